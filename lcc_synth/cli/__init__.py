@@ -1,0 +1,1 @@
+"""Command-line interface: ``lcc-synth COMMAND ...``; one module per command."""

@@ -1,0 +1,63 @@
+"""Entry point of ``lcc-synth``.
+
+Each command lives in its own module ``lcc_synth.cli.<command>`` exposing
+``HELP: str``, ``add_arguments(parser)`` and ``run(args) -> int``. Modules import their heavy
+dependencies inside ``run`` so that ``lcc-synth --help`` stays fast.
+
+Exit codes: 0 success, 1 a run that found a failure (e.g. a solver failure), 2 bad input
+(problem file, option) with a one-line message naming the field.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from lcc_synth.errors import ConfigError
+
+COMMANDS = ("run", "analyze", "regions", "simulate", "synthesize", "sweep", "review")
+
+
+def _available() -> dict[str, object]:
+    mods = {}
+    for name in COMMANDS:
+        try:
+            mods[name] = importlib.import_module(f"lcc_synth.cli.{name}")
+        except ModuleNotFoundError as err:
+            if err.name != f"lcc_synth.cli.{name}":
+                raise
+    return mods
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # argparse already exits 2; keep its one-line style
+        self.print_usage(sys.stderr)
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="lcc-synth", description="Design and test LCC controllers for a CAV.")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    for name, mod in _available().items():
+        p = sub.add_parser(name, help=mod.HELP, description=mod.HELP)
+        mod.add_arguments(p)
+        p.set_defaults(_run=mod.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args._run(args) or 0)
+    except ConfigError as err:
+        print(f"lcc-synth {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"lcc-synth {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

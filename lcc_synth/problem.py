@@ -1,0 +1,284 @@
+"""Problem files: TOML loading and field validation shared by every command.
+
+A problem file has a few common tables, and each command reads its own:
+
+.. code-block:: toml
+
+    name = "paper_table2"          # optional; default: the file's stem
+    description = "..."            # optional
+
+    [hdv]                          # nonlinear HDV model (default: the paper's OVM)
+    model = "ovm"                  # "ovm" | "idm"
+    alpha = 0.6
+    beta = 0.9
+    s_st = 5.0
+    s_go = 35.0
+    v_max = 30.0
+
+    [system]
+    kind = "fd_lcc"                # "lcc" | "cf_lcc" | "fd_lcc" | "ccc"
+    m = 0                          # HDVs ahead of the CAV
+    n = 10                         # HDVs behind the CAV
+    v_star = 15.0                  # equilibrium velocity (m/s)
+
+Errors are :class:`~lcc_synth.errors.ConfigError` naming the file and the dotted field.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from lcc_synth.errors import ConfigError
+from lcc_synth.hdv import IDM, OVM, model_from_dict
+from lcc_synth.models import KINDS, LCCModel, model_from_hdv
+
+__all__ = [
+    "Problem",
+    "load_problem",
+    "check_keys",
+    "get_number",
+    "get_int",
+    "get_bool",
+    "get_str",
+    "get_table",
+    "get_number_list",
+    "System",
+    "system_from",
+]
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A parsed TOML problem file: the raw tables plus where they came from."""
+
+    path: Path
+    data: Mapping[str, Any]
+
+    @property
+    def name(self) -> str:
+        value = self.data.get("name", self.path.stem)
+        if not isinstance(value, str) or not value:
+            raise ConfigError("name", f"must be a non-empty string, got {value!r}", str(self.path))
+        return value
+
+    def table(self, key: str, required: bool = False) -> dict[str, Any]:
+        """Top-level table ``key`` (empty dict when absent and not required)."""
+        return get_table(self.data, key, key, required=required)
+
+
+def load_problem(path: str | Path) -> Problem:
+    """Read a TOML problem file; a missing file or a TOML syntax error is a ConfigError."""
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError("path", "no such problem file", str(p))
+    try:
+        with p.open("rb") as fh:
+            data = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError("toml", f"not valid TOML: {err}", str(p)) from None
+    return Problem(p, data)
+
+
+# --------------------------------------------------------------------------------------------
+# Field readers: each names the dotted field in its error
+# --------------------------------------------------------------------------------------------
+
+_MISSING = object()
+
+
+def check_keys(table: Mapping[str, Any], allowed: Iterable[str], field: str) -> None:
+    """Reject keys of ``table`` not in ``allowed`` (typos must not pass silently)."""
+    allowed = set(allowed)
+    for key in table:
+        if key not in allowed:
+            where = f"{field}.{key}" if field else key
+            raise ConfigError(where, f"unknown key; allowed keys: {sorted(allowed)}")
+
+
+def _fmt_range(lo, hi, lo_open, hi_open) -> str:
+    parts = []
+    if lo is not None:
+        parts.append(f"{'>' if lo_open else '>='} {lo}")
+    if hi is not None:
+        parts.append(f"{'<' if hi_open else '<='} {hi}")
+    return " and ".join(parts) if parts else "a finite number"
+
+
+def get_number(
+    table: Mapping[str, Any],
+    key: str,
+    field: str,
+    default: Any = _MISSING,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    hi_open: bool = False,
+) -> float:
+    """A finite number ``table[key]`` within the bounds; ``default`` when absent."""
+    name = f"{field}.{key}" if field else key
+    if key not in table:
+        if default is _MISSING:
+            raise ConfigError(name, f"is required ({_fmt_range(lo, hi, lo_open, hi_open)})")
+        return default
+    value = table[key]
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(name, f"must be a number, got {value!r}")
+    value = float(value)
+    ok = math.isfinite(value)
+    if ok and lo is not None:
+        ok = value > lo if lo_open else value >= lo
+    if ok and hi is not None:
+        ok = value < hi if hi_open else value <= hi
+    if not ok:
+        raise ConfigError(name, f"must be {_fmt_range(lo, hi, lo_open, hi_open)}, got {value!r}")
+    return value
+
+
+def get_int(
+    table: Mapping[str, Any],
+    key: str,
+    field: str,
+    default: Any = _MISSING,
+    lo: int | None = None,
+    hi: int | None = None,
+) -> int:
+    """An integer ``table[key]`` in ``[lo, hi]``; ``default`` when absent."""
+    name = f"{field}.{key}" if field else key
+    if key not in table:
+        if default is _MISSING:
+            raise ConfigError(name, f"is required (an integer {_fmt_range(lo, hi, 0, 0)})")
+        return default
+    value = table[key]
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ConfigError(name, f"must be an integer, got {value!r}")
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        raise ConfigError(name, f"must be an integer {_fmt_range(lo, hi, 0, 0)}, got {value}")
+    return value
+
+
+def get_bool(table: Mapping[str, Any], key: str, field: str, default: Any = _MISSING) -> bool:
+    """A boolean ``table[key]``; ``default`` when absent."""
+    name = f"{field}.{key}" if field else key
+    if key not in table:
+        if default is _MISSING:
+            raise ConfigError(name, "is required (true or false)")
+        return default
+    value = table[key]
+    if not isinstance(value, bool):
+        raise ConfigError(name, f"must be true or false, got {value!r}")
+    return value
+
+
+def get_str(
+    table: Mapping[str, Any],
+    key: str,
+    field: str,
+    default: Any = _MISSING,
+    choices: Iterable[str] | None = None,
+) -> str:
+    """A string ``table[key]``, one of ``choices`` when given; ``default`` when absent."""
+    name = f"{field}.{key}" if field else key
+    if key not in table:
+        if default is _MISSING:
+            extra = f" (one of {sorted(choices)})" if choices is not None else ""
+            raise ConfigError(name, f"is required{extra}")
+        return default
+    value = table[key]
+    if not isinstance(value, str):
+        raise ConfigError(name, f"must be a string, got {value!r}")
+    if choices is not None and value not in set(choices):
+        raise ConfigError(name, f"must be one of {sorted(choices)}, got {value!r}")
+    return value
+
+
+def get_table(
+    table: Mapping[str, Any], key: str, field: str, required: bool = False
+) -> dict[str, Any]:
+    """A sub-table ``table[key]`` (empty dict when absent and not required)."""
+    if key not in table:
+        if required:
+            raise ConfigError(field, "table is required")
+        return {}
+    value = table[key]
+    if not isinstance(value, dict):
+        raise ConfigError(field, f"must be a table, got {value!r}")
+    return value
+
+
+def get_number_list(
+    table: Mapping[str, Any],
+    key: str,
+    field: str,
+    default: Any = _MISSING,
+    length: int | None = None,
+    lo: float | None = None,
+    hi: float | None = None,
+) -> list[float]:
+    """A list of finite numbers (optionally of fixed ``length`` and within bounds)."""
+    name = f"{field}.{key}" if field else key
+    if key not in table:
+        if default is _MISSING:
+            raise ConfigError(name, "is required (a list of numbers)")
+        return default
+    value = table[key]
+    if not isinstance(value, list):
+        raise ConfigError(name, f"must be a list of numbers, got {value!r}")
+    if length is not None and len(value) != length:
+        raise ConfigError(name, f"must have {length} entries, got {len(value)}")
+    wrapper = {str(i): v for i, v in enumerate(value)}
+    return [get_number(wrapper, str(i), name, lo=lo, hi=hi) for i in range(len(value))]
+
+
+# --------------------------------------------------------------------------------------------
+# Common tables: [hdv] and [system]
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class System:
+    """The ``[hdv]`` + ``[system]`` tables: nonlinear HDV model, layout and equilibrium."""
+
+    kind: str
+    m: int
+    n: int
+    v_star: float
+    hdv: OVM | IDM
+
+    @property
+    def s_star(self) -> float:
+        """Equilibrium spacing of the HDV model at ``v_star``."""
+        return float(self.hdv.equilibrium_spacing(self.v_star))
+
+    def linear_model(self, warn: bool = True) -> LCCModel:
+        """The homogeneous linearised model of this system."""
+        return model_from_hdv(self.kind, self.m, self.n, self.hdv, self.v_star, warn=warn)
+
+
+def system_from(data: Mapping[str, Any], source: str | None = None) -> System:
+    """Parse ``[hdv]`` and ``[system]`` of a problem file into a :class:`System`."""
+    try:
+        hdv = model_from_dict(get_table(data, "hdv", "hdv"), "hdv")
+        sys_t = get_table(data, "system", "system", required=True)
+        check_keys(sys_t, ["kind", "m", "n", "v_star"], "system")
+        kind = get_str(sys_t, "kind", "system", "lcc", choices=KINDS)
+        m = get_int(sys_t, "m", "system", 0, lo=0, hi=50)
+        n = get_int(sys_t, "n", "system", 0, lo=0, hi=200)
+        v_star = get_number(sys_t, "v_star", "system", 15.0, lo=0.0, lo_open=True)
+        try:
+            hdv.equilibrium_spacing(v_star)
+        except ConfigError as err:
+            raise ConfigError("system.v_star", err.message) from None
+        if kind in ("cf_lcc", "fd_lcc") and m != 0:
+            raise ConfigError("system.m", f"must be 0 for {kind}, got {m}")
+        if kind in ("cf_lcc", "fd_lcc") and n < 1:
+            raise ConfigError("system.n", f"must be >= 1 for {kind}, got {n}")
+        if kind == "ccc" and n != 0:
+            raise ConfigError("system.n", f"must be 0 for ccc, got {n}")
+        return System(kind, m, n, v_star, hdv)
+    except ConfigError as err:
+        raise err.with_source(source) if source and not err.source else err from None
