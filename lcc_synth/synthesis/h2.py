@@ -1,0 +1,383 @@
+"""H2 synthesis set-up for LCC models: plant, weights, true H2 norm, Riccati and LMI designs.
+
+The design plant
+----------------
+For an :class:`~lcc_synth.models.LCCModel` ``dx = A x + B u + H v_h`` and a gain semantics
+(``feedback.py``, eq. 23) the CAV's static gains ``g`` (a row on the model's states) act as
+
+    input = (g + K0) x + kh0 v_h,     (K0, kh0) = feedback.input_feedback(model, zero gains)
+
+so the synthesis works on the *design plant*
+
+    dx = A_d x + B g x + B_w w,       A_d = A + B K0,
+    z  = [Q^1/2 x ; R^1/2 g x]
+
+and the designed row ``g`` IS the ``gains`` vector of the semantics (``u = +g x``, no minus
+sign, as in ``feedback.py``). For ``"added"`` the CAV keeps its HDV law and ``g`` is added; for
+``"replace"`` ``g`` is the whole command (CF-LCC then does not use ``v_h``: ``kh0 = -alpha3``).
+
+Disturbances ``w`` (columns of ``B_w``, each scaled by its weight):
+
+* ``head``  the head-vehicle velocity error ``v_h`` entering through ``H + B kh0``
+  (absent in FD-LCC, which has no head vehicle);
+* ``accel`` one acceleration-noise column on every velocity state (CAV included).
+
+With the head disturbance alone ``B_w`` has rank one and the H2 cost only sees the part of
+the state the disturbance excites: any two gains that differ only on directions outside the
+controllable subspace of ``(A_d + B g, B_w)`` have the same cost, so the optimal gain is not
+unique (FD-LCC: no head vehicle, every stabilising gain has cost 0). Keep ``accel > 0`` for a
+unique optimum.
+
+FD-LCC's position state ``-p_0`` is a pure integrator (zero open-loop eigenvalue) that feeds no
+other state. ``position = "drop"`` (default) removes it from the design (its gain is 0, the
+CAV's position drifts freely as in the paper's gains); ``position = "weight"`` keeps it with
+weight ``q_p > 0`` so the gain also regulates the position and the closed loop is
+asymptotically stable in every state.
+
+In general LCC the vehicles ahead of the CAV are not controllable from ``u`` but stable (their
+HDV blocks do not depend on anything behind them): the plant is stabilisable, the Riccati and
+LMI designs work on the whole state, and the gains on the states ahead act as feed-forward.
+:func:`check_stabilisable` verifies this (PBH test on the unstable modes).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import scipy.linalg as sla
+
+from lcc_synth.errors import ConfigError
+from lcc_synth.feedback import SEMANTICS, StaticGains, input_feedback
+from lcc_synth.models import LCCModel
+
+__all__ = [
+    "SynthesisError",
+    "Weights",
+    "H2Plant",
+    "make_plant",
+    "check_stabilisable",
+    "closed_loop_matrix",
+    "max_real_eig",
+    "h2_cost",
+    "h2_norm",
+    "riccati_gain",
+    "LMIResult",
+    "lmi_full_state",
+    "STABILITY_TOL",
+]
+
+#: a closed loop counts as stable when every eigenvalue has real part below ``-STABILITY_TOL``
+STABILITY_TOL = 1e-9
+
+
+class SynthesisError(RuntimeError):
+    """A synthesis failed: solver failure, infeasibility or a non-stabilising result.
+
+    The CLI prints it as one line and exits 1. ``details`` holds solver status, residuals and
+    eigenvalue margins for the report.
+    """
+
+    def __init__(self, message: str, details: dict | None = None):
+        self.details = dict(details or {})
+        super().__init__(message)
+
+
+@dataclass(frozen=True)
+class Weights:
+    """Performance and disturbance weights of the H2 problem.
+
+    Attributes
+    ----------
+    q_s, q_v : float
+        Weight on every spacing error / velocity error squared (``Q`` diagonal), > 0.
+    q_p : float
+        Weight on FD-LCC's ``-p_0`` when ``position = "weight"`` (> 0 then).
+    r : float
+        Weight on the gain's input squared (``R``), > 0.
+    head : float
+        Standard deviation-like weight of the head-vehicle velocity disturbance, >= 0.
+    accel : float
+        Weight of the per-vehicle acceleration noise (every velocity state), >= 0.
+    position : {"drop", "weight"}
+        FD-LCC position-state handling (see module docstring).
+    """
+
+    q_s: float = 1.0
+    q_v: float = 1.0
+    q_p: float = 0.1
+    r: float = 1.0
+    head: float = 0.0
+    accel: float = 1.0
+    position: str = "drop"
+
+    def __post_init__(self) -> None:
+        for name in ("q_s", "q_v", "r"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+                raise ConfigError(f"weights.{name}", f"must be a finite number > 0, got {v!r}")
+        for name in ("q_p", "head", "accel"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
+                raise ConfigError(f"weights.{name}", f"must be a finite number >= 0, got {v!r}")
+        if self.position not in ("drop", "weight"):
+            raise ConfigError(
+                "weights.position", f"must be 'drop' or 'weight', got {self.position!r}"
+            )
+        if self.head == 0 and self.accel == 0:
+            raise ConfigError("weights", "head and accel disturbance weights cannot both be 0")
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True, eq=False)
+class H2Plant:
+    """The design plant of the module docstring, on the kept states.
+
+    Attributes
+    ----------
+    model : LCCModel
+    semantics : str
+    weights : Weights
+    keep : numpy.ndarray
+        Indices (into the model's states) of the design states.
+    state_names : tuple of str
+        Names of the design states.
+    A, B, Bw : numpy.ndarray
+        Design plant ``A_d``, input ``B`` (nx, 1), disturbances ``B_w`` (nx, nw).
+    q : numpy.ndarray
+        Diagonal of ``Q`` on the design states.
+    r : float
+        ``R``.
+    w_names : tuple of str
+        Name of each disturbance column.
+    K0 : numpy.ndarray
+        ``(model.nx,)`` input feedback of the zero gain under the semantics.
+    kh0 : float
+        Head-velocity feed-through of the zero gain under the semantics.
+    """
+
+    model: LCCModel
+    semantics: str
+    weights: Weights
+    keep: np.ndarray
+    state_names: tuple[str, ...]
+    A: np.ndarray
+    B: np.ndarray
+    Bw: np.ndarray
+    q: np.ndarray
+    r: float
+    w_names: tuple[str, ...]
+    K0: np.ndarray
+    kh0: float
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def nx(self) -> int:
+        return self.A.shape[0]
+
+    def vehicle_of_state(self) -> np.ndarray:
+        """Vehicle index (-m..n) of each design state."""
+        veh = np.repeat(np.array(self.model.vehicles), 2)
+        return veh[self.keep]
+
+    def to_model_gain(self, g: np.ndarray) -> np.ndarray:
+        """Gain row on the model's full state (dropped states get 0)."""
+        full = np.zeros(self.model.nx)
+        full[self.keep] = np.asarray(g, dtype=float).ravel()
+        return full
+
+    def gains(self, g: np.ndarray) -> StaticGains:
+        """The :class:`StaticGains` (semantics of the plant) realising design gain ``g``."""
+        full = self.to_model_gain(g)
+        names = self.model.state_names
+        return StaticGains({names[i]: float(full[i]) for i in range(len(names))}, self.semantics)
+
+    def input_feedback(self, g: np.ndarray) -> tuple[np.ndarray, float]:
+        """``(K, kh)`` on the model's input, as ``feedback.input_feedback`` returns."""
+        return self.to_model_gain(g) + self.K0, self.kh0
+
+
+def make_plant(model: LCCModel, semantics: str = "replace", weights: Weights | None = None):
+    """Build the :class:`H2Plant` of ``model`` under ``semantics`` and ``weights``."""
+    weights = weights or Weights()
+    if semantics not in SEMANTICS:
+        raise ConfigError("semantics", f"must be one of {list(SEMANTICS)}, got {semantics!r}")
+    if semantics == "added" and model.kind == "fd_lcc":
+        raise ConfigError(
+            "synthesis.semantics",
+            "'added' needs a vehicle ahead to follow with the HDV law; FD-LCC has none: "
+            "use 'replace'",
+        )
+    K0, kh0 = input_feedback(model, StaticGains({}, semantics))
+    A_full = model.A + model.B @ K0.reshape(1, -1)
+    H_eff = (model.H + model.B * kh0).ravel()
+    names = model.state_names
+    keep = np.arange(model.nx)
+    if model.kind == "fd_lcc" and weights.position == "drop":
+        keep = keep[[nm != "-p_0" for nm in names]]
+    elif model.kind == "fd_lcc" and weights.q_p <= 0:
+        raise ConfigError("weights.q_p", "must be > 0 when weights.position = 'weight'")
+    A = A_full[np.ix_(keep, keep)]
+    B = model.B[keep]
+    cols, w_names = [], []
+    if weights.head > 0 and np.any(H_eff != 0):
+        cols.append(weights.head * H_eff[keep])
+        w_names.append("v_h")
+    if weights.accel > 0:
+        for j, i in enumerate(keep):
+            if names[i].startswith("v_"):
+                col = np.zeros(len(keep))
+                col[j] = weights.accel
+                cols.append(col)
+                w_names.append(f"a_{names[i][2:]}")
+    if not cols:
+        raise ConfigError(
+            "weights.head",
+            f"{model.kind} has no head vehicle: the head disturbance alone leaves nothing to "
+            "design for; set weights.accel > 0",
+        )
+    Bw = np.column_stack(cols)
+    q = np.array(
+        [
+            weights.q_p if nm == "-p_0" else (weights.q_s if nm.startswith("s_") else weights.q_v)
+            for nm in (names[i] for i in keep)
+        ]
+    )
+    return H2Plant(
+        model=model,
+        semantics=semantics,
+        weights=weights,
+        keep=keep,
+        state_names=tuple(names[i] for i in keep),
+        A=A,
+        B=B,
+        Bw=Bw,
+        q=q,
+        r=float(weights.r),
+        w_names=tuple(w_names),
+        K0=K0,
+        kh0=float(kh0),
+    )
+
+
+def check_stabilisable(plant: H2Plant, tol: float = 1e-9) -> None:
+    """PBH test: every mode with Re >= -tol must be controllable; else :class:`SynthesisError`."""
+    eig = np.linalg.eigvals(plant.A)
+    nx = plant.nx
+    for lam in eig[eig.real >= -tol]:
+        M = np.hstack([lam * np.eye(nx) - plant.A, plant.B])
+        s = np.linalg.svd(M, compute_uv=False)
+        if s[-1] <= 1e-9 * max(1.0, s[0]):
+            raise SynthesisError(
+                f"the plant is not stabilisable: mode {lam:.4g} is not controllable from the CAV",
+                {"mode": [lam.real, lam.imag]},
+            )
+
+
+def closed_loop_matrix(plant: H2Plant, g: np.ndarray) -> np.ndarray:
+    return plant.A + plant.B @ np.asarray(g, dtype=float).reshape(1, -1)
+
+
+def max_real_eig(M: np.ndarray) -> float:
+    return float(np.max(np.linalg.eigvals(M).real))
+
+
+def h2_cost(plant: H2Plant, g: np.ndarray) -> tuple[float, np.ndarray | None, np.ndarray | None]:
+    """True squared H2 norm ``J(g)`` from ``w`` to ``z`` with the controllability Gramian ``L``
+    and observability Gramian ``P`` of the closed loop (``inf, None, None`` if unstable).
+
+    ``A_K L + L A_K' + B_w B_w' = 0``, ``A_K' P + P A_K + Q + g' R g = 0``,
+    ``J = tr(B_w' P B_w) = tr((Q + g' R g) L)``.
+    """
+    g = np.asarray(g, dtype=float).reshape(1, -1)
+    AK = plant.A + plant.B @ g
+    if max_real_eig(AK) >= -STABILITY_TOL:
+        return math.inf, None, None
+    L = sla.solve_continuous_lyapunov(AK, -plant.Bw @ plant.Bw.T)
+    Qk = np.diag(plant.q) + plant.r * (g.T @ g)
+    P = sla.solve_continuous_lyapunov(AK.T, -Qk)
+    L = 0.5 * (L + L.T)
+    P = 0.5 * (P + P.T)
+    J = float(np.trace(Qk @ L))
+    if not math.isfinite(J) or J < 0:
+        return math.inf, None, None
+    return J, L, P
+
+
+def h2_norm(plant: H2Plant, g: np.ndarray) -> float:
+    """True closed-loop H2 norm ``sqrt(J(g))`` (``inf`` when the closed loop is not stable)."""
+    J, _, _ = h2_cost(plant, g)
+    return math.sqrt(J) if math.isfinite(J) else math.inf
+
+
+def riccati_gain(plant: H2Plant) -> tuple[np.ndarray, np.ndarray]:
+    """Unstructured H2-optimal gain ``g = -R^-1 B' P`` from the CARE; returns ``(g, P)``."""
+    check_stabilisable(plant)
+    try:
+        P = sla.solve_continuous_are(plant.A, plant.B, np.diag(plant.q), np.array([[plant.r]]))
+    except (np.linalg.LinAlgError, ValueError) as err:
+        raise SynthesisError(f"Riccati solver failed: {err}") from None
+    g = -(plant.B.T @ P) / plant.r
+    if max_real_eig(closed_loop_matrix(plant, g)) >= -STABILITY_TOL:
+        raise SynthesisError("Riccati gain does not stabilise the plant")
+    return g.ravel(), P
+
+
+@dataclass
+class LMIResult:
+    """A gain from a convex (LMI) design with its bound and solver diagnostics."""
+
+    g: np.ndarray
+    bound: float
+    status: str
+    solve_time: float
+    residual: float
+    info: dict = field(default_factory=dict)
+
+
+def solve_checked(prob, what: str, eps: float = 1e-7) -> tuple[str, float]:
+    """Solve a cvxpy problem with Clarabel (named explicitly); raise on failure."""
+    import time
+
+    import cvxpy as cp
+
+    t0 = time.perf_counter()
+    try:
+        prob.solve(solver=cp.CLARABEL)
+    except cp.error.SolverError as err:
+        raise SynthesisError(f"{what}: Clarabel failed: {err}") from None
+    dt = time.perf_counter() - t0
+    if prob.status not in ("optimal", "optimal_inaccurate"):
+        raise SynthesisError(
+            f"{what}: solver status {prob.status!r} (infeasible or unbounded)",
+            {"status": prob.status},
+        )
+    return prob.status, dt
+
+
+def lmi_full_state(plant: H2Plant, eps: float = 1e-7) -> LMIResult:
+    """Full-state H2 synthesis by the standard LMI (Clarabel).
+
+    ``min tr(Q X) + R W`` over ``X > 0, Z, W`` with
+    ``A X + X A' + B Z + Z' B' + B_w B_w' <= 0`` and ``[[W, Z], [Z', X]] >= 0``; then
+    ``g = Z X^-1`` and ``J(g) <= tr(Q X) + R W``. The returned bound is its square root.
+    """
+    import cvxpy as cp
+
+    nx = plant.nx
+    X = cp.Variable((nx, nx), symmetric=True)
+    Z = cp.Variable((1, nx))
+    W = cp.Variable((1, 1), symmetric=True)
+    M = plant.A @ X + X @ plant.A.T + plant.B @ Z + Z.T @ plant.B.T + plant.Bw @ plant.Bw.T
+    cons = [X >> eps * np.eye(nx), -(M + M.T) / 2 >> 0, cp.bmat([[W, Z], [Z.T, X]]) >> 0]
+    obj = cp.Minimize(cp.trace(np.diag(plant.q) @ X) + plant.r * W[0, 0])
+    prob = cp.Problem(obj, cons)
+    status, dt = solve_checked(prob, "full-state H2 LMI")
+    Xv, Zv = X.value, Z.value
+    g = np.linalg.solve(Xv.T, Zv.T).T.ravel()
+    Mv = plant.A @ Xv + Xv @ plant.A.T + plant.B @ Zv + Zv.T @ plant.B.T + plant.Bw @ plant.Bw.T
+    residual = float(max(np.max(np.linalg.eigvalsh((Mv + Mv.T) / 2)), 0.0))
+    return LMIResult(g, math.sqrt(max(prob.value, 0.0)), status, dt, residual)
