@@ -18,7 +18,16 @@ import numpy as np
 
 from lcc_synth.hdv import CarFollowingModel
 
-__all__ = ["ControlContext", "Observation", "Controller"]
+__all__ = [
+    "ControlContext",
+    "Observation",
+    "Controller",
+    "LinearLaw",
+    "HDVController",
+    "StaticGainController",
+    "CONTROLLER_TYPES",
+    "build_controller",
+]
 
 
 @dataclass(frozen=True)
@@ -106,3 +115,252 @@ class Controller(Protocol):
 
     def stats(self) -> dict[str, Any]:
         """Run statistics (fallbacks, solve times...); ``{}`` when there is nothing to say."""
+
+
+# --------------------------------------------------------------------------------------------
+# Controllers with a fixed linear law (simulator helper): the CAV as an HDV, static gains
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class LinearLaw:
+    """A CAV command that is a fixed function of the observation (no internal state).
+
+    ``u = [F_hdv(s_0, v_-1 - v_0, v_0) if hdv_law] + sum_j Ks[j] (s_j - s*)
+    + sum_j Kv[j] (v_j - v*) + Kp * (-(p_0 - p_0(t_0) - v* (t - t_0)))``
+    with the nominal HDV model ``F_hdv`` of the :class:`ControlContext` and ``t_0`` the first
+    sample. Arrays are indexed by vehicle column (head = 0). The simulator evaluates this law
+    inside its compiled loop (no Python call per step); ``__call__`` evaluates the same law.
+    """
+
+    Ks: np.ndarray
+    Kv: np.ndarray
+    Kp: float = 0.0
+    hdv_law: bool = False
+
+
+def _law_from_gains(gains, m: int, n: int) -> LinearLaw:
+    nv = m + n + 2
+    Ks = np.zeros(nv)
+    Kv = np.zeros(nv)
+    Kp = 0.0
+    for name, value in gains.gains.items():
+        if name == "-p_0":
+            Kp += value
+            continue
+        kind, idx = name.split("_", 1)
+        col = int(idx) + m + 1
+        (Ks if kind == "s" else Kv)[col] += value
+    return LinearLaw(Ks, Kv, Kp, gains.semantics == "added")
+
+
+class _LinearController:
+    """Shared evaluation of a :class:`LinearLaw` (see :class:`StaticGainController`)."""
+
+    name: str
+    sample_time: float | None
+
+    def _law(self, ctx: ControlContext) -> LinearLaw:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def reset(self, ctx: ControlContext) -> None:
+        self._ctx = ctx
+        self._law_cache = self._law(ctx)
+        self._p_ref = None
+        self._t_ref = None
+
+    def linear_law(self, ctx: ControlContext) -> LinearLaw:
+        """The law for ``ctx`` (the simulator runs it in its compiled loop)."""
+        return self._law(ctx)
+
+    def __call__(self, obs: Observation) -> np.ndarray:
+        ctx, law = self._ctx, self._law_cache
+        cav = ctx.cav
+        vs = ctx.v_star
+        u = np.zeros(obs.velocity.shape[0])
+        if law.hdv_law:
+            u += ctx.hdv.accel(
+                obs.spacing[:, cav],
+                obs.velocity[:, cav - 1] - obs.velocity[:, cav],
+                obs.velocity[:, cav],
+            )
+        cols = np.flatnonzero(law.Ks)
+        if cols.size:
+            u += (obs.spacing[:, cols] - ctx.s_star[:, None]) @ law.Ks[cols]
+        cols = np.flatnonzero(law.Kv)
+        if cols.size:
+            u += (obs.velocity[:, cols] - vs[:, None]) @ law.Kv[cols]
+        if law.Kp != 0.0:
+            if self._p_ref is None:
+                self._p_ref = obs.position[:, cav].copy()
+                self._t_ref = obs.t
+            u += law.Kp * -(obs.position[:, cav] - self._p_ref - vs * (obs.t - self._t_ref))
+        return u
+
+    def stats(self) -> dict[str, Any]:
+        return {}
+
+
+class HDVController(_LinearController):
+    """The CAV drives exactly like an HDV: the nominal car-following law of the context.
+
+    Parameters
+    ----------
+    name : str
+    sample_time : float, optional
+        Controller period (s); default every simulation step.
+    """
+
+    def __init__(self, name: str = "hdv", sample_time: float | None = None):
+        self.name = name
+        self.sample_time = sample_time
+
+    def _law(self, ctx: ControlContext) -> LinearLaw:
+        nv = ctx.n_vehicles
+        return LinearLaw(np.zeros(nv), np.zeros(nv), 0.0, True)
+
+    def describe(self) -> dict[str, Any]:
+        return {"type": "hdv", "sample_time": self.sample_time}
+
+
+class StaticGainController(_LinearController):
+    """Static state feedback of eq. (23) on the CAV's observation.
+
+    Parameters
+    ----------
+    name : str
+    gains : lcc_synth.feedback.StaticGains
+        Gains keyed by state name and their semantics (``added`` keeps the CAV's nonlinear
+        HDV law towards the vehicle ahead and adds the gains; ``replace`` uses them alone).
+    model : lcc_synth.models.LCCModel
+        The linear model the gains are written for (checked: every name must be a state).
+    sample_time : float, optional
+        Controller period (s); default every simulation step.
+    """
+
+    def __init__(self, name: str, gains, model, sample_time: float | None = None):
+        gains.check(model)
+        self.name = name
+        self.gains = gains
+        self.model = model
+        self.sample_time = sample_time
+
+    def _law(self, ctx: ControlContext) -> LinearLaw:
+        from lcc_synth.errors import ConfigError
+
+        if (ctx.m, ctx.n) != (self.model.m, self.model.n):
+            raise ConfigError(
+                f"controllers.{self.name}",
+                f"gains are for m={self.model.m}, n={self.model.n}; the scenario has "
+                f"m={ctx.m}, n={ctx.n}",
+            )
+        return _law_from_gains(self.gains, ctx.m, ctx.n)
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "type": "static",
+            "kind": self.model.kind,
+            "semantics": self.gains.semantics,
+            "gains": dict(self.gains.gains),
+            "sample_time": self.sample_time,
+        }
+
+
+# --------------------------------------------------------------------------------------------
+# Problem-file factory (contract 4)
+# --------------------------------------------------------------------------------------------
+
+CONTROLLER_TYPES = ("hdv", "static", "gains_file", "mpc")
+
+
+def _sample_time(table, field: str) -> float | None:
+    from lcc_synth.problem import get_number
+
+    if "sample_time" not in table:
+        return None
+    return get_number(table, "sample_time", field, lo=0.0, lo_open=True)
+
+
+def build_controller(name: str, table, system, source: str | None = None) -> Controller:
+    """Build the controller of a ``[controllers.NAME]`` table.
+
+    Parameters
+    ----------
+    name : str
+        The controller's name (the table key).
+    table : mapping
+        ``type = "hdv" | "static" | "gains_file" | "mpc"`` and the type's keys (see
+        ``problems/README.md``). ``gains_file`` paths are relative to ``source``'s folder.
+    system : lcc_synth.problem.System
+        The problem's ``[hdv]`` + ``[system]``.
+    source : str, optional
+        The problem file (for error messages and relative paths).
+    """
+    import json
+    from pathlib import Path
+
+    from lcc_synth.errors import ConfigError
+    from lcc_synth.feedback import SEMANTICS, StaticGains
+    from lcc_synth.models import KINDS, model_from_hdv
+    from lcc_synth.problem import check_keys, get_str, get_table
+
+    field = f"controllers.{name}"
+    try:
+        if not isinstance(table, dict):
+            raise ConfigError(field, f"must be a table, got {table!r}")
+        ctype = get_str(table, "type", field, choices=CONTROLLER_TYPES)
+        if ctype == "mpc":
+            try:
+                from lcc_synth.mpc import mpc_controller_from_table
+            except ImportError as err:
+                raise ConfigError(
+                    f"{field}.type", f"'mpc' controllers need lcc_synth.mpc, which failed: {err}"
+                ) from None
+            return mpc_controller_from_table(name, table, system)
+        if ctype == "hdv":
+            check_keys(table, ["type", "sample_time"], field)
+            return HDVController(name, _sample_time(table, field))
+        if ctype == "static":
+            check_keys(table, ["type", "kind", "semantics", "gains", "sample_time"], field)
+            kind = get_str(table, "kind", field, system.kind, choices=KINDS)
+            semantics = get_str(table, "semantics", field, "added", choices=SEMANTICS)
+            raw = get_table(table, "gains", f"{field}.gains", required=True)
+            where = f"{field} (kind={kind!r})"
+        else:
+            check_keys(table, ["type", "file", "sample_time"], field)
+            rel = get_str(table, "file", field)
+            path = Path(rel)
+            if not path.is_absolute() and source:
+                path = Path(source).parent / path
+            if not path.is_file():
+                raise ConfigError(f"{field}.file", f"no such gains file: {path}")
+            try:
+                data = json.loads(path.read_text())
+            except json.JSONDecodeError as err:
+                raise ConfigError(f"{field}.file", f"{path} is not valid JSON: {err}") from None
+            for key in ("kind", "m", "n", "semantics", "gains"):
+                if key not in data:
+                    raise ConfigError(f"{field}.file", f"{path} lacks the key {key!r}")
+            kind = data["kind"]
+            if kind not in KINDS:
+                raise ConfigError(f"{field}.file", f"{path}: kind must be one of {KINDS}")
+            if (data["m"], data["n"]) != (system.m, system.n):
+                raise ConfigError(
+                    f"{field}.file",
+                    f"{path} holds gains for m={data['m']}, n={data['n']}; the problem has "
+                    f"m={system.m}, n={system.n}",
+                )
+            semantics = data["semantics"]
+            raw = data["gains"]
+            if not isinstance(raw, dict):
+                raise ConfigError(f"{field}.file", f"{path}: gains must be an object")
+            where = f"{field}.file"
+        try:
+            gains = StaticGains(raw, semantics)
+            model = model_from_hdv(kind, system.m, system.n, system.hdv, system.v_star, warn=False)
+            ctrl = StaticGainController(name, gains, model, _sample_time(table, field))
+        except ConfigError as err:
+            raise ConfigError(f"{where}.{err.field}", err.message) from None
+        return ctrl
+    except ConfigError as err:
+        raise err.with_source(source) if source and not err.source else err from None

@@ -1,0 +1,283 @@
+"""Prescribed motions ("perturbations") of chosen vehicles, Section V.
+
+A perturbation overrides the acceleration of one vehicle while it is active (the vehicle's own
+law, the CAV's controller and its emergency braking included). Outside every active window the
+head vehicle cruises (zero acceleration) and the other vehicles follow their laws.
+
+Vehicles are named by the paper's index ``-m .. n`` (``0`` = CAV) or ``"head"``.
+Activity windows are open intervals ``start < t < end``, tested with a tolerance of
+``1e-6 dt`` so that floating-point sample times (``t_start + k dt``) never flip an endpoint.
+
+The simulator consumes :func:`overrides`: two ``(T, n_vehicles)`` tables, an acceleration
+override and a speed target, NaN where nothing is prescribed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lcc_synth.errors import ConfigError
+from lcc_synth.problem import check_keys, get_number, get_number_list, get_str
+
+__all__ = [
+    "Sine",
+    "Brake",
+    "BrakeProfile",
+    "Profile",
+    "Perturbation",
+    "vehicle_column",
+    "overrides",
+    "perturbation_from_table",
+    "read_profile_csv",
+]
+
+Vehicle = int | str
+
+
+def vehicle_column(vehicle: Vehicle, m: int, n: int, field: str = "vehicle") -> int:
+    """Array column of ``vehicle`` ("head" or a paper index in ``[-m, n]``)."""
+    if vehicle == "head":
+        return 0
+    if isinstance(vehicle, bool) or not isinstance(vehicle, int | np.integer):
+        raise ConfigError(field, f'must be "head" or an integer in [{-m}, {n}], got {vehicle!r}')
+    if not -m <= int(vehicle) <= n:
+        raise ConfigError(field, f'must be "head" or an integer in [{-m}, {n}], got {vehicle}')
+    return int(vehicle) + m + 1
+
+
+def _window(t: np.ndarray, start: float, end: float, dt: float) -> np.ndarray:
+    eps = 1e-6 * dt
+    return (t > start + eps) & (t < end - eps)
+
+
+@dataclass(frozen=True)
+class Sine:
+    """``a = amplitude cos(2 pi (t - start) / period)`` for ``start < t < end``.
+
+    Section V-A: ``Sine(0.2, 12.0, 20.0)`` on the head vehicle.
+    """
+
+    amplitude: float
+    period: float
+    start: float
+    end: float | None = None
+    vehicle: Vehicle = "head"
+    target = "accel"
+
+    def values(self, t: np.ndarray, dt: float) -> np.ndarray:
+        end = self.start + self.period if self.end is None else self.end
+        out = self.amplitude * np.cos(2.0 * np.pi / self.period * (t - self.start))
+        return np.where(_window(t, self.start, end, dt), out, np.nan)
+
+
+@dataclass(frozen=True)
+class Brake:
+    """``a = decel`` for ``start < t < start + duration`` (Section V-B: vehicle 1, -5, 1 s)."""
+
+    vehicle: Vehicle
+    start: float = 20.0
+    duration: float = 1.0
+    decel: float = -5.0
+    target = "accel"
+
+    def values(self, t: np.ndarray, dt: float) -> np.ndarray:
+        active = _window(t, self.start, self.start + self.duration, dt)
+        return np.where(active, self.decel, np.nan)
+
+
+@dataclass(frozen=True)
+class BrakeProfile:
+    """Brake at ``decel`` for ``decel_time``, hold (a = 0) for ``hold_time``, accelerate at
+    ``accel`` for ``accel_time``, then cruise; each phase an open window from ``start`` on."""
+
+    start: float = 20.0
+    decel: float = -5.0
+    decel_time: float = 2.0
+    hold_time: float = 5.0
+    accel: float = 2.0
+    accel_time: float = 5.0
+    vehicle: Vehicle = "head"
+    target = "accel"
+
+    def values(self, t: np.ndarray, dt: float) -> np.ndarray:
+        t1 = self.start + self.decel_time
+        t2 = t1 + self.hold_time
+        t3 = t2 + self.accel_time
+        out = np.full(t.shape, np.nan)
+        eps = 1e-6 * dt
+        # phases are contiguous: a boundary sample belongs to the later phase
+        out[(t > self.start + eps) & (t < t1 - eps)] = self.decel
+        out[(t >= t1 - eps) & (t < t2 - eps)] = 0.0
+        out[(t >= t2 - eps) & (t < t3 - eps)] = self.accel
+        return out
+
+
+@dataclass(frozen=True)
+class Profile:
+    """Piecewise acceleration (``target="accel"``) or speed (``target="speed"``) profile.
+
+    Active for ``times[0] <= t < times[-1]``. ``interpolation="step"`` holds ``values[i]`` on
+    ``[times[i], times[i+1])``; ``"linear"`` interpolates. A speed profile is tracked as closely
+    as the acceleration limits allow: ``a_k = (v(t_{k+1}) - v_k) / dt``, then clipped.
+    """
+
+    times: tuple[float, ...]
+    values_: tuple[float, ...]
+    target: str = "accel"
+    interpolation: str = "step"
+    vehicle: Vehicle = "head"
+
+    def __post_init__(self) -> None:
+        times = np.asarray(self.times, dtype=float)
+        if len(self.times) < 2 or len(self.times) != len(self.values_):
+            raise ConfigError(
+                "times", "needs at least 2 times and as many values as times, got "
+                f"{len(self.times)} times and {len(self.values_)} values"
+            )
+        if not np.all(np.isfinite(times)) or not np.all(np.isfinite(self.values_)):
+            raise ConfigError("values", "times and values must be finite")
+        if np.any(np.diff(times) <= 0):
+            raise ConfigError("times", "must be strictly increasing")
+        if self.target not in ("accel", "speed"):
+            raise ConfigError("target", f'must be "accel" or "speed", got {self.target!r}')
+        if self.interpolation not in ("step", "linear"):
+            raise ConfigError(
+                "interpolation", f'must be "step" or "linear", got {self.interpolation!r}'
+            )
+        if self.target == "speed" and min(self.values_) < 0:
+            raise ConfigError("values", "speeds must be >= 0")
+
+    def _eval(self, t: np.ndarray) -> np.ndarray:
+        times = np.asarray(self.times)
+        vals = np.asarray(self.values_)
+        if self.interpolation == "linear":
+            return np.interp(t, times, vals)
+        idx = np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 1)
+        return vals[idx]
+
+    def values(self, t: np.ndarray, dt: float) -> np.ndarray:
+        eps = 1e-6 * dt
+        active = (t >= self.times[0] - eps) & (t < self.times[-1] - eps)
+        # a speed profile prescribes where the vehicle should be one step later
+        query = t + dt if self.target == "speed" else t
+        query = np.clip(query, self.times[0], self.times[-1])
+        return np.where(active, self._eval(query), np.nan)
+
+
+Perturbation = Sine | Brake | BrakeProfile | Profile
+
+
+def overrides(
+    perturbations: Sequence[Perturbation], t: np.ndarray, dt: float, m: int, n: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Acceleration overrides and speed targets, each ``(T, m + n + 2)``, NaN when free.
+
+    Later perturbations win where several are active on the same vehicle at once.
+    """
+    nv = m + n + 2
+    acc = np.full((len(t), nv), np.nan)
+    spd = np.full((len(t), nv), np.nan)
+    for i, p in enumerate(perturbations):
+        col = vehicle_column(p.vehicle, m, n, f"scenario.perturbations[{i}].vehicle")
+        vals = p.values(t, dt)
+        on = ~np.isnan(vals)
+        dest, other = (spd, acc) if p.target == "speed" else (acc, spd)
+        dest[on, col] = vals[on]
+        other[on, col] = np.nan
+    return acc, spd
+
+
+# --------------------------------------------------------------------------------------------
+# Problem files
+# --------------------------------------------------------------------------------------------
+
+
+def read_profile_csv(path: Path, field: str) -> tuple[list[float], list[float]]:
+    """Two columns ``t, value`` (comma separated, optional header line)."""
+    if not path.is_file():
+        raise ConfigError(field, f"no such CSV file: {path}")
+    times: list[float] = []
+    vals: list[float] = []
+    for lineno, line in enumerate(path.read_text().splitlines(), start=1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        parts = [p.strip() for p in line.split(",")]
+        try:
+            t, v = float(parts[0]), float(parts[1])
+        except (ValueError, IndexError):
+            if lineno == 1 or not times:  # header
+                continue
+            raise ConfigError(field, f"{path}:{lineno}: expected 't,value', got {line!r}") from None
+        if not (math.isfinite(t) and math.isfinite(v)):
+            raise ConfigError(field, f"{path}:{lineno}: values must be finite")
+        times.append(t)
+        vals.append(v)
+    return times, vals
+
+
+_KEYS = {
+    "sine": ["type", "vehicle", "amplitude", "period", "start", "end"],
+    "brake": ["type", "vehicle", "start", "duration", "decel"],
+    "brake_profile": [
+        "type", "vehicle", "start", "decel", "decel_time", "hold_time", "accel", "accel_time"
+    ],
+    "accel_profile": ["type", "vehicle", "times", "values", "csv", "interpolation"],
+    "speed_profile": ["type", "vehicle", "times", "values", "csv", "interpolation"],
+}
+
+
+def perturbation_from_table(
+    table: Mapping[str, Any], field: str, m: int, n: int, base_dir: Path | None = None
+) -> Perturbation:
+    """Build one perturbation from a ``[[scenario.perturbations]]`` entry."""
+    if not isinstance(table, Mapping):
+        raise ConfigError(field, f"must be a table, got {table!r}")
+    kind = get_str(table, "type", field, choices=list(_KEYS))
+    check_keys(table, _KEYS[kind], field)
+    vehicle = table.get("vehicle", "head")
+    vehicle_column(vehicle, m, n, f"{field}.vehicle")
+    if kind == "sine":
+        period = get_number(table, "period", field, 12.0, lo=0.0, lo_open=True)
+        start = get_number(table, "start", field, 20.0)
+        end = get_number(table, "end", field, start + period, lo=start)
+        amp = get_number(table, "amplitude", field, 0.2)
+        return Sine(amp, period, start, end, vehicle)
+    if kind == "brake":
+        return Brake(
+            vehicle,
+            get_number(table, "start", field, 20.0),
+            get_number(table, "duration", field, 1.0, lo=0.0),
+            get_number(table, "decel", field, -5.0),
+        )
+    if kind == "brake_profile":
+        return BrakeProfile(
+            get_number(table, "start", field, 20.0),
+            get_number(table, "decel", field, -5.0),
+            get_number(table, "decel_time", field, 2.0, lo=0.0),
+            get_number(table, "hold_time", field, 5.0, lo=0.0),
+            get_number(table, "accel", field, 2.0),
+            get_number(table, "accel_time", field, 5.0, lo=0.0),
+            vehicle,
+        )
+    target = "accel" if kind == "accel_profile" else "speed"
+    interp = get_str(table, "interpolation", field, "step", choices=["step", "linear"])
+    if "csv" in table:
+        if "times" in table or "values" in table:
+            raise ConfigError(f"{field}.csv", "give either csv or times/values, not both")
+        rel = get_str(table, "csv", field)
+        path = Path(rel) if base_dir is None or Path(rel).is_absolute() else base_dir / rel
+        times, vals = read_profile_csv(path, f"{field}.csv")
+    else:
+        times = get_number_list(table, "times", field)
+        vals = get_number_list(table, "values", field)
+    try:
+        return Profile(tuple(times), tuple(vals), target, interp, vehicle)
+    except ConfigError as err:
+        raise ConfigError(f"{field}.{err.field}", err.message) from None
