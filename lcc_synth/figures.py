@@ -1,0 +1,60 @@
+"""PNG figure writers (matplotlib, Agg backend, imported inside each function).
+
+Every function takes already computed results from the package's analysis modules and writes
+one PNG; none of them computes anything of its own.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+__all__ = ["plot_control_energy"]
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_control_energy(sweep, path: str | Path) -> Path:
+    """Fig. 5: ``lambda_min(W(t))`` and ``tr(W(t)^{-1})`` against the number of HDVs ``n``.
+
+    Parameters
+    ----------
+    sweep : lcc_synth.energy.EnergySweep
+        Result of :func:`lcc_synth.energy.energy_vs_size`; one curve per horizon, each ending
+        at the last size before ``W(t)`` became numerically singular (marked in the legend).
+    path : str or Path
+        Output PNG.
+
+    Returns
+    -------
+    Path of the written file.
+    """
+    plt = _pyplot()
+    path = Path(path)
+    fig, (ax_l, ax_t) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    for t, reports in sweep.reports.items():
+        n = [r.n for r in reports]
+        label = f"t = {t:g} s"
+        stop = sweep.singular_n(t)
+        if stop is not None:
+            label += f" (W singular from n = {stop})"
+        ax_l.semilogy(n, [r.lambda_min for r in reports], "o-", label=label)
+        ax_t.semilogy(n, [r.trace_inv for r in reports], "o-", label=label)
+    ax_l.set_title(r"(a) $\lambda_{\min}(W(t))$")
+    ax_t.set_title(r"(b) $\mathrm{tr}(W(t)^{-1})$")
+    for ax in (ax_l, ax_t):
+        ax.set_xlabel("number of HDVs behind the CAV, n")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+        ax.xaxis.get_major_locator().set_params(integer=True)
+    fig.suptitle("Control energy of FD-LCC (Fig. 5)")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
