@@ -1,0 +1,57 @@
+"""``lcc-synth synthesize PROBLEM.toml [--out gains.json] [--json] [--figure pareto.png]``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+HELP = "synthesise H2 structured / sparse / string-stable static gains for the CAV"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("problem", help="problem file with a [synthesis] table")
+    parser.add_argument("--out", metavar="GAINS.json", help="write the gains file (contract 3)")
+    parser.add_argument("--json", action="store_true", help="print the report as one JSON object")
+    parser.add_argument(
+        "--figure", metavar="PNG", help="design = 'sparsity': write the Pareto-front PNG"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from lcc_synth.problem import load_problem
+    from lcc_synth.synthesis.config import spec_from_problem
+    from lcc_synth.synthesis.design import synthesize
+    from lcc_synth.synthesis.gains_file import write_gains
+    from lcc_synth.synthesis.h2 import SynthesisError
+    from lcc_synth.synthesis.report import format_report
+
+    spec = spec_from_problem(load_problem(args.problem))
+    try:
+        rep = synthesize(spec)
+    except SynthesisError as err:
+        if args.json:
+            print(json.dumps({"ok": False, "error": str(err), "details": err.details},
+                             default=str))
+        print(f"lcc-synth synthesize: synthesis failed: {err}", file=sys.stderr)
+        return 1
+    written = []
+    if args.out:
+        written.append(str(write_gains(args.out, rep)))
+    if args.figure:
+        if not rep.pareto:
+            from lcc_synth.errors import ConfigError
+
+            raise ConfigError("--figure", "only design = 'sparsity' produces a Pareto front")
+        from lcc_synth.figures import pareto_front_png
+
+        written.append(str(pareto_front_png(rep.pareto, rep.h2_unstructured, args.figure,
+                                            title=rep.problem)))
+    if args.json:
+        doc = {"ok": True, **rep.as_dict(), "written": written}
+        print(json.dumps(doc))
+    else:
+        print(format_report(rep))
+        for w in written:
+            print(f"wrote {w}")
+    return 0

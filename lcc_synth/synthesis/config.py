@@ -1,0 +1,223 @@
+"""The ``[synthesis]`` table of a problem file (``lcc-synth synthesize``).
+
+.. code-block:: toml
+
+    [synthesis]
+    design = "structured"     # "full_state" | "structured" | "sparsity" | "string_stable"
+    semantics = "replace"     # "replace" | "added" (feedback.py, eq. 23); default: "replace"
+                              # for fd_lcc/cf_lcc, "added" for lcc/ccc
+    pattern = [1, 2]          # vehicles heard besides the CAV (structured, string_stable);
+                              # "all" (default) = every vehicle of the string
+    method = "lmi"            # structured: "lmi" (convex restriction + polish) | "direct"
+                              # full_state: "riccati" | "lmi"
+    cross_check = true        # full_state: also solve the other method and compare
+    tol = 1e-7                # polishing tolerance (relative gradient norm), in (0, 1e-2]
+    max_iter = 500            # polishing iterations, >= 1
+
+    [synthesis.weights]       # see lcc_synth.synthesis.h2.Weights
+    q_s = 1.0                 # spacing errors, > 0
+    q_v = 1.0                 # velocity errors, > 0
+    q_p = 0.1                 # FD-LCC -p_0 when position = "weight", > 0
+    r = 1.0                   # the gain's input, > 0
+    head = 0.0                # head-vehicle velocity disturbance, >= 0
+    accel = 1.0               # acceleration noise on every velocity state, >= 0
+    position = "drop"         # FD-LCC position state: "drop" | "weight"
+
+    [synthesis.sparsity]      # design = "sparsity"
+    gammas = [...]            # penalties >= 0 (default: n_gamma log-spaced values x J*)
+    n_gamma = 12              # 2..60
+    reweight = true           # group weights from the unstructured optimum
+    rho = 10.0                # ADMM penalty parameter, > 0
+    max_loss = 0.01           # chosen gain: fewest vehicles with H2 <= (1 + max_loss) H2*
+
+    [synthesis.string]        # design = "string_stable"
+    gamma = 1.0               # H-infinity bound on head -> tail, >= 1
+    polish_steps = 200        # string-stable-feasible polishing iterations, >= 0
+
+    [synthesis.baseline]      # optional: compare with hand-picked gains (e.g. the paper's)
+    name = "paper"
+    semantics = "replace"
+    gains = { v_0 = -0.5, s_1 = -0.2, v_1 = 0.05, s_2 = -0.1, v_2 = 0.05 }
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from lcc_synth.errors import ConfigError
+from lcc_synth.feedback import SEMANTICS, StaticGains
+from lcc_synth.problem import (
+    Problem,
+    System,
+    check_keys,
+    get_bool,
+    get_int,
+    get_number,
+    get_number_list,
+    get_str,
+    get_table,
+    system_from,
+)
+from lcc_synth.synthesis.h2 import Weights
+
+__all__ = ["DESIGNS", "SynthesisSpec", "spec_from_problem"]
+
+DESIGNS = ("full_state", "structured", "sparsity", "string_stable")
+
+
+@dataclass(frozen=True)
+class SynthesisSpec:
+    """A parsed synthesis problem."""
+
+    name: str
+    system: System
+    design: str
+    semantics: str
+    weights: Weights
+    pattern: tuple[int, ...] | None  # None = every vehicle
+    method: str
+    cross_check: bool = True
+    tol: float = 1e-7
+    max_iter: int = 500
+    sparsity: dict[str, Any] = field(default_factory=dict)
+    string_gamma: float = 1.0
+    polish_steps: int = 200
+    baseline: tuple[str, StaticGains] | None = None
+    source: str | None = None
+
+
+def _pattern(table: dict, system: System) -> tuple[int, ...] | None:
+    if "pattern" not in table:
+        return None
+    value = table["pattern"]
+    if value == "all":
+        return None
+    lo, hi = -system.m, system.n
+    if not isinstance(value, list) or any(
+        isinstance(v, bool) or not isinstance(v, int) for v in value
+    ):
+        raise ConfigError(
+            "synthesis.pattern",
+            f'must be "all" or a list of vehicle indices in [{lo}, {hi}], got {value!r}',
+        )
+    for v in value:
+        if not lo <= v <= hi:
+            raise ConfigError(
+                "synthesis.pattern", f"vehicle {v} outside [{lo}, {hi}] for this system"
+            )
+    return tuple(sorted(set(value) - {0}))
+
+
+def spec_from_problem(problem: Problem) -> SynthesisSpec:
+    """Parse the ``[hdv]``, ``[system]`` and ``[synthesis]`` tables of a problem file."""
+    src = str(problem.path)
+    try:
+        check_keys(
+            problem.data, ["name", "description", "hdv", "system", "synthesis"], ""
+        )
+        system = system_from(problem.data, src)
+        t = get_table(problem.data, "synthesis", "synthesis", required=True)
+        check_keys(
+            t,
+            [
+                "design", "semantics", "pattern", "method", "cross_check", "tol", "max_iter",
+                "weights", "sparsity", "string", "baseline",
+            ],
+            "synthesis",
+        )
+        design = get_str(t, "design", "synthesis", "structured", choices=DESIGNS)
+        default_sem = "replace" if system.kind in ("fd_lcc", "cf_lcc") else "added"
+        semantics = get_str(t, "semantics", "synthesis", default_sem, choices=SEMANTICS)
+        if semantics == "added" and system.kind == "fd_lcc":
+            raise ConfigError(
+                "synthesis.semantics", "fd_lcc has no vehicle ahead to follow: use 'replace'"
+            )
+        pattern = _pattern(t, system)
+        if design == "full_state":
+            method = get_str(t, "method", "synthesis", "riccati", choices=("riccati", "lmi"))
+        else:
+            method = get_str(t, "method", "synthesis", "lmi", choices=("lmi", "direct"))
+        cross_check = get_bool(t, "cross_check", "synthesis", True)
+        tol = get_number(t, "tol", "synthesis", 1e-7, lo=0.0, hi=1e-2, lo_open=True)
+        max_iter = get_int(t, "max_iter", "synthesis", 500, lo=1, hi=100000)
+
+        w = get_table(t, "weights", "synthesis.weights")
+        check_keys(w, ["q_s", "q_v", "q_p", "r", "head", "accel", "position"], "synthesis.weights")
+        kw = {}
+        for key, dflt in (("q_s", 1.0), ("q_v", 1.0), ("r", 1.0)):
+            kw[key] = get_number(w, key, "synthesis.weights", dflt, lo=0.0, lo_open=True)
+        for key, dflt in (("q_p", 0.1), ("head", 0.0), ("accel", 1.0)):
+            kw[key] = get_number(w, key, "synthesis.weights", dflt, lo=0.0)
+        kw["position"] = get_str(
+            w, "position", "synthesis.weights", "drop", choices=("drop", "weight")
+        )
+        if kw["head"] == 0 and kw["accel"] == 0:
+            raise ConfigError("synthesis.weights", "head and accel cannot both be 0")
+        if system.kind == "fd_lcc" and kw["accel"] == 0:
+            raise ConfigError(
+                "synthesis.weights.accel",
+                "must be > 0 for fd_lcc (no head vehicle: the head disturbance does not exist)",
+            )
+        if kw["position"] == "weight" and kw["q_p"] <= 0:
+            raise ConfigError("synthesis.weights.q_p", "must be > 0 when position = 'weight'")
+        weights = Weights(**kw)
+
+        sp = get_table(t, "sparsity", "synthesis.sparsity")
+        check_keys(sp, ["gammas", "n_gamma", "reweight", "rho", "max_loss"], "synthesis.sparsity")
+        sparsity = {
+            "gammas": get_number_list(sp, "gammas", "synthesis.sparsity", None, lo=0.0),
+            "n_gamma": get_int(sp, "n_gamma", "synthesis.sparsity", 12, lo=2, hi=60),
+            "reweight": get_bool(sp, "reweight", "synthesis.sparsity", True),
+            "rho": get_number(sp, "rho", "synthesis.sparsity", 10.0, lo=0.0, lo_open=True),
+            "max_loss": get_number(sp, "max_loss", "synthesis.sparsity", 0.01, lo=0.0, hi=10.0),
+        }
+        if sparsity["gammas"] is not None and not sparsity["gammas"]:
+            raise ConfigError("synthesis.sparsity.gammas", "must not be empty")
+
+        st = get_table(t, "string", "synthesis.string")
+        check_keys(st, ["gamma", "polish_steps"], "synthesis.string")
+        string_gamma = get_number(st, "gamma", "synthesis.string", 1.0, lo=1.0, hi=100.0)
+        polish_steps = get_int(st, "polish_steps", "synthesis.string", 200, lo=0, hi=100000)
+        if design == "string_stable" and system.kind == "fd_lcc":
+            raise ConfigError(
+                "synthesis.design", "string_stable needs a head vehicle; fd_lcc has none"
+            )
+        if design == "string_stable" and weights.head == 0:
+            raise ConfigError(
+                "synthesis.weights.head",
+                "must be > 0 for design = 'string_stable' (the head disturbance is the point)",
+            )
+
+        baseline = None
+        b = get_table(t, "baseline", "synthesis.baseline")
+        if b:
+            check_keys(b, ["name", "semantics", "gains"], "synthesis.baseline")
+            bname = get_str(b, "name", "synthesis.baseline", "baseline")
+            bsem = get_str(b, "semantics", "synthesis.baseline", semantics, choices=SEMANTICS)
+            bg = get_table(b, "gains", "synthesis.baseline.gains", required=True)
+            try:
+                gains = StaticGains(bg, bsem)
+                gains.check(system.linear_model(warn=False))
+            except ConfigError as err:
+                raise ConfigError(f"synthesis.baseline.{err.field}", err.message) from None
+            baseline = (bname, gains)
+        return SynthesisSpec(
+            name=problem.name,
+            system=system,
+            design=design,
+            semantics=semantics,
+            weights=weights,
+            pattern=pattern,
+            method=method,
+            cross_check=cross_check,
+            tol=tol,
+            max_iter=max_iter,
+            sparsity=sparsity,
+            string_gamma=string_gamma,
+            polish_steps=polish_steps,
+            baseline=baseline,
+            source=src,
+        )
+    except ConfigError as err:
+        raise err.with_source(src) if not err.source else err from None

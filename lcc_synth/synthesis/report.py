@@ -1,0 +1,210 @@
+"""Checks of every synthesised gain and the report that carries them.
+
+:func:`evaluate_gain` computes, from the gain alone: the closed-loop eigenvalues (design plant
+and full model), the TRUE H2 norm (Lyapunov), and for models with a head vehicle the global
+string-stability check of contract 1 (peak ``|Gamma|``, its frequency, verdict).
+:func:`check_gain` turns an unusable result (non-finite entries, unstable closed loop, infinite
+H2 norm) into a :class:`~lcc_synth.synthesis.h2.SynthesisError` -- never a returned gain.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from lcc_synth.synthesis.h2 import (
+    STABILITY_TOL,
+    H2Plant,
+    SynthesisError,
+    closed_loop_matrix,
+    h2_norm,
+    max_real_eig,
+)
+
+__all__ = ["GainCheck", "evaluate_gain", "check_gain", "SynthesisReport", "format_report"]
+
+
+@dataclass
+class GainCheck:
+    """Everything computed from one gain."""
+
+    h2: float
+    max_real_eig: float  # design plant closed loop
+    max_real_eig_model: float  # full model (FD-LCC "drop": the free position integrator is 0)
+    plant_stable: bool | None
+    string_stable: bool | None
+    gamma_peak: float | None
+    gamma_peak_omega: float | None
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def evaluate_gain(plant: H2Plant, g: np.ndarray) -> GainCheck:
+    """Closed-loop eigenvalues, true H2 norm and string stability of design gain ``g``."""
+    g = np.asarray(g, float).ravel()
+    mre = max_real_eig(closed_loop_matrix(plant, g)) if np.all(np.isfinite(g)) else math.inf
+    h2 = h2_norm(plant, g) if math.isfinite(mre) else math.inf
+    model = plant.model
+    K, kh = plant.input_feedback(g)
+    mre_model = max_real_eig(model.A + model.B @ K.reshape(1, -1)) if math.isfinite(mre) else mre
+    ps = ss = peak = peak_w = None
+    if model.kind != "fd_lcc" and math.isfinite(mre):
+        from lcc_synth.string_stability import string_stability
+
+        rep = string_stability(model, K, kh)
+        ps, ss = bool(rep.plant_stable), bool(rep.string_stable)
+        peak, peak_w = float(rep.gamma_peak), float(rep.gamma_peak_omega)
+    return GainCheck(h2, mre, mre_model, ps, ss, peak, peak_w)
+
+
+def check_gain(plant: H2Plant, g: np.ndarray, what: str, details: dict | None = None) -> GainCheck:
+    """:func:`evaluate_gain`, raising :class:`SynthesisError` on an unusable result."""
+    g = np.asarray(g, float).ravel()
+    details = dict(details or {})
+    if not np.all(np.isfinite(g)):
+        raise SynthesisError(f"{what}: the gain has non-finite entries", details)
+    chk = evaluate_gain(plant, g)
+    if not chk.max_real_eig < -STABILITY_TOL:
+        details["max_real_eig"] = chk.max_real_eig
+        raise SynthesisError(
+            f"{what}: the closed loop is not stable (max Re(eig) = {chk.max_real_eig:.3g})",
+            details,
+        )
+    if not math.isfinite(chk.h2):
+        raise SynthesisError(f"{what}: the closed-loop H2 norm is not finite", details)
+    return chk
+
+
+@dataclass
+class SynthesisReport:
+    """Result of ``lcc-synth synthesize``: the gain, how it was found and its checks."""
+
+    problem: str
+    design: str
+    kind: str
+    m: int
+    n: int
+    v_star: float
+    semantics: str
+    weights: dict[str, Any]
+    disturbances: list[str]
+    pattern: list[int]
+    state_names: list[str]
+    K: list[float]
+    gains: dict[str, float]
+    input_K: list[float]
+    input_kh: float
+    check: GainCheck
+    h2_lmi_bound: float | None = None
+    h2_restriction: float | None = None
+    h2_unstructured: float | None = None
+    solver: dict[str, Any] = field(default_factory=dict)
+    polish: dict[str, Any] = field(default_factory=dict)
+    baseline: dict[str, Any] | None = None
+    pareto: list[dict[str, Any]] | None = None
+    timings: dict[str, float] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+    def as_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["check"] = self.check.as_dict()
+        return _jsonable(d)
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return [_jsonable(v) for v in x.tolist()]
+    if isinstance(x, np.bool_):
+        return bool(x)
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, float | np.floating):
+        x = float(x)
+        return x if math.isfinite(x) else None
+    return x
+
+
+def _fmt(x, spec=".6g") -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "n/a"
+    return format(x, spec)
+
+
+def format_report(rep: SynthesisReport) -> str:
+    """Human-readable report."""
+    c = rep.check
+    lines = [
+        f"synthesis: {rep.problem}  ({rep.design}, {rep.kind} m={rep.m} n={rep.n}, "
+        f"v*={rep.v_star:g}, semantics={rep.semantics})",
+        "weights: " + ", ".join(f"{k}={v}" for k, v in rep.weights.items()),
+        f"disturbances: {', '.join(rep.disturbances)}",
+        f"pattern (vehicles heard): {rep.pattern}",
+        "gain (u = +K x, "
+        + ("added to the HDV law" if rep.semantics == "added" else "whole CAV command")
+        + "):",
+    ]
+    nz = [(k, v) for k, v in rep.gains.items() if v != 0.0]
+    lines += [f"  {k:>6s} = {v: .6f}" for k, v in nz] or ["  (all zero)"]
+    lines += [
+        f"true H2 norm           : {_fmt(c.h2)}",
+        f"LMI bound              : {_fmt(rep.h2_lmi_bound)}"
+        + (
+            f"  (LMI gain's true H2 {_fmt(rep.h2_restriction)})"
+            if rep.h2_restriction is not None
+            else ""
+        ),
+        f"unstructured optimum   : {_fmt(rep.h2_unstructured)}",
+        f"max Re(eig) closed loop: {_fmt(c.max_real_eig, '.4g')}"
+        f"  (full model {_fmt(c.max_real_eig_model, '.4g')})",
+    ]
+    if c.string_stable is not None:
+        lines.append(
+            f"peak |Gamma|           : {_fmt(c.gamma_peak, '.9f')} at w = "
+            f"{_fmt(c.gamma_peak_omega, '.4g')} rad/s -> "
+            + ("string stable" if c.string_stable else "NOT string stable")
+        )
+    else:
+        lines.append("string stability       : n/a (no head vehicle)")
+    if rep.solver:
+        lines.append("solver: " + ", ".join(f"{k}={_fmt(v) if isinstance(v, float) else v}"
+                                             for k, v in rep.solver.items()))
+    if rep.polish:
+        lines.append("polish: " + ", ".join(f"{k}={_fmt(v) if isinstance(v, float) else v}"
+                                             for k, v in rep.polish.items()))
+    if rep.baseline:
+        b = rep.baseline
+        lines.append(
+            f"baseline '{b['name']}': true H2 {_fmt(b['h2'])}, max Re(eig) "
+            f"{_fmt(b['max_real_eig'], '.4g')}"
+            + (
+                f", peak |Gamma| {_fmt(b['gamma_peak'], '.6f')}, "
+                + ("string stable" if b["string_stable"] else "not string stable")
+                if b.get("string_stable") is not None
+                else ""
+            )
+            + (
+                f"  -> synthesised gain is {100 * (1 - c.h2 / b['h2']):.1f}% lower in H2"
+                if b["h2"] and math.isfinite(b["h2"])
+                else ""
+            )
+        )
+    if rep.pareto:
+        lines.append("Pareto sweep (vehicles heard besides the CAV -> true H2 after polishing):")
+        lines.append(f"  {'#':>2s}  {'H2':>10s}  {'front':>5s}  vehicles")
+        for p in rep.pareto:
+            lines.append(
+                f"  {p['count']:>2d}  {p['h2']:>10.6f}  {'*' if p['on_front'] else '':>5s}  "
+                f"{p['vehicles']}"
+            )
+    if rep.timings:
+        lines.append("time: " + ", ".join(f"{k} {v:.3f} s" for k, v in rep.timings.items()))
+    lines += [f"note: {s}" for s in rep.notes]
+    return "\n".join(lines)
