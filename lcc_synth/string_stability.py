@@ -1,0 +1,636 @@
+"""Head-to-tail transfer function and string stability, Section IV and Appendix A.
+
+Head-to-tail transfer function (eq. 24): ``Gamma(s) = V_t(s) / V_h(s)``, the velocity error of the
+tail vehicle over the velocity error of the head vehicle, for the CAV law (eq. 23)
+
+    u = a1 s_0 - a2 v_0 + a3 v_-1 + sum_i (mu_i s_i + k_i v_i).
+
+Two independent computations:
+
+* :func:`gamma_closed_form` evaluates the paper's formula ``Gamma = G (phi/gamma)^(n+m)`` with
+  ``phi = a3 s + a1``, ``gamma = s^2 + a2 s + a1`` and ``H_i = mu_i (gamma/phi - 1) + k_i s``,
+  generalised to per-vehicle (heterogeneous) coefficients by replacing every power of
+  ``phi/gamma`` with the product of the vehicles' own ratios (Appendix A, same derivation).
+  :func:`gamma_polynomials` gives the same function as an exact ratio of polynomials
+  ``num/den``; ``den`` is the closed-loop characteristic polynomial.
+* :func:`gamma_state_space` evaluates ``c (jw I - A_cl)^-1 h_cl`` of the closed loop
+  (``feedback.closed_loop``) by a vectorised Hessenberg solve (orthogonal reduction once, then an
+  O(nx^2) elimination with pivoting per frequency), never by an eigen-decomposition: identical
+  vehicle blocks make ``A`` nearly defective.
+
+String-stability verdict (eq. 25): ``|Gamma(jw)| < 1`` for all ``w > 0``. Every stabilising gain
+gives ``|Gamma(0)| = 1``, so the question is decided by
+
+1. the low-frequency expansion ``|Gamma(jw)|^2 = Gamma(0)^2 + c w^2 + O(w^4)``: ``c > 0`` means
+   ``|Gamma| > 1`` just above ``w = 0``. ``c = g1^2 - g0 g2`` with ``g_k`` the Taylor
+   coefficients of ``Gamma`` at 0 (computed from ``A_cl^-1`` solves). The verdict requires
+   ``c_rel = c / (g1^2 + |g0 g2|) < -LOW_FREQ_TOL`` (1e-9): a point whose curvature is zero to
+   round-off is on the boundary and counted as *not* string stable (conservative);
+2. the global supremum over ``w > 0``: every local maximum must stay below ``1 - PEAK_TOL``
+   (1e-9). The search is global: a dense logarithmic grid (``GRID_PER_DECADE`` points per decade
+   over ``[min(1e-3, 0.01 min|lambda|), max(100, 100 max|lambda|)]``) to which the imaginary
+   parts and moduli of all closed-loop poles are added (a lightly damped pole makes a narrow
+   peak exactly there), then every local maximum of the grid is refined by a vectorised
+   golden-section search (bracket = its two grid neighbours, 45 iterations, relative frequency
+   resolution ~1e-9, so the peak value is exact to round-off). A second, independent method is
+   the Hamiltonian level-set algorithm of Boyd & Balakrishnan (:func:`hinf_norm_hamiltonian`,
+   :func:`level_crossings`), selectable with ``method="hamiltonian"``; the tests check that
+   both agree.
+
+Plant (asymptotic) stability uses the closed-loop eigenvalues computed per strongly connected
+block of ``A_cl`` (a permutation to block-triangular form, exact): HDVs that the CAV does not
+feed back form their own 2x2 blocks, so their eigenvalues are exact instead of being scattered
+by a long Jordan chain.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import scipy.linalg as sla
+from scipy.sparse.csgraph import connected_components
+
+from lcc_synth.errors import ConfigError
+from lcc_synth.feedback import _hdv_law, closed_loop
+from lcc_synth.hdv import LinearCoefficients
+from lcc_synth.models import LCCModel
+
+__all__ = [
+    "StringStabilityReport",
+    "GRID_PER_DECADE",
+    "LOW_FREQ_TOL",
+    "PEAK_TOL",
+    "phi_gamma",
+    "closed_form_gains",
+    "gamma_closed_form",
+    "gamma_polynomials",
+    "gamma_state_space",
+    "transfer_response",
+    "closed_loop_eigenvalues",
+    "low_frequency_curvature",
+    "hinf_norm_hamiltonian",
+    "level_crossings",
+    "string_stability",
+    "gains_string_stability",
+]
+
+GRID_PER_DECADE = 120
+LOW_FREQ_TOL = 1e-9
+PEAK_TOL = 1e-9
+_GOLDEN_ITERS = 45
+
+CoefSpec = LinearCoefficients | Mapping[int, LinearCoefficients]
+
+
+# --------------------------------------------------------------------------------------------
+# Report
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class StringStabilityReport:
+    """Closed-loop plant stability and head-to-tail string stability of one gain.
+
+    Attributes
+    ----------
+    plant_stable : bool
+        All closed-loop eigenvalues have negative real part.
+    string_stable : bool
+        ``plant_stable`` and ``|Gamma(jw)| < 1`` for every ``w > 0`` (see module docstring).
+    gamma_peak : float
+        ``sup_{w > 0} |Gamma(jw)|`` (for an unstable plant: the formal frequency response).
+    gamma_peak_omega : float
+        Where the supremum is attained (rad/s); ``0.0`` when it is the limit ``w -> 0``.
+    max_real_eig : float
+        Largest real part of the closed-loop eigenvalues.
+    gamma_dc : float
+        ``|Gamma(0)|`` (1 for every stabilising gain).
+    low_freq_curvature : float
+        ``c`` in ``|Gamma(jw)|^2 = Gamma(0)^2 + c w^2 + O(w^4)``; ``c > 0`` is string unstable.
+    interior_peak, interior_peak_omega : float
+        Largest local maximum of ``|Gamma(jw)|`` at ``w > 0`` (NaN when ``|Gamma|`` decreases
+        monotonically).
+    method : str
+        ``"grid"`` or ``"hamiltonian"``.
+    """
+
+    plant_stable: bool
+    string_stable: bool
+    gamma_peak: float
+    gamma_peak_omega: float
+    max_real_eig: float
+    gamma_dc: float
+    low_freq_curvature: float
+    interior_peak: float
+    interior_peak_omega: float
+    method: str
+
+    def as_dict(self) -> dict:
+        """JSON-ready dict (non-finite floats become ``None``)."""
+        out = asdict(self)
+        for key, value in out.items():
+            if isinstance(value, float) and not np.isfinite(value):
+                out[key] = None
+        return out
+
+
+# --------------------------------------------------------------------------------------------
+# Closed form (eq. 24, Appendix A)
+# --------------------------------------------------------------------------------------------
+
+
+def phi_gamma(coef: LinearCoefficients) -> tuple[np.ndarray, np.ndarray]:
+    """``phi(s) = a3 s + a1`` and ``gamma(s) = s^2 + a2 s + a1`` (highest power first)."""
+    return (
+        np.array([coef.alpha3, coef.alpha1], dtype=float),
+        np.array([1.0, coef.alpha2, coef.alpha1], dtype=float),
+    )
+
+
+def _per_vehicle(coefs: CoefSpec, m: int, n: int) -> dict[int, LinearCoefficients]:
+    if isinstance(coefs, LinearCoefficients):
+        return {i: coefs for i in range(-m, n + 1)}
+    out = dict(coefs)
+    missing = [i for i in range(-m, n + 1) if i not in out]
+    if missing:
+        raise ConfigError("coefficients", f"missing linear coefficients of vehicles {missing}")
+    return out
+
+
+def _check_gains(mu: Mapping[int, float], k: Mapping[int, float], m: int, n: int) -> None:
+    for name, table in (("mu", mu), ("k", k)):
+        for i in table:
+            if not (-m <= int(i) <= n):
+                raise ConfigError(
+                    f"{name}[{i}]", f"vehicle index must be in [{-m}, {n}] (m={m}, n={n})"
+                )
+
+
+def _cav_polys(c0: LinearCoefficients, mu0: float, k0: float, kh: float):
+    """CAV law ``(a1 + mu0) s_0 + (k0 - a2) v_0 + (a3 + kh) v_ahead`` -> (phi_0, gamma_0)."""
+    phi0 = np.array([c0.alpha3 + kh, c0.alpha1 + mu0])
+    gam0 = np.array([1.0, c0.alpha2 - k0, c0.alpha1 + mu0])
+    return phi0, gam0
+
+
+def closed_form_gains(
+    model: LCCModel, K: np.ndarray, kh: float = 0.0
+) -> tuple[dict[int, float], dict[int, float], float]:
+    """Translate input feedback ``(K, kh)`` into the paper's ``mu_i, k_i`` (eq. 23).
+
+    Returns ``(mu, k, kh_extra)``: the gains *added* to the CAV's HDV law (``mu[0]``/``k[0]``
+    add to ``a1``/``-a2``; ``k[-1]`` adds to ``a3``), and for ``m = 0`` the gain added to ``a3``
+    on the head velocity. Any static CAV command on an LCC model has this form.
+    """
+    if model.kind == "fd_lcc":
+        raise ConfigError(
+            "system.kind", "fd_lcc has no head vehicle: the head-to-tail transfer is undefined"
+        )
+    K = np.asarray(K, dtype=float).reshape(-1)
+    if K.shape[0] != model.nx:
+        raise ConfigError("gain", f"needs {model.nx} entries for this model, got {K.shape[0]}")
+    K_law, kh_law = _hdv_law(model)
+    if model.kind == "cf_lcc":  # the model's input is u_hat; the HDV law is inside A
+        K_added, kh_added = K.copy(), float(kh)
+    else:
+        K_added, kh_added = K - K_law, float(kh) - kh_law
+    mu = {i: float(K_added[2 * j]) for j, i in enumerate(model.vehicles)}
+    kk = {i: float(K_added[2 * j + 1]) for j, i in enumerate(model.vehicles)}
+    return mu, kk, kh_added
+
+
+def gamma_closed_form(
+    coefs: CoefSpec,
+    mu: Mapping[int, float],
+    k: Mapping[int, float],
+    m: int,
+    n: int,
+    s,
+    kh: float = 0.0,
+):
+    """Evaluate eq. (24), ``Gamma(s) = G(s) (phi/gamma)^(n+m)``, at complex ``s``.
+
+    Parameters
+    ----------
+    coefs : LinearCoefficients or mapping
+        Homogeneous coefficients (exactly the paper's formula) or one set per vehicle index
+        ``-m..n`` (index 0: the CAV's HDV law). Heterogeneous strings use the product of the
+        vehicles' own ``phi_j/gamma_j`` in place of each power of ``phi/gamma``.
+    mu, k : mapping of int to float
+        Spacing and velocity gains ``mu_i, k_i`` per vehicle index (missing: 0). ``mu[0]``,
+        ``k[0]`` add to the CAV's ``a1``/``-a2``.
+    m, n : int
+        HDVs ahead / behind.
+    s : complex array_like
+        Laplace variable (``1j * omega`` for the frequency response).
+    kh : float
+        For ``m = 0`` only: gain added to ``a3`` on the head velocity.
+    """
+    _check_gains(mu, k, m, n)
+    c = _per_vehicle(coefs, m, n)
+    s = np.asarray(s, dtype=complex)
+    T = {}
+    H = {}
+    for i in [*range(-m, 0), *range(1, n + 1)]:
+        ph, ga = phi_gamma(c[i])
+        phv, gav = np.polyval(ph, s), np.polyval(ga, s)
+        T[i] = phv / gav
+        H[i] = mu.get(i, 0.0) * (gav / phv - 1.0) + k.get(i, 0.0) * s
+    phi0, gam0 = _cav_polys(c[0], mu.get(0, 0.0), k.get(0, 0.0), kh if m == 0 else 0.0)
+    if m > 0 and kh:
+        raise ConfigError("kh", "only for m = 0 (with m > 0 use k[-1])")
+    num = np.polyval(phi0, s).astype(complex)
+    for i in range(-m, 0):
+        inv = np.ones_like(s)
+        for j in range(i + 1, 0):
+            inv = inv / T[j]
+        num = num + H[i] * inv  # homogeneous: H_i (phi/gamma)^(i+1)
+    den = np.polyval(gam0, s).astype(complex)
+    prod = np.ones_like(s)
+    for i in range(1, n + 1):
+        prod = prod * T[i]
+        den = den - H[i] * prod  # homogeneous: H_i (phi/gamma)^i
+    G = num / den
+    out = G
+    for i in T:
+        out = out * T[i]  # homogeneous: (phi/gamma)^(n+m)
+    return out
+
+
+def gamma_polynomials(
+    coefs: CoefSpec,
+    mu: Mapping[int, float],
+    k: Mapping[int, float],
+    m: int,
+    n: int,
+    kh: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``Gamma = num / den`` as exact polynomials (highest power first).
+
+    ``den`` is the closed-loop characteristic polynomial (degree ``2(m+n+1)``, monic):
+    ``prod_{P} gamma_j * [gamma_0 prod_F gamma_j - sum_{i in F} h_i(s) prod_{j<i} phi_j
+    prod_{j>i} gamma_j]`` with ``h_i = mu_i (gamma_i - phi_i) + k_i s phi_i``; ``num`` is
+    ``prod_F phi_j * [phi_0 prod_P phi_j + sum_{i in P} h_i ...]``. Both are affine in every
+    single pair ``(mu_i, k_i)``: the fact the region maps exploit. Products of quadratics only:
+    no cancellation, no root finding.
+    """
+    _check_gains(mu, k, m, n)
+    if m > 0 and kh:
+        raise ConfigError("kh", "only for m = 0 (with m > 0 use k[-1])")
+    c = _per_vehicle(coefs, m, n)
+    pg = {i: phi_gamma(c[i]) for i in c if i != 0}
+
+    def h(i):
+        ph, ga = pg[i]
+        return np.polyadd(
+            mu.get(i, 0.0) * np.polysub(ga, np.concatenate([[0.0], ph])),
+            k.get(i, 0.0) * np.polymul([1.0, 0.0], ph),
+        )
+
+    def prod(polys):
+        out = np.array([1.0])
+        for p in polys:
+            out = np.polymul(out, p)
+        return out
+
+    phi0, gam0 = _cav_polys(c[0], mu.get(0, 0.0), k.get(0, 0.0), kh if m == 0 else 0.0)
+    P = list(range(-m, 0))
+    F = list(range(1, n + 1))
+    # ahead part: V_0 numerator over prod_P gamma
+    num_p = prod([phi0] + [pg[j][0] for j in P])
+    for i in P:
+        term = prod([h(i)] + [pg[j][0] for j in P if j < i] + [pg[j][1] for j in P if j > i])
+        num_p = np.polyadd(num_p, term)
+    den_f = prod([gam0] + [pg[j][1] for j in F])
+    for i in F:
+        term = prod([h(i)] + [pg[j][0] for j in F if j < i] + [pg[j][1] for j in F if j > i])
+        den_f = np.polysub(den_f, term)
+    num = np.polymul(num_p, prod([pg[j][0] for j in F]))
+    den = np.polymul(den_f, prod([pg[j][1] for j in P]))
+    return np.trim_zeros(num, "f"), den
+
+
+# --------------------------------------------------------------------------------------------
+# State space
+# --------------------------------------------------------------------------------------------
+
+
+def _hessenberg_solver(A: np.ndarray, b: np.ndarray, c: np.ndarray, chunk: int = 512):
+    """A function ``s -> c (s I - A)^-1 b`` (see :func:`transfer_response`), reduction done once."""
+    A = np.asarray(A, dtype=float)
+    b = np.asarray(b, dtype=float).reshape(-1)
+    c = np.asarray(c, dtype=float).reshape(-1)
+    nx = A.shape[0]
+    Hs, Q = sla.hessenberg(A, calc_q=True)
+    bh = Q.T @ b
+    ch = c @ Q
+    diag = np.arange(nx)
+
+    def solve(s):
+        s = np.asarray(s, dtype=complex)
+        out = np.empty(s.shape, dtype=complex)
+        flat = s.reshape(-1)
+        res = out.reshape(-1)
+        for start in range(0, flat.size, chunk):
+            z = flat[start : start + chunk]
+            N = z.size
+            M = np.broadcast_to(-Hs, (N, nx, nx)).astype(complex)
+            M[:, diag, diag] += z[:, None]
+            r = np.broadcast_to(bh, (N, nx)).astype(complex)
+            for j in range(nx - 1):
+                swap = np.abs(M[:, j + 1, j]) > np.abs(M[:, j, j])
+                if swap.any():
+                    idx = np.nonzero(swap)[0]
+                    top = M[idx, j, j:].copy()
+                    M[idx, j, j:] = M[idx, j + 1, j:]
+                    M[idx, j + 1, j:] = top
+                    rt = r[idx, j].copy()
+                    r[idx, j] = r[idx, j + 1]
+                    r[idx, j + 1] = rt
+                piv = M[:, j, j]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    lam = np.where(piv != 0, M[:, j + 1, j] / piv, 0.0)
+                M[:, j + 1, j + 1 :] -= lam[:, None] * M[:, j, j + 1 :]
+                r[:, j + 1] -= lam * r[:, j]
+            y = np.empty((N, nx), dtype=complex)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                for j in range(nx - 1, -1, -1):
+                    acc = r[:, j] - np.einsum("ij,ij->i", M[:, j, j + 1 :], y[:, j + 1 :])
+                    y[:, j] = acc / M[:, j, j]
+            res[start : start + N] = y @ ch
+        return out
+
+    return solve
+
+
+def transfer_response(
+    A: np.ndarray, b: np.ndarray, c: np.ndarray, s, chunk: int = 512
+) -> np.ndarray:
+    """``c (s I - A)^-1 b`` for every complex ``s`` (SISO), numerically stable and vectorised.
+
+    ``A`` is reduced once to upper Hessenberg form ``A = Q Hs Q^T`` (orthogonal); each
+    ``(s I - Hs) y = Q^T b`` is then solved by Gaussian elimination of the single subdiagonal
+    with row pivoting between the two candidate rows (backward stable, O(nx^2) per ``s``),
+    vectorised over ``s`` in chunks.
+    """
+    return _hessenberg_solver(A, b, c, chunk)(np.atleast_1d(np.asarray(s, dtype=complex)))
+
+
+def _tail_output(model: LCCModel) -> np.ndarray:
+    c = np.zeros(model.nx)
+    c[model.tail_velocity_index] = 1.0
+    return c
+
+
+def _check_head(model: LCCModel) -> None:
+    if model.kind == "fd_lcc":
+        raise ConfigError(
+            "system.kind", "fd_lcc has no head vehicle: the head-to-tail transfer is undefined"
+        )
+
+
+def gamma_state_space(model: LCCModel, K: np.ndarray, kh: float = 0.0, omega=None) -> np.ndarray:
+    """``Gamma(j omega)`` from the closed-loop state space (input feedback ``K``, ``kh``)."""
+    _check_head(model)
+    Acl, Hcl = closed_loop(model, K, kh)
+    omega = np.asarray(omega, dtype=float)
+    return transfer_response(Acl, Hcl, _tail_output(model), 1j * omega)
+
+
+def closed_loop_eigenvalues(Acl: np.ndarray) -> np.ndarray:
+    """Eigenvalues of ``Acl`` computed per strongly connected block (exact permutation to
+    block-triangular form), so uncoupled identical vehicles do not scatter each other's."""
+    Acl = np.asarray(Acl, dtype=float)
+    ncomp, labels = connected_components(Acl != 0, directed=True, connection="strong")
+    parts = []
+    for comp in range(ncomp):
+        idx = np.nonzero(labels == comp)[0]
+        parts.append(np.linalg.eigvals(Acl[np.ix_(idx, idx)]))
+    return np.concatenate(parts)
+
+
+def low_frequency_curvature(Acl: np.ndarray, h: np.ndarray, c: np.ndarray):
+    """``(g0, c2, c_rel)``: ``Gamma(0)``, the curvature ``c`` of ``|Gamma(jw)|^2 = g0^2 + c w^2
+    + O(w^4)`` and ``c`` relative to its two terms (``c = g1^2 - g0 g2``, Taylor coefficients of
+    ``Gamma`` at 0 from three solves with ``Acl``)."""
+    lu = sla.lu_factor(Acl)
+    y1 = sla.lu_solve(lu, np.asarray(h, float).reshape(-1))
+    y2 = sla.lu_solve(lu, y1)
+    y3 = sla.lu_solve(lu, y2)
+    g0 = -float(c @ y1)
+    g1 = -float(c @ y2)
+    g2 = -2.0 * float(c @ y3)
+    curv = g1 * g1 - g0 * g2
+    scale = g1 * g1 + abs(g0 * g2)
+    return g0, curv, (curv / scale if scale > 0 else 0.0)
+
+
+# --------------------------------------------------------------------------------------------
+# Global peak search: dense grid + pole frequencies + golden-section refinement
+# --------------------------------------------------------------------------------------------
+
+
+def _frequency_grid(eigs: np.ndarray) -> np.ndarray:
+    mags = np.abs(eigs)
+    mags = mags[mags > 1e-12]
+    lo = min(1e-3, 0.01 * mags.min()) if mags.size else 1e-3
+    hi = max(1e2, 100.0 * mags.max()) if mags.size else 1e2
+    count = int(np.ceil(GRID_PER_DECADE * np.log10(hi / lo))) + 1
+    grid = np.logspace(np.log10(lo), np.log10(hi), count)
+    poles = np.concatenate([np.abs(eigs.imag), mags])
+    poles = poles[(poles > lo) & (poles < hi)]
+    return np.unique(np.concatenate([grid, poles]))
+
+
+def _golden_max(f, lo: np.ndarray, hi: np.ndarray):
+    """Vectorised golden-section maximisation on ``log w`` brackets ``[lo, hi]``."""
+    a, b = np.log(lo), np.log(hi)
+    r = (np.sqrt(5.0) - 1.0) / 2.0
+    x1 = b - r * (b - a)
+    x2 = a + r * (b - a)
+    f1, f2 = f(np.exp(x1)), f(np.exp(x2))
+    for _ in range(_GOLDEN_ITERS):
+        left = f1 >= f2  # maximum in [a, x2]
+        a_new = np.where(left, a, x1)
+        b_new = np.where(left, x2, b)
+        # the kept interior point becomes the new x2 (left) or x1 (right)
+        keep_x = np.where(left, x1, x2)
+        keep_f = np.where(left, f1, f2)
+        new_x = np.where(left, b_new - r * (b_new - a_new), a_new + r * (b_new - a_new))
+        new_f = f(np.exp(new_x))
+        x1 = np.where(left, new_x, keep_x)
+        f1 = np.where(left, new_f, keep_f)
+        x2 = np.where(left, keep_x, new_x)
+        f2 = np.where(left, keep_f, new_f)
+        a, b = a_new, b_new
+    xb = np.where(f1 >= f2, x1, x2)
+    return np.exp(xb), np.maximum(f1, f2)
+
+
+def _interior_peaks(mag_fn, eigs: np.ndarray, rising_at_zero: bool):
+    """All local maxima of ``|Gamma(jw)|`` for ``w > 0``: ``(omegas, values)``.
+
+    ``rising_at_zero`` (low-frequency curvature >= 0): a maximum below the lowest grid
+    frequency is searched too; otherwise a decrease at the low end is the ``w -> 0`` limit."""
+    w = _frequency_grid(eigs)
+    g = mag_fn(w)
+    g = np.where(np.isfinite(g), g, np.inf)
+    inner = np.nonzero((g[1:-1] >= g[:-2]) & (g[1:-1] >= g[2:]))[0] + 1
+    lo = list(w[inner - 1])
+    hi = list(w[inner + 1])
+    if rising_at_zero and g[0] > g[1]:  # the maximum lies below the lowest grid frequency
+        lo.insert(0, w[0] * 1e-3)
+        hi.insert(0, w[1])
+    if g[-1] > g[-2]:
+        lo.append(w[-2])
+        hi.append(w[-1] * 1e3)
+    if not lo:
+        return np.empty(0), np.empty(0)
+    om, val = _golden_max(mag_fn, np.array(lo), np.array(hi))
+    # a bracket whose grid value beats the refined one (non-unimodal bracket): keep the grid
+    grid_best = np.array([g[i] for i in inner]) if len(inner) else np.empty(0)
+    if grid_best.size:
+        off = 1 if (rising_at_zero and g[0] > g[1]) else 0
+        sl = slice(off, off + len(inner))
+        better = grid_best > val[sl]
+        val[sl] = np.where(better, grid_best, val[sl])
+        om[sl] = np.where(better, w[inner], om[sl])
+    return om, val
+
+
+# --------------------------------------------------------------------------------------------
+# Hamiltonian level-set method (Boyd & Balakrishnan 1990), the independent check
+# --------------------------------------------------------------------------------------------
+
+
+def level_crossings(
+    A: np.ndarray, b: np.ndarray, c: np.ndarray, level: float, rtol: float = 1e-7
+) -> np.ndarray:
+    """Frequencies ``w >= 0`` with ``|c (jw I - A)^-1 b| = level``: the imaginary-axis
+    eigenvalues ``jw`` of the Hamiltonian ``[[A, b b^T/level], [-c^T c/level, -A^T]]``.
+
+    An eigenvalue counts as imaginary when ``|Re| <= rtol * max(1, |lambda|)``.
+    """
+    A = np.asarray(A, float)
+    b = np.asarray(b, float).reshape(-1, 1)
+    c = np.asarray(c, float).reshape(1, -1)
+    Hm = np.block([[A, b @ b.T / level], [-c.T @ c / level, -A.T]])
+    ev = np.linalg.eigvals(Hm)
+    on_axis = np.abs(ev.real) <= rtol * np.maximum(1.0, np.abs(ev))
+    return np.sort(np.unique(np.round(np.abs(ev[on_axis].imag), 12)))
+
+
+def hinf_norm_hamiltonian(
+    A: np.ndarray, b: np.ndarray, c: np.ndarray, tol: float = 1e-9, max_iter: int = 100
+) -> tuple[float, float]:
+    """``(sup_w |G(jw)|, argmax)`` of a stable SISO ``G = c (sI - A)^-1 b`` by the
+    quadratically convergent level-set iteration of Boyd & Balakrishnan."""
+    eigs = np.linalg.eigvals(A)
+    cand = np.concatenate([[0.0], np.abs(eigs.imag), np.abs(eigs)])
+    vals = np.abs(transfer_response(A, b, c, 1j * cand))
+    i = int(np.argmax(vals))
+    lb, w_best = float(vals[i]), float(cand[i])
+    for _ in range(max_iter):
+        level = (1.0 + 2.0 * tol) * lb
+        ws = level_crossings(A, b, c, level)
+        if ws.size < 2:
+            return lb, w_best
+        mids = 0.5 * (ws[:-1] + ws[1:])
+        mv = np.abs(transfer_response(A, b, c, 1j * mids))
+        j = int(np.argmax(mv))
+        if mv[j] <= lb:
+            return lb, w_best
+        lb, w_best = float(mv[j]), float(mids[j])
+    return lb, w_best
+
+
+# --------------------------------------------------------------------------------------------
+# Verdict
+# --------------------------------------------------------------------------------------------
+
+
+def string_stability(
+    model: LCCModel, K: np.ndarray, kh: float = 0.0, method: str = "grid"
+) -> StringStabilityReport:
+    """Plant and head-to-tail string stability of the closed loop ``input = K x + kh v_h``.
+
+    Parameters
+    ----------
+    model : LCCModel
+        Any kind with a head vehicle (not ``fd_lcc``).
+    K, kh : array_like, float
+        Feedback on the model's input, as :func:`lcc_synth.feedback.input_feedback` returns.
+    method : {"grid", "hamiltonian"}
+        Global search of ``sup |Gamma(jw)|``: dense grid + pole frequencies + golden-section
+        refinement, or Boyd-Balakrishnan level sets (see the module docstring).
+    """
+    _check_head(model)
+    if method not in ("grid", "hamiltonian"):
+        raise ConfigError("method", f"must be 'grid' or 'hamiltonian', got {method!r}")
+    Acl, Hcl = closed_loop(model, K, kh)
+    c = _tail_output(model)
+    h = Hcl.reshape(-1)
+    eigs = closed_loop_eigenvalues(Acl)
+    max_re = float(eigs.real.max())
+    plant_stable = bool(max_re < 0.0)
+    singular = np.any(np.abs(eigs) < 1e-12)
+    if singular:
+        g0, curv, crel = float("nan"), float("nan"), float("nan")
+    else:
+        g0, curv, crel = low_frequency_curvature(Acl, h, c)
+
+    solver = _hessenberg_solver(Acl, h, c)
+
+    def mag(w):
+        return np.abs(solver(1j * np.asarray(w, float)))
+
+    if method == "hamiltonian" and plant_stable:
+        peak, peak_w = hinf_norm_hamiltonian(Acl, h, c)
+        crossings = level_crossings(Acl, h, c, abs(g0))
+        crossings = crossings[crossings > 1e-6 * max(1.0, np.abs(eigs).max())]
+        dc = abs(g0)
+        interior = peak if peak_w > 0 and peak > dc else float("nan")
+        interior_w = peak_w if np.isfinite(interior) else float("nan")
+        string_stable = bool(crel < -LOW_FREQ_TOL and crossings.size == 0)
+        gamma_peak = max(peak, dc)
+        gamma_peak_w = peak_w if peak > dc * (1 + PEAK_TOL) else 0.0
+    else:
+        om, val = _interior_peaks(mag, eigs, rising_at_zero=not crel < 0)
+        dc = abs(g0) if np.isfinite(g0) else float(mag(np.array([1e-9]))[0])
+        if val.size:
+            j = int(np.argmax(val))
+            interior, interior_w = float(val[j]), float(om[j])
+        else:
+            interior, interior_w = float("nan"), float("nan")
+        string_stable = bool(
+            plant_stable
+            and crel < -LOW_FREQ_TOL
+            and (not val.size or interior < 1.0 - PEAK_TOL)
+        )
+        if np.isfinite(interior) and interior > dc:
+            gamma_peak, gamma_peak_w = interior, interior_w
+        else:
+            gamma_peak, gamma_peak_w = dc, 0.0
+    string_stable = bool(string_stable and plant_stable)
+    return StringStabilityReport(
+        plant_stable=plant_stable,
+        string_stable=string_stable,
+        gamma_peak=float(gamma_peak),
+        gamma_peak_omega=float(gamma_peak_w),
+        max_real_eig=max_re,
+        gamma_dc=float(dc),
+        low_freq_curvature=float(curv),
+        interior_peak=float(interior),
+        interior_peak_omega=float(interior_w),
+        method=method,
+    )
+
+
+def gains_string_stability(model: LCCModel, gains, method: str = "grid") -> StringStabilityReport:
+    """:func:`string_stability` of a :class:`~lcc_synth.feedback.StaticGains` on ``model``."""
+    from lcc_synth.feedback import input_feedback
+
+    K, kh = input_feedback(model, gains)
+    return string_stability(model, K, kh, method=method)
