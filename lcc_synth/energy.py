@@ -39,6 +39,8 @@ __all__ = [
     "COND_LIMIT",
     "NumericallySingularError",
     "EnergyReport",
+    "EnergySweep",
+    "energy_vs_size",
     "gramian",
     "condition_limit",
     "energy_report",
@@ -268,3 +270,80 @@ def min_energy_input(model: LCCModel, t: float, x0, x_target) -> Callable[[np.nd
         return out.reshape(tau_arr.shape + (B.shape[1],))
 
     return u
+
+
+@dataclass(frozen=True)
+class EnergySweep:
+    """Energy metrics against the system size (Fig. 5).
+
+    Attributes
+    ----------
+    reports : dict of float to list of EnergyReport
+        For every horizon, the reports for ``n = 1, 2, ...`` up to the last computable size.
+    singular : dict of float to NumericallySingularError or None
+        For every horizon, the refusal at the first numerically singular size (``None`` when
+        every size up to ``n_max`` was computable).
+    """
+
+    reports: dict[float, list[EnergyReport]]
+    singular: dict[float, NumericallySingularError | None]
+
+    def singular_n(self, t: float) -> int | None:
+        """First ``n`` at which ``W(t)`` is numerically singular, or ``None``."""
+        err = self.singular[t]
+        return None if err is None else err.n
+
+    def as_dict(self) -> dict:
+        """JSON-serialisable dict keyed by the horizon as a string."""
+        return {
+            f"{t:g}": {
+                "reports": [r.as_dict() for r in self.reports[t]],
+                "singular_n": self.singular_n(t),
+                "singular_condition": (
+                    None if self.singular[t] is None else float(self.singular[t].condition)
+                ),
+            }
+            for t in self.reports
+        }
+
+
+def energy_vs_size(
+    coefficients,
+    horizons=(10.0, 20.0, 30.0),
+    n_max: int = 30,
+    kind: str = "fd_lcc",
+) -> EnergySweep:
+    """Fig. 5: ``lambda_min(W(t))`` and ``tr(W(t)^{-1})`` for ``n = 1..n_max`` HDVs behind.
+
+    Stops, for each horizon, at the first ``n`` where ``W(t)`` is numerically singular (the
+    energy only grows with ``n``, so larger sizes are singular too).
+
+    Parameters
+    ----------
+    coefficients : LinearCoefficients
+        Homogeneous HDV coefficients (e.g. ``OVM().linear_coefficients(15.0)``).
+    horizons : sequence of float
+        Horizons ``t`` (s).
+    n_max : int
+        Largest size tried.
+    kind : {"fd_lcc", "cf_lcc"}
+        Model family (the paper uses FD-LCC).
+    """
+    from lcc_synth.models import build_model
+
+    if kind not in ("fd_lcc", "cf_lcc"):
+        raise ConfigError("kind", f"must be 'fd_lcc' or 'cf_lcc' (controllable), got {kind!r}")
+    if isinstance(n_max, bool) or not isinstance(n_max, int) or n_max < 1:
+        raise ConfigError("n_max", f"must be an integer >= 1, got {n_max!r}")
+    reports: dict[float, list[EnergyReport]] = {}
+    singular: dict[float, NumericallySingularError | None] = {}
+    for t in horizons:
+        t = _check_t(t)
+        reports[t], singular[t] = [], None
+        for n in range(1, n_max + 1):
+            try:
+                reports[t].append(energy_report(build_model(kind, 0, n, coefficients), t))
+            except NumericallySingularError as err:
+                singular[t] = err
+                break
+    return EnergySweep(reports, singular)

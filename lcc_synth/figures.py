@@ -53,7 +53,9 @@ def plot_control_energy(sweep, path: str | Path) -> Path:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
         ax.xaxis.get_major_locator().set_params(integer=True)
-    fig.suptitle("Control energy of FD-LCC (Fig. 5)")
+    kinds = {r.kind for reports in sweep.reports.values() for r in reports}
+    names = {"fd_lcc": "FD-LCC", "cf_lcc": "CF-LCC"}
+    fig.suptitle(f"Control energy of {', '.join(names.get(k, k) for k in sorted(kinds))} (Fig. 5)")
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
     plt.close(fig)

@@ -132,3 +132,20 @@ def test_report_as_dict():
     d = energy_report(fd_lcc(2, PAPER), 10.0).as_dict()
     assert d["n"] == 2 and d["n_states"] == 6 and d["t"] == 10.0
     assert d["lambda_min"] > 0 and d["condition_limit"] == COND_LIMIT
+
+
+def test_energy_vs_size_stops_at_the_first_singular_size(tmp_path):
+    from lcc_synth.energy import energy_vs_size
+    from lcc_synth.figures import plot_control_energy
+
+    sweep = energy_vs_size(PAPER, horizons=(10.0, 30.0), n_max=12)
+    assert [r.n for r in sweep.reports[10.0]] == [1, 2, 3, 4]
+    assert sweep.singular_n(10.0) == 5 and sweep.singular_n(30.0) == 6
+    assert sweep.reports[30.0][0].lambda_min == energy_report(fd_lcc(1, PAPER), 30.0).lambda_min
+    short = energy_vs_size(PAPER, horizons=(30.0,), n_max=3)
+    assert short.singular_n(30.0) is None and len(short.reports[30.0]) == 3
+    assert sweep.as_dict()["10"]["singular_n"] == 5
+    with pytest.raises(ConfigError, match="kind"):
+        energy_vs_size(PAPER, kind="lcc")
+    out = plot_control_energy(sweep, tmp_path / "fig5.png")
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
