@@ -17,6 +17,7 @@
     [synthesis.weights]       # see lcc_synth.synthesis.h2.Weights
     q_s = 1.0                 # spacing errors, > 0
     q_v = 1.0                 # velocity errors, > 0
+    q_a = 0.0                 # every HDV's acceleration (smooth driving / fuel proxy), >= 0
     q_p = 0.1                 # FD-LCC -p_0 when position = "weight", > 0
     r = 1.0                   # the gain's input, > 0
     head = 0.0                # head-vehicle velocity disturbance, >= 0
@@ -143,11 +144,12 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec:
         max_iter = get_int(t, "max_iter", "synthesis", 500, lo=1, hi=100000)
 
         w = get_table(t, "weights", "synthesis.weights")
-        check_keys(w, ["q_s", "q_v", "q_p", "r", "head", "accel", "position"], "synthesis.weights")
+        wkeys = ["q_s", "q_v", "q_a", "q_p", "r", "head", "accel", "position"]
+        check_keys(w, wkeys, "synthesis.weights")
         kw = {}
         for key, dflt in (("q_s", 1.0), ("q_v", 1.0), ("r", 1.0)):
             kw[key] = get_number(w, key, "synthesis.weights", dflt, lo=0.0, lo_open=True)
-        for key, dflt in (("q_p", 0.1), ("head", 0.0), ("accel", 1.0)):
+        for key, dflt in (("q_a", 0.0), ("q_p", 0.1), ("head", 0.0), ("accel", 1.0)):
             kw[key] = get_number(w, key, "synthesis.weights", dflt, lo=0.0)
         kw["position"] = get_str(
             w, "position", "synthesis.weights", "drop", choices=("drop", "weight")

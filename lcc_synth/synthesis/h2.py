@@ -92,6 +92,11 @@ class Weights:
     ----------
     q_s, q_v : float
         Weight on every spacing error / velocity error squared (``Q`` diagonal), > 0.
+    q_a : float
+        Weight on every HDV's acceleration squared, >= 0 (``a_i`` is the HDV's velocity row of
+        ``A``, linear in the state, so ``Q += q_a sum_i A_vi' A_vi`` stays a state weight; the
+        head-velocity feed-through of the first HDV is left out). A smooth-driving proxy for
+        fuel: the Bowyer fuel model charges accelerations and wastes hard braking.
     q_p : float
         Weight on FD-LCC's ``-p_0`` when ``position = "weight"`` (> 0 then).
     r : float
@@ -106,6 +111,7 @@ class Weights:
 
     q_s: float = 1.0
     q_v: float = 1.0
+    q_a: float = 0.0
     q_p: float = 0.1
     r: float = 1.0
     head: float = 0.0
@@ -117,7 +123,7 @@ class Weights:
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
                 raise ConfigError(f"weights.{name}", f"must be a finite number > 0, got {v!r}")
-        for name in ("q_p", "head", "accel"):
+        for name in ("q_a", "q_p", "head", "accel"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
                 raise ConfigError(f"weights.{name}", f"must be a finite number >= 0, got {v!r}")
@@ -148,7 +154,9 @@ class H2Plant:
     A, B, Bw : numpy.ndarray
         Design plant ``A_d``, input ``B`` (nx, 1), disturbances ``B_w`` (nx, nw).
     q : numpy.ndarray
-        Diagonal of ``Q`` on the design states.
+        Diagonal state weights (``q_s``, ``q_v``, ``q_p``) on the design states.
+    Q : numpy.ndarray
+        The state weight ``diag(q) + q_a sum_i A_vi' A_vi`` (symmetric, banded).
     r : float
         ``R``.
     w_names : tuple of str
@@ -168,6 +176,7 @@ class H2Plant:
     B: np.ndarray
     Bw: np.ndarray
     q: np.ndarray
+    Q: np.ndarray
     r: float
     w_names: tuple[str, ...]
     K0: np.ndarray
@@ -246,6 +255,12 @@ def make_plant(model: LCCModel, semantics: str = "replace", weights: Weights | N
             for nm in (names[i] for i in keep)
         ]
     )
+    Q = np.diag(q)
+    if weights.q_a > 0:
+        veh = np.repeat(np.array(model.vehicles), 2)[keep]
+        rows = [j for j, i in enumerate(keep) if names[i].startswith("v_") and veh[j] != 0]
+        Ca = A[rows]
+        Q = Q + weights.q_a * (Ca.T @ Ca)
     return H2Plant(
         model=model,
         semantics=semantics,
@@ -256,6 +271,7 @@ def make_plant(model: LCCModel, semantics: str = "replace", weights: Weights | N
         B=B,
         Bw=Bw,
         q=q,
+        Q=Q,
         r=float(weights.r),
         w_names=tuple(w_names),
         K0=K0,
@@ -297,7 +313,7 @@ def h2_cost(plant: H2Plant, g: np.ndarray) -> tuple[float, np.ndarray | None, np
     if max_real_eig(AK) >= -STABILITY_TOL:
         return math.inf, None, None
     L = sla.solve_continuous_lyapunov(AK, -plant.Bw @ plant.Bw.T)
-    Qk = np.diag(plant.q) + plant.r * (g.T @ g)
+    Qk = plant.Q + plant.r * (g.T @ g)
     P = sla.solve_continuous_lyapunov(AK.T, -Qk)
     L = 0.5 * (L + L.T)
     P = 0.5 * (P + P.T)
@@ -317,7 +333,7 @@ def riccati_gain(plant: H2Plant) -> tuple[np.ndarray, np.ndarray]:
     """Unstructured H2-optimal gain ``g = -R^-1 B' P`` from the CARE; returns ``(g, P)``."""
     check_stabilisable(plant)
     try:
-        P = sla.solve_continuous_are(plant.A, plant.B, np.diag(plant.q), np.array([[plant.r]]))
+        P = sla.solve_continuous_are(plant.A, plant.B, plant.Q, np.array([[plant.r]]))
     except (np.linalg.LinAlgError, ValueError) as err:
         raise SynthesisError(f"Riccati solver failed: {err}") from None
     g = -(plant.B.T @ P) / plant.r
@@ -373,7 +389,7 @@ def lmi_full_state(plant: H2Plant, eps: float = 1e-7) -> LMIResult:
     W = cp.Variable((1, 1), symmetric=True)
     M = plant.A @ X + X @ plant.A.T + plant.B @ Z + Z.T @ plant.B.T + plant.Bw @ plant.Bw.T
     cons = [X >> eps * np.eye(nx), -(M + M.T) / 2 >> 0, cp.bmat([[W, Z], [Z.T, X]]) >> 0]
-    obj = cp.Minimize(cp.trace(np.diag(plant.q) @ X) + plant.r * W[0, 0])
+    obj = cp.Minimize(cp.trace(plant.Q @ X) + plant.r * W[0, 0])
     prob = cp.Problem(obj, cons)
     status, dt = solve_checked(prob, "full-state H2 LMI")
     Xv, Zv = X.value, Z.value

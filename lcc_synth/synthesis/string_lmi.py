@@ -101,7 +101,7 @@ def string_lmi(
         -(BRL + BRL.T) / 2 >> 0,
     ]
     cons = [k for k in cons if k is not None]
-    prob = cp.Problem(cp.Minimize(cp.trace(np.diag(plant.q) @ X) + plant.r * W[0, 0]), cons)
+    prob = cp.Problem(cp.Minimize(cp.trace(plant.Q @ X) + plant.r * W[0, 0]), cons)
     status, dt = solve_checked(prob, f"string-stability LMI (gamma = {gamma:g})")
     Xv, Zv = X.value, Z.value
     g = np.linalg.solve(Xv.T, Zv.T).ravel()

@@ -179,7 +179,7 @@ def convex_restriction(
     W = cp.Variable((1, 1), symmetric=True)
     cons.append(cp.bmat([[W, z], [z.T, xb[0]]]) >> 0)
     obj = cp.Minimize(
-        sum(cp.trace(np.diag(plant.q[b]) @ x) for b, x in zip(blocks, xb, strict=True))
+        sum(cp.trace(plant.Q[np.ix_(b, b)] @ x) for b, x in zip(blocks, xb, strict=True))
         + plant.r * W[0, 0]
     )
     prob = cp.Problem(obj, cons)
