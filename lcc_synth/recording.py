@@ -396,8 +396,11 @@ def _sample_indices(T: int, every: int) -> np.ndarray:
 
 
 def _time_column(t: np.ndarray):
+    """The ``time`` timeline (seconds -> ns, rounded: Rerun's float path truncates, which puts
+    e.g. 2.05 s at 2049999999 ns)."""
     rr = _rr()
-    return rr.TimeColumn("time", duration=np.asarray(t, dtype=np.float64))
+    ns = np.round(np.asarray(t, dtype=np.float64) * 1e9).astype(np.int64)
+    return rr.TimeColumn("time", duration=ns.astype("timedelta64[ns]"))
 
 
 def _send_series(rec: Any, entity: str, t: np.ndarray, values: np.ndarray, names, colors) -> None:
@@ -431,6 +434,11 @@ def _fmt(value: Any) -> str:
     return str(value)
 
 
+def _cell(text: Any) -> str:
+    """Text safe inside a markdown table cell."""
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
 def _jsonable(value: Any) -> Any:
     if isinstance(value, Mapping):
         return {str(k): _jsonable(v) for k, v in value.items()}
@@ -458,7 +466,7 @@ def _mapping_markdown(
     scalars = {k: v for k, v in data.items() if _is_scalar(v)}
     if scalars:
         lines += ["| quantity | value |", "|---|---|"]
-        lines += [f"| {k} | {_fmt(v)} |" for k, v in scalars.items()]
+        lines += [f"| {_cell(k)} | {_cell(_fmt(v))} |" for k, v in scalars.items()]
         lines.append("")
     rest = {k: v for k, v in data.items() if k not in scalars}
     for key, value in rest.items():
@@ -942,6 +950,7 @@ class RecordingSummary:
     has_blueprint: bool
     entities: dict[str, EntitySummary]
     texts: dict[str, str]
+    views: list[dict[str, str]] = field(default_factory=list)
 
     @property
     def time_range(self) -> tuple[float, float] | None:
@@ -975,7 +984,11 @@ class RecordingSummary:
                 for p, e in sorted(self.entities.items())
             },
             "texts": dict(sorted(self.texts.items())),
+            "views": self.views,
         }
+
+
+_VIEW_FIELDS = ("class_identifier", "display_name", "space_origin")
 
 
 def _open_reader(path: str | Path):
@@ -1006,9 +1019,21 @@ def summarize_recording(path: str | Path) -> RecordingSummary:
     texts: dict[str, str] = {}
     try:
         chunks = list(reader.stream(store=recordings[0]))
-        has_blueprint = bool(reader.blueprints())
+        blueprints = reader.blueprints()
+        bp_chunks = list(reader.stream(store=blueprints[0])) if blueprints else []
     except Exception as err:
         raise ConfigError("path", f"corrupt Rerun recording: {err}", str(path)) from None
+    views = []
+    for ch in bp_chunks:
+        rb = ch.to_record_batch()
+        if "ViewBlueprint:space_origin" in rb.schema.names:
+            row = {
+                k: rb.column(f"ViewBlueprint:{k}").to_pylist()[-1]
+                for k in _VIEW_FIELDS
+                if f"ViewBlueprint:{k}" in rb.schema.names
+            }
+            views.append({k: (v[-1] if isinstance(v, list) and v else v) for k, v in row.items()})
+    views.sort(key=lambda v: (str(v.get("space_origin")), str(v.get("display_name"))))
     for ch in chunks:
         ep = ch.entity_path
         if ep.startswith("/__"):
@@ -1048,7 +1073,8 @@ def summarize_recording(path: str | Path) -> RecordingSummary:
         size_bytes=p.stat().st_size,
         application_id=recordings[0].application_id,
         recording_ids=[r.recording_id for r in recordings],
-        has_blueprint=has_blueprint,
+        has_blueprint=bool(blueprints),
         entities=entities,
         texts=texts,
+        views=views,
     )

@@ -1,0 +1,216 @@
+"""``lcc-synth review PATH.rrd``: open a recording in the Rerun viewer, or summarise it.
+
+* With a display (``DISPLAY`` / ``WAYLAND_DISPLAY`` on Linux, always on macOS and Windows) the
+  native viewer opens the file.
+* Without one (or with ``--web``) the web viewer is served on 127.0.0.1 only (Rerun binds
+  0.0.0.0 by default) and the address to open is printed.
+* ``--summary`` prints what the recording holds (entities, time range, samples, the metrics
+  and reports) without a viewer; with ``--json`` as one JSON object.
+
+The viewer is the ``rerun`` executable of the ``rerun-sdk`` wheel, started directly (not via the
+Python wrapper script) in its own process group, with Rerun's usage analytics off; Ctrl-C (or
+any exit) stops it and everything it started.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from lcc_synth.errors import ConfigError
+
+HELP = "open a Rerun recording (.rrd) in the viewer, or print a summary of it"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("path", metavar="PATH.rrd", help="the recording to open")
+    parser.add_argument(
+        "--summary", action="store_true", help="print what the recording holds; no viewer"
+    )
+    parser.add_argument("--json", action="store_true", help="with --summary: one JSON object")
+    parser.add_argument(
+        "--web",
+        action="store_true",
+        help="serve the web viewer on 127.0.0.1 even when a display is available",
+    )
+    parser.add_argument(
+        "--web-port", type=int, default=0, metavar="PORT",
+        help="HTTP port of the web viewer (default: a free port)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--port", type=int, default=0, metavar="PORT",
+        help="gRPC port the viewer streams the recording from (default: a free port)",
+    )  # fmt: skip
+
+
+def has_display(env: dict[str, str] | None = None, platform: str | None = None) -> bool:
+    """Whether a native viewer window can open here."""
+    env = os.environ if env is None else env
+    platform = sys.platform if platform is None else platform
+    if platform.startswith(("darwin", "win")):
+        return True
+    return bool(env.get("DISPLAY") or env.get("WAYLAND_DISPLAY"))
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _check_port(value: int, field: str) -> int:
+    if not 0 <= value <= 65535:
+        raise ConfigError(field, f"must be a port in [1, 65535] (0 = pick a free one), got {value}")
+    return value or _free_port()
+
+
+def _listening(port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.settimeout(0.2)
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+def web_url(web_port: int, grpc_port: int) -> str:
+    """Address of the web viewer showing the served recording."""
+    return f"http://127.0.0.1:{web_port}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc_port}%2Fproxy"
+
+
+def _stop(proc: subprocess.Popen, timeout: float = 3.0) -> None:
+    """Stop the viewer and its process group: SIGTERM, then SIGKILL (it only reads a file)."""
+    if proc.poll() is not None:
+        return
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        try:
+            if os.name == "posix":
+                os.killpg(proc.pid, sig)
+            else:  # pragma: no cover - Windows
+                proc.terminate() if sig != signal.SIGKILL else proc.kill()
+        except ProcessLookupError:
+            return
+        try:
+            proc.wait(timeout=timeout)
+            return
+        except subprocess.TimeoutExpired:
+            continue
+
+
+def _print_summary(summary, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(summary.to_json()))
+        return
+    tr = summary.time_range
+    print(f"recording    {summary.path} ({summary.size_bytes / 1e6:.2f} MB)")
+    print(f"application  {summary.application_id}; recording id {', '.join(summary.recording_ids)}")
+    views = f" ({len(summary.views)} views)" if summary.views else ""
+    print(f"blueprint    {'yes' if summary.has_blueprint else 'no'}{views}")
+    print(f"time range   {f'{tr[0]:g} .. {tr[1]:g} s' if tr else 'none (static data only)'}")
+    print(f"entities     {len(summary.entities)}")
+    width = max((len(p) for p in summary.entities), default=10)
+    for path, ent in sorted(summary.entities.items()):
+        kinds = sorted({c.split(":")[0] for c in ent.components})
+        if ent.static:
+            what = "static"
+        else:
+            series = f", {ent.series} series" if ent.series > 1 else ""
+            what = f"{ent.samples} samples{series}, t {ent.t_min:g}..{ent.t_max:g} s"
+        print(f"  {path:<{width}}  {'/'.join(kinds)}: {what}")
+    metrics = {p: t for p, t in summary.texts.items() if p.endswith(("/metrics", "/status"))}
+    for path, text in sorted(metrics.items()):
+        print(f"\n--- {path}\n{text.rstrip()}")
+
+
+def _interrupt(signum, frame):  # SIGTERM / SIGHUP: stop like Ctrl-C
+    raise KeyboardInterrupt
+
+
+def _serve(binary: Path, path: Path, args: argparse.Namespace, env: dict[str, str]) -> int:
+    previous = {}
+    for sig in (getattr(signal, "SIGTERM", None), getattr(signal, "SIGHUP", None)):
+        if sig is not None:
+            try:
+                previous[sig] = signal.signal(sig, _interrupt)
+            except ValueError:  # not the main thread: leave signals alone
+                pass
+    try:
+        return _serve_until_stopped(binary, path, args, env)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _serve_until_stopped(
+    binary: Path, path: Path, args: argparse.Namespace, env: dict[str, str]
+) -> int:
+    web = not has_display() or args.web
+    cmd = [str(binary), str(path)]
+    if web:
+        web_port = _check_port(args.web_port, "--web-port")
+        grpc_port = _check_port(args.port, "--port")
+        if web_port == grpc_port:
+            raise ConfigError("--port", f"must differ from --web-port ({web_port})")
+        cmd += [
+            "--serve-web", "--bind", "127.0.0.1",
+            "--web-viewer-port", str(web_port), "--port", str(grpc_port),
+        ]  # fmt: skip
+    with tempfile.TemporaryFile(mode="w+b") as log:
+        proc = subprocess.Popen(
+            cmd,
+            stdin=subprocess.DEVNULL,
+            stdout=log,
+            stderr=log,
+            env=env,
+            start_new_session=True,  # our Ctrl-C stops it through _stop, never half of it
+        )
+        try:
+            if web:
+                deadline = time.monotonic() + 30.0
+                while not _listening(web_port):
+                    if proc.poll() is not None or time.monotonic() > deadline:
+                        _stop(proc)
+                        log.seek(0)
+                        tail = log.read().decode(errors="replace").strip().splitlines()[-5:]
+                        print(
+                            "lcc-synth review: the web viewer did not start:\n  "
+                            + "\n  ".join(tail),
+                            file=sys.stderr,
+                        )
+                        return 1
+                    time.sleep(0.1)
+                print(f"Serving {path} on 127.0.0.1 only; open {web_url(web_port, grpc_port)}")
+                print("Press Ctrl-C to stop.", flush=True)
+            else:
+                print(f"Opened {path} in the Rerun viewer (Ctrl-C here closes it).", flush=True)
+            rc = proc.wait()
+        except KeyboardInterrupt:
+            _stop(proc)
+            print("stopped", file=sys.stderr)
+            return 0
+        finally:
+            _stop(proc)
+        if rc not in (0, -signal.SIGINT, -signal.SIGTERM, 130):
+            log.seek(0)
+            tail = log.read().decode(errors="replace").strip().splitlines()[-5:]
+            print("lcc-synth review: the viewer failed:\n  " + "\n  ".join(tail), file=sys.stderr)
+            return 1
+    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    from lcc_synth.recording import rerun_binary, summarize_recording, viewer_environment
+
+    path = Path(args.path)
+    if args.json and not args.summary:
+        raise ConfigError("--json", "only applies with --summary")
+    summary = summarize_recording(path)  # validates: ConfigError for a missing/invalid file
+    if args.summary:
+        _print_summary(summary, args.json)
+        return 0
+    return _serve(rerun_binary(), path, args, viewer_environment())

@@ -1,0 +1,351 @@
+"""Rerun recordings: read back what was recorded and compare with the simulator's arrays."""
+
+from __future__ import annotations
+
+import argparse
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rerun")
+
+from rerun.chunk import RrdReader  # noqa: E402
+
+from lcc_synth import recording as R  # noqa: E402
+from lcc_synth.controllers import HDVController, StaticGainController  # noqa: E402
+from lcc_synth.errors import ConfigError  # noqa: E402
+from lcc_synth.feedback import StaticGains  # noqa: E402
+from lcc_synth.hdv import OVM  # noqa: E402
+from lcc_synth.metrics import MetricsConfig  # noqa: E402
+from lcc_synth.metrics import summary as metrics_summary  # noqa: E402
+from lcc_synth.models import model_from_hdv  # noqa: E402
+from lcc_synth.perturbations import Brake  # noqa: E402
+from lcc_synth.simulation import Scenario, simulate  # noqa: E402
+
+M, N = 1, 3  # one HDV ahead, three behind: every kind of vehicle column
+
+
+def _scenario(duration: float = 6.0, batch: int = 1) -> Scenario:
+    return Scenario(
+        m=M,
+        n=N,
+        duration=duration,
+        batch=batch,
+        perturbations=(Brake(vehicle=1, start=1.0, duration=1.0),),
+        name="rec_test",
+    )
+
+
+def _controllers():
+    model = model_from_hdv("lcc", M, N, OVM(), 15.0, warn=False)
+    gains = StaticGains({"v_0": -0.5, "s_1": -0.2, "v_1": 0.05}, "added")
+    return [HDVController("all_hdv"), StaticGainController("lcc gains", gains, model)]
+
+
+class Boom(RuntimeError):
+    pass
+
+
+class RaisingController:
+    """A Python-loop controller (no linear law) that raises ``exc`` once t >= t_fail."""
+
+    name = "raiser"
+    sample_time = None
+
+    def __init__(self, exc: BaseException, t_fail: float = 2.0):
+        self.exc = exc
+        self.t_fail = t_fail
+
+    def reset(self, ctx):
+        self.batch = ctx.batch
+
+    def __call__(self, obs):
+        if obs.t >= self.t_fail:
+            raise self.exc
+        return np.zeros(self.batch)
+
+    def describe(self):
+        return {"type": "test"}
+
+    def stats(self):
+        return {}
+
+
+def _chunks(path: Path) -> dict[str, list]:
+    out: dict[str, list] = {}
+    for ch in RrdReader(path).stream():
+        out.setdefault(ch.entity_path, []).append(ch)
+    return out
+
+
+def _temporal(chunks, entity: str, component: str) -> tuple[np.ndarray, list]:
+    """(time in ns, values per row) of ``component`` at ``entity``, sorted by time."""
+    times, values = [], []
+    for ch in chunks[entity]:
+        if ch.is_static:
+            continue
+        rb = ch.to_record_batch()
+        if component not in rb.schema.names:
+            continue
+        times.append(rb.column("time").cast("int64").to_numpy())
+        values += rb.column(component).to_pylist()
+    t = np.concatenate(times)
+    order = np.argsort(t, kind="stable")
+    return t[order], [values[i] for i in order]
+
+
+def _static(chunks, entity: str, component: str):
+    """The latest static value (static data logged again replaces the earlier one)."""
+    found = []
+    for ch in chunks[entity]:
+        rb = ch.to_record_batch()
+        if ch.is_static and component in rb.schema.names:
+            value = rb.column(component).to_pylist()[-1]
+            found.append(value[-1] if component.endswith(":text") else value)
+    if not found:
+        raise KeyError((entity, component))
+    return found[-1]
+
+
+@pytest.fixture(scope="module")
+def table(tmp_path_factory):
+    """Two controllers simulated and recorded in one file (full rate)."""
+    sc = _scenario()
+    results = {c.name: simulate(sc, c) for c in _controllers()}
+    path = tmp_path_factory.mktemp("rec") / "two.rrd"
+    bp = R.simulation_blueprint("rec test", list(results))
+    with R.open_recording(path, "rec test", bp) as rec:
+        for res in results.values():
+            metrics = metrics_summary(res, MetricsConfig(window=(0.5, 5.0)))
+            R.record_simulation(rec, res, "rec test", metrics=metrics)
+    return path, results
+
+
+def test_recorded_values_equal_simulator_arrays(table):
+    path, results = table
+    chunks = _chunks(path)
+    for name, res in results.items():
+        base = f"/rec_test/{R.entity_name(name)}"
+        t_ns, vel = _temporal(chunks, f"{base}/velocity", "Scalars:scalars")
+        np.testing.assert_array_equal(t_ns, np.round(res.t * 1e9).astype(np.int64))
+        np.testing.assert_array_equal(np.array(vel), res.velocity[0])
+        _, acc = _temporal(chunks, f"{base}/acceleration", "Scalars:scalars")
+        np.testing.assert_array_equal(np.array(acc), res.acceleration[0])
+        _, sp = _temporal(chunks, f"{base}/spacing", "Scalars:scalars")
+        np.testing.assert_array_equal(np.array(sp), res.spacing[0, :, 1:])
+        _, u = _temporal(chunks, f"{base}/cav/u_cmd", "Scalars:scalars")
+        np.testing.assert_array_equal(np.array(u)[:, 0], res.u_cmd[0])
+        _, aeb = _temporal(chunks, f"{base}/cav/aeb_active", "Scalars:scalars")
+        np.testing.assert_array_equal(np.array(aeb)[:, 0], res.aeb_active[0].astype(float))
+        # road view: x relative to the CAV, y = ROAD_Y_SCALE * velocity error (float32)
+        _, road = _temporal(chunks, f"{base}/road", "Points2D:positions")
+        road = np.array(road)
+        cav = res.cav
+        np.testing.assert_array_equal(
+            road[..., 0], (res.position[0] - res.position[0, :, cav : cav + 1]).astype(np.float32)
+        )
+        np.testing.assert_array_equal(
+            road[..., 1], (R.ROAD_Y_SCALE * (res.velocity[0] - 15.0)).astype(np.float32)
+        )
+    # the braking vehicle really braked, so the data are not trivially constant
+    assert np.ptp(results["all_hdv"].velocity[0, :, M + 2]) > 3.0
+
+
+def test_every_vehicle_and_controller_is_present_with_paper_colors(table):
+    path, results = table
+    chunks = _chunks(path)
+    names = ["head", "hdv-1", "cav", "hdv1", "hdv2", "hdv3"]
+    assert R.vehicle_names(M, N) == names
+    for name in results:
+        c = R.entity_name(name)
+        series = _static(chunks, f"/rec_test/{c}/velocity", "SeriesLines:names")
+        assert series == [f"{c} {v}" for v in names]
+        assert _static(chunks, f"/rec_test/{c}/spacing", "SeriesLines:names") == series[1:]
+        colors = _static(chunks, f"/rec_test/{c}/velocity", "SeriesLines:colors")
+        rgba = [((x >> 24) & 255, (x >> 16) & 255, (x >> 8) & 255) for x in colors]
+        assert rgba[0] == R.COLOR_HEAD and rgba[M + 1] == R.COLOR_CAV
+        assert all(col == R.COLOR_HDV for i, col in enumerate(rgba) if i not in (0, M + 1))
+        assert _static(chunks, f"/rec_test/{c}/road", "Points2D:labels") == names
+        text = _static(chunks, f"/rec_test/{c}/metrics", "TextDocument:text")
+        assert "aave" in text and "per vehicle" in text
+        ctrl = _static(chunks, f"/rec_test/{c}/controller", "TextDocument:text")
+        assert "describe" not in ctrl and "type" in ctrl
+    comparison = _static(chunks, "/rec_test/metrics", "TextDocument:text")
+    for name in results:
+        assert R.entity_name(name) in comparison
+    assert "complete" in _static(chunks, "/rec_test/status", "TextDocument:text")
+    # static-gain description reaches the controller document
+    assert "v_0" in _static(chunks, "/rec_test/lcc_gains/controller", "TextDocument:text")
+
+
+def test_blueprint_is_in_the_file(table):
+    path, results = table
+    reader = RrdReader(path)
+    [bp] = reader.blueprints()
+    origins = set()
+    kinds = set()
+    for ch in reader.stream(store=bp):
+        rb = ch.to_record_batch()
+        if "ViewBlueprint:space_origin" in rb.schema.names:
+            origins.add(rb.column("ViewBlueprint:space_origin").to_pylist()[-1][-1])
+            kinds.add(rb.column("ViewBlueprint:class_identifier").to_pylist()[-1][-1])
+    for name in results:
+        c = R.entity_name(name)
+        for q in ("velocity", "spacing", "acceleration", "road", "controller"):
+            assert f"/rec_test/{c}/{q}" in origins
+    assert "/rec_test/metrics" in origins
+    assert {"TimeSeries", "2D", "TextDocument"} <= kinds
+
+
+def test_decimation_records_every_kth_step_and_the_last(tmp_path):
+    res = simulate(_scenario(duration=2.0), HDVController("hdv"))
+    path = tmp_path / "dec.rrd"
+    with R.open_recording(path, "dec") as rec:
+        R.record_simulation(rec, res, "dec", decimate=7)
+    t_ns, vel = _temporal(_chunks(path), "/dec/hdv/velocity", "Scalars:scalars")
+    idx = np.r_[np.arange(0, 200, 7), 199]
+    np.testing.assert_array_equal(t_ns, np.round(res.t[idx] * 1e9).astype(np.int64))
+    np.testing.assert_array_equal(np.array(vel), res.velocity[0, idx])
+    with pytest.raises(ConfigError, match="decimate"):
+        with R.open_recording(tmp_path / "bad.rrd", "dec") as rec:
+            R.record_simulation(rec, res, "dec", decimate=0)
+
+
+def test_batch_member_and_controller_label(tmp_path):
+    sc = Scenario(m=0, n=2, duration=1.0, batch=3, heterogeneity={"alpha": 0.1}, seed=4)
+    res = simulate(sc, HDVController("hdv"))
+    path = tmp_path / "batch.rrd"
+    with R.open_recording(path, "b") as rec:
+        for run in range(3):
+            R.record_simulation(rec, res, "b", controller=f"hdv_seed{run}", run=run)
+        with pytest.raises(ConfigError, match="run"):
+            R.record_simulation(rec, res, "b", run=3)
+    chunks = _chunks(path)
+    for run in range(3):
+        _, vel = _temporal(chunks, f"/b/hdv_seed{run}/velocity", "Scalars:scalars")
+        np.testing.assert_array_equal(np.array(vel), res.velocity[run])
+
+
+@pytest.mark.parametrize("exc", [Boom("controller failed"), KeyboardInterrupt()])
+def test_interrupted_run_leaves_a_readable_file(tmp_path, exc):
+    sc = _scenario(duration=4.0)
+    first = simulate(sc, HDVController("all_hdv"))
+    path = tmp_path / "interrupted.rrd"
+    with pytest.raises(type(exc)):
+        with R.open_recording(
+            path, "rec test", R.simulation_blueprint("rec test", ["all_hdv", "raiser"])
+        ) as rec:
+            R.record_simulation(rec, first, "rec test")
+            simulate(sc, RaisingController(exc))  # raises mid-run (t = 2 s of 4 s)
+    summary = R.summarize_recording(path)  # full read of a finalised file (footer included)
+    assert summary.has_blueprint
+    assert "/rec_test/all_hdv/velocity" in summary.entities
+    assert summary.entities["/rec_test/all_hdv/velocity"].samples == len(first.t)
+    assert not any("raiser" in p for p in summary.entities)
+    status = summary.texts["/rec_test/status"]
+    assert "interrupted" in status and type(exc).__name__ in status
+    _, vel = _temporal(_chunks(path), "/rec_test/all_hdv/velocity", "Scalars:scalars")
+    np.testing.assert_array_equal(np.array(vel), first.velocity[0])
+    RrdReader(path).store()  # the footer/manifest was written
+
+
+def test_summary_reports_entities_time_range_samples_and_metrics(table):
+    path, results = table
+    s = R.summarize_recording(path)
+    assert s.application_id == R.APP_ID
+    assert s.time_range == (0.0, pytest.approx(results["all_hdv"].t[-1]))
+    vel = s.entities["/rec_test/all_hdv/velocity"]
+    assert vel.samples == len(results["all_hdv"].t) and vel.series == M + N + 2
+    assert s.entities["/rec_test/all_hdv/spacing"].series == M + N + 1
+    assert s.entities["/rec_test/metrics"].static
+    assert "aave" in s.texts["/rec_test/all_hdv/metrics"]
+    js = s.to_json()
+    assert js["entities"]["/rec_test/all_hdv/road"]["samples"] == len(results["all_hdv"].t)
+
+
+def test_summary_rejects_missing_and_invalid_files(tmp_path):
+    with pytest.raises(ConfigError, match="no such recording"):
+        R.summarize_recording(tmp_path / "missing.rrd")
+    bad = tmp_path / "bad.rrd"
+    bad.write_text("not a recording\n" * 10)
+    with pytest.raises(ConfigError, match="not a readable Rerun recording"):
+        R.summarize_recording(bad)
+
+
+def test_recording_path_and_flags():
+    parser = argparse.ArgumentParser()
+    R.add_recording_arguments(parser)
+    now = datetime(2026, 1, 2, 3, 4, 5, tzinfo=UTC)
+    assert R.recording_path(parser.parse_args([]), "paper table2", now) == Path(
+        "logs/paper_table2-20260102T030405Z.rrd"
+    )
+    assert R.recording_path(parser.parse_args(["--no-record"]), "p") is None
+    assert R.recording_path(parser.parse_args(["--rrd", "x/y.rrd"]), "p") == Path("x/y.rrd")
+    with pytest.raises(ConfigError, match="--rrd"):
+        R.recording_path(parser.parse_args(["--rrd", "x/y.txt"]), "p")
+    with pytest.raises(ConfigError, match="--record-every"):
+        R.recording_path(parser.parse_args(["--record-every", "0"]), "p")
+    assert R.recording_decimation(parser.parse_args(["--record-every", "5"])) == 5
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--rrd", "a.rrd", "--no-record"])
+
+
+def test_analysis_and_synthesis_records(tmp_path):
+    omega = np.logspace(-2, 1, 50)
+    mag = 1.0 / np.sqrt(1.0 + (omega / 0.5) ** 2)
+    classes = np.zeros((4, 5), dtype=int)
+    classes[1:, 2:] = 1
+    classes[2:, 3:] = 2
+    mu = np.linspace(-1, 1, 5)
+    k = np.linspace(-2, 2, 4)
+    gains = {
+        "state_names": ["s_0", "v_0", "s_1"],
+        "gains": {"v_0": -0.5, "s_1": -0.2},
+        "h2_true": 3.5,
+    }
+    path = tmp_path / "an.rrd"
+    with R.open_recording(path, "analysis", R.analysis_blueprint(["case A"], ["mu_k"])) as rec:
+        R.record_gamma(rec, "case A", omega, mag, {"string_stable": True})
+        R.record_region_map(rec, "mu_k", classes, mu, k)
+        R.record_gains(rec, "fd h2", gains)
+    chunks = _chunks(path)
+    strip = np.array(_static(chunks, "/analysis/gamma/case_A", "LineStrips2D:strips")[0])
+    np.testing.assert_allclose(strip[:, 0], np.log10(omega), rtol=1e-6)
+    np.testing.assert_allclose(strip[:, 1], mag, rtol=1e-6)
+    rep = _static(chunks, "/analysis/gamma/case_A/report", "TextDocument:text")
+    assert "string_stable" in rep and "True" in rep
+    buf = _static(chunks, "/analysis/regions/mu_k", "SegmentationImage:buffer")
+    img = np.array(buf, dtype=np.uint8).reshape(4, 5)
+    np.testing.assert_array_equal(img, classes[::-1])  # k increasing upwards
+    rep = _static(chunks, "/analysis/regions/mu_k/report", "TextDocument:text")
+    assert "| fraction string stable | 0.2 |" in rep  # 4 of 20 points
+    assert "| fraction plant stable | 0.45 |" in rep  # 9 of 20 points
+    values = _static(chunks, "/synthesis/fd_h2/gains", "BarChart:values")
+    assert values is not None
+    rep = _static(chunks, "/synthesis/fd_h2/report", "TextDocument:text")
+    assert "| v_0 | -0.5 |" in rep and "| s_0 | 0 |" in rep and "h2_true" in rep
+    with pytest.raises(ConfigError, match="classes"):
+        with R.open_recording(tmp_path / "bad.rrd", "x") as rec:
+            R.record_region_map(rec, "bad", classes[:, :3], mu, k)
+
+
+def test_mpc_history_is_recorded(tmp_path):
+    K, H = 20, 6
+    t = 0.1 * np.arange(K)
+    hist = {
+        "t": t,
+        "solve_time": np.linspace(1e-3, 2e-3, K),
+        "predicted_u": np.tile(np.linspace(0, 1, H - 1), (K, 1)),
+        "dt": 0.1,
+    }
+    path = tmp_path / "mpc.rrd"
+    with R.open_recording(path, "m") as rec:
+        R.record_mpc_history(rec, "/m/mpc_ctrl", hist)
+    chunks = _chunks(path)
+    t_ns, st = _temporal(chunks, "/m/mpc_ctrl/mpc/solve_time_ms", "Scalars:scalars")
+    np.testing.assert_allclose(np.array(st)[:, 0], hist["solve_time"] * 1e3)
+    _, strips = _temporal(chunks, "/m/mpc_ctrl/mpc/predicted/u", "LineStrips2D:strips")
+    first = np.array(strips[3][0])
+    np.testing.assert_allclose(first[:, 0], t[3] + 0.1 * np.arange(H - 1), rtol=1e-6)
