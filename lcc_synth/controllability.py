@@ -67,6 +67,7 @@ __all__ = [
     "structural_split",
     "Staircase",
     "kalman_decomposition",
+    "uncontrollable_modes",
     "controllable_subspace",
     "observable_subspace",
     "SubspaceReport",
@@ -224,6 +225,20 @@ def kalman_decomposition(
     return Staircase(T, n_c, steps, min_acc, max_rej, int(unreach.size), tol)
 
 
+def uncontrollable_modes(
+    A: np.ndarray, B: np.ndarray, tol: float | None = None, dec: Staircase | None = None
+) -> np.ndarray:
+    """Eigenvalues of the uncontrollable block ``A_u`` of the Kalman decomposition.
+
+    ``(A, B)`` is stabilizable iff all have a negative real part. ``dec`` reuses a
+    decomposition already computed with :func:`kalman_decomposition`.
+    """
+    A = np.asarray(A, dtype=float)
+    dec = kalman_decomposition(A, B, tol) if dec is None else dec
+    Au = dec.T[:, dec.n_c :].T @ A @ dec.T[:, dec.n_c :]
+    return np.linalg.eigvals(Au) if Au.size else np.zeros(0, dtype=complex)
+
+
 def controllable_subspace(A: np.ndarray, B: np.ndarray, tol: float | None = None) -> np.ndarray:
     """Orthonormal basis ``(nx, n_c)`` of the controllable subspace of ``(A, B)``."""
     dec = kalman_decomposition(A, B, tol)
@@ -321,13 +336,36 @@ class SubspaceReport:
 
 @dataclass(frozen=True)
 class ControllabilityReport(SubspaceReport):
-    """Controllable subspace of ``(A, B)``; ``controllable`` iff ``rank == n_states``."""
+    """Controllable subspace of ``(A, B)``; ``controllable`` iff ``rank == n_states``.
+
+    ``uncontrollable_eigenvalues`` are the eigenvalues of the uncontrollable block ``A_u`` of the
+    Kalman decomposition (no input can move them); ``stabilizable`` iff all have a negative real
+    part. Repeated eigenvalues of ``A_u`` come out scattered by round-off (see the module
+    docstring), their real parts stay reliable to that scatter.
+    """
 
     controllable: bool = False
+    uncontrollable_eigenvalues: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+
+    @property
+    def stabilizable(self) -> bool:
+        """All uncontrollable modes are asymptotically stable."""
+        return bool(np.all(self.uncontrollable_eigenvalues.real < 0))
+
+    @property
+    def uncontrollable_max_real(self) -> float | None:
+        """Largest real part of an uncontrollable mode (``None`` when controllable)."""
+        ev = self.uncontrollable_eigenvalues
+        return float(ev.real.max()) if ev.size else None
 
     def as_dict(self) -> dict:
         """JSON-serialisable summary (no basis)."""
-        return {"controllable": bool(self.controllable), **self._summary()}
+        return {
+            "controllable": bool(self.controllable),
+            "stabilizable": self.stabilizable,
+            "uncontrollable_max_real": self.uncontrollable_max_real,
+            **self._summary(),
+        }
 
 
 @dataclass(frozen=True)
@@ -409,6 +447,7 @@ def controllability_report(
         max_rejected=dec.max_rejected,
         membership_tol=membership_tol,
         controllable=rank == model.nx,
+        uncontrollable_eigenvalues=uncontrollable_modes(model.A, model.B, tol, dec),
     )
 
 

@@ -331,3 +331,29 @@ def test_default_outputs_and_errors():
         observability_report(fd_lcc(3, PAPER), [])
     with pytest.raises(ConfigError, match="unknown state"):
         observability_report(fd_lcc(3, PAPER), ["v_9"])
+
+
+def test_uncontrollable_modes_are_those_of_the_vehicles_ahead():
+    """A_22 is block triangular with the P_1 of each vehicle ahead on its diagonal, so the
+    uncontrollable modes are the roots of s^2 + alpha2 s + alpha1 of those vehicles."""
+    coefs = [LinearCoefficients(0.7, 1.6, 0.8), LinearCoefficients(2.0, 1.3, 0.5), PAPER, PAPER]
+    rep = controllability_report(general_lcc(2, 2, coefs))
+    expected = np.concatenate([np.roots([1.0, c.alpha2, c.alpha1]) for c in coefs[:2]])
+    got = rep.uncontrollable_eigenvalues
+    assert got.size == 4
+    for lam in expected:
+        assert np.min(np.abs(got - lam)) < 1e-10
+    assert rep.stabilizable and rep.uncontrollable_max_real < 0
+    assert rep.as_dict()["stabilizable"] is True
+    full = controllability_report(fd_lcc(3, PAPER))
+    assert full.uncontrollable_eigenvalues.size == 0 and full.uncontrollable_max_real is None
+
+
+def test_violating_eq13_loses_the_cancelled_mode():
+    """The lost modes sit at the cancelled pole-zero pair lambda = -(alpha2 - alpha3)."""
+    rep = controllability_report(fd_lcc(3, VIOLATING))
+    lam = rep.uncontrollable_eigenvalues
+    assert lam.size == 3
+    # A triple eigenvalue in a Jordan chain scatters by about eps^(1/3) ~ 6e-6.
+    np.testing.assert_allclose(lam, -float(A2 - A3), atol=1e-4)
+    assert rep.stabilizable
