@@ -1,0 +1,174 @@
+"""``lcc-synth review``: summary, bad input, and the web viewer served on 127.0.0.1 only."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rerun")
+
+from lcc_synth import recording as R  # noqa: E402
+from lcc_synth.cli import review  # noqa: E402
+from lcc_synth.cli.main import main  # noqa: E402
+from lcc_synth.controllers import HDVController  # noqa: E402
+from lcc_synth.perturbations import Brake  # noqa: E402
+from lcc_synth.simulation import Scenario, simulate  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def rrd(tmp_path_factory):
+    sc = Scenario(m=0, n=2, duration=3.0, perturbations=(Brake(vehicle=1, start=1.0),))
+    res = simulate(sc, HDVController("all_hdv"))
+    path = tmp_path_factory.mktemp("review") / "run.rrd"
+    with R.open_recording(path, "demo", R.simulation_blueprint("demo", ["all_hdv"])) as rec:
+        R.record_simulation(rec, res, "demo", metrics={"aave": 0.123456, "fuel_ml": 9.5})
+    return path
+
+
+def test_summary_prints_entities_time_range_samples_and_metrics(rrd, capsys):
+    assert main(["review", "--summary", str(rrd)]) == 0
+    out = capsys.readouterr().out
+    assert "time range   0 .. 2.99 s" in out
+    assert re.search(r"/demo/all_hdv/velocity\s+Scalars/SeriesLines: 300 samples, 4 series", out)
+    assert "/demo/all_hdv/road" in out and "blueprint    yes" in out
+    assert "| aave | 0.123456 |" in out  # the metrics document
+    assert "complete" in out  # the status document
+
+
+def test_summary_json_is_one_object(rrd, capsys):
+    assert main(["review", "--summary", "--json", str(rrd)]) == 0
+    out = capsys.readouterr().out
+    data = json.loads(out)
+    assert data["time_range"] == [0.0, 2.99]
+    assert data["entities"]["/demo/all_hdv/velocity"]["samples"] == 300
+    assert data["has_blueprint"] is True
+    assert any(v["space_origin"] == "/demo/all_hdv/road" for v in data["views"])
+
+
+@pytest.mark.parametrize("content", [None, b"", b"definitely not an rrd file\n" * 20])
+def test_missing_or_invalid_file_exits_2(tmp_path, capsys, content):
+    path = tmp_path / "x.rrd"
+    if content is not None:
+        path.write_bytes(content)
+    assert main(["review", "--summary", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("lcc-synth review: error:") and "\n" not in err
+    assert main(["review", str(path)]) == 2  # also without --summary, before any viewer starts
+
+
+def test_display_detection():
+    assert not review.has_display({}, "linux")
+    assert review.has_display({"DISPLAY": ":0"}, "linux")
+    assert review.has_display({"WAYLAND_DISPLAY": "wayland-0"}, "linux")
+    assert review.has_display({}, "darwin")
+
+
+def test_viewer_environment_turns_analytics_off():
+    env = R.viewer_environment({"PATH": "/bin"})
+    assert env["CI"] == "1" and env["PATH"] == "/bin"
+    assert R.rerun_binary().is_file() and os.access(R.rerun_binary(), os.X_OK)
+
+
+def _listening(port: int) -> bool:
+    with socket.socket() as s:
+        s.settimeout(0.2)
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+def test_web_viewer_serves_on_localhost_and_stops_on_ctrl_c(rrd):
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "lcc_synth.cli.main", "review", str(rrd)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=env,
+        text=True,
+    )
+    try:
+        line = proc.stdout.readline()  # blocks until the viewer listens (or fails)
+        m = re.search(r"open (http://127\.0\.0\.1:(\d+)/\?url=\S+127\.0\.0\.1%3A(\d+)\S+)", line)
+        assert m, (line, proc.stderr.read() if proc.poll() is not None else "")
+        url, web_port, grpc_port = m.group(1), int(m.group(2)), int(m.group(3))
+        with urllib.request.urlopen(url, timeout=10) as resp:
+            assert resp.status == 200
+        # bound to 127.0.0.1 only: the ports are not open on any other local address
+        viewer_pids = _viewer_pids(web_port)
+        assert viewer_pids or not os.path.isdir("/proc/net"), "no process listens on the web port"
+        for addr in _other_local_addresses():
+            with socket.socket() as s:
+                s.settimeout(0.2)
+                assert s.connect_ex((addr, web_port)) != 0
+        proc.send_signal(signal.SIGINT)  # Ctrl-C
+        assert proc.wait(timeout=15) == 0
+        deadline = time.monotonic() + 10
+        while (_listening(web_port) or _listening(grpc_port)) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not _listening(web_port) and not _listening(grpc_port)
+        for pid in viewer_pids:  # the viewer process itself is gone (not orphaned)
+            assert not _alive(pid)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def _viewer_pids(port: int) -> list[int]:
+    """PIDs of processes with a listening socket on ``port`` (Linux /proc; empty elsewhere)."""
+    if not os.path.isdir("/proc/net"):
+        return []
+    inodes = set()
+    with open("/proc/net/tcp") as fh:
+        for row in fh.readlines()[1:]:
+            parts = row.split()
+            if int(parts[1].split(":")[1], 16) == port and parts[3] == "0A":
+                inodes.add(parts[9])
+    pids = []
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            for fd in os.listdir(f"/proc/{pid}/fd"):
+                link = os.readlink(f"/proc/{pid}/fd/{fd}")
+                if link.startswith("socket:[") and link[8:-1] in inodes:
+                    pids.append(int(pid))
+                    break
+        except OSError:
+            continue
+    return pids
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().split()[2] != "Z"
+    except OSError:
+        return False
+
+
+def _other_local_addresses() -> list[str]:
+    """Non-loopback IPv4 addresses of this machine (where a 0.0.0.0 bind would answer)."""
+    addrs = set()
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.connect(("10.255.255.255", 1))
+            addrs.add(s.getsockname()[0])
+    except OSError:
+        pass
+    try:
+        addrs.update(socket.gethostbyname_ex(socket.gethostname())[2])
+    except OSError:
+        pass
+    return [a for a in addrs if not a.startswith("127.")]
+
+
+def test_port_validation(rrd):
+    assert main(["review", "--web", "--web-port", "70000", str(rrd)]) == 2
+    assert np.isfinite(review._free_port())
