@@ -357,3 +357,14 @@ def test_violating_eq13_loses_the_cancelled_mode():
     # A triple eigenvalue in a Jordan chain scatters by about eps^(1/3) ~ 6e-6.
     np.testing.assert_allclose(lam, -float(A2 - A3), atol=1e-4)
     assert rep.stabilizable
+
+
+@pytest.mark.parametrize(("m", "n"), [(1, 1), (2, 3), (3, 2)])
+def test_structural_split_and_plain_staircase_agree_on_small_systems(m, n):
+    model = general_lcc(m, n, PAPER)
+    with_split = kalman_decomposition(model.A, model.B)
+    plain = kalman_decomposition(model.A, model.B, structural=False)
+    assert with_split.n_structural == 2 * m and plain.n_structural == 0
+    assert plain.n_c == with_split.n_c == 2 * n + 2
+    Q1, Q2 = with_split.T[:, : with_split.n_c], plain.T[:, : plain.n_c]
+    np.testing.assert_allclose(Q1 @ Q1.T, Q2 @ Q2.T, atol=1e-12)
