@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["plot_control_energy"]
+__all__ = ["plot_pareto_front", "plot_control_energy"]
 
 
 def _pyplot():
@@ -56,6 +56,44 @@ def plot_control_energy(sweep, path: str | Path) -> Path:
     kinds = {r.kind for reports in sweep.reports.values() for r in reports}
     names = {"fd_lcc": "FD-LCC", "cf_lcc": "CF-LCC"}
     fig.suptitle(f"Control energy of {', '.join(names.get(k, k) for k in sorted(kinds))} (Fig. 5)")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_pareto_front(pareto, h2_full: float, path: str | Path, title: str | None = None) -> Path:
+    """Sparsity Pareto front: vehicles the CAV hears (besides itself) vs true H2 norm.
+
+    Parameters
+    ----------
+    pareto : list of dict
+        The ``pareto`` entries of a synthesis report (``count``, ``h2``, ``on_front``,
+        ``vehicles``), from :func:`lcc_synth.synthesis.sparsity.sparsity_sweep`.
+    h2_full : float
+        Unstructured optimum (every vehicle heard), drawn as a reference line.
+    path : str or Path
+        Output PNG.
+    """
+    plt = _pyplot()
+    path = Path(path)
+    fig, ax = plt.subplots(figsize=(6.5, 4), constrained_layout=True)
+    off = [p for p in pareto if not p["on_front"]]
+    front = sorted((p for p in pareto if p["on_front"]), key=lambda p: p["count"])
+    if off:
+        ax.plot([p["count"] for p in off], [p["h2"] for p in off], "x", color="0.6",
+                label="other patterns found")
+    ax.plot([p["count"] for p in front], [p["h2"] for p in front], "o-", label="Pareto front")
+    for p in front:
+        ax.annotate(",".join(str(v) for v in p["vehicles"]) or "CAV only",
+                    (p["count"], p["h2"]), textcoords="offset points", xytext=(4, 6), fontsize=7)
+    ax.axhline(h2_full, ls="--", color="k", lw=0.8, label="unstructured optimum")
+    ax.set_xlabel("vehicles heard besides the CAV")
+    ax.set_ylabel("true closed-loop H2 norm (after polishing)")
+    ax.xaxis.get_major_locator().set_params(integer=True)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(title or "Sparsity-promoting H2 design")
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
     plt.close(fig)

@@ -43,9 +43,9 @@ def run(args: argparse.Namespace) -> int:
             from lcc_synth.errors import ConfigError
 
             raise ConfigError("--figure", "only design = 'sparsity' produces a Pareto front")
-        from lcc_synth.figures import pareto_front_png
+        from lcc_synth.figures import plot_pareto_front
 
-        written.append(str(pareto_front_png(rep.pareto, rep.h2_unstructured, args.figure,
+        written.append(str(plot_pareto_front(rep.pareto, rep.h2_unstructured, args.figure,
                                             title=rep.problem)))
     if args.json:
         doc = {"ok": True, **rep.as_dict(), "written": written}

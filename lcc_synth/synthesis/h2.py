@@ -354,22 +354,32 @@ class LMIResult:
     info: dict = field(default_factory=dict)
 
 
-def solve_checked(prob, what: str, eps: float = 1e-7) -> tuple[str, float]:
-    """Solve a cvxpy problem with Clarabel (named explicitly); raise on failure."""
+def solve_checked(prob, what: str, hint: str = "") -> tuple[str, float]:
+    """Solve a cvxpy problem with Clarabel (named explicitly); raise on failure.
+
+    Accepts ``optimal`` and ``optimal_inaccurate`` (the caller checks the *result*: eigenvalues
+    and the true H2 norm); anything else is a :class:`SynthesisError`.
+    """
     import time
+    import warnings
 
     import cvxpy as cp
 
     t0 = time.perf_counter()
     try:
-        prob.solve(solver=cp.CLARABEL)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "solution may be inaccurate"
+            prob.solve(solver=cp.CLARABEL)
     except cp.error.SolverError as err:
-        raise SynthesisError(f"{what}: Clarabel failed: {err}") from None
+        raise SynthesisError(
+            f"{what}: Clarabel failed ({err}); the problem is probably infeasible or "
+            f"badly conditioned{hint}",
+            {"status": "solver_error"},
+        ) from None
     dt = time.perf_counter() - t0
     if prob.status not in ("optimal", "optimal_inaccurate"):
         raise SynthesisError(
-            f"{what}: solver status {prob.status!r} (infeasible or unbounded)",
-            {"status": prob.status},
+            f"{what}: solver status {prob.status!r}{hint}", {"status": prob.status}
         )
     return prob.status, dt
 

@@ -102,7 +102,12 @@ def string_lmi(
     ]
     cons = [k for k in cons if k is not None]
     prob = cp.Problem(cp.Minimize(cp.trace(plant.Q @ X) + plant.r * W[0, 0]), cons)
-    status, dt = solve_checked(prob, f"string-stability LMI (gamma = {gamma:g})")
+    status, dt = solve_checked(
+        prob,
+        f"string-stability LMI (gamma = {gamma:g})",
+        "; no gain of this pattern is certified string stable by the LMI (a common, "
+        "block-diagonal Lyapunov matrix: conservative, hear more vehicles or raise gamma)",
+    )
     Xv, Zv = X.value, Z.value
     g = np.linalg.solve(Xv.T, Zv.T).ravel()
     g[~mask] = 0.0

@@ -183,7 +183,12 @@ def convex_restriction(
         + plant.r * W[0, 0]
     )
     prob = cp.Problem(obj, cons)
-    status, dt = solve_checked(prob, "structured H2 convex restriction")
+    status, dt = solve_checked(
+        prob,
+        "structured H2 convex restriction",
+        "; the block-diagonal restriction certifies no gain of this pattern (use "
+        "method = 'direct' to polish from the truncated Riccati gain)",
+    )
     Xv = np.zeros((nx, nx))
     for b, x in zip(blocks, xb, strict=True):
         Xv[np.ix_(b, b)] = x.value
