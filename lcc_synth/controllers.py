@@ -48,6 +48,10 @@ class ControlContext:
         Acceleration limits (m/s^2) the simulator enforces.
     hdv : CarFollowingModel
         The nominal HDV model (the CAV's own "HDV law" for the ``added`` semantics).
+    s_ref : numpy.ndarray, optional
+        ``(batch, n_vehicles)`` spacing reference of each vehicle for its spacing error
+        (e.g. each heterogeneous HDV's own equilibrium spacing at ``v*``); ``None`` means
+        ``s_star`` for every vehicle. See :meth:`spacing_reference`.
     """
 
     m: int
@@ -59,6 +63,13 @@ class ControlContext:
     a_min: float
     a_max: float
     hdv: CarFollowingModel
+    s_ref: np.ndarray | None = None
+
+    def spacing_reference(self) -> np.ndarray:
+        """``(batch, n_vehicles)`` reference of every spacing error (``s_ref`` or ``s_star``)."""
+        if self.s_ref is not None:
+            return self.s_ref
+        return np.repeat(np.asarray(self.s_star, dtype=float)[:, None], self.n_vehicles, axis=1)
 
     @property
     def cav(self) -> int:
@@ -126,7 +137,7 @@ class Controller(Protocol):
 class LinearLaw:
     """A CAV command that is a fixed function of the observation (no internal state).
 
-    ``u = [F_hdv(s_0, v_-1 - v_0, v_0) if hdv_law] + sum_j Ks[j] (s_j - s*)
+    ``u = [F_hdv(s_0, v_-1 - v_0, v_0) if hdv_law] + sum_j Ks[j] (s_j - s_ref_j)
     + sum_j Kv[j] (v_j - v*) + Kp * (-(p_0 - p_0(t_0) - v* (t - t_0)))``
     with the nominal HDV model ``F_hdv`` of the :class:`ControlContext` and ``t_0`` the first
     sample. Arrays are indexed by vehicle column (head = 0). The simulator evaluates this law
@@ -186,7 +197,7 @@ class _LinearController:
             )
         cols = np.flatnonzero(law.Ks)
         if cols.size:
-            u += (obs.spacing[:, cols] - ctx.s_star[:, None]) @ law.Ks[cols]
+            u += (obs.spacing[:, cols] - ctx.spacing_reference()[:, cols]) @ law.Ks[cols]
         cols = np.flatnonzero(law.Kv)
         if cols.size:
             u += (obs.velocity[:, cols] - vs[:, None]) @ law.Kv[cols]

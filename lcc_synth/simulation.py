@@ -39,8 +39,10 @@ compiled loop advances the scenarios between samples.
 from __future__ import annotations
 
 import math
+import os
 import time
 from collections.abc import Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -180,6 +182,10 @@ class Scenario:
         batch size).
     record_every : int
         Keep every k-th sample in the result.
+    spacing_reference : {"nominal", "own_equilibrium"}
+        Reference of the spacing errors the controllers see: the nominal ``s*`` for every
+        vehicle, or each HDV's own equilibrium spacing at ``v*`` (the heterogeneous
+        linearisation, eq. 8 around each vehicle's equilibrium). Same thing when homogeneous.
     """
 
     m: int
@@ -203,6 +209,7 @@ class Scenario:
     v2v: V2V = field(default_factory=V2V)
     seed: int = 0
     record_every: int = 1
+    spacing_reference: str = "nominal"
     name: str = "scenario"
 
     def __post_init__(self) -> None:
@@ -210,6 +217,11 @@ class Scenario:
             val = getattr(self, key)
             if isinstance(val, bool) or not isinstance(val, int | np.integer) or val < lo:
                 raise ConfigError(f"scenario.{key}", f"must be an integer >= {lo}, got {val!r}")
+        if self.spacing_reference not in ("nominal", "own_equilibrium"):
+            raise ConfigError(
+                "scenario.spacing_reference",
+                f'must be "nominal" or "own_equilibrium", got {self.spacing_reference!r}',
+            )
         _num("scenario.dt", self.dt, lo=0.0, lo_open=True)
         _num("scenario.duration", self.duration, lo=0.0, lo_open=True)
         _num("scenario.t_start", self.t_start)
@@ -471,23 +483,25 @@ def _observe(b, k, p, v, hp, hv, L, lat, loss, noise, seed, cav, obs_s, obs_v, o
         obs_p[b, j] = pj
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True, nogil=True)
 def _advance(
-    k0, k1, p, v, hp, hv, L, delay_steps, code, params, nom_code, nom_params,
+    b0, b1, k0, k1, p, v, hp, hv, L, delay_steps, code, params, nom_code, nom_params,
     dt, t_start, a_min, a_max, cav, cav_aeb, hdv_aeb, noise_std, seed,
-    acc_ovr, spd_ovr, mode, ratio, u_hold, Ks, Kv, Kp, hdv_law, v_star, s_star, p_ref,
+    acc_ovr, spd_ovr, mode, ratio, u_hold, Ks, Kv, Kp, hdv_law, v_star, s_ref, p_ref,
     loss, lat, obs_noise, obs_s, obs_v, obs_p, alive, collided, ctime,
     stride, out_p, out_v, out_a, out_s, out_u, out_aeb,
 ):  # fmt: skip
-    """Advance every scenario from sample ``k0`` to ``k1`` (exclusive).
+    """Advance scenarios ``b0 .. b1 - 1`` from sample ``k0`` to ``k1`` (exclusive).
+
+    Releases the GIL: disjoint scenario ranges run on several threads at once.
 
     ``mode`` 1 evaluates the linear law (Ks, Kv, Kp, hdv_law) at every ``ratio``-th sample;
     mode 0 applies the held command ``u_hold`` (set by a Python controller).
     """
-    B, nv = p.shape
+    nv = p.shape[1]
     abs_min = abs(a_min)
-    for b in numba.prange(B):
-        acc = np.empty(nv)
+    acc = np.empty(nv)
+    for b in range(b0, b1):
         for k in range(k0, k1):
             rec = k % stride == 0
             r = k // stride
@@ -538,7 +552,7 @@ def _advance(
                     )  # fmt: skip
                 for j in range(1, nv):
                     if Ks[j] != 0.0:
-                        u += Ks[j] * (obs_s[b, j] - s_star[b])
+                        u += Ks[j] * (obs_s[b, j] - s_ref[b, j])
                 for j in range(nv):
                     if Kv[j] != 0.0:
                         u += Kv[j] * (obs_v[b, j] - v_star[b])
@@ -619,6 +633,30 @@ def _observe_all(k, p, v, hp, hv, L, lat, loss, noise, seed, cav, obs_s, obs_v, 
 # --------------------------------------------------------------------------------------------
 
 
+_POOL: ThreadPoolExecutor | None = None
+
+
+def _cpu_count() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _threads(batch: int, work_per_call: int) -> int:
+    """Threads for one kernel call: 1 unless there are several scenarios and enough work."""
+    if batch < 2 or batch * work_per_call < 200_000:
+        return 1
+    return min(batch, _cpu_count())
+
+
+def _executor() -> ThreadPoolExecutor:
+    global _POOL
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(max_workers=_cpu_count(), thread_name_prefix="lcc-sim")
+    return _POOL
+
+
 def _steps_of(value: float, dt: float, field: str, multiple: bool) -> int:
     ratio = value / dt
     r = int(round(ratio))
@@ -686,13 +724,21 @@ def simulate(
 
     v_star = np.full(B, float(sc.v_star))
     s_star = np.full(B, sc.s_star)
-    ctx = ControlContext(sc.m, sc.n, B, dt, v_star, s_star, sc.a_min, sc.a_max, sc.hdv)
+    if sc.spacing_reference == "own_equilibrium":
+        s_ref = draws.initial_spacing.copy()
+        s_ref[:, 0] = s_star
+    else:
+        s_ref = np.repeat(s_star[:, None], nv, axis=1)
+    ctx = ControlContext(
+        sc.m, sc.n, B, dt, v_star, s_star, sc.a_min, sc.a_max, sc.hdv, s_ref=s_ref.copy()
+    )
     controller.reset(ctx)
     ts = controller.sample_time
     ratio = 1 if ts is None else _steps_of(
         ts, dt, f"controllers.{controller.name}.sample_time", multiple=True
     )
-    law = controller.linear_law(ctx) if hasattr(controller, "linear_law") else None
+    law_fn = getattr(controller, "linear_law", None)
+    law = law_fn(ctx) if callable(law_fn) else None
 
     loss = sc.v2v.rates(nv)
     obs_noise = np.array([sc.v2v.spacing_noise, sc.v2v.velocity_noise, sc.v2v.position_noise])
@@ -714,15 +760,29 @@ def simulate(
     ctime = np.full((B, nv), np.nan)
     u_hold = np.zeros(B)
 
-    def advance(k0, k1, mode, Ks, Kv, Kp, hdv_law):
+    def advance_range(b0, b1, k0, k1, mode, Ks, Kv, Kp, hdv_law):
         _advance(
-            k0, k1, p, v, hp, hv, L, delay_steps, code, params, code, nom_params,
+            b0, b1, k0, k1, p, v, hp, hv, L, delay_steps, code, params, code, nom_params,
             float(dt), float(sc.t_start), float(sc.a_min), float(sc.a_max), cav,
             bool(sc.cav_aeb), bool(sc.hdv_aeb), float(sc.hdv_accel_noise), int(sc.seed),
             acc_ovr, spd_ovr, mode, ratio, u_hold, Ks, Kv, float(Kp), bool(hdv_law),
-            v_star, s_star, p_ref, loss, lat, obs_noise, obs_s, obs_v, obs_p,
+            v_star, s_ref, p_ref, loss, lat, obs_noise, obs_s, obs_v, obs_p,
             alive, collided, ctime, stride, out_p, out_v, out_a, out_s, out_u, out_aeb,
         )  # fmt: skip
+
+    n_threads = _threads(B, (T if law is not None else ratio) * nv)
+
+    def advance(k0, k1, mode, Ks, Kv, Kp, hdv_law):
+        if n_threads == 1:
+            advance_range(0, B, k0, k1, mode, Ks, Kv, Kp, hdv_law)
+            return
+        edges = np.linspace(0, B, n_threads + 1).astype(int)
+        futures = [
+            _executor().submit(advance_range, b0, b1, k0, k1, mode, Ks, Kv, Kp, hdv_law)
+            for b0, b1 in zip(edges[:-1], edges[1:], strict=True)
+        ]
+        for f in futures:
+            f.result()
 
     if law is not None:
         Ks = np.ascontiguousarray(law.Ks, dtype=float)

@@ -1,0 +1,221 @@
+"""Performance and safety metrics of simulation results (Section V-B and beyond).
+
+Every function takes a :class:`~lcc_synth.simulation.SimResult` and returns one value per
+scenario of the batch (``(batch,)``) or per scenario and vehicle (``(batch, n_vehicles)``,
+columns head..tail).
+
+Window: AAVE and fuel use the samples whose time lies in the CLOSED interval ``window``
+(default 20-40 s: 2001 samples at dt = 0.01), integrated by the rectangle rule (sum x dt), as
+the paper's reference computation does.
+
+Vehicle sets: ``"cav_and_behind"`` (the paper's "sum over i = 0..10": CAV and the HDVs behind),
+``"all"`` (head included), ``"hdvs"`` (every HDV), or explicit paper indices / ``"head"``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from lcc_synth.errors import ConfigError
+from lcc_synth.perturbations import vehicle_column
+
+__all__ = [
+    "VEHICLE_SETS",
+    "MetricsConfig",
+    "vehicle_columns",
+    "window_mask",
+    "bowyer_fuel_rate",
+    "aave",
+    "fuel",
+    "min_spacing",
+    "min_time_to_collision",
+    "max_abs_velocity_error",
+    "max_abs_command",
+    "rms_jerk",
+    "aeb_activations",
+    "collisions",
+    "summary",
+]
+
+VEHICLE_SETS = ("cav_and_behind", "all", "hdvs")
+
+
+@dataclass(frozen=True)
+class MetricsConfig:
+    """Window and vehicle set of AAVE and fuel, and an optional baseline controller name."""
+
+    window: tuple[float, float] = (20.0, 40.0)
+    vehicles: str | tuple[int | str, ...] = "cav_and_behind"
+    baseline: str | None = None
+
+    def __post_init__(self) -> None:
+        t0, t1 = self.window
+        if not (np.isfinite(t0) and np.isfinite(t1) and t1 > t0):
+            raise ConfigError("metrics.window", f"must be [t0, t1] with t1 > t0, got {self.window}")
+        if isinstance(self.vehicles, str) and self.vehicles not in VEHICLE_SETS:
+            raise ConfigError(
+                "metrics.vehicles",
+                f"must be one of {list(VEHICLE_SETS)} or a list of indices, got {self.vehicles!r}",
+            )
+
+
+def vehicle_columns(result, vehicles: str | Sequence[int | str] = "cav_and_behind") -> np.ndarray:
+    """Array columns of a vehicle set (see the module docstring)."""
+    nv, cav = result.n_vehicles, result.cav
+    if isinstance(vehicles, str):
+        if vehicles == "cav_and_behind":
+            return np.arange(cav, nv)
+        if vehicles == "all":
+            return np.arange(nv)
+        if vehicles == "hdvs":
+            return np.array([j for j in range(1, nv) if j != cav])
+        if vehicles == "head":
+            return np.array([0])
+        raise ConfigError("metrics.vehicles", f"must be one of {list(VEHICLE_SETS)}")
+    cols = [vehicle_column(v, result.m, result.n, "metrics.vehicles") for v in vehicles]
+    if not cols:
+        raise ConfigError("metrics.vehicles", "must name at least one vehicle")
+    return np.array(cols)
+
+
+def window_mask(result, window: tuple[float, float] = (20.0, 40.0)) -> np.ndarray:
+    """Samples with ``window[0] <= t <= window[1]`` (tolerance 1e-6 dt for round-off)."""
+    eps = 1e-6 * result.sim_dt
+    mask = (result.t >= window[0] - eps) & (result.t <= window[1] + eps)
+    if not mask.any():
+        raise ConfigError(
+            "metrics.window",
+            f"{list(window)} holds no sample of the run ({result.t[0]:g} to {result.t[-1]:g} s)",
+        )
+    return mask
+
+
+def bowyer_fuel_rate(v, a):
+    """Instantaneous fuel rate (mL/s) of Bowyer et al. (1985) as printed in Section V-B.
+
+    ``R = 0.333 + 0.00108 v^2 + 1.2 a``; ``f = 0.444 + 0.090 R v + [0.054 a^2 v]_{a>0}`` when
+    ``R > 0``, else ``0.444``. ``v`` in m/s, ``a`` in m/s^2; broadcasts.
+    """
+    v = np.asarray(v, dtype=float)
+    a = np.asarray(a, dtype=float)
+    R = 0.333 + 0.00108 * v**2 + 1.2 * a
+    f = 0.444 + 0.090 * R * v + np.where(a > 0, 0.054 * a**2 * v, 0.0)
+    return np.where(R > 0, f, 0.444)
+
+
+def _slice(result, arr, window, vehicles):
+    mask = window_mask(result, window)
+    cols = vehicle_columns(result, vehicles)
+    return arr[:, mask][:, :, cols], mask, cols
+
+
+def aave(result, window=(20.0, 40.0), vehicles="cav_and_behind") -> np.ndarray:
+    """Average absolute velocity error (m/s): ``sum_i int |v_i - v*| dt / (t1 - t0) / count``.
+
+    NaN for a scenario that collided before or inside the window.
+    """
+    v, _, cols = _slice(result, result.velocity, window, vehicles)
+    err = np.abs(v - result.v_star[:, None, None])
+    return err.sum(axis=(1, 2)) * result.dt / (window[1] - window[0]) / len(cols)
+
+
+def fuel(result, window=(20.0, 40.0), vehicles="cav_and_behind") -> np.ndarray:
+    """Total fuel (mL) of the vehicle set over the window (Bowyer model, rectangle rule)."""
+    v, mask, cols = _slice(result, result.velocity, window, vehicles)
+    a = result.acceleration[:, mask][:, :, cols]
+    return bowyer_fuel_rate(v, a).sum(axis=(1, 2)) * result.dt
+
+
+def min_spacing(result) -> np.ndarray:
+    """Minimum spacing (m) of every vehicle over the run, ``(batch, nv)``; NaN for the head."""
+    out = np.full((result.batch, result.n_vehicles), np.nan)
+    out[:, 1:] = np.nanmin(result.spacing[:, :, 1:], axis=1)
+    return out
+
+
+def min_time_to_collision(result) -> np.ndarray:
+    """Minimum time to collision (s) of every vehicle, ``(batch, nv)``.
+
+    ``TTC = s_i / (v_i - v_ahead)`` at samples where the vehicle closes in (``v_i > v_ahead``);
+    ``inf`` when it never does; NaN for the head.
+    """
+    v = result.velocity
+    closing = v[:, :, 1:] - v[:, :, :-1]
+    s = result.spacing[:, :, 1:]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ttc = np.where(closing > 0, s / closing, np.inf)
+    ttc = np.where(np.isnan(ttc), np.inf, ttc)
+    out = np.full((result.batch, result.n_vehicles), np.nan)
+    out[:, 1:] = ttc.min(axis=1)
+    return out
+
+
+def max_abs_velocity_error(result) -> np.ndarray:
+    """``max_t |v_i - v*|`` (m/s) of every vehicle, ``(batch, nv)``."""
+    return np.nanmax(np.abs(result.velocity - result.v_star[:, None, None]), axis=1)
+
+
+def max_abs_command(result) -> np.ndarray:
+    """``max_t |u|`` (m/s^2) of the CAV's command (before limits and emergency braking)."""
+    return np.nanmax(np.abs(result.u_cmd), axis=1)
+
+
+def rms_jerk(result) -> np.ndarray:
+    """RMS of the CAV's jerk (m/s^3): finite differences of its applied acceleration."""
+    a = result.acceleration[:, :, result.cav]
+    jerk = np.diff(a, axis=1) / result.dt
+    return np.sqrt(np.nanmean(jerk**2, axis=1))
+
+
+def aeb_activations(result) -> np.ndarray:
+    """Number of samples where the CAV's emergency braking overrode its command."""
+    return result.aeb_active.sum(axis=1)
+
+
+def collisions(result) -> np.ndarray:
+    """Number of vehicles that collided with the vehicle ahead, per scenario."""
+    return result.collided.sum(axis=1)
+
+
+def _stat(x: np.ndarray) -> float:
+    x = np.asarray(x, dtype=float)
+    return float(np.mean(x)) if x.size else float("nan")
+
+
+def summary(result, config: MetricsConfig | None = None) -> dict[str, Any]:
+    """All metrics of a result; batch statistics where a batch has several scenarios.
+
+    Scalars are means over the batch (``*_std`` the standard deviations, ``*_all`` every
+    scenario); ``min_spacing`` and ``collisions``/``aeb_activations`` are the worst case /
+    totals. Per-vehicle lists are ordered head..tail (head spacing is NaN).
+    """
+    cfg = config or MetricsConfig()
+    a = aave(result, cfg.window, cfg.vehicles)
+    f = fuel(result, cfg.window, cfg.vehicles)
+    ms = min_spacing(result)
+    mv = max_abs_velocity_error(result)
+    ttc = min_time_to_collision(result)
+    return {
+        "aave": _stat(a),
+        "aave_std": float(np.std(a)),
+        "aave_all": a.tolist(),
+        "fuel_ml": _stat(f),
+        "fuel_ml_std": float(np.std(f)),
+        "fuel_ml_all": f.tolist(),
+        "min_spacing": float(np.nanmin(ms[:, 1:])),
+        "collisions": int(collisions(result).sum()),
+        "aeb_activations": int(aeb_activations(result).sum()),
+        "max_abs_command": float(np.nanmax(max_abs_command(result))),
+        "rms_jerk_cav": _stat(rms_jerk(result)),
+        "min_ttc": float(np.nanmin(ttc[:, 1:])),
+        "per_vehicle": {
+            "max_abs_velocity_error": np.nanmax(mv, axis=0).tolist(),
+            "min_spacing": [float("nan")] + np.nanmin(ms[:, 1:], axis=0).tolist(),
+            "min_ttc": [float("nan")] + np.nanmin(ttc[:, 1:], axis=0).tolist(),
+        },
+        "batch": result.batch,
+    }
