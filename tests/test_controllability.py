@@ -368,3 +368,42 @@ def test_structural_split_and_plain_staircase_agree_on_small_systems(m, n):
     assert plain.n_c == with_split.n_c == 2 * n + 2
     Q1, Q2 = with_split.T[:, : with_split.n_c], plain.T[:, : plain.n_c]
     np.testing.assert_allclose(Q1 @ Q1.T, Q2 @ Q2.T, atol=1e-12)
+
+
+def _exactify(M: np.ndarray) -> list[list[Fraction]]:
+    """Replace every float entry of an LCC matrix built from VIOLATING by its exact rational."""
+    table = {float(q): q for q in (A1, A2, A3, -A1, -A2, -A3, Fraction(1), Fraction(-1))}
+    table[0.0] = Fraction(0)
+    return [[table[float(x)] for x in row] for row in M]
+
+
+def _exact_observability_rank(A, C) -> int:
+    rows, nx = [list(r) for r in C], len(A)
+    block = [list(r) for r in C]
+    for _ in range(nx - 1):
+        block = [[sum(r[k] * A[k][j] for k in range(nx)) for j in range(nx)] for r in block]
+        rows.extend(block)
+    return _exact_rank(rows)
+
+
+@pytest.mark.parametrize(
+    ("model", "outputs"),
+    [
+        (fd_lcc(3, VIOLATING), ["v_3"]),
+        (cf_lcc(3, VIOLATING), ["v_3"]),
+        (general_lcc(2, 2, VIOLATING), ["s_0", "v_0", "v_2"]),
+    ],
+    ids=["fd", "cf", "lcc"],
+)
+def test_violating_eq13_observability_matches_exact_rank(model, outputs):
+    """Theorems 3/4 assume eq. (13); when it fails the pole-zero cancellations of the HDVs also
+    hide modes from v_k. Truth: the exact rank of the observability matrix."""
+    A = _exactify(model.A)
+    C = _exactify(model.output_matrix(outputs))
+    exact = _exact_observability_rank(A, C)
+    rep = observability_report(model, outputs)
+    assert exact < model.nx and rep.rank == exact and not rep.observable
+    assert rep.decision_margin > 1e3
+    # And controllability of the general model against the exact Kalman rank.
+    B = [row[0] for row in _exactify(model.B)]
+    assert controllability_report(model).rank == _exact_kalman_rank(A, B)
