@@ -84,9 +84,16 @@ def plot_pareto_front(pareto, h2_full: float, path: str | Path, title: str | Non
         ax.plot([p["count"] for p in off], [p["h2"] for p in off], "x", color="0.6",
                 label="other patterns found")
     ax.plot([p["count"] for p in front], [p["h2"] for p in front], "o-", label="Pareto front")
+    def label(vs):
+        if not vs:
+            return "CAV only"
+        if len(vs) > 2 and list(vs) == list(range(vs[0], vs[0] + len(vs))):
+            return f"{vs[0]}..{vs[-1]}"
+        return ",".join(str(v) for v in vs)
+
     for p in front:
-        ax.annotate(",".join(str(v) for v in p["vehicles"]) or "CAV only",
-                    (p["count"], p["h2"]), textcoords="offset points", xytext=(4, 6), fontsize=7)
+        ax.annotate(label(p["vehicles"]), (p["count"], p["h2"]), textcoords="offset points",
+                    xytext=(3, 5), fontsize=7, rotation=30)
     ax.axhline(h2_full, ls="--", color="k", lw=0.8, label="unstructured optimum")
     ax.set_xlabel("vehicles heard besides the CAV")
     ax.set_ylabel("true closed-loop H2 norm (after polishing)")
