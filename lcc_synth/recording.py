@@ -91,6 +91,8 @@ __all__ = [
     "synthesis_blueprint",
     "open_recording",
     "record_simulation",
+    "record_metrics",
+    "SimulationRecorder",
     "record_mpc_history",
     "record_gamma",
     "record_region_map",
@@ -368,6 +370,8 @@ def open_recording(
     with rec:  # flush + finalise the file sink on every exit (Rerun 0.41 context manager)
         try:
             yield rec
+        except GeneratorExit:  # the with-block was abandoned (interpreter exit): just finalise
+            raise
         except BaseException as err:
             what = type(err).__name__ + (f": {err}" if str(err) else "")
             record_text(
@@ -403,11 +407,31 @@ def _time_column(t: np.ndarray):
     return rr.TimeColumn("time", duration=ns.astype("timedelta64[ns]"))
 
 
-def _send_series(rec: Any, entity: str, t: np.ndarray, values: np.ndarray, names, colors) -> None:
-    """One entity with ``values.shape[1]`` scalar series (one ``send_columns`` call)."""
+class _ArrowBatch:
+    """A ready pyarrow array as a Rerun component batch (``as_arrow_array`` protocol)."""
+
+    def __init__(self, array):
+        self.array = array
+
+    def as_arrow_array(self):
+        return self.array
+
+
+def _rows(rr: Any, descriptor: Any, flat: Any, rows: int, per_row: int):
+    """``rows`` rows of ``per_row`` instances each: a component column over ``flat`` without
+    copying (``Scalars.columns(...).partition(...)`` copies the data several times)."""
+    offsets = np.arange(0, rows * per_row + 1, per_row, dtype=np.int32)
+    return rr.ComponentColumn(descriptor, _ArrowBatch(flat), offsets=offsets)
+
+
+def _send_series(rec: Any, entity: str, t: Any, values: np.ndarray, names, colors) -> None:
+    """One entity with ``values.shape[1]`` scalar series (one ``send_columns`` call); ``t`` is
+    the times (s) or a ready ``TimeColumn``."""
+    import pyarrow as pa
+
     rr = _rr()
     values = np.ascontiguousarray(values, dtype=np.float64)
-    k = values.shape[1]
+    rows, k = values.shape
     rec.log(
         entity,
         rr.SeriesLines(
@@ -415,10 +439,15 @@ def _send_series(rec: Any, entity: str, t: np.ndarray, values: np.ndarray, names
         ),
         static=True,
     )
-    cols = rr.Scalars.columns(scalars=values.reshape(-1))
-    if k > 1:
-        cols = cols.partition([k] * values.shape[0])
-    rec.send_columns(entity, indexes=[_time_column(t)], columns=cols)
+    flat = pa.array(values.reshape(-1), type=pa.float64())  # NaN stays NaN (a gap)
+    column = _rows(rr, rr.Scalars.descriptor_scalars(), flat, rows, k)
+    tcol = _time_column(t) if isinstance(t, np.ndarray) else t
+    rec.send_columns(entity, indexes=[tcol], columns=[column])
+
+
+def _flush_started(rec: Any) -> None:
+    """Start writing what was logged without waiting (the context manager's exit waits)."""
+    rec.flush(timeout_sec=0.0)
 
 
 def _fmt(value: Any) -> str:
@@ -502,10 +531,20 @@ def _mapping_markdown(
 
 
 @dataclass
+class _RunFacts:
+    """What the metrics document of a recorded run always shows (from the result itself)."""
+
+    vehicles: list[str]
+    events: str
+    row: dict[str, Any]
+
+
+@dataclass
 class _RecState:
-    """Per-recording state: comparison rows per scenario, colors handed out."""
+    """Per-recording state: comparison rows per scenario, run facts, colors handed out."""
 
     rows: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
+    runs: dict[tuple[str, str], _RunFacts] = field(default_factory=dict)
     colors: dict[str, tuple[int, int, int]] = field(default_factory=dict)
 
     def color(self, key: str) -> tuple[int, int, int]:
@@ -594,24 +633,30 @@ def record_simulation(
     base = f"/{s}/{c}"
     idx = _sample_indices(T, int(decimate))
     t = t_all[idx]
+    tcol = _time_column(t)
     names = vehicle_names(m, n)
     colors = vehicle_colors(m, n)
     label = [f"{c} {v}" for v in names]
 
     vel = velocity[run, idx]
-    _send_series(rec, f"{base}/velocity", t, vel, label, colors)
+    _send_series(rec, f"{base}/velocity", tcol, vel, label, colors)
     _send_series(
-        rec, f"{base}/spacing", t, np.asarray(result.spacing)[run, idx, 1:], label[1:], colors[1:]
+        rec,
+        f"{base}/spacing",
+        tcol,
+        np.asarray(result.spacing)[run, idx, 1:],
+        label[1:],
+        colors[1:],
     )
     _send_series(
-        rec, f"{base}/acceleration", t, np.asarray(result.acceleration)[run, idx], label, colors
+        rec, f"{base}/acceleration", tcol, np.asarray(result.acceleration)[run, idx], label, colors
     )
     state = _state(rec)
     u_color = state.color(base)  # one color per controller: u_cmd of all controllers overlaid
     u_cmd = np.asarray(result.u_cmd)[run, idx, None]
-    _send_series(rec, f"{base}/cav/u_cmd", t, u_cmd, [f"{c} u_cmd"], [u_color])
+    _send_series(rec, f"{base}/cav/u_cmd", tcol, u_cmd, [f"{c} u_cmd"], [u_color])
     aeb = np.asarray(result.aeb_active)[run, idx].astype(np.float64)[:, None]
-    _send_series(rec, f"{base}/cav/aeb_active", t, aeb, [f"{c} AEB active"], [(214, 39, 40)])
+    _send_series(rec, f"{base}/cav/aeb_active", tcol, aeb, [f"{c} AEB active"], [(214, 39, 40)])
 
     # Road view (Fig. 11): x = position relative to the CAV, y = scaled velocity error.
     pos = np.asarray(result.position)[run, idx]
@@ -624,10 +669,14 @@ def record_simulation(
         rr.Points2D.from_fields(colors=colors, radii=[1.5] * nv, labels=names, show_labels=False),
         static=True,
     )
+    import pyarrow as pa
+
+    item = pa.list_(pa.field("item", pa.float32(), nullable=False), 2)
+    points = pa.FixedSizeListArray.from_arrays(pa.array(xy.reshape(-1)), type=item)
     rec.send_columns(
         f"{base}/road",
-        indexes=[_time_column(t)],
-        columns=rr.Points2D.columns(positions=xy.reshape(-1, 2)).partition([nv] * len(idx)),
+        indexes=[tcol],
+        columns=[_rows(rr, rr.Points2D.descriptor_positions(), points, len(idx), nv)],
     )
     x_lo, x_hi = float(np.nanmin(xy[..., 0])), float(np.nanmax(xy[..., 0]))
     rec.log(
@@ -655,116 +704,196 @@ def record_simulation(
     collided = np.asarray(result.collided)[run]
     ctime = np.asarray(result.collision_time)[run]
     crash = [f"{names[i]} at t = {_fmt(float(ctime[i]))} s" for i in np.flatnonzero(collided)]
-    aeb_on = np.asarray(result.aeb_active)[run]
-    aeb_count = int(np.count_nonzero(aeb_on[1:] & ~aeb_on[:-1]) + bool(aeb_on[0])) if T else 0
-    computed = {"collisions": len(crash), "aeb_activations": aeb_count}
-    mdict = dict(metrics) if metrics is not None else {}
-    record_text(
-        rec,
-        f"{base}/metrics",
-        f"# {c}: metrics\n\n"
-        + (_mapping_markdown("metrics", mdict, names) if mdict else "")
-        + f"\ncollisions: {', '.join(crash) if crash else 'none'}; "
-        f"emergency-braking activations: {aeb_count}\n",
+    aeb_on = np.asarray(result.aeb_active)[run].astype(bool)
+    episodes = int(np.count_nonzero(aeb_on[1:] & ~aeb_on[:-1]) + bool(aeb_on[0])) if T else 0
+    state.runs[(s, c)] = _RunFacts(
+        names,
+        f"collisions: {', '.join(crash) if crash else 'none'}; emergency braking: "
+        f"{episodes} episode(s), {int(aeb_on.sum())} sample(s) active",
+        {"collisions": len(crash), "aeb_episodes": episodes},
     )
-    rows = state.rows.setdefault(s, {})
-    rows[c] = {**computed, **{k: v for k, v in mdict.items() if _is_scalar(v)}}
-    record_text(rec, f"/{s}/metrics", _comparison_markdown(scenario, rows))
+    record_metrics(rec, scenario, c, metrics or {})
     if mpc_history is not None:
-        record_mpc_history(rec, base, mpc_history)
-    rec.flush()
+        record_mpc_history(rec, base, mpc_history, run=run)
+    _flush_started(rec)
     return base
 
 
-def _hist_get(history: Any, *keys: str) -> Any:
-    for key in keys:
-        if isinstance(history, Mapping) and key in history:
-            return history[key]
-        if hasattr(history, key):
-            return getattr(history, key)
-    return None
+def record_metrics(rec: Any, scenario: str, controller: str, metrics: Mapping[str, Any]) -> None:
+    """(Re)write the metrics document of a recorded run and the scenario's comparison table.
+
+    ``controller`` is the name given to :func:`record_simulation`. Use it when the metrics are
+    only known after every controller ran (e.g. reductions versus a baseline).
+    """
+    s, c = entity_name(scenario), entity_name(controller)
+    state = _state(rec)
+    facts = state.runs.get((s, c))
+    if facts is None:
+        raise ConfigError("controller", f"{controller!r} was not recorded in scenario {scenario!r}")
+    mdict = {k: v for k, v in dict(metrics).items() if k not in ("controller", "controller_stats")}
+    record_text(
+        rec,
+        f"/{s}/{c}/metrics",
+        f"# {c}: metrics\n\n"
+        + (_mapping_markdown("metrics", mdict, facts.vehicles) if mdict else "")
+        + f"\n{facts.events}\n",
+    )
+    rows = state.rows.setdefault(s, {})
+    rows[c] = {**facts.row, **{k: v for k, v in mdict.items() if _is_scalar(v)}}
+    record_text(rec, f"/{s}/metrics", _comparison_markdown(scenario, rows))
+    _flush_started(rec)
 
 
-def record_mpc_history(rec: Any, base: str, history: Any) -> None:
+class SimulationRecorder:
+    """Record the controllers of one problem as their results arrive (for CLI commands).
+
+    The recording opens at the first result (its default path needs the problem name), inside
+    ``stack`` so that it is finalised however the command ends; each call records one
+    controller at once, so an interrupted command keeps every controller finished before.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed flags of :func:`add_recording_arguments` (validated here, before any work).
+    stack : contextlib.ExitStack
+        Owns the open recording.
+
+    Examples
+    --------
+    >>> with ExitStack() as stack:                                        # doctest: +SKIP
+    ...     recorder = SimulationRecorder(args, stack)
+    ...     for name, result in ...:
+    ...         recorder(spec, name, result)
+    ...     recorder.metrics({name: metrics_dict, ...})
+    """
+
+    def __init__(self, args: argparse.Namespace, stack: Any):
+        self.args = args
+        self.stack = stack
+        self.enabled = not getattr(args, "no_record", False)
+        self.every = recording_decimation(args)
+        if self.enabled:
+            recording_path(args, "check")  # a bad --rrd fails before the simulation runs
+        self.path: Path | None = None
+        self.rec: Any = None
+        self.scenario: str | None = None
+
+    def __call__(self, spec: Any, name: str, result: Any) -> None:
+        """Record controller ``name``'s ``result`` of ``spec`` (``spec.name``,
+        ``spec.controllers``); MPC controllers' ``history()`` is recorded too."""
+        if not self.enabled:
+            return
+        if self.rec is None:
+            self.scenario = spec.name
+            self.path = recording_path(self.args, spec.name)
+            blueprint = simulation_blueprint(spec.name, list(spec.controllers))
+            self.rec = self.stack.enter_context(open_recording(self.path, spec.name, blueprint))
+        controller = dict(spec.controllers).get(name)
+        history = None
+        if callable(getattr(controller, "history", None)):
+            history = controller.history() or None
+        record_simulation(
+            self.rec, result, self.scenario, controller=name, decimate=self.every,
+            mpc_history=history,
+        )  # fmt: skip
+
+    def metrics(self, report: Mapping[str, Mapping[str, Any]]) -> None:
+        """Write each controller's final metrics (``{name: metrics}``) and the comparison."""
+        if self.rec is None:
+            return
+        for name, entry in report.items():
+            record_metrics(self.rec, self.scenario, name, entry)
+
+
+#: ``lcc_synth.mpc`` per-step status codes (its ``STATUS_CODES``); 0 = QP solved.
+_MPC_STATUS = {0: "qp", 1: "shifted_plan", 2: "static_gain", 3: "hold"}
+
+
+def record_mpc_history(
+    rec: Any, base: str, history: Mapping[str, Any], run: int = 0, plan_every: int | None = None
+) -> None:
     """Record an MPC controller's per-step history under ``<base>/mpc/``.
 
-    ``history`` is a mapping or an object with (all optional except ``t``): ``t (K,)`` controller
-    step times (s); ``solve_time`` (K,) in seconds; ``status`` (K,) strings or ``fallback`` (K,)
-    level/bool; ``predicted_time`` (K, N+1) or a step ``dt``; and predicted trajectories
-    ``predicted_u (K, N)``, ``predicted_velocity (K, N+1, V)``, ``predicted_spacing (K, N+1, V)``.
-    Predicted trajectories become ``LineStrips2D`` (x = absolute time of the prediction, one
-    strip per vehicle) at every controller step, so scrubbing the timeline shows the plan.
+    ``history`` is ``MPCController.history()`` of :mod:`lcc_synth.mpc`: ``t (S,)`` controller
+    step times; per scenario ``(B, S, ...)``: ``step_time`` and ``osqp_time`` (s), ``status``
+    (0 QP, 1 shifted plan, 2 static gain, 3 hold), ``plan (B, S, N)`` planned model inputs,
+    ``predicted_velocity`` / ``predicted_spacing`` ``(B, S, N+1, V)`` and ``pred_time (N+1,)``
+    offsets (s); arrays without the batch axis are accepted too.
+
+    Entities: ``mpc/solve_time_ms`` (series: whole step, OSQP), ``mpc/status`` (status code and
+    1 when a fallback was used), and ``mpc/predicted/{u,velocity,spacing}``: ``LineStrips2D``
+    at each recorded controller step, x = seconds ahead of that step, y = the predicted value
+    (one strip per vehicle), so scrubbing the timeline shows the plan of the moment.
+    ``plan_every`` records every k-th plan (default: at most about 200 plans).
     """
+    import pyarrow as pa
+
     rr = _rr()
-    t = _hist_get(history, "t", "time", "times")
-    if t is None:
+    if "t" not in history:
         raise ConfigError("mpc_history", "needs the controller step times 't'")
-    t = np.asarray(t, dtype=np.float64).reshape(-1)
-    K = len(t)
-    if K == 0:
+    t = np.asarray(history["t"], dtype=np.float64).reshape(-1)
+    S = t.size
+    if S == 0:
         return
-    solve = _hist_get(history, "solve_time", "solve_times", "solve_time_s")
-    if solve is not None:
-        solve = np.asarray(solve, dtype=np.float64).reshape(-1)[:K] * 1e3
+
+    def member(key: str, per_step_ndim: int):
+        if key not in history or history[key] is None:
+            return None
+        x = np.asarray(history[key])
+        if x.ndim == per_step_ndim + 2:  # (B, S, ...)
+            if not 0 <= run < x.shape[0]:
+                raise ConfigError("run", f"must be in [0, {x.shape[0] - 1}], got {run}")
+            x = x[run]
+        return x[:S]
+
+    tcol = _time_column(t)
+    times = [member(k, 0) for k in ("step_time", "osqp_time", "solve_time")]
+    times = [(k, x) for k, x in zip(("step", "OSQP", "solve"), times, strict=True) if x is not None]
+    if times:
+        vals = np.column_stack([x.astype(np.float64) * 1e3 for _, x in times])
         _send_series(
-            rec,
-            f"{base}/mpc/solve_time_ms",
-            t[: len(solve)],
-            solve[:, None],
-            ["solve time (ms)"],
-            [COLOR_CAV],
-        )
-    fallback = _hist_get(history, "fallback", "fallbacks", "fallback_level")
-    if fallback is not None:
-        fb = np.asarray(fallback).reshape(-1)[:K].astype(np.float64)
-        _send_series(
-            rec,
-            f"{base}/mpc/fallback",
-            t[: len(fb)],
-            fb[:, None],
-            ["fallback level"],
-            [(214, 39, 40)],
-        )
-    status = _hist_get(history, "status", "statuses")
+            rec, f"{base}/mpc/solve_time_ms", tcol, vals, [f"{k} time (ms)" for k, _ in times],
+            _PALETTE[: len(times)],
+        )  # fmt: skip
+    status = member("status", 0)
     if status is not None:
-        status = [str(x) for x in list(status)[:K]]
-        rec.send_columns(
-            f"{base}/mpc/status",
-            indexes=[_time_column(t[: len(status)])],
-            columns=rr.TextLog.columns(text=status),
-        )
-    pt = _hist_get(history, "predicted_time")
-    dt = _hist_get(history, "dt", "sample_time")
-    for key, unit in (
-        ("predicted_u", "u"),
-        ("predicted_velocity", "velocity"),
-        ("predicted_spacing", "spacing"),
-    ):
-        pred = _hist_get(history, key)
+        code = status.astype(np.float64)
+        vals = np.column_stack([code, (code > 0).astype(np.float64)])
+        names = ["status (" + ", ".join(f"{k} {v}" for k, v in _MPC_STATUS.items()) + ")",
+                 "fallback used"]  # fmt: skip
+        _send_series(rec, f"{base}/mpc/status", tcol, vals, names, [(90, 90, 90), (214, 39, 40)])
+
+    every = plan_every or max(1, S // 200)
+    steps = np.arange(0, S, every)
+    offsets = history.get("pred_time")
+    for key, label in (("plan", "u"), ("predicted_velocity", "velocity"),
+                       ("predicted_spacing", "spacing")):  # fmt: skip
+        pred = member(key, 1 if key == "plan" else 2)
         if pred is None:
             continue
-        pred = np.asarray(pred, dtype=np.float64)
+        pred = np.asarray(pred, dtype=np.float64)[steps]
         if pred.ndim == 2:
             pred = pred[:, :, None]
-        k, H, V = pred.shape[0], pred.shape[1], pred.shape[2]
-        k = min(k, K)
-        if pt is not None:
-            times = np.asarray(pt, dtype=np.float64)[:k, :H]
-        elif dt is not None:
-            times = t[:k, None] + float(dt) * np.arange(H)[None, :]
+        K, H, V = pred.shape
+        if offsets is not None:
+            x = np.asarray(offsets, dtype=np.float64)[:H]
+        elif "dt" in history:
+            x = float(history["dt"]) * np.arange(H)
         else:
-            raise ConfigError("mpc_history", f"{key} needs 'predicted_time' or 'dt'")
-        strips = np.empty((k, V, H, 2), dtype=np.float32)
-        strips[..., 0] = times[:, None, :]
-        strips[..., 1] = np.transpose(pred[:k], (0, 2, 1))
+            raise ConfigError("mpc_history", f"{key} needs 'pred_time' or 'dt'")
+        xy = np.empty((K, V, H, 2), dtype=np.float32)
+        xy[..., 0] = x[None, None, :]
+        xy[..., 1] = np.transpose(pred, (0, 2, 1))
+        item = pa.list_(pa.field("item", pa.float32(), nullable=False), 2)
+        pts = pa.FixedSizeListArray.from_arrays(pa.array(xy.reshape(-1)), type=item)
+        strip_off = np.arange(0, K * V * H + 1, H, dtype=np.int32)
+        strips = pa.ListArray.from_arrays(pa.array(strip_off), pts)
         rec.send_columns(
-            f"{base}/mpc/predicted/{unit}",
-            indexes=[_time_column(t[:k])],
-            columns=rr.LineStrips2D.columns(strips=list(strips.reshape(k * V, H, 2))).partition(
-                [V] * k
-            ),
+            f"{base}/mpc/predicted/{label}",
+            indexes=[_time_column(t[steps])],
+            columns=[_rows(rr, rr.LineStrips2D.descriptor_strips(), strips, K, V)],
         )
-    rec.flush()
+    _flush_started(rec)
 
 
 def record_gamma(
@@ -809,7 +938,7 @@ def record_gamma(
         f"/analysis/gamma/{c}/report",
         f"# {case}\n\n" + _mapping_markdown("head-to-tail", data),
     )
-    rec.flush()
+    _flush_started(rec)
 
 
 def record_region_map(
@@ -859,7 +988,7 @@ def record_region_map(
         f"/analysis/regions/{r}/report",
         f"# region map {name}\n\n" + _mapping_markdown("grid", data),
     )
-    rec.flush()
+    _flush_started(rec)
 
 
 def record_gains(rec: Any, name: str, gains: Mapping[str, Any]) -> None:
@@ -888,7 +1017,7 @@ def record_gains(rec: Any, name: str, gains: Mapping[str, Any]) -> None:
     if other:
         lines.append(_mapping_markdown("report", other))
     record_text(rec, f"/synthesis/{n}/report", "\n".join(lines))
-    rec.flush()
+    _flush_started(rec)
 
 
 # --------------------------------------------------------------------------------------------

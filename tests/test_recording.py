@@ -332,20 +332,93 @@ def test_analysis_and_synthesis_records(tmp_path):
 
 
 def test_mpc_history_is_recorded(tmp_path):
-    K, H = 20, 6
-    t = 0.1 * np.arange(K)
+    """The MPC controller's ``history()`` layout: (B, S, ...) arrays, offsets ``pred_time``."""
+    B, S, N, V = 2, 20, 5, 3
+    t = 0.1 * np.arange(S)
+    rng = np.random.default_rng(1)
     hist = {
         "t": t,
-        "solve_time": np.linspace(1e-3, 2e-3, K),
-        "predicted_u": np.tile(np.linspace(0, 1, H - 1), (K, 1)),
-        "dt": 0.1,
+        "step_time": rng.uniform(1e-3, 2e-3, (B, S)),
+        "osqp_time": rng.uniform(5e-4, 1e-3, (B, S)),
+        "status": rng.integers(0, 4, (B, S)),
+        "plan": rng.normal(size=(B, S, N)),
+        "predicted_velocity": 15 + rng.normal(size=(B, S, N + 1, V)),
+        "pred_time": 0.1 * np.arange(N + 1),
     }
     path = tmp_path / "mpc.rrd"
     with R.open_recording(path, "m") as rec:
-        R.record_mpc_history(rec, "/m/mpc_ctrl", hist)
+        R.record_mpc_history(rec, "/m/mpc_ctrl", hist, run=1, plan_every=2)
     chunks = _chunks(path)
     t_ns, st = _temporal(chunks, "/m/mpc_ctrl/mpc/solve_time_ms", "Scalars:scalars")
-    np.testing.assert_allclose(np.array(st)[:, 0], hist["solve_time"] * 1e3)
-    _, strips = _temporal(chunks, "/m/mpc_ctrl/mpc/predicted/u", "LineStrips2D:strips")
-    first = np.array(strips[3][0])
-    np.testing.assert_allclose(first[:, 0], t[3] + 0.1 * np.arange(H - 1), rtol=1e-6)
+    np.testing.assert_array_equal(t_ns, np.round(t * 1e9).astype(np.int64))
+    np.testing.assert_allclose(
+        np.array(st), 1e3 * np.column_stack([hist["step_time"][1], hist["osqp_time"][1]])
+    )
+    _, status = _temporal(chunks, "/m/mpc_ctrl/mpc/status", "Scalars:scalars")
+    np.testing.assert_array_equal(np.array(status)[:, 0], hist["status"][1])
+    np.testing.assert_array_equal(np.array(status)[:, 1], hist["status"][1] > 0)
+    t_ns, strips = _temporal(chunks, "/m/mpc_ctrl/mpc/predicted/velocity", "LineStrips2D:strips")
+    np.testing.assert_array_equal(t_ns, np.round(t[::2] * 1e9).astype(np.int64))
+    k = 3  # the plan recorded at controller step 6
+    got = np.array(strips[k])  # (V, N + 1, 2)
+    np.testing.assert_allclose(got[..., 0], np.tile(hist["pred_time"], (V, 1)), rtol=1e-6)
+    np.testing.assert_allclose(got[..., 1], hist["predicted_velocity"][1, 6].T, rtol=1e-6)
+    _, u = _temporal(chunks, "/m/mpc_ctrl/mpc/predicted/u", "LineStrips2D:strips")
+    np.testing.assert_allclose(np.array(u[k])[0, :, 1], hist["plan"][1, 6], rtol=1e-6)
+
+
+def test_simulation_recorder_records_as_results_arrive(tmp_path):
+    """The CLI helper: opens at the first result, records each controller, then metrics."""
+    import contextlib
+    from types import SimpleNamespace
+
+    parser = argparse.ArgumentParser()
+    R.add_recording_arguments(parser)
+    path = tmp_path / "cli.rrd"
+    args = parser.parse_args(["--rrd", str(path), "--record-every", "3"])
+    ctrls = {c.name: c for c in _controllers()}
+    spec = SimpleNamespace(name="rec test", controllers=ctrls)
+    sc = _scenario(duration=2.0)
+    with pytest.raises(Boom), contextlib.ExitStack() as stack:
+        recorder = R.SimulationRecorder(args, stack)
+        first = simulate(sc, ctrls["all_hdv"])
+        recorder(spec, "all_hdv", first)
+        recorder.metrics({"all_hdv": {"aave": 1.25, "controller": {"type": "hdv"}}})
+        raise Boom("interrupted after the first controller")
+    s = R.summarize_recording(path)
+    assert s.entities["/rec_test/all_hdv/velocity"].samples == len(range(0, 200, 3)) + 1
+    assert "| aave | 1.25 |" in s.texts["/rec_test/all_hdv/metrics"]
+    assert "Boom" in s.texts["/rec_test/status"]
+    off = R.SimulationRecorder(parser.parse_args(["--no-record"]), contextlib.ExitStack())
+    off(spec, "all_hdv", first)
+    assert off.path is None and off.rec is None
+    with pytest.raises(ConfigError, match="--rrd"):
+        R.SimulationRecorder(parser.parse_args(["--rrd", "x.txt"]), contextlib.ExitStack())
+
+
+def test_mpc_controller_history_reaches_the_recording(tmp_path):
+    """A real MPC run recorded through the CLI helper: solve times and plans are in the file."""
+    import contextlib
+    from types import SimpleNamespace
+
+    mpc = pytest.importorskip("lcc_synth.mpc")
+    from lcc_synth.problem import system_from
+
+    system = system_from({"system": {"kind": "fd_lcc", "m": 0, "n": 3, "v_star": 15.0}})
+    ctrl = mpc.mpc_controller_from_table("mpc", {"type": "mpc", "horizon": 10}, system)
+    sc = Scenario(m=0, n=3, duration=2.0, perturbations=(Brake(vehicle=1, start=0.5),))
+    res = simulate(sc, ctrl)
+    hist = ctrl.history()
+    parser = argparse.ArgumentParser()
+    R.add_recording_arguments(parser)
+    path = tmp_path / "mpc_run.rrd"
+    with contextlib.ExitStack() as stack:
+        recorder = R.SimulationRecorder(parser.parse_args(["--rrd", str(path)]), stack)
+        recorder(SimpleNamespace(name="mpc demo", controllers={"mpc": ctrl}), "mpc", res)
+    chunks = _chunks(path)
+    t_ns, st = _temporal(chunks, "/mpc_demo/mpc/mpc/solve_time_ms", "Scalars:scalars")
+    np.testing.assert_array_equal(t_ns, np.round(hist["t"] * 1e9).astype(np.int64))
+    np.testing.assert_allclose(np.array(st)[:, 0], 1e3 * hist["step_time"][0])
+    _, plans = _temporal(chunks, "/mpc_demo/mpc/mpc/predicted/u", "LineStrips2D:strips")
+    assert len(plans) == len(hist["t"])
+    np.testing.assert_allclose(np.array(plans[5])[0, :, 1], hist["plan"][0, 5], rtol=1e-6)

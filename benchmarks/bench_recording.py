@@ -1,0 +1,84 @@
+"""Recording overhead and file size for the Table II problem (``problems/paper_table2.toml``).
+
+Measures, after a warm-up run (numba compilation, Rerun's first-call conversions, the ~1 s
+``import rerun`` are excluded and reported separately):
+
+* the simulation wall time of the three controllers (``simulate_many``),
+* the wall time of recording them (open + three ``record_simulation`` calls + finalise, i.e.
+  everything ``lcc-synth simulate`` adds), for several decimations,
+* the resulting file size.
+
+Usage: ``python benchmarks/bench_recording.py [--repeats 5] [--problem PATH]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--problem", default=str(ROOT / "problems" / "paper_table2.toml"))
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--every", type=int, nargs="*", default=[1, 2, 5, 10])
+    args = ap.parse_args()
+
+    from lcc_synth.metrics import summary
+    from lcc_synth.scenario import load_spec
+    from lcc_synth.simulation import simulate_many
+
+    spec = load_spec(args.problem)
+    simulate_many(spec.scenario, spec.controllers)  # warm-up (numba)
+    sims = []
+    for _ in range(args.repeats):
+        t0 = time.perf_counter()
+        results = simulate_many(spec.scenario, spec.controllers)
+        sims.append(time.perf_counter() - t0)
+    sim = statistics.median(sims)
+    metrics = {name: summary(res, spec.metrics) for name, res in results.items()}
+
+    t0 = time.perf_counter()
+    from lcc_synth import recording as R
+
+    R._rr()
+    t_import = time.perf_counter() - t0
+
+    res0 = next(iter(results.values()))
+    steps, nv = res0.velocity.shape[1], res0.velocity.shape[2]
+    print(
+        f"{spec.name}: {len(results)} controllers x {nv} vehicles x {steps} steps; "
+        f"simulation {sim * 1e3:.1f} ms (median of {args.repeats}); import rerun {t_import:.2f} s"
+    )
+    print(f"{'every':>5}  {'record ms':>9}  {'ratio':>6}  {'file MB':>7}  {'MB/ctrl':>7}")
+    with tempfile.TemporaryDirectory() as tmp:
+
+        def record(every: int, path: Path) -> float:
+            t0 = time.perf_counter()
+            bp = R.simulation_blueprint(spec.name, list(results))
+            with R.open_recording(path, spec.name, bp) as rec:
+                for name, res in results.items():
+                    R.record_simulation(rec, res, spec.name, metrics=metrics[name], decimate=every)
+            return time.perf_counter() - t0
+
+        record(1, Path(tmp) / "warmup.rrd")
+        for every in args.every:
+            times = []
+            for i in range(args.repeats):
+                path = Path(tmp) / f"e{every}_{i}.rrd"
+                times.append(record(every, path))
+            rec_t = statistics.median(times)
+            size = path.stat().st_size / 1e6
+            print(
+                f"{every:>5}  {rec_t * 1e3:>9.1f}  {rec_t / sim:>6.2f}  {size:>7.2f}  "
+                f"{size / len(results):>7.2f}"
+            )
+
+
+if __name__ == "__main__":
+    main()
