@@ -178,8 +178,13 @@ class Scenario:
     v2v : V2V
         Communication model of what the CAV receives.
     seed : int
-        Base seed; scenario ``b`` of the batch draws from ``[seed, b]`` (independent of the
-        batch size).
+        Base seed; scenario ``b`` of the batch draws from ``[seed, first_index + b]``
+        (independent of the batch size).
+    first_index : int
+        Index of the batch's first scenario in a larger study (Monte Carlo sweeps run it in
+        chunks): scenario ``b`` is study scenario ``first_index + b``, and every random draw
+        (parameters, delays, acceleration noise, V2V loss and noise) depends only on
+        ``(seed, first_index + b)``.
     record_every : int
         Keep every k-th sample in the result.
     spacing_reference : {"nominal", "own_equilibrium"}
@@ -208,12 +213,15 @@ class Scenario:
     hdv_accel_noise: float = 0.0
     v2v: V2V = field(default_factory=V2V)
     seed: int = 0
+    first_index: int = 0
     record_every: int = 1
     spacing_reference: str = "nominal"
     name: str = "scenario"
 
     def __post_init__(self) -> None:
-        for key, lo in (("m", 0), ("n", 0), ("batch", 1), ("record_every", 1), ("seed", 0)):
+        for key, lo in (
+            ("m", 0), ("n", 0), ("batch", 1), ("record_every", 1), ("seed", 0), ("first_index", 0)
+        ):
             val = getattr(self, key)
             if isinstance(val, bool) or not isinstance(val, int | np.integer) or val < lo:
                 raise ConfigError(f"scenario.{key}", f"must be an integer >= {lo}, got {val!r}")
@@ -308,7 +316,7 @@ class Scenario:
                     ) from None
             values[key] = np.array(np.broadcast_to(base, (B, nv)), dtype=float)
         delays = np.array(np.broadcast_to(np.asarray(self.delay, float), (B, nv)), dtype=float)
-        rngs = [np.random.default_rng([self.seed, b]) for b in range(B)]
+        rngs = [np.random.default_rng([self.seed, self.first_index + b]) for b in range(B)]
         for key in names:
             w = float(self.heterogeneity.get(key, 0.0))
             if w > 0:
@@ -452,7 +460,7 @@ def _hdv_accel(code, pr, s, ds, v):
 
 
 @numba.njit(cache=True)
-def _observe(b, k, p, v, hp, hv, L, lat, loss, noise, seed, cav, obs_s, obs_v, obs_p):
+def _observe(b, k, p, v, hp, hv, L, lat, loss, noise, seed, sid0, cav, obs_s, obs_v, obs_p):
     """Update the CAV's received values of scenario ``b`` at sample ``k`` (V2V model)."""
     nv = p.shape[1]
     for j in range(nv):
@@ -461,7 +469,7 @@ def _observe(b, k, p, v, hp, hv, L, lat, loss, noise, seed, cav, obs_s, obs_v, o
             obs_v[b, j] = v[b, j]
             obs_s[b, j] = p[b, j - 1] - p[b, j]
             continue
-        if loss[j] > 0.0 and _u01(seed, b, j, k, 2) < loss[j]:
+        if loss[j] > 0.0 and _u01(seed, sid0 + b, j, k, 2) < loss[j]:
             continue  # packet lost: hold the last value
         if lat == 0:
             pj = p[b, j]
@@ -473,11 +481,11 @@ def _observe(b, k, p, v, hp, hv, L, lat, loss, noise, seed, cav, obs_s, obs_v, o
             vj = hv[slot, b, j]
             sj = hp[slot, b, j - 1] - hp[slot, b, j] if j > 0 else _NAN
         if noise[0] > 0.0 and j > 0:
-            sj += noise[0] * _normal(seed, b, j, k, 3)
+            sj += noise[0] * _normal(seed, sid0 + b, j, k, 3)
         if noise[1] > 0.0:
-            vj += noise[1] * _normal(seed, b, j, k, 5)
+            vj += noise[1] * _normal(seed, sid0 + b, j, k, 5)
         if noise[2] > 0.0:
-            pj += noise[2] * _normal(seed, b, j, k, 7)
+            pj += noise[2] * _normal(seed, sid0 + b, j, k, 7)
         obs_s[b, j] = sj
         obs_v[b, j] = vj
         obs_p[b, j] = pj
@@ -486,7 +494,7 @@ def _observe(b, k, p, v, hp, hv, L, lat, loss, noise, seed, cav, obs_s, obs_v, o
 @numba.njit(cache=True, nogil=True)
 def _advance(
     b0, b1, k0, k1, p, v, hp, hv, L, delay_steps, code, params, nom_code, nom_params,
-    dt, t_start, a_min, a_max, cav, cav_aeb, hdv_aeb, noise_std, seed,
+    dt, t_start, a_min, a_max, cav, cav_aeb, hdv_aeb, noise_std, seed, sid0,
     acc_ovr, spd_ovr, mode, ratio, u_hold, Ks, Kv, Kp, hdv_law, v_star, s_ref, p_ref,
     loss, lat, obs_noise, obs_s, obs_v, obs_p, alive, collided, ctime,
     stride, out_p, out_v, out_a, out_s, out_u, out_aeb,
@@ -542,7 +550,7 @@ def _advance(
                 continue
             # ---- CAV command (sampled, zero-order hold) ----
             if mode == 1 and k % ratio == 0:
-                _observe(b, k, p, v, hp, hv, L, lat, loss, obs_noise, seed, cav,
+                _observe(b, k, p, v, hp, hv, L, lat, loss, obs_noise, seed, sid0, cav,
                          obs_s, obs_v, obs_p)  # fmt: skip
                 u = 0.0
                 if hdv_law:
@@ -584,7 +592,7 @@ def _advance(
                         vv = hv[sl, b, j]
                     a = _hdv_accel(code, params[b, j], s, ds, vv)
                     if noise_std > 0.0:
-                        a += noise_std * _normal(seed, b, j, k, 0)
+                        a += noise_std * _normal(seed, sid0 + b, j, k, 0)
                     a = min(max(a, a_min), a_max)
                     if hdv_aeb:
                         s = p[b, j - 1] - p[b, j]
@@ -614,7 +622,9 @@ def _advance(
 
 
 @numba.njit(cache=True)
-def _observe_all(k, p, v, hp, hv, L, lat, loss, noise, seed, cav, obs_s, obs_v, obs_p, alive):
+def _observe_all(
+    k, p, v, hp, hv, L, lat, loss, noise, seed, sid0, cav, obs_s, obs_v, obs_p, alive
+):
     B = p.shape[0]
     nv = p.shape[1]
     if L > 1:
@@ -625,7 +635,7 @@ def _observe_all(k, p, v, hp, hv, L, lat, loss, noise, seed, cav, obs_s, obs_v, 
                 hv[slot, b, j] = v[b, j]
     for b in range(B):
         if alive[b]:
-            _observe(b, k, p, v, hp, hv, L, lat, loss, noise, seed, cav, obs_s, obs_v, obs_p)
+            _observe(b, k, p, v, hp, hv, L, lat, loss, noise, seed, sid0, cav, obs_s, obs_v, obs_p)
 
 
 # --------------------------------------------------------------------------------------------
@@ -765,6 +775,7 @@ def simulate(
             b0, b1, k0, k1, p, v, hp, hv, L, delay_steps, code, params, code, nom_params,
             float(dt), float(sc.t_start), float(sc.a_min), float(sc.a_max), cav,
             bool(sc.cav_aeb), bool(sc.hdv_aeb), float(sc.hdv_accel_noise), int(sc.seed),
+            int(sc.first_index),
             acc_ovr, spd_ovr, mode, ratio, u_hold, Ks, Kv, float(Kp), bool(hdv_law),
             v_star, s_ref, p_ref, loss, lat, obs_noise, obs_s, obs_v, obs_p,
             alive, collided, ctime, stride, out_p, out_v, out_a, out_s, out_u, out_aeb,
@@ -796,7 +807,8 @@ def simulate(
     else:
         zeros = np.zeros(nv)
         for k0 in range(0, T, ratio):
-            _observe_all(k0, p, v, hp, hv, L, lat, loss, obs_noise, int(sc.seed), cav,
+            _observe_all(k0, p, v, hp, hv, L, lat, loss, obs_noise, int(sc.seed),
+                         int(sc.first_index), cav,
                          obs_s, obs_v, obs_p, alive)  # fmt: skip
             tk = float(t[k0])
             obs = Observation(tk, obs_s.copy(), obs_v.copy(), obs_p.copy())
