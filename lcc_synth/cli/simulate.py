@@ -25,10 +25,17 @@ def add_arguments(parser) -> None:
         metavar="N",
         help="run N random draws (scenario batch) per controller; overrides [scenario].batch",
     )
+    from lcc_synth.recording import add_recording_arguments
+
+    add_recording_arguments(parser)
 
 
-def collect(args):
-    """Load the problem and simulate every controller: ``(spec, {name: SimResult})``."""
+def collect(args, on_result=None):
+    """Load the problem and simulate every controller: ``(spec, {name: SimResult})``.
+
+    ``on_result(spec, name, result)``, when given, is called as soon as each controller's result
+    exists (the recording), so an interrupted run keeps the controllers finished before.
+    """
     from lcc_synth.errors import ConfigError
     from lcc_synth.scenario import load_spec
     from lcc_synth.simulation import simulate_many
@@ -36,7 +43,13 @@ def collect(args):
     if args.seeds is not None and args.seeds < 1:
         raise ConfigError("--seeds", f"must be >= 1, got {args.seeds}")
     spec = load_spec(args.problem, seeds=args.seeds)
-    return spec, simulate_many(spec.scenario, spec.controllers)
+    if on_result is None:
+        return spec, simulate_many(spec.scenario, spec.controllers)
+    results = {}
+    for name, ctrl in spec.controllers.items():  # same draws: they depend on the seed only
+        results.update(simulate_many(spec.scenario, {name: ctrl}))
+        on_result(spec, name, results[name])
+    return spec, results
 
 
 def _pct(base, x):
@@ -150,8 +163,17 @@ def print_table(spec, rep: dict[str, Any], file=None) -> None:
 
 
 def run(args) -> int:
-    spec, results = collect(args)
-    rep = report(spec, results)
+    from contextlib import ExitStack
+
+    from lcc_synth.recording import SimulationRecorder
+
+    with ExitStack() as stack:  # the recording is finalised however the run ends
+        recorder = SimulationRecorder(args, stack)
+        spec, results = collect(args, recorder if recorder.enabled else None)
+        rep = report(spec, results)
+        recorder.metrics(rep)
+    if recorder.path is not None:
+        print(f"recording: {recorder.path} (lcc-synth review {recorder.path})", file=sys.stderr)
     if args.json:
         print(json.dumps({"results": _clean(rep)}))
     else:
