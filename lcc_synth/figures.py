@@ -8,7 +8,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["plot_pareto_front", "plot_control_energy"]
+__all__ = [
+    "plot_pareto_front",
+    "plot_control_energy",
+    "plot_profiles",
+    "plot_gamma_curves",
+    "plot_sweep_distributions",
+]
 
 
 def _pyplot():
@@ -103,5 +109,143 @@ def plot_pareto_front(pareto, h2_full: float, path: str | Path, title: str | Non
     ax.set_title(title or "Sparsity-promoting H2 design")
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_profiles(results, path: str | Path, title: str | None = None, run: int = 0) -> Path:
+    """Velocity and spacing of every vehicle over time, one row per controller.
+
+    Parameters
+    ----------
+    results : mapping of str to lcc_synth.simulation.SimResult
+        ``{controller: result}`` of one scenario (same layout for all).
+    path : str or Path
+        Output PNG.
+    title : str, optional
+    run : int
+        Batch member to draw.
+
+    Head vehicle yellow, CAV blue, HDVs grey (lighter further back), as in the paper's figures.
+    """
+    import numpy as np
+
+    from lcc_synth.recording import vehicle_colors, vehicle_names
+
+    plt = _pyplot()
+    path = Path(path)
+    items = list(results.items())
+    fig, axes = plt.subplots(
+        len(items), 2, figsize=(11, 2.3 * len(items) + 0.6), sharex=True, squeeze=False,
+        constrained_layout=True,
+    )
+    for row, (name, res) in enumerate(items):
+        colors = vehicle_colors(res.m, res.n) / 255.0
+        labels = vehicle_names(res.m, res.n)
+        order = [j for j in range(res.n_vehicles) if j != res.cav] + [res.cav]  # CAV on top
+        for j in order:
+            lw = 1.8 if j in (0, res.cav) else 0.9
+            kw = {"color": colors[j], "lw": lw, "label": labels[j]}
+            axes[row, 0].plot(res.t, res.velocity[run, :, j], **kw)
+            if j > 0:
+                axes[row, 1].plot(res.t, res.spacing[run, :, j], **kw)
+        v_star = float(np.asarray(res.v_star).reshape(-1)[run])
+        axes[row, 0].axhline(v_star, color="k", lw=0.6, ls=":")
+        axes[row, 0].set_ylabel(f"{name}\nvelocity (m/s)")
+        axes[row, 1].set_ylabel("spacing (m)")
+        if res.collided[run].any():
+            axes[row, 1].set_title("collision", color="r", fontsize=9)
+        for ax in axes[row]:
+            ax.grid(True, alpha=0.3)
+    for ax in axes[-1]:
+        ax.set_xlabel("time (s)")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    keep = [i for i, lab in enumerate(labels) if lab in ("head", "cav")]
+    if keep:
+        axes[0, 0].legend([handles[i] for i in keep], [labels[i] for i in keep], fontsize=8,
+                          loc="lower right")
+    if title:
+        fig.suptitle(title)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_gamma_curves(curves, omega, path: str | Path, title: str | None = None) -> Path:
+    """``|Gamma(j omega)|`` (head-to-tail velocity transfer) of several linear designs.
+
+    Parameters
+    ----------
+    curves : mapping of str to (magnitude, report)
+        ``{label: (|Gamma| on omega, StringStabilityReport)}``, e.g. from
+        :func:`lcc_synth.comparison.gamma_curves`; the legend gives each peak and verdict.
+    omega : array_like
+        Frequencies (rad/s).
+    path : str or Path
+        Output PNG.
+    """
+    plt = _pyplot()
+    path = Path(path)
+    fig, ax = plt.subplots(figsize=(6.5, 4), constrained_layout=True)
+    for label, (mag, rep) in curves.items():
+        verdict = "string stable" if rep.string_stable else "not string stable"
+        ax.semilogx(omega, mag, label=f"{label}: peak {rep.gamma_peak:.3f} ({verdict})")
+    ax.axhline(1.0, color="k", lw=0.8, ls="--")
+    ax.set_xlabel("ω (rad/s)")
+    ax.set_ylabel("|Γ(jω)|  (head → tail velocity)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(title or "Head-to-tail transfer")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_sweep_distributions(samples, path: str | Path, metrics=None, title: str | None = None):
+    """Distributions of Monte Carlo metrics, one panel per metric, one box per controller.
+
+    Parameters
+    ----------
+    samples : mapping of str to mapping of str to array
+        ``{controller: {metric: values (one per scenario)}}``, e.g. a sweep's ``samples``;
+        NaN values (runs that collided before the end of the window) are left out.
+    path : str or Path
+        Output PNG.
+    metrics : mapping of str to str, optional
+        ``{metric: axis label}`` to draw (default every metric of the first controller).
+
+    Boxes span the 25th-75th percentiles, whiskers the 5th-95th, the dot is the mean.
+    """
+    import numpy as np
+
+    plt = _pyplot()
+    path = Path(path)
+    names = list(samples)
+    if metrics is None:
+        metrics = {k: k for k in samples[names[0]]}
+    keys = list(metrics)
+    ncol = min(3, len(keys))
+    nrow = -(-len(keys) // ncol)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 3.2 * nrow), squeeze=False,
+                             constrained_layout=True)
+    for ax, key in zip(axes.flat, keys, strict=False):
+        data = []
+        for c in names:
+            x = np.asarray(samples[c][key], dtype=float)
+            data.append(x[np.isfinite(x)])
+        ax.boxplot(data, whis=(5, 95), showfliers=False, tick_labels=names)
+        means = [d.mean() if d.size else np.nan for d in data]
+        ax.plot(np.arange(1, len(names) + 1), means, "o", color="C3", ms=4)
+        ax.set_title(metrics[key], fontsize=9)
+        ax.grid(True, axis="y", alpha=0.3)
+        ax.tick_params(axis="x", labelrotation=20, labelsize=8)
+    for ax in list(axes.flat)[len(keys):]:
+        ax.axis("off")
+    if title:
+        fig.suptitle(title)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
     return path

@@ -1,0 +1,272 @@
+"""``lcc-synth run [PROBLEM.toml]``: the main job, a suite of scenarios x controllers.
+
+Default problem: ``problems/showcase.toml`` of the repository checkout. Synthesises the ``h2``
+controllers for every layout, builds the MPC, runs every controller on every scenario, prints
+the metrics table and writes under ``results/<problem>-<UTC timestamp>/``: ``table.md``,
+``table.csv``, ``table.json`` (the ``--json`` shape), ``details.json`` (controller tables,
+synthesis reports, controller statistics, timings), the synthesised gains files, PNG figures
+(velocity and spacing profiles per scenario, ``|Gamma(j omega)|`` of the linear designs per
+layout) and ONE Rerun recording with every run side by side (``logs/`` by default).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+HELP = "run the showcase comparison: baseline, paper gains, H2 gain and MPC on a scenario suite"
+
+#: Frequencies (rad/s) of the |Gamma(j omega)| figures and recordings.
+_OMEGA = (-3.0, 1.5, 500)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from lcc_synth.recording import add_recording_arguments
+
+    parser.add_argument(
+        "problem",
+        nargs="?",
+        default=None,
+        help="suite problem file (default: problems/showcase.toml of the repository)",
+    )
+    parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    parser.add_argument(
+        "--scenarios", metavar="A,B", help="comma-separated scenario names to run (default all)"
+    )
+    parser.add_argument(
+        "--controllers", metavar="A,B", help="comma-separated controller names (default all)"
+    )
+    parser.add_argument(
+        "--out", metavar="DIR", default="results",
+        help="results root; the run writes DIR/<problem>-<UTC timestamp>/ (default results)",
+    )
+    parser.add_argument("--no-figures", action="store_true", help="do not write PNG figures")
+    parser.add_argument(
+        "--no-progress", action="store_true", help="no progress bars on stderr"
+    )
+    add_recording_arguments(parser)
+
+
+def default_problem() -> Path:
+    """``problems/showcase.toml`` next to the installed package (the repository checkout)."""
+    import lcc_synth
+    from lcc_synth.errors import ConfigError
+
+    path = Path(lcc_synth.__file__).resolve().parents[1] / "problems" / "showcase.toml"
+    if not path.is_file():
+        raise ConfigError(
+            "problem",
+            f"no problem file given and the default {path} does not exist (the package is not "
+            "installed from a repository checkout): pass a suite problem file",
+        )
+    return path
+
+
+def _names(value: str | None) -> list[str] | None:
+    return None if value is None else value.split(",")
+
+
+def _blueprint(suite, controllers, gamma_cases, design_names):
+    """One tab per scenario (the recording module's simulation layout), plus analysis."""
+    import rerun.blueprint as rrb
+
+    from lcc_synth.recording import analysis_blueprint, simulation_blueprint, synthesis_blueprint
+
+    tabs = []
+    for sname, ss in suite.scenarios.items():
+        box = simulation_blueprint(sname, controllers).root_container
+        box.name = ss.title or sname
+        tabs.append(box)
+    if gamma_cases:
+        box = analysis_blueprint(gamma_cases).root_container
+        box.name = "|Γ(jω)| of the linear designs"
+        tabs.append(box)
+    if design_names:
+        box = synthesis_blueprint(design_names).root_container
+        box.name = "synthesised gains"
+        tabs.append(box)
+    return rrb.Blueprint(rrb.Tabs(*tabs), collapse_panels=False)
+
+
+def run(args: argparse.Namespace) -> int:
+    from contextlib import nullcontext
+    from datetime import UTC, datetime
+
+    import numpy as np
+
+    from lcc_synth.comparison import (
+        format_table,
+        gamma_curves,
+        json_safe,
+        load_suite,
+        run_suite,
+        write_csv,
+        write_json,
+        write_markdown,
+    )
+    from lcc_synth.recording import (
+        entity_name,
+        open_recording,
+        record_gains,
+        record_gamma,
+        record_simulation,
+        recording_decimation,
+        recording_path,
+    )
+    from lcc_synth.synthesis.h2 import SynthesisError
+
+    problem = Path(args.problem) if args.problem else default_problem()
+    suite = load_suite(problem, _names(args.scenarios), _names(args.controllers))
+    now = datetime.now(UTC)
+    stamp = now.strftime("%Y%m%dT%H%M%SZ")
+    out_dir = Path(args.out) / f"{entity_name(suite.name)}-{stamp}"
+    rrd = recording_path(args, suite.name, now=now)
+    every = recording_decimation(args)
+    ctrl_names = list(suite.controllers)
+    layouts = suite.layouts_used()
+    has_head = [lname for lname in layouts if suite.layouts[lname].kind != "fd_lcc"]
+    linear = [c for c, t in suite.controllers.items() if t.get("type") in ("hdv", "static", "h2",
+                                                                         "gains_file")]
+    gamma_cases = [f"{lname}.{c}" for lname in has_head for c in linear]
+    design_names = [
+        f"{lname}.{c}" for lname in layouts for c, t in suite.controllers.items()
+        if t.get("type") == "h2"
+    ]
+    log = sys.stderr if args.json else sys.stdout
+    progress = not args.no_progress
+
+    if rrd is not None:
+        bp = _blueprint(suite, ctrl_names, gamma_cases, design_names)
+        recording = open_recording(rrd, suite.name, blueprint=bp, scenario=suite.name)
+    else:
+        recording = nullcontext(None)
+
+    with recording as rec:
+
+        def on_result(sname, cname, res, row, ctrl):
+            if rec is None:
+                return
+            history = ctrl.history() if hasattr(ctrl, "history") else None
+            record_simulation(
+                rec, res, sname, controller=cname, metrics=row, decimate=every,
+                mpc_history=history or None,
+            )
+
+        try:
+            result = run_suite(suite, progress=progress, on_result=on_result)
+        except SynthesisError as err:
+            print(f"lcc-synth run: synthesis failed: {err}", file=sys.stderr)
+            return 1
+
+        omega = np.logspace(*_OMEGA)
+        curves = {
+            lname: gamma_curves(result.controllers[lname], suite.layouts[lname], omega)
+            for lname in has_head
+        }
+        if rec is not None:
+            for lname, per in curves.items():
+                for cname, (mag, rep) in per.items():
+                    record_gamma(rec, f"{lname}.{cname}", omega, mag, rep.as_dict())
+            for lname, per in result.designs.items():
+                from lcc_synth.synthesis.gains_file import gains_document
+
+                for cname, rep in per.items():
+                    record_gains(rec, f"{lname}.{cname}", gains_document(rep))
+
+    # ---- files
+    from lcc_synth.synthesis.gains_file import write_gains
+
+    written = []
+    written.append(write_markdown(result.table, out_dir / "table.md", title=_title(suite)))
+    written.append(write_csv(result.table, out_dir / "table.csv"))
+    written.append(write_json(result.table, out_dir / "table.json"))
+    for lname, per in result.designs.items():
+        for cname, rep in per.items():
+            written.append(write_gains(out_dir / f"gains_{lname}_{cname}.json", rep))
+    details = {
+        "problem": str(problem),
+        "suite": suite.name,
+        "scenarios": {
+            s: {"layout": ss.layout, "title": ss.title, "metrics_window": list(ss.metrics.window),
+                "metrics_vehicles": ss.metrics.vehicles}
+            for s, ss in suite.scenarios.items()
+        },
+        "layouts": {
+            lname: {"kind": sy.kind, "m": sy.m, "n": sy.n, "v_star": sy.v_star}
+            for lname, sy in suite.layouts.items() if lname in layouts
+        },
+        "controller_tables": result.tables,
+        "synthesis": {
+            lname: {c: rep.as_dict() for c, rep in per.items()}
+            for lname, per in result.designs.items()
+        },
+        "string_stability": {
+            lname: {c: rep.as_dict() for c, (_, rep) in per.items()}
+            for lname, per in curves.items()
+        },
+        "controller_stats": {
+            s: {c: r.controller_stats for c, r in per.items()} for s, per in result.results.items()
+        },
+        "timings_s": result.timings,
+        "recording": str(rrd) if rrd else None,
+    }
+    path = out_dir / "details.json"
+    path.write_text(json.dumps(json_safe(details), indent=2, default=str) + "\n")
+    written.append(path)
+
+    if not args.no_figures:
+        from lcc_synth.figures import plot_gamma_curves, plot_profiles
+
+        for sname, per in result.results.items():
+            ss = suite.scenarios[sname]
+            written.append(
+                plot_profiles(per, out_dir / f"profiles_{sname}.png", title=ss.title or sname)
+            )
+        for lname, per in curves.items():
+            if per:
+                sy = suite.layouts[lname]
+                written.append(
+                    plot_gamma_curves(
+                        per, omega, out_dir / f"gamma_{lname}.png",
+                        title=f"|Γ(jω)| on layout {lname} ({sy.kind}, m={sy.m}, n={sy.n})",
+                    )
+                )
+
+    if args.json:
+        print(json.dumps(json_safe({"results": result.table})))
+    else:
+        print(_title(suite))
+        print(format_table(result.table))
+        for sname, per in result.results.items():
+            for cname, res in per.items():
+                st = res.controller_stats
+                if st and "fallbacks" in st:
+                    stt = st.get("step_time_ms", {})
+                    print(
+                        f"{sname}/{cname}: {st['fallbacks']} fallbacks, "
+                        f"step time median {_ms(stt.get('median'))} / p99 {_ms(stt.get('p99'))}"
+                        " ms",
+                    )
+        for lname, per in curves.items():
+            for cname, (_, rep) in per.items():
+                verdict = "string stable" if rep.string_stable else "NOT string stable"
+                print(f"|Γ| {lname}/{cname}: peak {rep.gamma_peak:.4f} -> {verdict}")
+    print(f"results: {out_dir}", file=log)
+    if rrd is not None:
+        print(f"recording: {rrd}  (open with: lcc-synth review {rrd})", file=log)
+    t = result.timings
+    print(
+        f"time: controllers {t['controllers']:.1f} s, simulations {t['simulations']:.1f} s",
+        file=log,
+    )
+    return 0
+
+
+def _ms(value) -> str:
+    return "n/a" if value is None else f"{value:.2f}"
+
+
+def _title(suite) -> str:
+    return f"{suite.name}: {len(suite.scenarios)} scenarios x {len(suite.controllers)} controllers"

@@ -1,0 +1,623 @@
+"""Comparison suites: several scenarios x several controllers -> one metrics table.
+
+A *suite* problem file (``lcc-synth run``, e.g. ``problems/showcase.toml``) describes
+
+* ``[hdv]``: the nominal HDV model shared by everything;
+* ``[layouts.NAME]``: strings of vehicles, each a ``[system]`` table (``kind, m, n, v_star``).
+  Controllers are built -- and H2 gains synthesised -- **per layout**: a gain designed for one
+  string cannot drive another (its state names and its closed loop belong to one ``m, n``);
+* ``[scenarios.NAME]``: ``layout = "..."``, optional ``title``, every key of a ``[scenario]``
+  table of ``lcc-synth simulate`` (``duration``, ``perturbations``, ``heterogeneity``, ``delay``,
+  ``v2v``...) and an optional ``metrics`` table overriding the file's ``[metrics]``;
+* ``[controllers.NAME]``: the controller tables of ``lcc-synth simulate`` (``type = "hdv" |
+  "static" | "gains_file" | "mpc"``), plus ``type = "h2"``: a gain synthesised for each layout
+  by :mod:`lcc_synth.synthesis`, whose other keys are those of the ``[synthesis]`` table of
+  ``lcc-synth synthesize`` (``design``, ``pattern``, ``weights``...; ``sample_time`` optional).
+  ``[controllers.NAME.layouts.LAYOUT]`` overrides keys for one layout (merged recursively),
+  e.g. the paper's gains, which differ between the Table II string and the Section V-A string.
+
+Every controller runs on every scenario with the same random draws (``simulate(..., draws)``);
+the metrics are those of :func:`lcc_synth.metrics.summary` (:data:`SUITE_METRICS`).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lcc_synth.controllers import CONTROLLER_TYPES, Controller, build_controller
+from lcc_synth.errors import ConfigError
+from lcc_synth.metrics import MetricsConfig
+from lcc_synth.problem import (
+    Problem,
+    System,
+    check_keys,
+    get_str,
+    get_table,
+    load_problem,
+    system_from,
+)
+from lcc_synth.scenario import metrics_from, scenario_from
+from lcc_synth.simulation import Scenario, SimResult
+
+__all__ = [
+    "SUITE_METRICS",
+    "SUITE_TYPES",
+    "SuiteScenario",
+    "Suite",
+    "SuiteRun",
+    "load_suite",
+    "select_names",
+    "controller_table",
+    "synthesize_table",
+    "prepare_controllers",
+    "build_controllers",
+    "metrics_row",
+    "run_suite",
+    "gamma_curves",
+    "json_safe",
+    "format_table",
+    "markdown_table",
+    "write_markdown",
+    "write_csv",
+    "write_json",
+    "progress_bar",
+]
+
+#: Metrics of the comparison table: key of :func:`lcc_synth.metrics.summary` -> (header, format).
+SUITE_METRICS: dict[str, tuple[str, str]] = {
+    "aave": ("AAVE (m/s)", ".4f"),
+    "fuel_ml": ("fuel (mL)", ".2f"),
+    "min_spacing": ("min spacing (m)", ".2f"),
+    "min_ttc": ("min TTC (s)", ".2f"),
+    "max_abs_command": ("max |u| (m/s²)", ".3f"),
+    "aeb_activations": ("AEB steps", "d"),
+    "collisions": ("collisions", "d"),
+}
+
+#: Controller types of a suite file: those of ``lcc-synth simulate`` plus synthesised ``h2``.
+SUITE_TYPES = (*CONTROLLER_TYPES, "h2")
+
+_TOP_KEYS = ["name", "description", "hdv", "metrics", "layouts", "scenarios", "controllers"]
+
+
+# --------------------------------------------------------------------------------------------
+# Suite file
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SuiteScenario:
+    """One scenario of a suite: its layout, simulator scenario and metric settings."""
+
+    name: str
+    layout: str
+    scenario: Scenario
+    metrics: MetricsConfig
+    title: str = ""
+
+
+@dataclass(frozen=True)
+class Suite:
+    """A parsed suite problem file (see the module docstring)."""
+
+    name: str
+    description: str
+    layouts: dict[str, System]
+    scenarios: dict[str, SuiteScenario]
+    controllers: dict[str, dict[str, Any]]
+    hdv_table: dict[str, Any] = field(default_factory=dict)
+    source: str | None = None
+
+    def layouts_used(self) -> list[str]:
+        """Layouts of the selected scenarios, in file order."""
+        used = {s.layout for s in self.scenarios.values()}
+        return [name for name in self.layouts if name in used]
+
+
+def select_names(available: Sequence[str], wanted: Sequence[str] | None, field: str) -> list[str]:
+    """``wanted`` (in the file's order) after checking every name exists; ``None`` = all."""
+    if wanted is None:
+        return list(available)
+    wanted = [w.strip() for w in wanted if w.strip()]
+    if not wanted:
+        raise ConfigError(field, f"must name at least one of {list(available)}")
+    unknown = [w for w in wanted if w not in available]
+    if unknown:
+        raise ConfigError(field, f"unknown name(s) {unknown}; available: {list(available)}")
+    return [a for a in available if a in wanted]
+
+
+def _system_data(system: System) -> dict[str, Any]:
+    return {"kind": system.kind, "m": system.m, "n": system.n, "v_star": system.v_star}
+
+
+def load_suite(
+    path: str | Path | Problem,
+    scenarios: Sequence[str] | None = None,
+    controllers: Sequence[str] | None = None,
+) -> Suite:
+    """Read a suite problem file, keeping only the named scenarios / controllers.
+
+    Raises
+    ------
+    ConfigError
+        A bad table, an unknown layout, scenario or controller name.
+    """
+    problem = path if isinstance(path, Problem) else load_problem(path)
+    src = str(problem.path)
+    try:
+        data = problem.data
+        check_keys(data, _TOP_KEYS, "")
+        hdv_table = get_table(data, "hdv", "hdv")
+        layouts_t = get_table(data, "layouts", "layouts", required=True)
+        if not layouts_t:
+            raise ConfigError("layouts", "needs at least one [layouts.NAME] table")
+        layouts: dict[str, System] = {}
+        for lname, table in layouts_t.items():
+            if not isinstance(table, dict):
+                raise ConfigError(f"layouts.{lname}", "must be a table (kind, m, n, v_star)")
+            try:
+                layouts[lname] = system_from({"hdv": hdv_table, "system": table})
+            except ConfigError as err:
+                raise ConfigError(
+                    err.field.replace("system", f"layouts.{lname}", 1), err.message
+                ) from None
+
+        scen_t = get_table(data, "scenarios", "scenarios", required=True)
+        if not scen_t:
+            raise ConfigError("scenarios", "needs at least one [scenarios.NAME] table")
+        chosen = select_names(list(scen_t), scenarios, "--scenarios")
+        suite_scenarios: dict[str, SuiteScenario] = {}
+        for sname in chosen:
+            f = f"scenarios.{sname}"
+            table = scen_t[sname]
+            if not isinstance(table, dict):
+                raise ConfigError(f, "must be a table")
+            lname = get_str(table, "layout", f, choices=list(layouts))
+            title = get_str(table, "title", f, "")
+            sc_table = {k: v for k, v in table.items() if k not in ("layout", "title", "metrics")}
+            system = layouts[lname]
+            try:
+                sc = scenario_from({"scenario": sc_table}, system, problem.path.parent)
+            except ConfigError as err:
+                raise ConfigError(err.field.replace("scenario", f, 1), err.message) from None
+            mt = dict(get_table(data, "metrics", "metrics"))
+            mt.update(get_table(table, "metrics", f"{f}.metrics"))
+            try:
+                mcfg = metrics_from({"metrics": mt}, system)
+            except ConfigError as err:
+                fld = err.field.replace("metrics", f"{f}.metrics", 1)
+                raise ConfigError(fld, err.message) from None
+            if mcfg.baseline is not None:
+                raise ConfigError(f"{f}.metrics.baseline", "is not used by a suite; remove it")
+            sc = replace(sc, name=sname)
+            suite_scenarios[sname] = SuiteScenario(sname, lname, sc, mcfg, title)
+
+        ctrl_t = get_table(data, "controllers", "controllers", required=True)
+        if not ctrl_t:
+            raise ConfigError("controllers", "needs at least one [controllers.NAME] table")
+        names = select_names(list(ctrl_t), controllers, "--controllers")
+        ctrls: dict[str, dict[str, Any]] = {}
+        for cname in names:
+            table = ctrl_t[cname]
+            f = f"controllers.{cname}"
+            if not isinstance(table, dict):
+                raise ConfigError(f, "must be a table")
+            get_str(table, "type", f, choices=SUITE_TYPES)
+            over = get_table(table, "layouts", f"{f}.layouts")
+            for lname, t in over.items():
+                if lname not in layouts:
+                    raise ConfigError(
+                        f"{f}.layouts.{lname}", f"unknown layout; available: {list(layouts)}"
+                    )
+                if not isinstance(t, dict):
+                    raise ConfigError(f"{f}.layouts.{lname}", "must be a table")
+                if "type" in t and t["type"] != table["type"]:
+                    raise ConfigError(f"{f}.layouts.{lname}.type", "cannot change the type")
+            ctrls[cname] = dict(table)
+        return Suite(
+            name=problem.name,
+            description=str(data.get("description", "")),
+            layouts=layouts,
+            scenarios=suite_scenarios,
+            controllers=ctrls,
+            hdv_table=dict(hdv_table),
+            source=src,
+        )
+    except ConfigError as err:
+        raise err.with_source(src) if not err.source else err from None
+
+
+# --------------------------------------------------------------------------------------------
+# Controllers per layout
+# --------------------------------------------------------------------------------------------
+
+
+def _merge(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for key, value in over.items():
+        if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def controller_table(table: Mapping[str, Any], layout: str) -> dict[str, Any]:
+    """The controller table for ``layout``: the base keys merged with its ``layouts`` entry."""
+    base = {k: v for k, v in table.items() if k != "layouts"}
+    over = table.get("layouts", {}).get(layout, {})
+    return _merge(base, over)
+
+
+def synthesize_table(
+    name: str,
+    table: Mapping[str, Any],
+    system: System,
+    hdv_table: Mapping[str, Any],
+    label: str,
+    source: str | None = None,
+):
+    """Synthesise an ``h2`` controller for ``system``.
+
+    Returns ``(static_table, report)``: a ``type = "static"`` controller table holding the
+    synthesised gain (plain data: it can be sent to Dask workers) and the
+    :class:`~lcc_synth.synthesis.report.SynthesisReport`.
+
+    Raises
+    ------
+    ConfigError
+        A bad synthesis key (named ``controllers.NAME...``).
+    lcc_synth.synthesis.SynthesisError
+        Solver failure, infeasibility or an unusable result.
+    """
+    from lcc_synth.synthesis.config import spec_from_problem
+    from lcc_synth.synthesis.design import synthesize
+
+    synth = {k: v for k, v in table.items() if k not in ("type", "sample_time")}
+    data = {
+        "name": label,
+        "hdv": dict(hdv_table),
+        "system": _system_data(system),
+        "synthesis": synth,
+    }
+    problem = Problem(Path(source) if source else Path(f"{label}.toml"), data)
+    try:
+        spec = spec_from_problem(problem)
+    except ConfigError as err:
+        fld = err.field
+        fld = f"controllers.{name}" + fld[len("synthesis") :] if fld.startswith("synthesis") else (
+            f"controllers.{name} ({fld})"
+        )
+        raise ConfigError(fld, err.message, source) from None
+    rep = synthesize(spec)
+    out: dict[str, Any] = {
+        "type": "static",
+        "kind": rep.kind,
+        "semantics": rep.semantics,
+        "gains": dict(rep.gains),
+    }
+    if "sample_time" in table:
+        out["sample_time"] = table["sample_time"]
+    return out, rep
+
+
+def prepare_controllers(
+    controllers: Mapping[str, Mapping[str, Any]],
+    system: System,
+    layout: str,
+    hdv_table: Mapping[str, Any],
+    source: str | None = None,
+    label: str = "suite",
+    on_step: Callable[[str], None] | None = None,
+):
+    """Controller tables of one layout, ``h2`` entries replaced by their synthesised gains.
+
+    Returns ``(tables, designs)``: ``{name: table}`` with only the types of
+    :data:`lcc_synth.controllers.CONTROLLER_TYPES`, and ``{name: SynthesisReport}``.
+    """
+    tables: dict[str, dict[str, Any]] = {}
+    designs: dict[str, Any] = {}
+    for name, raw in controllers.items():
+        if on_step is not None:
+            on_step(name)
+        table = controller_table(raw, layout)
+        if table.get("type") == "h2":
+            table, rep = synthesize_table(
+                name, table, system, hdv_table, f"{label}_{layout}_{name}", source
+            )
+            designs[name] = rep
+        tables[name] = table
+    return tables, designs
+
+
+def build_controllers(
+    tables: Mapping[str, Mapping[str, Any]], system: System, source: str | None = None
+) -> dict[str, Controller]:
+    """:func:`lcc_synth.controllers.build_controller` for every table."""
+    return {name: build_controller(name, dict(t), system, source) for name, t in tables.items()}
+
+
+# --------------------------------------------------------------------------------------------
+# Running a suite
+# --------------------------------------------------------------------------------------------
+
+
+def metrics_row(result: SimResult, config: MetricsConfig) -> dict[str, float | int]:
+    """The :data:`SUITE_METRICS` of one result (batch means / worst cases, as ``summary``)."""
+    from lcc_synth.metrics import summary
+
+    s = summary(result, config)
+    return {key: s[key] for key in SUITE_METRICS}
+
+
+def progress_bar(total: int, desc: str, enabled: bool = True):
+    """A progress bar on stderr (tqdm); a silent one when ``enabled`` is false."""
+    from tqdm import tqdm
+
+    return tqdm(
+        total=total,
+        desc=desc,
+        file=sys.stderr,
+        disable=not enabled,
+        leave=True,
+        dynamic_ncols=True,
+        unit="run",
+    )
+
+
+@dataclass
+class SuiteRun:
+    """Everything a suite run produced.
+
+    Attributes
+    ----------
+    table : dict
+        ``{scenario: {controller: {metric: value}}}`` (:data:`SUITE_METRICS`).
+    results : dict
+        ``{scenario: {controller: SimResult}}``.
+    tables : dict
+        ``{layout: {controller: table}}`` the controller tables actually built (``h2`` resolved).
+    designs : dict
+        ``{layout: {controller: SynthesisReport}}``.
+    controllers : dict
+        ``{layout: {controller: Controller}}``.
+    timings : dict
+        Wall times (s) of the stages.
+    """
+
+    suite: Suite
+    table: dict[str, dict[str, dict[str, Any]]]
+    results: dict[str, dict[str, SimResult]]
+    tables: dict[str, dict[str, dict[str, Any]]]
+    designs: dict[str, dict[str, Any]]
+    controllers: dict[str, dict[str, Controller]]
+    timings: dict[str, float]
+
+
+def run_suite(
+    suite: Suite,
+    progress: bool = True,
+    on_result: Callable[[str, str, SimResult, dict[str, Any], Controller], None] | None = None,
+) -> SuiteRun:
+    """Build the controllers of every layout (synthesising ``h2`` gains) and run every
+    controller on every scenario of ``suite``.
+
+    Parameters
+    ----------
+    suite : Suite
+    progress : bool
+        Show a progress bar per stage on stderr.
+    on_result : callable, optional
+        ``on_result(scenario, name, result, row, controller)`` right after each simulation
+        (e.g. to record it while the suite goes on; an MPC still holds that run's history).
+    """
+    import time
+
+    from lcc_synth.simulation import simulate
+
+    timings: dict[str, float] = {}
+    layouts = suite.layouts_used()
+    n_ctrl = len(suite.controllers)
+    tables: dict[str, dict[str, dict[str, Any]]] = {}
+    designs: dict[str, dict[str, Any]] = {}
+    built: dict[str, dict[str, Controller]] = {}
+    t0 = time.perf_counter()
+    what = "controllers (synthesis, MPC set-up)"
+    with progress_bar(len(layouts) * n_ctrl, what, progress) as bar:
+        for lname in layouts:
+            system = suite.layouts[lname]
+
+            def starting(cname: str, lname=lname) -> None:
+                bar.set_postfix_str(f"{lname}/{cname}")
+
+            tables[lname], designs[lname] = prepare_controllers(
+                suite.controllers, system, lname, suite.hdv_table, suite.source, suite.name,
+                on_step=starting,
+            )
+            built[lname] = {}
+            for cname, table in tables[lname].items():
+                starting(cname)
+                try:
+                    built[lname][cname] = build_controller(cname, dict(table), system, suite.source)
+                except ConfigError as err:
+                    raise ConfigError(
+                        f"{err.field} (layout {lname})", err.message, err.source
+                    ) from None
+                bar.update(1)
+    timings["controllers"] = time.perf_counter() - t0
+
+    table: dict[str, dict[str, dict[str, Any]]] = {}
+    results: dict[str, dict[str, SimResult]] = {}
+    t0 = time.perf_counter()
+    total = len(suite.scenarios) * n_ctrl
+    with progress_bar(total, "simulations", progress) as bar:
+        for sname, ss in suite.scenarios.items():
+            draws = ss.scenario.draw()
+            table[sname] = {}
+            results[sname] = {}
+            for cname, ctrl in built[ss.layout].items():
+                bar.set_postfix_str(f"{sname}/{cname}")
+                res = simulate(ss.scenario, ctrl, draws)
+                row = metrics_row(res, ss.metrics)
+                table[sname][cname] = row
+                results[sname][cname] = res
+                if on_result is not None:
+                    on_result(sname, cname, res, row, ctrl)
+                bar.update(1)
+    timings["simulations"] = time.perf_counter() - t0
+    return SuiteRun(suite, table, results, tables, designs, built, timings)
+
+
+def gamma_curves(
+    controllers: Mapping[str, Controller], system: System, omega: np.ndarray
+) -> dict[str, tuple[np.ndarray, Any]]:
+    """``|Gamma(j omega)|`` and the string-stability report of every linear controller.
+
+    Static-gain controllers use their own gains and model; the CAV driving as an HDV is the
+    empty gain added to the HDV law. MPC (not linear) and layouts without a head vehicle
+    (``fd_lcc``) give no curve. Returns ``{name: (magnitude, StringStabilityReport)}``.
+    """
+    from lcc_synth.controllers import HDVController, StaticGainController
+    from lcc_synth.feedback import StaticGains, input_feedback
+    from lcc_synth.string_stability import gamma_state_space, string_stability
+
+    if system.kind == "fd_lcc":
+        return {}
+    out = {}
+    for name, ctrl in controllers.items():
+        if isinstance(ctrl, StaticGainController):
+            model, gains = ctrl.model, ctrl.gains
+        elif isinstance(ctrl, HDVController):
+            model, gains = system.linear_model(warn=False), StaticGains({}, "added")
+        else:
+            continue
+        K, kh = input_feedback(model, gains)
+        mag = np.abs(gamma_state_space(model, K, kh, omega))
+        out[name] = (mag, string_stability(model, K, kh))
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Table writers
+# --------------------------------------------------------------------------------------------
+
+
+def json_safe(x: Any) -> Any:
+    """JSON-ready copy: numpy scalars to Python, NaN and infinities to ``None``."""
+    if isinstance(x, Mapping):
+        return {str(k): json_safe(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [json_safe(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return json_safe(x.tolist())
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def _cell(value: Any, fmt: str) -> str:
+    if value is None:
+        return "n/a"
+    if isinstance(value, float) and math.isnan(value):
+        return "nan"
+    if isinstance(value, float) and math.isinf(value):
+        return "inf" if value > 0 else "-inf"
+    if fmt == "d":
+        return str(int(value))
+    return format(float(value), fmt)
+
+
+def _rows(table: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> list[list[str]]:
+    rows = []
+    for sname, per in table.items():
+        for cname, metrics in per.items():
+            rows.append(
+                [sname, cname]
+                + [_cell(metrics.get(k), fmt) for k, (_, fmt) in SUITE_METRICS.items()]
+            )
+    return rows
+
+
+def _headers() -> list[str]:
+    return ["scenario", "controller"] + [h for h, _ in SUITE_METRICS.values()]
+
+
+def format_table(table: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> str:
+    """Plain-text table (one row per scenario and controller) for the terminal."""
+    head = _headers()
+    rows = _rows(table)
+    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in
+              enumerate(head)]
+    lines = ["  ".join(h.ljust(w) for h, w in zip(head, widths, strict=True))]
+    lines.append("  ".join("-" * w for w in widths))
+    prev = None
+    for r in rows:
+        shown = list(r)
+        if r[0] == prev:
+            shown[0] = ""
+        prev = r[0]
+        lines.append("  ".join(v.ljust(w) for v, w in zip(shown, widths, strict=True)).rstrip())
+    return "\n".join(lines)
+
+
+def markdown_table(table: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> str:
+    """The table as GitHub Markdown."""
+    head = _headers()
+    align = ["---"] * 2 + ["---:"] * (len(head) - 2)
+    lines = ["| " + " | ".join(head) + " |", "|" + "|".join(align) + "|"]
+    lines += ["| " + " | ".join(r) + " |" for r in _rows(table)]
+    return "\n".join(lines) + "\n"
+
+
+def write_markdown(
+    table: Mapping[str, Mapping[str, Mapping[str, Any]]], path: str | Path, title: str = ""
+) -> Path:
+    """Write :func:`markdown_table` (with an optional heading) to ``path``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    text = (f"# {title}\n\n" if title else "") + markdown_table(table)
+    path.write_text(text)
+    return path
+
+
+def write_csv(table: Mapping[str, Mapping[str, Mapping[str, Any]]], path: str | Path) -> Path:
+    """CSV with columns ``scenario, controller`` and the :data:`SUITE_METRICS` keys
+    (full precision; ``inf`` for a time to collision that never occurs, empty for NaN)."""
+    import csv
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["scenario", "controller", *SUITE_METRICS])
+        for sname, per in table.items():
+            for cname, metrics in per.items():
+                vals = []
+                for k in SUITE_METRICS:
+                    v = metrics.get(k)
+                    if v is None or (isinstance(v, float) and math.isnan(v)):
+                        vals.append("")
+                    else:
+                        vals.append(repr(float(v)) if isinstance(v, float) else str(v))
+                w.writerow([sname, cname, *vals])
+    return path
+
+
+def write_json(table: Mapping[str, Any], path: str | Path, **extra: Any) -> Path:
+    """``{"results": table, **extra}`` as JSON (non-finite numbers as ``null``)."""
+    import json
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(json_safe({"results": table, **extra}), indent=2) + "\n")
+    return path
