@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -422,3 +423,61 @@ def test_mpc_controller_history_reaches_the_recording(tmp_path):
     _, plans = _temporal(chunks, "/mpc_demo/mpc/mpc/predicted/u", "LineStrips2D:strips")
     assert len(plans) == len(hist["t"])
     np.testing.assert_allclose(np.array(plans[5])[0, :, 1], hist["plan"][0, 5], rtol=1e-6)
+
+
+SMALL_PROBLEM = """
+name = "small table2"
+[system]
+kind = "fd_lcc"
+m = 0
+n = 3
+v_star = 15.0
+[scenario]
+dt = 0.01
+duration = 4.0
+[[scenario.perturbations]]
+type = "brake"
+vehicle = 1
+start = 1.0
+duration = 1.0
+decel = -5.0
+[controllers.all_hdv]
+type = "hdv"
+[controllers.fd_lcc]
+type = "static"
+kind = "fd_lcc"
+semantics = "replace"
+gains = { v_0 = -0.5, s_1 = -0.2, v_1 = 0.05, s_2 = -0.1, v_2 = 0.05 }
+[metrics]
+window = [1.0, 4.0]
+baseline = "all_hdv"
+"""
+
+
+def test_simulate_command_records_every_controller(tmp_path, capsys, monkeypatch):
+    import json
+
+    from lcc_synth.cli.main import main
+
+    problem = tmp_path / "small.toml"
+    problem.write_text(SMALL_PROBLEM)
+    path = tmp_path / "sim.rrd"
+    assert main(["simulate", str(problem), "--json", "--rrd", str(path)]) == 0
+    captured = capsys.readouterr()
+    results = json.loads(captured.out)["results"]  # stdout: the JSON object only
+    assert str(path) in captured.err
+    s = R.summarize_recording(path)
+    for name, entry in results.items():
+        vel = s.entities[f"/small_table2/{name}/velocity"]
+        assert vel.samples == 400 and vel.series == 5
+        assert f"| aave | {entry['aave']:.6g} |" in s.texts[f"/small_table2/{name}/metrics"]
+    assert "reduction_vs_baseline" in s.texts["/small_table2/fd_lcc/metrics"]
+    assert "complete" in s.texts["/small_table2/status"]
+    # --no-record writes nothing; the default path is logs/<problem>-<UTC>.rrd in the cwd
+    monkeypatch.chdir(tmp_path)
+    assert main(["simulate", str(problem), "--no-record", "--json", "--record-every", "5"]) == 0
+    assert "recording:" not in capsys.readouterr().err and not (tmp_path / "logs").exists()
+    assert main(["simulate", str(problem), "--json", "--record-every", "5"]) == 0
+    [default] = (tmp_path / "logs").glob("small_table2-*Z.rrd")
+    assert re.fullmatch(r"small_table2-\d{8}T\d{6}Z\.rrd", default.name)
+    assert R.summarize_recording(default).entities["/small_table2/fd_lcc/velocity"].samples == 81
