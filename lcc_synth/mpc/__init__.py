@@ -1,0 +1,24 @@
+"""Safety-constrained model predictive control of the CAV in LCC (CasADi formulation, OSQP).
+
+- :mod:`lcc_synth.mpc.settings`: settings and their problem-file table.
+- :mod:`lcc_synth.mpc.formulation`: the condensed QP built once with CasADi.
+- :mod:`lcc_synth.mpc.solver`: OSQP workspace (set up once), exact reference, naive rebuild.
+- :mod:`lcc_synth.mpc.controller`: the controller of the common interface, fallback chain.
+"""
+
+from lcc_synth.mpc.controller import (
+    STATUS_CODES,
+    MPCController,
+    mpc_controller_from_table,
+    paper_fallback_gains,
+)
+from lcc_synth.mpc.settings import MPCSettings, settings_from_table
+
+__all__ = [
+    "MPCController",
+    "MPCSettings",
+    "STATUS_CODES",
+    "mpc_controller_from_table",
+    "paper_fallback_gains",
+    "settings_from_table",
+]

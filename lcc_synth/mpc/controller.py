@@ -1,0 +1,707 @@
+"""The LCC model predictive controller (a controller of :mod:`lcc_synth.controllers`).
+
+At every sample (``sample_time``, default 0.1 s; the simulator holds the command in between):
+
+1. **Equilibrium.** ``v_eq`` is the moving average (``prediction.equilibrium_window``) of the
+   reference velocity: the vehicle ahead of the CAV when ``m = 0`` (CF-LCC, LCC with m = 0; the
+   CAV senses it), vehicle ``-m`` otherwise (the head of general LCC is not connected, Section
+   II). FD-LCC uses the fixed design velocity ``v*`` (Remark 1 of the paper). ``s_eq`` is the
+   nominal HDV model's equilibrium spacing at ``v_eq``, plus each vehicle's offset
+   ``s_ref - s*`` from the context (heterogeneous strings with ``spacing_reference =
+   "own_equilibrium"``; zero otherwise).
+2. **State.** The error state of the model (``s_i - s_eq``, ``v_i - v_eq`` for the CAV and the
+   ``n_model`` HDVs behind, the HDVs ahead). FD-LCC's ``-p_0`` is the CAV's position relative to
+   a reference point moving at ``v_eq``; when its weight is 0 it is re-zeroed at every sample
+   (the QP then only uses it to predict the spacing to a vehicle ahead, if there is one).
+3. **Head prediction.** ``d_k = v_ref - v_eq`` held over the horizon (``head = "constant"``), or
+   the reference vehicle's measured acceleration held for ``head_accel_hold`` seconds
+   (``head = "accel"``; velocity never below 0).
+4. **Re-linearisation** (option): when ``|v_eq - v_lin| > relinearize_threshold`` the HDV model
+   is re-linearised at ``v_eq`` and OSQP gets the new matrix values (same pattern). The model is
+   cached per linearisation velocity (0.01 m/s grid) so batch members share the evaluation.
+5. **QP** (:mod:`lcc_synth.mpc.formulation`) solved by OSQP with warm start from the shifted
+   previous solution. The safe spacing to the vehicle ahead is in ABSOLUTE metres,
+   ``s_0 >= s_min + t_gap v_0`` with ``s_0 = s_eq + s~_0`` and ``v_0 = v_eq + v~_0``, soft with an
+   exact l1 penalty (FD-LCC: ``s_0`` predicted from the measured spacing, the vehicle ahead
+   moving with the head prediction).
+6. **Fallback chain** when the QP is not solved (status other than ``solved``, non-finite
+   data, any exception): the previous plan shifted by one step (while it lasts), else a static
+   gain (``fallback_gains_file`` if configured, else the paper's Section V-B gain for FD-/CF-LCC
+   and the CAV's HDV law for LCC/CCC) on the same error state, clipped to the acceleration
+   limits; the simulator's emergency braking is the last layer. Nothing raises inside the loop.
+
+The applied command is the model input for LCC/FD-LCC/CCC and ``K_law x + k_h d_0 + u_hat`` (the
+CAV's linear HDV law plus the MPC's added input) for CF-LCC.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lcc_synth.controllers import ControlContext, Observation
+from lcc_synth.errors import ConfigError
+from lcc_synth.feedback import StaticGains, cav_feedback
+from lcc_synth.mpc.formulation import Family, Formulation, Linearization, linearize
+from lcc_synth.mpc.settings import MPCSettings, settings_from_table
+from lcc_synth.mpc.solver import POLISH_NAMES, OSQPSolver
+
+__all__ = ["MPCController", "mpc_controller_from_table", "paper_fallback_gains", "STATUS_CODES"]
+
+#: Per-step outcome codes stored in ``history()["status"]``.
+STATUS_CODES = {0: "qp", 1: "shifted_plan", 2: "static_gain", 3: "hold"}
+
+_PAPER_TAIL = {"v_0": -0.5, "s_1": -0.2, "v_1": 0.05, "s_2": -0.1, "v_2": 0.05}
+
+
+def paper_fallback_gains(kind: str, n: int) -> StaticGains:
+    """The default fallback: the paper's Section V-B gains (FD-LCC; CF-LCC adds ``0.1 s_0``),
+    restricted to the vehicles the model has, or the CAV's HDV law for LCC / CCC."""
+    if kind in ("fd_lcc", "cf_lcc"):
+        g = {k: v for k, v in _PAPER_TAIL.items() if int(k.split("_")[1]) <= n}
+        if kind == "cf_lcc":
+            g["s_0"] = 0.1
+        return StaticGains(g, "replace")
+    return StaticGains({}, "added")
+
+
+def _v_limit(hdv) -> float:
+    for attr in ("v_max", "v0"):
+        if hasattr(hdv, attr):
+            return float(getattr(hdv, attr))
+    return 40.0
+
+
+@dataclass
+class _Member:
+    """Solver and loop state of one batch member."""
+
+    solver: OSQPSolver
+    lin: Linearization
+    qp: Any
+    fb_K: np.ndarray
+    fb_kh: float
+    v_buf: np.ndarray
+    s_off: np.ndarray
+    v_buf_n: int = 0
+    v_buf_i: int = 0
+    v_eq: float = 0.0
+    v_ref_prev: float = math.nan
+    p_ref: float = math.nan
+    u_prev: float = 0.0
+    cmd_prev: float = 0.0
+    plan: np.ndarray | None = None
+    plan_age: int = 0
+    warm: tuple | None = None
+    hist: dict[str, list] = field(default_factory=dict)
+
+
+class MPCController:
+    """Safety-constrained linear MPC of the CAV (see the module docstring).
+
+    Parameters
+    ----------
+    name : str
+        Controller name.
+    settings : MPCSettings
+    system : lcc_synth.problem.System
+        Kind, ``m``, ``n``, nominal HDV model and design ``v*``.
+    fallback : StaticGains, optional
+        Static fallback gain (default :func:`paper_fallback_gains`).
+    fallback_source : str
+        Where the fallback came from (for :meth:`describe`).
+    record : bool
+        Keep the per-step history (:meth:`history`).
+
+    Attributes
+    ----------
+    history_enabled : bool
+    """
+
+    def __init__(
+        self,
+        name: str,
+        settings: MPCSettings,
+        system,
+        fallback: StaticGains | None = None,
+        fallback_source: str = "paper",
+        record: bool = True,
+    ):
+        self.name = name
+        self.settings = settings
+        self.sample_time = settings.sample_time
+        self.system = system
+        self.kind = system.kind
+        self.m = system.m
+        n_model = system.n if settings.n_model is None else settings.n_model
+        if n_model > system.n:
+            raise ConfigError("n_model", f"must be <= [system].n = {system.n}, got {n_model}")
+        if self.kind in ("cf_lcc", "fd_lcc") and n_model < 1:
+            raise ConfigError("n_model", f"must be >= 1 for {self.kind}, got {n_model}")
+        if self.kind == "lcc" and self.m == 0 and n_model == 0:
+            raise ConfigError("n_model", "must be >= 1 for LCC with m = 0")
+        self.n_model = n_model
+        self.record = record
+        self._v_hi = _v_limit(system.hdv)
+        v0 = self._clip_v(system.v_star)
+        try:
+            self._lin0 = linearize(self.kind, self.m, n_model, system.hdv, v0, settings)
+        except ConfigError as err:
+            raise ConfigError(f"weights ({err.field})", err.message) from None
+        model = self._lin0.model
+        self._families = self._make_families(model)
+        self.formulation = Formulation(
+            self.kind, model.nx, settings, _state_weights(model, settings), self._families
+        )
+        self._shift_z, self._shift_y = self.formulation.shift_indices()
+        self.fallback = fallback if fallback is not None else paper_fallback_gains(
+            self.kind, n_model
+        )
+        self.fallback_source = fallback_source
+        try:
+            cav_feedback(model, self.fallback)
+        except ConfigError as err:
+            raise ConfigError(
+                "fallback_gains_file" if fallback_source != "paper" else "fallback",
+                f"{err.field}: {err.message} (the MPC models m={self.m}, n={n_model})",
+            ) from None
+        self._cache: dict[float, tuple[Linearization, Any, np.ndarray, float]] = {}
+        self._members: list[_Member] = []
+        self._ctx: ControlContext | None = None
+        self._reset_stats()
+
+    # ---------------------------------------------------------------- setup helpers
+
+    def _clip_v(self, v: float) -> float:
+        return float(np.clip(v, 1.0, self._v_hi - 1.0))
+
+    def _make_families(self, model) -> list[Family]:
+        c = self.settings.constraints
+        fams = []
+        if c.spacing_ahead:
+            b = model.block(0)
+            fams.append(Family(0, b.start, b.start + 1, c.t_gap, c.s_min))
+        for i in c.behind:
+            if i > self.n_model:
+                raise ConfigError(
+                    "constraints.behind",
+                    f"HDV {i} is not in the MPC's model (n_model = {self.n_model})",
+                )
+            b = model.block(i)
+            fams.append(Family(i, b.start, b.start + 1, c.t_gap_behind, c.s_min_behind))
+        return fams
+
+    def _linearization(self, v: float):
+        """Cached (lin, qp, fb_K, fb_kh) at ``v`` rounded to 0.01 m/s."""
+        key = round(self._clip_v(v), 2)
+        hit = self._cache.get(key)
+        if hit is None:
+            s = self.system
+            lin = self._lin0 if key == round(self._lin0.v_lin, 2) else linearize(
+                self.kind, self.m, self.n_model, s.hdv, key, self.settings
+            )
+            qp = self.formulation.matrices(lin)
+            K, kh = cav_feedback(lin.model, self.fallback)
+            hit = (lin, qp, np.asarray(K, float), float(kh))
+            if len(self._cache) > 256:
+                self._cache.clear()
+            self._cache[key] = hit
+        return hit
+
+    def _reset_stats(self) -> None:
+        self._st = {
+            "steps": 0,
+            "solves": 0,
+            "qp_failures": {},
+            "polish": {},
+            "fallback_shifted": 0,
+            "fallback_static": 0,
+            "fallback_hold": 0,
+            "errors": 0,
+            "error_messages": [],
+            "relinearizations": 0,
+            "relinearize_failures": 0,
+            "slack_steps": 0,
+            "max_slack": 0.0,
+            "violation_steps": 0,
+            "max_violation": 0.0,
+            "step_time": [],
+            "osqp_time": [],
+            "relin_time": [],
+            "iterations": [],
+        }
+
+    # ---------------------------------------------------------------- protocol
+
+    def reset(self, ctx: ControlContext) -> None:
+        """Set up one OSQP workspace per batch member (the only solver set-up of the run)."""
+        if ctx.m != self.m or ctx.n < self.n_model:
+            raise ConfigError(
+                f"controllers.{self.name}",
+                f"the MPC models m={self.m}, n={self.n_model}; the scenario has "
+                f"m={ctx.m}, n={ctx.n}",
+            )
+        self._ctx = ctx
+        self._a_min = max(self.settings.constraints.a_min, ctx.a_min)
+        self._a_max = min(self.settings.constraints.a_max, ctx.a_max)
+        self._reset_stats()
+        self._t = []
+        N = self.settings.horizon
+        F = len(self._families)
+        W = max(1, int(round(self.settings.prediction.equilibrium_window / self.sample_time)))
+        self._members = []
+        for b in range(ctx.batch):
+            lin, qp, K, kh = self._linearization(float(ctx.v_star[b]))
+            nx = lin.model.nx
+            p = self.formulation.param(np.zeros(nx), np.zeros(N), 0.0)
+            q, lo, hi = self.formulation.bounds(
+                qp, p, self._a_min, self._a_max, np.full((F, N), -np.inf)
+            )
+            solver = OSQPSolver(qp, q, lo, hi, self.settings.solver)
+            s_off = np.asarray(ctx.spacing_reference()[b], float) - float(ctx.s_star[b])
+            s_off = np.nan_to_num(s_off, nan=0.0)
+            mem = _Member(solver, lin, qp, K, kh, np.zeros(W), s_off, v_eq=float(ctx.v_star[b]))
+            mem.hist = {k: [] for k in _HIST_KEYS}
+            self._members.append(mem)
+
+    def __call__(self, obs: Observation) -> np.ndarray:
+        ctx = self._ctx
+        if ctx is None:
+            raise RuntimeError("MPCController: call reset(ctx) before the first step")
+        B = ctx.batch
+        out = np.zeros(B)
+        self._t.append(float(obs.t))
+        for b in range(B):
+            t0 = time.perf_counter()
+            mem = self._members[b]
+            try:
+                out[b] = self._step(b, mem, obs)
+            except Exception as err:  # never raise inside the loop
+                self._st["errors"] += 1
+                if len(self._st["error_messages"]) < 5:
+                    self._st["error_messages"].append(f"t={obs.t:g}: {type(err).__name__}: {err}")
+                out[b] = self._hold(mem)
+                self._record_fail(mem, out[b])
+            self._st["step_time"].append(time.perf_counter() - t0)
+        self._st["steps"] += 1
+        return out
+
+    # ---------------------------------------------------------------- one member, one step
+
+    def _observe(self, b: int, mem: _Member, obs: Observation):
+        """Update ``v_eq``; return (x0, xi_full, d, v_ref, s0_meas)."""
+        ctx = self._ctx
+        pred = self.settings.prediction
+        m, cav = self.m, ctx.cav
+        ref_col = 0 if m == 0 else 1
+        v_ref = float(obs.velocity[b, ref_col])
+        mode = pred.equilibrium_mode(self.kind)
+        if mode == "fixed":
+            mem.v_eq = float(ctx.v_star[b])
+        elif math.isfinite(v_ref):
+            W = mem.v_buf.size
+            if mem.v_buf_n == 0:
+                mem.v_buf[:] = v_ref
+                mem.v_buf_n = W
+            else:
+                mem.v_buf[mem.v_buf_i] = v_ref
+            mem.v_buf_i = (mem.v_buf_i + 1) % W
+            mem.v_eq = float(mem.v_buf.mean())
+        v_eq = mem.v_eq
+        s_eq = float(self.system.hdv.equilibrium_spacing(self._clip_v(v_eq)))
+        cols = np.arange(-m, self.n_model + 1) + m + 1
+        x = np.empty(2 * cols.size)
+        x[0::2] = obs.spacing[b, cols] - s_eq - mem.s_off[cols]
+        x[1::2] = obs.velocity[b, cols] - v_eq
+        # FD-LCC: -p_0 relative to a reference moving at v_eq
+        p0 = float(obs.position[b, cav])
+        if math.isnan(mem.p_ref):
+            mem.p_ref = p0
+        xi = -(p0 - mem.p_ref)
+        mem.p_ref += v_eq * self.sample_time
+        if self.kind == "fd_lcc":
+            x[0] = xi if self.settings.weights.position > 0 else 0.0
+        # head prediction
+        N = self.settings.horizon
+        Ts = self.sample_time
+        d0 = (v_ref - v_eq) if math.isfinite(v_ref) else 0.0
+        d = np.full(N, d0)
+        if pred.head == "accel" and math.isfinite(mem.v_ref_prev) and math.isfinite(v_ref):
+            a = float(np.clip((v_ref - mem.v_ref_prev) / Ts, self._a_min, self._a_max))
+            d = d0 + a * np.minimum(np.arange(N) * Ts, pred.head_accel_hold)
+            d = np.maximum(d, -v_eq)
+        mem.v_ref_prev = v_ref
+        if self.kind == "fd_lcc":
+            d_model = np.zeros(N)  # FD-LCC's model has no head input
+        else:
+            d_model = d
+        s0 = float(obs.spacing[b, cav])
+        return x, xi, d, d_model, s_eq, s0
+
+    def _family_bounds(self, mem: _Member, x0, d, s_eq, s0) -> np.ndarray:
+        N = self.settings.horizon
+        v_eq = mem.v_eq
+        out = np.empty((len(self._families), N))
+        for f, fam in enumerate(self._families):
+            base = fam.s_min + fam.t_gap * v_eq
+            if fam.vehicle == 0 and self.kind == "fd_lcc":
+                if not math.isfinite(s0):
+                    out[f] = -np.inf
+                    continue
+                # s_0(k) = s0 + sum_{j<k} (v_ahead_j - v_eq) Ts + (xi_k - xi_0)
+                drift = np.cumsum(d) * self.sample_time
+                out[f] = base - (s0 - x0[0] + drift)
+            else:
+                out[f] = base - s_eq - mem.s_off[fam.vehicle + self.m + 1]
+        return out
+
+    def _relinearize(self, mem: _Member) -> None:
+        pred = self.settings.prediction
+        if not pred.relinearize:
+            return
+        if abs(mem.v_eq - mem.lin.v_lin) <= pred.relinearize_threshold:
+            return
+        t0 = time.perf_counter()
+        try:
+            lin, qp, K, kh = self._linearization(mem.v_eq)
+            mem.solver.update_matrices(qp)
+        except Exception as err:
+            self._st["relinearize_failures"] += 1
+            if len(self._st["error_messages"]) < 5:
+                self._st["error_messages"].append(f"re-linearisation at {mem.v_eq:.2f}: {err}")
+            return
+        mem.lin, mem.qp, mem.fb_K, mem.fb_kh = lin, qp, K, kh
+        self._st["relinearizations"] += 1
+        self._st["relin_time"].append(time.perf_counter() - t0)
+
+    def _step(self, b: int, mem: _Member, obs: Observation) -> float:
+        st = self._st
+        x0, xi, d, d_model, s_eq, s0 = self._observe(b, mem, obs)
+        # measured constraint violation (absolute spacing to the vehicle ahead)
+        c = self.settings.constraints
+        v0 = float(obs.velocity[b, self._ctx.cav])
+        if c.spacing_ahead and math.isfinite(s0) and math.isfinite(v0):
+            viol = c.s_min + c.t_gap * v0 - s0
+            if viol > 1e-6:
+                st["violation_steps"] += 1
+                st["max_violation"] = max(st["max_violation"], viol)
+        self._relinearize(mem)
+        lin = mem.lin
+        form = self.formulation
+        N = self.settings.horizon
+        if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(d_model))):
+            return self._fallback(mem, x0, xi, d_model, "nonfinite_state")
+        p = form.param(x0, d_model, mem.u_prev)
+        fb = self._family_bounds(mem, x0, d, s_eq, s0)
+        q, lo, hi = form.bounds(mem.qp, p, self._a_min, self._a_max, fb)
+        warm = mem.warm
+        res = mem.solver.solve(
+            q, lo, hi,
+            None if warm is None else warm[0][self._shift_z],
+            None if warm is None else warm[1][self._shift_y],
+        )  # fmt: skip
+        st["solves"] += 1
+        st["osqp_time"].append(res.run_time)
+        st["iterations"].append(res.iterations)
+        pname = POLISH_NAMES.get(res.polish, str(res.polish))
+        st["polish"][pname] = st["polish"].get(pname, 0) + 1
+        if not res.ok:
+            st["qp_failures"][res.status] = st["qp_failures"].get(res.status, 0) + 1
+            return self._fallback(mem, x0, xi, d_model, res.status)
+        z = res.z
+        mem.warm = (z, res.y)
+        U = z[:N]
+        slack = float(z[N:].max()) if z.size > N else 0.0
+        if slack > 1e-6:
+            st["slack_steps"] += 1
+            st["max_slack"] = max(st["max_slack"], slack)
+        mem.plan = U.copy()
+        mem.plan_age = 0
+        u_model = float(U[0])
+        cmd = self._total(lin, x0, d_model[0], u_model)
+        mem.u_prev = cmd if self.settings.weights.input_on == "total" else u_model
+        mem.cmd_prev = cmd
+        if self.record:
+            self._record(mem, cmd, u_model, 0, res, slack, x0, d_model, U)
+        return cmd
+
+    def _total(self, lin: Linearization, x0, d0: float, u_model: float) -> float:
+        u = u_model
+        if self.kind == "cf_lcc":
+            u += float(lin.K_law @ x0) + lin.k_h * d0
+        return float(np.clip(u, self._a_min, self._a_max))
+
+    def _fallback(self, mem: _Member, x0, xi, d_model, why: str) -> float:
+        st = self._st
+        N = self.settings.horizon
+        lin = mem.lin
+        if (
+            mem.plan is not None
+            and mem.plan_age + 1 < N
+            and np.all(np.isfinite(x0))
+            and np.all(np.isfinite(d_model))
+        ):
+            mem.plan_age += 1
+            u_model = float(mem.plan[mem.plan_age])
+            cmd = self._total(lin, x0, d_model[0], u_model)
+            st["fallback_shifted"] += 1
+            code = 1
+        else:
+            xs = np.array(x0, dtype=float)
+            if self.kind == "fd_lcc":
+                xs[0] = xi
+            cmd = float(mem.fb_K @ xs + mem.fb_kh * (d_model[0] if d_model.size else 0.0))
+            if math.isfinite(cmd):
+                cmd = float(np.clip(cmd, self._a_min, self._a_max))
+                u_model = cmd
+                if self.kind == "cf_lcc" and np.all(np.isfinite(x0)):
+                    u_model = cmd - float(lin.K_law @ x0) - lin.k_h * d_model[0]
+                mem.plan = None
+                st["fallback_static"] += 1
+                code = 2
+            else:
+                cmd = self._hold(mem)
+                self._record_fail(mem, cmd)
+                return cmd
+        mem.u_prev = cmd if self.settings.weights.input_on == "total" else u_model
+        mem.cmd_prev = cmd
+        if self.record:
+            self._record(mem, cmd, u_model, code, None, 0.0, x0, d_model, None)
+        return cmd
+
+    def _hold(self, mem: _Member) -> float:
+        self._st["fallback_hold"] += 1
+        cmd = mem.cmd_prev if math.isfinite(mem.cmd_prev) else 0.0
+        return float(np.clip(cmd, self._a_min, self._a_max))
+
+    # ---------------------------------------------------------------- history
+
+    def _record(self, mem: _Member, cmd, u_model, code, res, slack, x0, d, U) -> None:
+        h = mem.hist
+        N = self.settings.horizon
+        h["u"].append(cmd)
+        h["u_model"].append(u_model)
+        h["status"].append(code)
+        h["osqp_time"].append(math.nan if res is None else res.run_time)
+        h["iterations"].append(-1 if res is None else res.iterations)
+        h["slack"].append(slack)
+        h["v_eq"].append(mem.v_eq)
+        h["v_lin"].append(mem.lin.v_lin)
+        h["x0"].append(np.asarray(x0, float).copy())
+        h["d"].append(np.asarray(d, float).copy())
+        h["plan"].append(np.full(N, np.nan) if U is None else np.asarray(U, float).copy())
+        h["lin"].append(mem.lin)
+
+    def _record_fail(self, mem: _Member, cmd: float) -> None:
+        if not self.record:
+            return
+        nx = mem.lin.model.nx
+        N = self.settings.horizon
+        self._record(mem, cmd, math.nan, 3, None, 0.0, np.full(nx, np.nan), np.full(N, np.nan),
+                     None)
+
+    def history(self) -> dict[str, np.ndarray]:
+        """Per-sample record of the last run, arrays with leading axes ``(batch, samples)``.
+
+        Keys: ``t (S,)``; ``u`` applied command; ``u_model`` model input (CF-LCC: ``u_hat``);
+        ``status`` (:data:`STATUS_CODES`); ``step_time`` (s, whole controller step) and
+        ``osqp_time`` (s, OSQP run time, NaN when not solved); ``iterations``; ``slack`` (largest
+        spacing slack, m); ``v_eq``, ``v_lin``; ``x0 (B, S, nx)`` error state; ``d (B, S, N)``
+        head prediction; ``plan (B, S, N)`` optimal model inputs; ``predicted_states
+        (B, S, N+1, nx)``; ``predicted_velocity`` and ``predicted_spacing`` ``(B, S, N+1, V)``
+        absolute values for the modelled vehicles ``-m..n_model`` (``state_names`` tells the
+        order; FD-LCC's CAV spacing column is NaN); ``pred_time (N+1,)`` offsets (s).
+        """
+        if not self._members or not self.record:
+            return {}
+        N = self.settings.horizon
+        out: dict[str, Any] = {"t": np.array(self._t)}
+        B = len(self._members)
+        S = min(len(m.hist["u"]) for m in self._members)
+        for key in ("u", "u_model", "status", "osqp_time", "iterations", "slack", "v_eq", "v_lin"):
+            out[key] = np.array([m.hist[key][:S] for m in self._members])
+        out["step_time"] = np.array(self._st["step_time"][: S * B]).reshape(S, B).T
+        for key in ("x0", "d", "plan"):
+            out[key] = np.array([np.array(m.hist[key][:S]) for m in self._members])
+        nx = out["x0"].shape[-1]
+        X = np.full((B, S, N + 1, nx), np.nan)
+        for b, mem in enumerate(self._members):
+            for k in range(S):
+                U = mem.hist["plan"][k]
+                if np.all(np.isfinite(U)):
+                    X[b, k] = mem.hist["lin"][k].predict(mem.hist["x0"][k], mem.hist["d"][k], U)
+        out["predicted_states"] = X
+        v_eq = out["v_eq"][:, :, None, None]
+        s_eq = np.asarray(
+            self.system.hdv.equilibrium_spacing(np.clip(out["v_eq"], 1.0, self._v_hi - 1.0))
+        )[:, :, None, None]
+        out["predicted_velocity"] = X[..., 1::2] + v_eq
+        cols = np.arange(-self.m, self.n_model + 1) + self.m + 1
+        offs = np.array([mem.s_off[cols] for mem in self._members])[:, None, None, :]
+        sp = X[..., 0::2] + s_eq + offs
+        if self.kind == "fd_lcc":
+            sp[..., self.m] = np.nan
+        out["predicted_spacing"] = sp
+        out["pred_time"] = np.arange(N + 1) * self.sample_time
+        out["state_names"] = np.array(self._lin0.model.state_names)
+        return out
+
+    # ---------------------------------------------------------------- reports
+
+    def describe(self) -> dict[str, Any]:
+        """Horizon, weights, constraints, prediction, solver and fallback settings."""
+        import osqp
+
+        s = self.settings
+        d = s.as_dict()
+        d.update(
+            {
+                "type": "mpc",
+                "name": self.name,
+                "kind": self.kind,
+                "m": self.m,
+                "n_model": self.n_model,
+                "equilibrium": s.prediction.equilibrium_mode(self.kind),
+                "state_names": list(self._lin0.model.state_names),
+                "qp": {
+                    "formulation": "condensed, CasADi symbolic (built once)",
+                    "variables": self.formulation.nz,
+                    "constraints": self.formulation.nc,
+                    "spacing_families": [f.vehicle for f in self._families],
+                    "solver": f"osqp {osqp.__version__}",
+                },
+                "fallback": {
+                    "source": self.fallback_source,
+                    "semantics": self.fallback.semantics,
+                    "gains": dict(self.fallback.gains),
+                },
+            }
+        )
+        d["solver"]["name"] = "osqp"
+        return d
+
+    def stats(self) -> dict[str, Any]:
+        """Solve-time distribution, fallbacks, QP failures, slack use and measured violations.
+
+        Times are in milliseconds: ``step_time_ms`` is the whole controller step of one batch
+        member (state, QP update and solve, fallback), ``osqp_time_ms`` OSQP's own run time.
+        ``violation_steps`` / ``max_violation_m`` compare the MEASURED spacing with
+        ``s_min + t_gap v_0`` at every sample; ``slack_steps`` / ``max_slack_m`` are the
+        predicted violations the QP accepted.
+        """
+        st = self._st
+
+        def dist(values):
+            a = np.asarray(values, float) * 1e3
+            if a.size == 0:
+                return {"median": None, "p99": None, "max": None, "mean": None, "count": 0}
+            return {
+                "median": float(np.median(a)),
+                "p99": float(np.percentile(a, 99)),
+                "max": float(a.max()),
+                "mean": float(a.mean()),
+                "count": int(a.size),
+            }
+
+        it = np.asarray(st["iterations"], float)
+        fallbacks = st["fallback_shifted"] + st["fallback_static"] + st["fallback_hold"]
+        return {
+            "steps": st["steps"],
+            "solves": st["solves"],
+            "step_time_ms": dist(st["step_time"]),
+            "osqp_time_ms": dist(st["osqp_time"]),
+            "relinearize_time_ms": dist(st["relin_time"]),
+            "iterations": {
+                "median": float(np.median(it)) if it.size else None,
+                "max": int(it.max()) if it.size else None,
+            },
+            "qp_failures": dict(st["qp_failures"]),
+            "polish": dict(st["polish"]),
+            "fallbacks": fallbacks,
+            "fallback_shifted": st["fallback_shifted"],
+            "fallback_static": st["fallback_static"],
+            "fallback_hold": st["fallback_hold"],
+            "errors": st["errors"],
+            "error_messages": list(st["error_messages"]),
+            "relinearizations": st["relinearizations"],
+            "relinearize_failures": st["relinearize_failures"],
+            "slack_steps": st["slack_steps"],
+            "max_slack_m": st["max_slack"],
+            "violation_steps": st["violation_steps"],
+            "max_violation_m": st["max_violation"],
+        }
+
+
+_HIST_KEYS = ("u", "u_model", "status", "osqp_time", "iterations", "slack", "v_eq", "v_lin",
+              "x0", "d", "plan", "lin")
+
+
+def _state_weights(model, settings):
+    from lcc_synth.mpc.formulation import state_weights
+
+    return state_weights(model, settings)
+
+
+def _load_gains_file(path: Path, system, field_name: str) -> StaticGains:
+    """Read a gains file (contract 3 of the brief) as the fallback gain."""
+    if not path.is_file():
+        raise ConfigError(field_name, f"no such gains file: {path}")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as err:
+        raise ConfigError(field_name, f"{path} is not valid JSON: {err}") from None
+    for key in ("kind", "m", "n", "semantics", "gains"):
+        if key not in data:
+            raise ConfigError(field_name, f"{path} lacks the key {key!r}")
+    if data["kind"] != system.kind or data["m"] != system.m:
+        raise ConfigError(
+            field_name,
+            f"{path} holds gains for kind={data['kind']!r}, m={data['m']}; the MPC controls "
+            f"kind={system.kind!r}, m={system.m}",
+        )
+    if not isinstance(data["gains"], dict):
+        raise ConfigError(field_name, f"{path}: gains must be an object")
+    try:
+        return StaticGains(data["gains"], data["semantics"])
+    except ConfigError as err:
+        raise ConfigError(f"{field_name}.{err.field}", err.message) from None
+
+
+def mpc_controller_from_table(name: str, table, system, source: str | None = None):
+    """Build an :class:`MPCController` from a ``[controllers.NAME]`` table (``type = "mpc"``).
+
+    Parameters
+    ----------
+    name : str
+        Controller name (table key).
+    table : mapping
+        The table; see :mod:`lcc_synth.mpc.settings` for the keys.
+    system : lcc_synth.problem.System
+    source : str, optional
+        The problem file: errors name it and ``fallback_gains_file`` is relative to its folder.
+    """
+    field_name = f"controllers.{name}"
+    try:
+        settings = settings_from_table(table, field_name)
+        fallback = None
+        fb_source = "paper"
+        if settings.fallback_gains_file:
+            path = Path(settings.fallback_gains_file)
+            if not path.is_absolute() and source:
+                path = Path(source).parent / path
+            fallback = _load_gains_file(path, system, f"{field_name}.fallback_gains_file")
+            fb_source = str(path)
+        try:
+            return MPCController(name, settings, system, fallback, fb_source)
+        except ConfigError as err:
+            if err.field.startswith(field_name):
+                raise
+            raise ConfigError(f"{field_name}.{err.field}", err.message) from None
+    except ConfigError as err:
+        raise err.with_source(source) if source and not err.source else err from None

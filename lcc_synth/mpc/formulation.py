@@ -1,0 +1,357 @@
+"""The MPC's quadratic program, formulated once with CasADi.
+
+Prediction model: the LCC error model of :mod:`lcc_synth.models` discretised exactly (ZOH) at the
+controller's sample time ``Ts``::
+
+    x_{k+1} = Ad x_k + Bd u_k + Hd d_k,          k = 0 .. N-1
+
+with ``d_k`` the predicted head-vehicle velocity error (held constant by default). The QP is
+condensed: the decision vector is ``z = [u_0 .. u_{N-1}, e_1 .. e_{N*F}]`` (model inputs and one
+spacing slack per constrained family and step), and
+
+    min  sum_{k=1}^{N-1} r_k' Q r_k + r_N' P r_N + sum_k w_u a_k^2 + w_j (a_k - a_{k-1})^2
+         + rho_1 sum e + rho_2 sum e^2,       r_k = x_k - x_dir d_k
+    s.t. a_min <= a_k = K_law x_k + k_h d_k + u_k <= a_max      (hard, total CAV acceleration)
+         c_f' x_k + e_{f,k} >= b_{f,k}                           (soft spacing, k = 1..N)
+         e >= 0
+
+``x_dir d`` is the steady state of the string when the head's velocity error is ``d``: every
+velocity error equals ``d`` and every spacing error is ``(alpha2 - alpha3) / alpha1 * d`` (the
+linearised equilibrium-spacing curve, ``ds*/dv``). So the cost regulates the string towards
+the equilibrium consistent with the PREDICTED head velocity, not towards ``v_eq`` (which lags
+the head after a hard brake and would otherwise pull against the safety constraint); with
+``d = 0`` it is the plain regulator. FD-LCC (no head input) has ``x_dir = 0``.
+
+``K_law, k_h`` are the CAV's linear HDV law for CF-LCC (whose input is the added ``u_hat``) and
+zero otherwise, so ``a_k`` is the CAV's total acceleration; with ``weights.input_on = "model"``
+the input and jerk weights apply to ``u_k`` (= ``u_hat``) instead. ``a_{-1}`` is the previous
+command. ``P`` solves the discrete algebraic Riccati equation of the same stage cost (with the
+cross term ``w_u K_law' u`` when the total acceleration of CF-LCC is weighted); for FD-LCC with a
+zero position weight it is solved on the model without the marginal ``-p_0`` state, which no
+other state depends on (its row and column of ``P`` are zero).
+
+The model matrices ``theta = (Ad, Bd, Hd, P, K_law, k_h)`` are CasADi symbols too, so the
+sparsity pattern of the Hessian and of the constraint matrix is structural and never changes:
+re-linearising at a new equilibrium only re-evaluates the numeric values (one CasADi call) and
+hands them to OSQP with ``update(Px=..., Ax=...)``. The vectors are affine in the step parameter
+``p = [x_0, d_0..d_{N-1}, u_{-1}]``: ``q = Qp p + q0`` and the constraint offset ``Gp p + g0``
+(``q0`` holds the l1 slack penalty), extracted as dense matrices once per linearisation, so a
+control step is two small
+matrix-vector products plus the OSQP update and solve.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+
+from lcc_synth.errors import ConfigError
+from lcc_synth.feedback import StaticGains, cav_feedback
+from lcc_synth.hdv import CarFollowingModel
+from lcc_synth.models import LCCModel, discretize, model_from_hdv
+from lcc_synth.mpc.settings import MPCSettings
+
+__all__ = [
+    "Family",
+    "Linearization",
+    "QPMatrices",
+    "Formulation",
+    "state_weights",
+    "terminal_cost",
+    "linearize",
+    "steady_direction",
+]
+
+
+@dataclass(frozen=True)
+class Family:
+    """One soft spacing constraint family ``x_k[s] - t_gap * x_k[v] + e >= bound`` (k = 1..N).
+
+    ``vehicle`` is the paper's index (0 = the CAV's spacing to the vehicle ahead).
+    """
+
+    vehicle: int
+    s_index: int
+    v_index: int
+    t_gap: float
+    s_min: float
+
+
+@dataclass(frozen=True, eq=False)
+class Linearization:
+    """The discrete prediction model at one equilibrium velocity ``v_lin``."""
+
+    v_lin: float
+    model: LCCModel
+    Ad: np.ndarray
+    Bd: np.ndarray
+    Hd: np.ndarray
+    P: np.ndarray
+    K_law: np.ndarray
+    k_h: float
+    x_dir: np.ndarray
+
+    def predict(self, x0: np.ndarray, d: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Predicted states ``(N+1, nx)`` for inputs ``u`` and head errors ``d`` (both ``(N,)``)."""
+        X = np.empty((len(u) + 1, x0.size))
+        X[0] = x0
+        for k in range(len(u)):
+            X[k + 1] = self.Ad @ X[k] + self.Bd * u[k] + self.Hd * d[k]
+        return X
+
+
+@dataclass(frozen=True, eq=False)
+class QPMatrices:
+    """Numeric QP data of one linearisation (``P`` upper triangular, CSC)."""
+
+    P: sp.csc_matrix
+    A: sp.csc_matrix
+    Qp: np.ndarray
+    Gp: np.ndarray
+    q0: np.ndarray
+    g0: np.ndarray
+
+
+def state_weights(model: LCCModel, settings: MPCSettings) -> np.ndarray:
+    """Diagonal of ``Q``: velocity weight on every ``v_i``, spacing weights on ``s_i``."""
+    w = settings.weights
+    q = np.empty(model.nx)
+    for j, i in enumerate(model.vehicles):
+        if i == 0:
+            q[2 * j] = w.position if model.kind == "fd_lcc" else w.cav_spacing
+        else:
+            q[2 * j] = w.spacing
+        q[2 * j + 1] = w.velocity
+    return q
+
+
+def terminal_cost(
+    model: LCCModel,
+    Ad: np.ndarray,
+    Bd: np.ndarray,
+    q: np.ndarray,
+    r: float,
+    K_law: np.ndarray | None = None,
+):
+    """Terminal weight ``P`` from the discrete Riccati equation.
+
+    The stage cost is ``x'diag(q)x + r (K_law x + u)^2`` (``K_law`` = 0 when omitted).
+
+    For FD-LCC with zero weight on ``-p_0`` the position state (eigenvalue 1, observed by no
+    other state and unweighted) makes the Riccati equation ill-posed; it is removed, and ``P``
+    gets a zero row and column for it.
+
+    Raises
+    ------
+    ConfigError
+        When the Riccati equation has no stabilising solution.
+    """
+    keep = np.arange(model.nx)
+    if model.kind == "fd_lcc" and q[0] == 0.0:
+        keep = keep[1:]
+    A_r = Ad[np.ix_(keep, keep)]
+    B_r = Bd[keep].reshape(-1, 1)
+    Q_r = np.diag(q[keep])
+    S_r = None
+    if K_law is not None and np.any(K_law != 0.0):
+        k = np.asarray(K_law, float)[keep].reshape(-1, 1)
+        Q_r = Q_r + r * (k @ k.T)
+        S_r = r * k
+    try:
+        P_r = sla.solve_discrete_are(A_r, B_r, Q_r, np.array([[r]]), s=S_r)
+    except (np.linalg.LinAlgError, ValueError) as err:
+        raise ConfigError(
+            "weights",
+            f"the terminal Riccati equation has no stabilising solution ({err}); "
+            "give positive velocity and spacing weights",
+        ) from None
+    if not np.all(np.isfinite(P_r)):
+        raise ConfigError("weights", "the terminal Riccati solution is not finite")
+    P = np.zeros((model.nx, model.nx))
+    P[np.ix_(keep, keep)] = 0.5 * (P_r + P_r.T)
+    return P
+
+
+def linearize(
+    kind: str,
+    m: int,
+    n: int,
+    hdv: CarFollowingModel,
+    v_lin: float,
+    settings: MPCSettings,
+) -> Linearization:
+    """Linearise the HDV model at ``v_lin`` and build the discrete prediction model."""
+    model = model_from_hdv(kind, m, n, hdv, v_lin, warn=False)
+    Ad, BH = discretize(model.A, np.hstack([model.B, model.H]), settings.sample_time)
+    Bd, Hd = BH[:, 0].copy(), BH[:, 1].copy()
+    q = state_weights(model, settings)
+    if kind == "cf_lcc":
+        K_law, k_h = cav_feedback(model, StaticGains({}, "added"))
+        K_law = np.asarray(K_law, float)
+    else:
+        K_law, k_h = np.zeros(model.nx), 0.0
+    total = settings.weights.input_on == "total"
+    P = terminal_cost(model, Ad, Bd, q, settings.weights.input, K_law if total else None)
+    return Linearization(
+        float(v_lin), model, Ad, Bd, Hd, P, K_law, float(k_h), steady_direction(model)
+    )
+
+
+def steady_direction(model: LCCModel) -> np.ndarray:
+    """``x_dir``: the equilibrium error state per unit head-velocity error (zero for FD-LCC)."""
+    x = np.zeros(model.nx)
+    if model.kind == "fd_lcc":
+        return x
+    for j, i in enumerate(model.vehicles):
+        c = model.coefficients[i]
+        x[2 * j] = (c.alpha2 - c.alpha3) / c.alpha1
+        x[2 * j + 1] = 1.0
+    return x
+
+
+def _to_csc(dm) -> sp.csc_matrix:
+    s = dm.sparsity()
+    colind, row = s.get_ccs()
+    data = np.array(dm.nonzeros(), dtype=float)
+    return sp.csc_matrix((data, np.asarray(row), np.asarray(colind)), shape=dm.shape)
+
+
+class Formulation:
+    """The symbolic QP of one MPC layout (kind, sizes, weights, constraint families).
+
+    Built once per controller (about 0.3 s); :meth:`matrices` evaluates it at a linearisation.
+
+    Parameters
+    ----------
+    kind : str
+        Model kind; ``"cf_lcc"`` adds the HDV law to the input constraint.
+    nx : int
+        Number of states.
+    settings : MPCSettings
+    q : numpy.ndarray
+        Diagonal of the stage weight ``Q``.
+    families : list of Family
+        Soft spacing constraints.
+    """
+
+    def __init__(self, kind: str, nx: int, settings: MPCSettings, q, families: list[Family]):
+        import casadi as ca
+
+        self.kind = kind
+        self.nx = nx
+        self.N = N = settings.horizon
+        self.families = list(families)
+        F = len(self.families)
+        self.nz = N + F * N
+        self.nc = N + 2 * F * N
+        self.n_param = nx + N + 1
+        w = settings.weights
+
+        Ad = ca.MX.sym("Ad", nx, nx)
+        Bd = ca.MX.sym("Bd", nx, 1)
+        Hd = ca.MX.sym("Hd", nx, 1)
+        P = ca.MX.sym("P", nx, nx)
+        xdir = ca.MX.sym("xdir", nx)
+        theta = [Ad, Bd, Hd, P, xdir]
+        if kind == "cf_lcc":
+            K = ca.MX.sym("K", 1, nx)
+            kh = ca.MX.sym("kh")
+            theta += [K, kh]
+        x0 = ca.MX.sym("x0", nx)
+        d = ca.MX.sym("d", N)
+        u_prev = ca.MX.sym("u_prev")
+        U = ca.MX.sym("U", N)
+        E = ca.MX.sym("E", F * N)
+        Qd = ca.DM(np.asarray(q, dtype=float))
+
+        x = x0
+        J = 0
+        g_in = []
+        g_sp = [[] for _ in range(F)]
+        a_prev = u_prev
+        for k in range(N):
+            a_k = K @ x + kh * d[k] + U[k] if kind == "cf_lcc" else U[k]
+            g_in.append(a_k)
+            weighted = a_k if w.input_on == "total" else U[k]
+            x = Ad @ x + Bd * U[k] + Hd * d[k]
+            J += w.input * weighted**2
+            if w.jerk > 0:
+                J += w.jerk * (weighted - a_prev) ** 2
+            a_prev = weighted
+            if k < N - 1:
+                r = x - xdir * d[k + 1]
+                J += ca.dot(Qd * r, r)
+            for f, fam in enumerate(self.families):
+                g_sp[f].append(x[fam.s_index] - fam.t_gap * x[fam.v_index] + E[f * N + k])
+        r = x - xdir * d[N - 1]
+        J += ca.bilin(P, r, r)
+        if F:
+            J += w.slack * ca.sum1(E) + w.slack_quadratic * ca.dot(E, E)
+        z = ca.vertcat(U, E)
+        p = ca.vertcat(x0, d, u_prev)
+        g = ca.vertcat(*g_in, *[r for fam_rows in g_sp for r in fam_rows], E)
+
+        H, grad = ca.hessian(J, z)
+        zero = ca.MX.zeros(z.shape)
+        grad0 = ca.substitute(grad, z, zero)
+        g_at0 = ca.substitute(g, z, zero)
+        Qp = ca.jacobian(grad0, p)
+        Gp = ca.jacobian(g_at0, p)
+        pzero = ca.MX.zeros(p.shape)
+        q0 = ca.substitute(grad0, p, pzero)
+        g0 = ca.substitute(g_at0, p, pzero)
+        A = ca.jacobian(g, z)
+        self._fun = ca.Function("mpc_qp", theta, [ca.triu(H), A, Qp, Gp, q0, g0])
+
+    def theta(self, lin: Linearization) -> list:
+        """Numeric arguments of the CasADi function for ``lin``."""
+        args = [lin.Ad, lin.Bd, lin.Hd, lin.P, lin.x_dir]
+        if self.kind == "cf_lcc":
+            args += [lin.K_law.reshape(1, -1), lin.k_h]
+        return args
+
+    def matrices(self, lin: Linearization) -> QPMatrices:
+        """Evaluate the QP data at ``lin`` (fixed sparsity pattern, see the module docstring)."""
+        H, A, Qp, Gp, q0, g0 = self._fun(*self.theta(lin))
+        return QPMatrices(
+            _to_csc(H),
+            _to_csc(A),
+            np.array(Qp),
+            np.array(Gp),
+            np.array(q0).reshape(-1),
+            np.array(g0).reshape(-1),
+        )
+
+    def param(self, x0: np.ndarray, d: np.ndarray, u_prev: float) -> np.ndarray:
+        """The step parameter ``p = [x0, d, u_prev]``."""
+        return np.concatenate([x0, d, [u_prev]])
+
+    def bounds(self, qp: QPMatrices, p: np.ndarray, a_min: float, a_max: float,
+               fam_bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(q, l, u)`` of OSQP for parameter ``p``.
+
+        ``fam_bounds`` is ``(F, N)``: the right-hand side ``b_{f,k}`` of every spacing row
+        (``-inf`` disables a row).
+        """
+        N, F = self.N, len(self.families)
+        off = qp.Gp @ p + qp.g0
+        lo = np.empty(self.nc)
+        hi = np.empty(self.nc)
+        lo[:N] = a_min
+        hi[:N] = a_max
+        lo[N:N + F * N] = np.asarray(fam_bounds, float).reshape(-1)
+        hi[N:N + F * N] = np.inf
+        lo[N + F * N:] = 0.0
+        hi[N + F * N:] = np.inf
+        return qp.Qp @ p + qp.q0, lo - off, hi - off
+
+    def shift_indices(self) -> tuple[np.ndarray, np.ndarray]:
+        """Index arrays that shift a primal / dual solution by one step (warm start)."""
+        N = self.N
+        base = np.minimum(np.arange(N) + 1, N - 1)
+        zi = np.concatenate([base + b * N for b in range(self.nz // N)])
+        yi = np.concatenate([base + b * N for b in range(self.nc // N)])
+        return zi, yi

@@ -1,0 +1,358 @@
+"""Settings of the LCC model predictive controller and their validation.
+
+A problem file selects the MPC with a controller table (every key optional)::
+
+    [controllers.mpc]
+    type = "mpc"
+    sample_time = 0.1          # controller period (s); the simulator holds the command between
+    horizon = 50               # prediction steps N (horizon N * sample_time seconds)
+    n_model = 10               # HDVs behind that the MPC predicts (default: all of [system].n)
+    fallback_gains_file = "gains.json"   # static fallback gain (default: the paper's gain)
+
+    [controllers.mpc.weights]  # stage cost x'Qx + w_input u^2 + w_jerk (du)^2
+    velocity = 1.0             # velocity error of every vehicle, (m/s)^-2
+    spacing = 0.5              # spacing error of every HDV, m^-2
+    spacing_cav = 0.5          # the CAV's own spacing error s_0 (LCC / CF-LCC); default = spacing
+    position = 0.0             # FD-LCC's -p_0 state (marginally stable; 0 = not regulated)
+    input = 1.0                # CAV acceleration (see input_on), > 0
+    jerk = 0.0                 # change of that acceleration between steps
+    input_on = "total"         # CF-LCC: "total" CAV acceleration or the "model" input u_hat
+    slack = 100.0              # exact (l1) penalty on spacing-constraint violation, per m and step
+    slack_quadratic = 1.0      # small quadratic slack term (keeps the QP strictly convex)
+
+    [controllers.mpc.constraints]
+    a_min = -5.0               # hard bounds on the CAV's total acceleration (m/s^2)
+    a_max = 2.0
+    s_min = 5.0                # soft safe spacing to the vehicle ahead, ABSOLUTE metres:
+    t_gap = 0.8                #   s_0 >= s_min + t_gap * v_0
+    spacing_ahead = true       # enforce it (needs a vehicle ahead)
+    behind = []                # HDVs behind with soft bounds s_i >= s_min_behind + t_gap_behind v_i
+    s_min_behind = 5.0
+    t_gap_behind = 0.8
+
+    [controllers.mpc.prediction]
+    head = "constant"          # "constant": head velocity held; "accel": its measured
+    head_accel_hold = 1.0      #   acceleration held for this long (s), then constant
+    equilibrium = "moving_average"   # or "fixed" (system v_star); FD-LCC default: "fixed"
+    equilibrium_window = 5.0   # moving-average window (s)
+    relinearize = false        # re-linearise the HDV model when v_eq drifts ...
+    relinearize_threshold = 1.0     # ... by more than this (m/s)
+
+    [controllers.mpc.solver]   # OSQP
+    eps_abs = 1.0e-6
+    eps_rel = 1.0e-6
+    max_iter = 10000
+    polish = true
+    warm_start = true
+    time_limit = 0.0           # s, 0 = none
+
+Every bad value is a :class:`~lcc_synth.errors.ConfigError` naming the dotted field.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+from lcc_synth.errors import ConfigError
+from lcc_synth.problem import (
+    check_keys,
+    get_bool,
+    get_int,
+    get_number,
+    get_str,
+    get_table,
+)
+
+__all__ = [
+    "Weights",
+    "Constraints",
+    "Prediction",
+    "SolverSettings",
+    "MPCSettings",
+    "settings_from_table",
+]
+
+HEAD_PREDICTIONS = ("constant", "accel")
+INPUT_ON = ("total", "model")
+EQUILIBRIA = ("moving_average", "fixed")
+
+
+@dataclass(frozen=True)
+class Weights:
+    """Cost weights (all >= 0; ``input`` > 0 so the QP is strictly convex)."""
+
+    velocity: float = 1.0
+    spacing: float = 0.5
+    spacing_cav: float | None = None
+    position: float = 0.0
+    input: float = 1.0
+    jerk: float = 0.0
+    input_on: str = "total"
+    slack: float = 100.0
+    slack_quadratic: float = 1.0
+
+    @property
+    def cav_spacing(self) -> float:
+        """Weight of the CAV's own spacing error (``spacing`` unless set)."""
+        return self.spacing if self.spacing_cav is None else self.spacing_cav
+
+
+@dataclass(frozen=True)
+class Constraints:
+    """Hard input bounds and soft absolute spacing bounds."""
+
+    a_min: float = -5.0
+    a_max: float = 2.0
+    s_min: float = 5.0
+    t_gap: float = 0.8
+    spacing_ahead: bool = True
+    behind: tuple[int, ...] = ()
+    s_min_behind: float = 5.0
+    t_gap_behind: float = 0.8
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """Head-vehicle prediction and equilibrium estimation."""
+
+    head: str = "constant"
+    head_accel_hold: float = 1.0
+    equilibrium: str | None = None  # None: "fixed" for FD-LCC, else "moving_average"
+    equilibrium_window: float = 5.0
+    relinearize: bool = False
+    relinearize_threshold: float = 1.0
+
+    def equilibrium_mode(self, kind: str) -> str:
+        """The estimator used for a model of ``kind``."""
+        if self.equilibrium is not None:
+            return self.equilibrium
+        return "fixed" if kind == "fd_lcc" else "moving_average"
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """OSQP settings (tight by default: the applied input must match an exact QP solution)."""
+
+    eps_abs: float = 1.0e-6
+    eps_rel: float = 1.0e-6
+    max_iter: int = 10000
+    polish: bool = True
+    warm_start: bool = True
+    time_limit: float = 0.0
+
+    def osqp_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of ``osqp.OSQP.setup``."""
+        out = {
+            "eps_abs": self.eps_abs,
+            "eps_rel": self.eps_rel,
+            "max_iter": self.max_iter,
+            "polishing": self.polish,
+            "polish_refine_iter": 5,
+            "warm_starting": self.warm_start,
+            "verbose": False,
+        }
+        if self.time_limit > 0:
+            out["time_limit"] = self.time_limit
+        return out
+
+
+@dataclass(frozen=True)
+class MPCSettings:
+    """Everything that defines the MPC (see the module docstring for the meaning)."""
+
+    sample_time: float = 0.1
+    horizon: int = 50
+    n_model: int | None = None
+    weights: Weights = field(default_factory=Weights)
+    constraints: Constraints = field(default_factory=Constraints)
+    prediction: Prediction = field(default_factory=Prediction)
+    solver: SolverSettings = field(default_factory=SolverSettings)
+    fallback_gains_file: str | None = None
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-serialisable view."""
+        out = asdict(self)
+        out["constraints"]["behind"] = list(self.constraints.behind)
+        return out
+
+
+def _pos(value: float, name: str, strict: bool = False) -> None:
+    import math
+
+    ok = isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+    ok = ok and (value > 0 if strict else value >= 0)
+    if not ok:
+        raise ConfigError(name, f"must be {'> 0' if strict else '>= 0'}, got {value!r}")
+
+
+def validate(s: MPCSettings, field_prefix: str = "") -> None:
+    """Check the cross-field rules; raise :class:`ConfigError` naming the field."""
+    pre = f"{field_prefix}." if field_prefix else ""
+    _pos(s.sample_time, f"{pre}sample_time", strict=True)
+    if isinstance(s.horizon, bool) or not isinstance(s.horizon, int) or s.horizon < 1:
+        raise ConfigError(f"{pre}horizon", f"must be an integer >= 1, got {s.horizon!r}")
+    if s.n_model is not None and (not isinstance(s.n_model, int) or s.n_model < 0):
+        raise ConfigError(f"{pre}n_model", f"must be an integer >= 0, got {s.n_model!r}")
+    w = s.weights
+    for name in ("velocity", "spacing", "position", "jerk", "slack", "slack_quadratic"):
+        _pos(getattr(w, name), f"{pre}weights.{name}")
+    if w.spacing_cav is not None:
+        _pos(w.spacing_cav, f"{pre}weights.spacing_cav")
+    _pos(w.input, f"{pre}weights.input", strict=True)
+    if w.input_on not in INPUT_ON:
+        raise ConfigError(
+            f"{pre}weights.input_on", f"must be one of {list(INPUT_ON)}, got {w.input_on!r}"
+        )
+    c = s.constraints
+    if not c.a_min < 0 < c.a_max:
+        if not c.a_min < c.a_max:
+            raise ConfigError(
+                f"{pre}constraints.a_min",
+                f"must be < a_max = {c.a_max}, got a_min = {c.a_min}",
+            )
+        raise ConfigError(
+            f"{pre}constraints.a_min",
+            f"need a_min < 0 < a_max so that holding speed is allowed, got [{c.a_min}, {c.a_max}]",
+        )
+    for name in ("s_min", "t_gap", "s_min_behind", "t_gap_behind"):
+        _pos(getattr(c, name), f"{pre}constraints.{name}")
+    for i in c.behind:
+        if isinstance(i, bool) or not isinstance(i, int) or i < 1:
+            raise ConfigError(
+                f"{pre}constraints.behind", f"entries are HDV indices >= 1, got {i!r}"
+            )
+    if len(set(c.behind)) != len(c.behind):
+        raise ConfigError(f"{pre}constraints.behind", f"has duplicates: {list(c.behind)}")
+    p = s.prediction
+    if p.head not in HEAD_PREDICTIONS:
+        raise ConfigError(
+            f"{pre}prediction.head", f"must be one of {list(HEAD_PREDICTIONS)}, got {p.head!r}"
+        )
+    if p.equilibrium is not None and p.equilibrium not in EQUILIBRIA:
+        raise ConfigError(
+            f"{pre}prediction.equilibrium",
+            f"must be one of {list(EQUILIBRIA)}, got {p.equilibrium!r}",
+        )
+    _pos(p.head_accel_hold, f"{pre}prediction.head_accel_hold")
+    _pos(p.equilibrium_window, f"{pre}prediction.equilibrium_window", strict=True)
+    _pos(p.relinearize_threshold, f"{pre}prediction.relinearize_threshold", strict=True)
+    o = s.solver
+    _pos(o.eps_abs, f"{pre}solver.eps_abs", strict=True)
+    _pos(o.eps_rel, f"{pre}solver.eps_rel")
+    if o.eps_abs > 1e-3 or o.eps_rel > 1e-3:
+        raise ConfigError(
+            f"{pre}solver.eps_abs",
+            "must be <= 1e-3 (OSQP's 1e-3 default already moves the applied input by up to "
+            f"0.4 m/s^2); got eps_abs={o.eps_abs}, eps_rel={o.eps_rel}",
+        )
+    if isinstance(o.max_iter, bool) or not isinstance(o.max_iter, int) or o.max_iter < 1:
+        raise ConfigError(f"{pre}solver.max_iter", f"must be an integer >= 1, got {o.max_iter!r}")
+    _pos(o.time_limit, f"{pre}solver.time_limit")
+
+
+# --------------------------------------------------------------------------------------------
+# Problem-file table -> settings
+# --------------------------------------------------------------------------------------------
+
+_TOP = ["type", "sample_time", "horizon", "n_model", "fallback_gains_file",
+        "weights", "constraints", "prediction", "solver"]
+
+
+def settings_from_table(table: Mapping[str, Any], field_name: str) -> MPCSettings:
+    """Parse a ``[controllers.NAME]`` table of ``type = "mpc"`` into :class:`MPCSettings`.
+
+    Parameters
+    ----------
+    table : mapping
+        The controller table.
+    field_name : str
+        Its dotted path (e.g. ``"controllers.mpc"``), used in error messages.
+    """
+    f = field_name
+    check_keys(table, _TOP, f)
+    wt = get_table(table, "weights", f"{f}.weights")
+    check_keys(wt, [k for k in Weights.__dataclass_fields__], f"{f}.weights")
+    d = Weights()
+    weights = Weights(
+        velocity=get_number(wt, "velocity", f"{f}.weights", d.velocity, lo=0.0),
+        spacing=get_number(wt, "spacing", f"{f}.weights", d.spacing, lo=0.0),
+        spacing_cav=get_number(wt, "spacing_cav", f"{f}.weights", None, lo=0.0),
+        position=get_number(wt, "position", f"{f}.weights", d.position, lo=0.0),
+        input=get_number(wt, "input", f"{f}.weights", d.input, lo=0.0, lo_open=True),
+        jerk=get_number(wt, "jerk", f"{f}.weights", d.jerk, lo=0.0),
+        input_on=get_str(wt, "input_on", f"{f}.weights", d.input_on, choices=INPUT_ON),
+        slack=get_number(wt, "slack", f"{f}.weights", d.slack, lo=0.0),
+        slack_quadratic=get_number(
+            wt, "slack_quadratic", f"{f}.weights", d.slack_quadratic, lo=0.0
+        ),
+    )
+    ct = get_table(table, "constraints", f"{f}.constraints")
+    check_keys(ct, [k for k in Constraints.__dataclass_fields__], f"{f}.constraints")
+    dc = Constraints()
+    behind = ct.get("behind", [])
+    if not isinstance(behind, list):
+        raise ConfigError(f"{f}.constraints.behind", f"must be a list of integers, got {behind!r}")
+    constraints = Constraints(
+        a_min=get_number(ct, "a_min", f"{f}.constraints", dc.a_min),
+        a_max=get_number(ct, "a_max", f"{f}.constraints", dc.a_max),
+        s_min=get_number(ct, "s_min", f"{f}.constraints", dc.s_min, lo=0.0),
+        t_gap=get_number(ct, "t_gap", f"{f}.constraints", dc.t_gap, lo=0.0),
+        spacing_ahead=get_bool(ct, "spacing_ahead", f"{f}.constraints", dc.spacing_ahead),
+        behind=tuple(behind),
+        s_min_behind=get_number(ct, "s_min_behind", f"{f}.constraints", dc.s_min_behind, lo=0.0),
+        t_gap_behind=get_number(ct, "t_gap_behind", f"{f}.constraints", dc.t_gap_behind, lo=0.0),
+    )
+    pt = get_table(table, "prediction", f"{f}.prediction")
+    check_keys(pt, [k for k in Prediction.__dataclass_fields__], f"{f}.prediction")
+    dp = Prediction()
+    prediction = Prediction(
+        head=get_str(pt, "head", f"{f}.prediction", dp.head, choices=HEAD_PREDICTIONS),
+        head_accel_hold=get_number(
+            pt, "head_accel_hold", f"{f}.prediction", dp.head_accel_hold, lo=0.0
+        ),
+        equilibrium=get_str(pt, "equilibrium", f"{f}.prediction", None, choices=EQUILIBRIA),
+        equilibrium_window=get_number(
+            pt, "equilibrium_window", f"{f}.prediction", dp.equilibrium_window,
+            lo=0.0, lo_open=True,
+        ),
+        relinearize=get_bool(pt, "relinearize", f"{f}.prediction", dp.relinearize),
+        relinearize_threshold=get_number(
+            pt, "relinearize_threshold", f"{f}.prediction", dp.relinearize_threshold,
+            lo=0.0, lo_open=True,
+        ),
+    )
+    st = get_table(table, "solver", f"{f}.solver")
+    check_keys(st, [k for k in SolverSettings.__dataclass_fields__], f"{f}.solver")
+    ds = SolverSettings()
+    solver = SolverSettings(
+        eps_abs=get_number(st, "eps_abs", f"{f}.solver", ds.eps_abs, lo=0.0, lo_open=True),
+        eps_rel=get_number(st, "eps_rel", f"{f}.solver", ds.eps_rel, lo=0.0),
+        max_iter=get_int(st, "max_iter", f"{f}.solver", ds.max_iter, lo=1),
+        polish=get_bool(st, "polish", f"{f}.solver", ds.polish),
+        warm_start=get_bool(st, "warm_start", f"{f}.solver", ds.warm_start),
+        time_limit=get_number(st, "time_limit", f"{f}.solver", ds.time_limit, lo=0.0),
+    )
+    fb = table.get("fallback_gains_file")
+    if fb is not None and (not isinstance(fb, str) or not fb):
+        raise ConfigError(f"{f}.fallback_gains_file", f"must be a file path, got {fb!r}")
+    n_model = get_int(table, "n_model", f, None, lo=0)
+    try:
+        return MPCSettings(
+            sample_time=get_number(table, "sample_time", f, 0.1, lo=0.0, lo_open=True),
+            horizon=get_int(table, "horizon", f, 50, lo=1),
+            n_model=n_model,
+            weights=weights,
+            constraints=constraints,
+            prediction=prediction,
+            solver=solver,
+            fallback_gains_file=fb,
+        )
+    except ConfigError as err:
+        if err.field.startswith(f):
+            raise
+        raise ConfigError(f"{f}.{err.field}", err.message) from None

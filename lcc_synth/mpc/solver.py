@@ -1,0 +1,140 @@
+"""QP solvers of the MPC: OSQP set up once (the real-time path), an exact reference solver
+and the naive rebuild-every-step variant (for tests and benchmarks only).
+
+OSQP statuses are checked on every solve: only ``solved`` is accepted (``solved inaccurate``,
+``maximum iterations reached``, infeasibility, time limit... are failures that trigger the
+controller's fallback chain). A failed polish (``status_polish < 0``) is counted but the ADMM
+solution, converged to the tight default tolerances (1e-6), is still used.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from lcc_synth.mpc.formulation import QPMatrices
+from lcc_synth.mpc.settings import SolverSettings
+
+__all__ = ["SolveResult", "OSQPSolver", "solve_exact", "solve_rebuild"]
+
+OSQP_SOLVED = 1
+POLISH_NAMES = {
+    -2: "linsys_error",
+    -1: "failed",
+    0: "not_performed",
+    1: "success",
+    2: "no_active_set_found",
+}
+
+
+@dataclass
+class SolveResult:
+    """Outcome of one QP solve."""
+
+    ok: bool
+    status: str
+    status_val: int
+    polish: int
+    z: np.ndarray | None
+    y: np.ndarray | None
+    iterations: int
+    run_time: float
+
+
+class OSQPSolver:
+    """One OSQP workspace for the whole run: vectors updated per step, matrices only when the
+    model is re-linearised (same sparsity pattern, ``update(Px=..., Ax=...)``).
+
+    Parameters
+    ----------
+    qp : QPMatrices
+        Initial matrices.
+    q, l, u : numpy.ndarray
+        Initial vectors.
+    settings : SolverSettings
+    """
+
+    def __init__(self, qp: QPMatrices, q, l, u, settings: SolverSettings):
+        import osqp
+
+        self.settings = settings
+        self._P_pattern = (qp.P.indptr.copy(), qp.P.indices.copy())
+        self._A_pattern = (qp.A.indptr.copy(), qp.A.indices.copy())
+        self._solver = osqp.OSQP()
+        self._solver.setup(qp.P, q, qp.A, l, u, **settings.osqp_kwargs())
+        self.force_failure = False  # test hook: make every solve report a failure
+
+    def update_matrices(self, qp: QPMatrices) -> None:
+        """New numeric values on the same sparsity pattern (re-linearisation)."""
+        for M, (indptr, indices), what in (
+            (qp.P, self._P_pattern, "P"),
+            (qp.A, self._A_pattern, "A"),
+        ):
+            if not (np.array_equal(M.indptr, indptr) and np.array_equal(M.indices, indices)):
+                raise RuntimeError(f"the sparsity pattern of {what} changed")
+        self._solver.update(Px=qp.P.data, Ax=qp.A.data)
+
+    def solve(self, q, l, u, warm_z=None, warm_y=None) -> SolveResult:
+        """Update the vectors, warm-start (optional) and solve."""
+        self._solver.update(q=q, l=l, u=u)
+        if warm_z is not None and self.settings.warm_start:
+            self._solver.warm_start(x=warm_z, y=warm_y)
+        res = self._solver.solve(raise_error=False)
+        info = res.info
+        ok = info.status_val == OSQP_SOLVED and not self.force_failure
+        z = None if res.x is None else np.array(res.x)
+        if ok and (z is None or not np.all(np.isfinite(z))):
+            ok = False
+        status = "forced_failure" if self.force_failure else str(info.status)
+        return SolveResult(
+            ok, status, int(info.status_val), int(info.status_polish), z,
+            None if res.y is None else np.array(res.y), int(info.iter), float(info.run_time),
+        )  # fmt: skip
+
+
+def solve_exact(qp: QPMatrices, q, l, u, solver: str = "daqp") -> np.ndarray:
+    """Exact solution of the same QP with an active-set solver bundled with CasADi.
+
+    Parameters
+    ----------
+    solver : {"daqp", "qpoases"}
+        CasADi ``conic`` plugin.
+
+    Raises
+    ------
+    RuntimeError
+        When the solver does not report success.
+    """
+    import casadi as ca
+
+    Pu = qp.P.toarray()
+    H = Pu + np.triu(Pu, 1).T
+    A = qp.A.toarray()
+    big = 1e20
+    lo = np.where(np.isfinite(l), l, -big)
+    hi = np.where(np.isfinite(u), u, big)
+    opts = {"error_on_fail": False}
+    if solver == "qpoases":
+        opts.update({"printLevel": "none"})
+    conic = ca.conic(
+        "exact", solver, {"h": ca.DM(H).sparsity(), "a": ca.DM(A).sparsity()}, opts
+    )
+    sol = conic(h=H, g=np.asarray(q, float), a=A, lba=lo, uba=hi)
+    if not conic.stats().get("success", False):
+        raise RuntimeError(f"{solver} failed: {conic.stats().get('return_status')}")
+    return np.array(sol["x"]).reshape(-1)
+
+
+def solve_rebuild(formulation, lin, q, l, u, settings: SolverSettings) -> tuple[SolveResult, float]:
+    """The naive variant: evaluate the QP matrices and set up a new OSQP workspace, then solve.
+
+    Returns the result and the wall time (s) of the whole step. Used by the benchmark to show
+    what re-creating the solver on every step costs.
+    """
+    t0 = time.perf_counter()
+    qp = formulation.matrices(lin)
+    s = OSQPSolver(qp, q, l, u, settings)
+    res = s.solve(q, l, u)
+    return res, time.perf_counter() - t0
