@@ -327,7 +327,7 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
                 raise ConfigError(
                     f"{field}.type", f"'mpc' controllers need lcc_synth.mpc, which failed: {err}"
                 ) from None
-            return mpc_controller_from_table(name, table, system)
+            return mpc_controller_from_table(name, table, system, source=source)
         if ctype == "hdv":
             check_keys(table, ["type", "sample_time"], field)
             return HDVController(name, _sample_time(table, field))
@@ -336,7 +336,7 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
             kind = get_str(table, "kind", field, system.kind, choices=KINDS)
             semantics = get_str(table, "semantics", field, "added", choices=SEMANTICS)
             raw = get_table(table, "gains", f"{field}.gains", required=True)
-            where = f"{field} (kind={kind!r})"
+            where = field
         else:
             check_keys(table, ["type", "file", "sample_time"], field)
             rel = get_str(table, "file", field)
@@ -366,12 +366,13 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
             if not isinstance(raw, dict):
                 raise ConfigError(f"{field}.file", f"{path}: gains must be an object")
             where = f"{field}.file"
+        sample_time = _sample_time(table, field)
         try:
             gains = StaticGains(raw, semantics)
             model = model_from_hdv(kind, system.m, system.n, system.hdv, system.v_star, warn=False)
-            ctrl = StaticGainController(name, gains, model, _sample_time(table, field))
+            ctrl = StaticGainController(name, gains, model, sample_time)
         except ConfigError as err:
-            raise ConfigError(f"{where}.{err.field}", err.message) from None
+            raise ConfigError(f"{where}.{err.field}", f"{err.message} (kind {kind!r})") from None
         return ctrl
     except ConfigError as err:
         raise err.with_source(source) if source and not err.source else err from None
