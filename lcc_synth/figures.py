@@ -14,6 +14,9 @@ __all__ = [
     "plot_profiles",
     "plot_gamma_curves",
     "plot_sweep_distributions",
+    "plot_case_grid",
+    "plot_snapshots",
+    "plot_metric_bars",
 ]
 
 
@@ -243,6 +246,148 @@ def plot_sweep_distributions(samples, path: str | Path, metrics=None, title: str
         ax.tick_params(axis="x", labelrotation=20, labelsize=8)
     for ax in list(axes.flat)[len(keys):]:
         ax.axis("off")
+    if title:
+        fig.suptitle(title)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_case_grid(
+    results, path: str | Path, quantity: str = "velocity", xlim=(20.0, 45.0),
+    title: str | None = None, run: int = 0,
+) -> Path:  # fmt: skip
+    """Figs. 10 / 12: one panel per controller (2 columns), velocity or spacing of every
+    vehicle over ``xlim``; head yellow-grey, HDVs ahead dark grey, CAV red, HDVs behind blue
+    (the paper's colours).
+
+    Parameters
+    ----------
+    results : mapping of str to lcc_synth.simulation.SimResult
+    path : str or Path
+    quantity : {"velocity", "spacing"}
+    xlim : (float, float)
+        Time window shown (s).
+    """
+    import numpy as np
+
+    plt = _pyplot()
+    path = Path(path)
+    items = list(results.items())
+    ncol = 2 if len(items) > 1 else 1
+    nrow = (len(items) + ncol - 1) // ncol
+    fig, axes = plt.subplots(
+        nrow, ncol, figsize=(5.2 * ncol, 2.8 * nrow + 0.4), sharex=True, sharey=True,
+        squeeze=False, constrained_layout=True,
+    )  # fmt: skip
+    for ax, (name, res) in zip(axes.flat, items, strict=False):
+        keep = (res.t >= xlim[0]) & (res.t <= xlim[1])
+        t = res.t[keep]
+        data = res.velocity if quantity == "velocity" else res.spacing
+        for j in range(res.n_vehicles):
+            if quantity == "spacing" and j == 0:
+                continue
+            if j == 0:
+                kw = {"color": (0.75, 0.75, 0.75), "label": "head vehicle"}
+            elif j < res.cav:
+                kw = {"color": (0.35, 0.35, 0.35), "label": "HDVs ahead" if j == 1 else None}
+            elif j == res.cav:
+                kw = {"color": (0.96, 0.21, 0.49), "label": "CAV"}
+            else:
+                kw = {"color": (0.26, 0.47, 0.89), "label": "HDVs behind" if j == res.cav + 1
+                      else None}  # fmt: skip
+            ax.plot(t, data[run, keep, j], lw=1.6, **kw)
+        ref = res.v_star[run] if quantity == "velocity" else res.s_star[run]
+        ax.axhline(float(np.asarray(ref)), color="k", lw=0.5, ls=":")
+        ax.set_title(name, fontsize=10)
+        ax.grid(True, alpha=0.3)
+    for ax in axes.flat[len(items):]:
+        ax.set_visible(False)
+    for ax in axes[-1]:
+        ax.set_xlabel("t (s)")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("velocity (m/s)" if quantity == "velocity" else "spacing (m)")
+    axes.flat[0].legend(fontsize=7, loc="lower right")
+    if title:
+        fig.suptitle(title)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_snapshots(
+    baseline, lcc, times, path: str | Path, title: str | None = None, run: int = 0,
+    labels=("looking ahead only", "LCC"),
+) -> Path:  # fmt: skip
+    """Fig. 11: the string at several moments, velocity deviation of each vehicle against its
+    position (upper row ``baseline``, lower row ``lcc``); head black, CAV blue, HDVs grey.
+
+    Parameters
+    ----------
+    baseline, lcc : lcc_synth.simulation.SimResult
+        Two runs of the same scenario.
+    times : sequence of float
+        Moments to draw (s); the nearest recorded sample is used.
+    """
+    import numpy as np
+
+    plt = _pyplot()
+    path = Path(path)
+    times = list(times)
+    fig, axes = plt.subplots(
+        2, len(times), figsize=(2.9 * len(times), 4.6), sharey=True, squeeze=False,
+        constrained_layout=True,
+    )  # fmt: skip
+    for row, res in enumerate((baseline, lcc)):
+        for col, tq in enumerate(times):
+            ax = axes[row, col]
+            k = int(np.argmin(np.abs(res.t - tq)))
+            p = res.position[run, k]
+            dv = res.velocity[run, k] - res.v_star[run]
+            x = p - p[res.cav]  # positions relative to the CAV
+            ax.axhline(0.0, color="k", lw=0.5, ls="--")
+            ax.plot(x[1:], dv[1:], color=(0.36, 0.16, 0.52), lw=0.8)
+            hdv = [j for j in range(1, res.n_vehicles) if j != res.cav]
+            ax.scatter(x[hdv], dv[hdv], s=28, color=(0.7, 0.7, 0.7), zorder=3)
+            ax.scatter(x[res.cav], dv[res.cav], s=40, color=(0.0, 0.69, 0.94), zorder=4)
+            ax.scatter(x[0], dv[0], s=14, color="k", zorder=4)
+            ax.set_title(f"t = {res.t[k]:.1f} s", fontsize=9)
+            ax.grid(True, alpha=0.3)
+            if row == 1:
+                ax.set_xlabel("position rel. to CAV (m)")
+        axes[row, 0].set_ylabel(f"{labels[row]}\nv - v* (m/s)")
+    if title:
+        fig.suptitle(title)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_metric_bars(report, path: str | Path, title: str | None = None) -> Path:
+    """Table II as bars: AAVE and fuel of every controller (error bars: spread over seeds),
+    annotated with the reduction versus the baseline. ``report`` is what
+    :func:`lcc_synth.cli.simulate.report` returns."""
+    plt = _pyplot()
+    path = Path(path)
+    names = list(report)
+    fig, axes = plt.subplots(1, 2, figsize=(9.5, 3.6), constrained_layout=True)
+    for ax, key, unit in ((axes[0], "aave", "AAVE (m/s)"), (axes[1], "fuel_ml", "fuel (mL)")):
+        vals = [report[n][key] for n in names]
+        errs = [report[n][f"{key}_std"] if report[n]["batch"] > 1 else 0.0 for n in names]
+        bars = ax.bar(names, vals, yerr=errs if any(errs) else None, capsize=4,
+                      color=["0.6"] + ["tab:blue"] * (len(names) - 1))  # fmt: skip
+        pct = "aave_pct" if key == "aave" else "fuel_pct"
+        for bar, n, v in zip(bars, names, vals, strict=True):
+            red = report[n].get("reduction_vs_baseline")
+            text = f"{v:.2f}" + (f"\n(-{red[pct]:.2f} %)" if red else "")
+            ax.annotate(text, (bar.get_x() + bar.get_width() / 2, v / 2), ha="center",
+                        va="center", fontsize=8, color="white", fontweight="bold")
+        ax.set_ylabel(unit)
+        ax.set_ylim(0, max(vals) * 1.25)
+        ax.grid(True, axis="y", alpha=0.3)
     if title:
         fig.suptitle(title)
     path.parent.mkdir(parents=True, exist_ok=True)
