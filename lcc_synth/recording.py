@@ -97,6 +97,9 @@ __all__ = [
     "record_gamma",
     "record_region_map",
     "record_gains",
+    "record_synthesis",
+    "record_synthesis_file",
+    "gamma_grid",
     "record_text",
     "viewer_environment",
     "rerun_binary",
@@ -306,24 +309,30 @@ def analysis_blueprint(cases: Sequence[str] = (), regions: Sequence[str] = ()):
     return rrb.Blueprint(rrb.Horizontal(*parts, column_shares=[3, 2][: len(parts)]))
 
 
-def synthesis_blueprint(names: Sequence[str]):
-    """Default layout of a synthesis recording: gains bar charts, reports, |Gamma| curves."""
+def synthesis_blueprint(names: Sequence[str], gamma: bool = True, pareto: bool = False):
+    """Default layout of a synthesis recording: gains bar charts, |Gamma| curves, the Pareto
+    front (sparsity designs) and the reports."""
     rrb = _rrb()
-    bars = [
+    plots = [
         rrb.BarChartView(origin=f"/synthesis/{entity_name(n)}/gains", name=f"{n}: gains")
         for n in names
-    ]
+    ] or [rrb.BarChartView(origin="/synthesis")]
+    if gamma:
+        plots.append(rrb.Spatial2DView(origin="/analysis/gamma", name="|Γ(jω)| vs log10 ω"))
+    if pareto:
+        plots += [
+            rrb.Spatial2DView(
+                origin=f"/synthesis/{entity_name(n)}/pareto",
+                name=f"{n}: Pareto front (vehicles heard vs true H2)",
+            )
+            for n in names
+        ]
     reports = [
         rrb.TextDocumentView(origin=f"/synthesis/{entity_name(n)}/report", name=f"{n}: report")
         for n in names
-    ]
-    gamma = rrb.Spatial2DView(origin="/analysis/gamma", name="|Γ(jω)| vs log10 ω")
+    ] or [rrb.TextDocumentView(origin="/synthesis")]
     return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Vertical(*(bars or [rrb.BarChartView(origin="/synthesis")]), gamma),
-            rrb.Tabs(*(reports or [rrb.TextDocumentView(origin="/synthesis")])),
-            column_shares=[3, 2],
-        )
+        rrb.Horizontal(rrb.Vertical(*plots), rrb.Tabs(*reports), column_shares=[3, 2])
     )
 
 
@@ -989,6 +998,85 @@ def record_region_map(
         f"# region map {name}\n\n" + _mapping_markdown("grid", data),
     )
     _flush_started(rec)
+
+
+def gamma_grid(peak_omega: float | None = None, points: int = 400) -> np.ndarray:
+    """Frequencies (rad/s) for |Gamma| curves: log-spaced 1e-3..10, plus the peak frequency."""
+    omega = np.logspace(-3, 1, points)
+    if peak_omega is not None and np.isfinite(peak_omega) and peak_omega > 0:
+        omega = np.unique(np.append(omega, float(peak_omega)))
+    return omega
+
+
+def record_synthesis(rec: Any, rep: Any, system: Any = None) -> None:
+    """Record a synthesis report (``lcc_synth.synthesis.report.SynthesisReport``).
+
+    Under ``/synthesis/<problem>/``: the gains bar chart and report (the gains file of contract
+    3 plus solver, polish, baseline, timings and notes), the Pareto front of a sparsity sweep
+    (``pareto``: LineStrips2D of the front and Points2D of every pattern found, x = vehicles
+    heard, y = true H2); and, when ``system`` (the problem's :class:`~lcc_synth.problem.System`)
+    is given and the model has a head vehicle, ``/analysis/gamma/<problem>``: |Gamma(j omega)|
+    of the synthesised gain.
+    """
+    from lcc_synth.synthesis.gains_file import gains_document
+
+    rr = _rr()
+    name = rep.problem
+    doc = dict(gains_document(rep))
+    for key in ("solver", "polish", "baseline", "timings", "notes"):
+        value = getattr(rep, key, None)
+        if value:
+            doc[key] = _jsonable(value)
+    record_gains(rec, name, doc)
+    if rep.pareto:
+        n = entity_name(name)
+        pts = np.array([[p["count"], p["h2"]] for p in rep.pareto], dtype=np.float32)
+        labels = [
+            ", ".join(str(v) for v in p.get("vehicles", [])) or "CAV only" for p in rep.pareto
+        ]
+        rec.log(
+            f"/synthesis/{n}/pareto/patterns",
+            rr.Points2D(pts, labels=labels, colors=[COLOR_HDV], radii=0.05),
+            static=True,
+        )
+        front = sorted((p for p in rep.pareto if p.get("on_front")), key=lambda p: p["count"])
+        if front:
+            xy = np.array([[p["count"], p["h2"]] for p in front], dtype=np.float32)
+            rec.log(
+                f"/synthesis/{n}/pareto/front",
+                rr.LineStrips2D([xy], colors=[COLOR_CAV], labels=["Pareto front"], radii=0.02),
+                static=True,
+            )
+    if system is not None and rep.kind != "fd_lcc":
+        from lcc_synth.string_stability import gamma_state_space
+
+        model = system.linear_model(warn=False)
+        omega = gamma_grid(rep.check.gamma_peak_omega)
+        gamma = gamma_state_space(model, np.asarray(rep.input_K, float), float(rep.input_kh), omega)
+        record_gamma(
+            rec,
+            name,
+            omega,
+            np.abs(gamma),
+            {
+                "gamma_peak (global check)": rep.check.gamma_peak,
+                "gamma_peak_omega (rad/s)": rep.check.gamma_peak_omega,
+                "string_stable": rep.check.string_stable,
+                "plant_stable": rep.check.plant_stable,
+            },
+        )
+    _flush_started(rec)
+
+
+def record_synthesis_file(path: str | Path, rep: Any, system: Any = None) -> Path:
+    """Write a synthesis recording to ``path`` (see :func:`record_synthesis`)."""
+    path = Path(path)
+    blueprint = synthesis_blueprint(
+        [rep.problem], gamma=system is not None and rep.kind != "fd_lcc", pareto=bool(rep.pareto)
+    )
+    with open_recording(path, rep.problem, blueprint) as rec:
+        record_synthesis(rec, rep, system)
+    return path
 
 
 def record_gains(rec: Any, name: str, gains: Mapping[str, Any]) -> None:

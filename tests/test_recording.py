@@ -323,8 +323,8 @@ def test_analysis_and_synthesis_records(tmp_path):
     rep = _static(chunks, "/analysis/regions/mu_k/report", "TextDocument:text")
     assert "| fraction string stable | 0.2 |" in rep  # 4 of 20 points
     assert "| fraction plant stable | 0.45 |" in rep  # 9 of 20 points
-    values = _static(chunks, "/synthesis/fd_h2/gains", "BarChart:values")
-    assert values is not None
+    values = _static(chunks, "/synthesis/fd_h2/gains", "BarChart:values")[0]["buffer"]
+    np.testing.assert_array_equal(values, [0.0, -0.5, -0.2])  # state order, missing = 0
     rep = _static(chunks, "/synthesis/fd_h2/report", "TextDocument:text")
     assert "| v_0 | -0.5 |" in rep and "| s_0 | 0 |" in rep and "h2_true" in rep
     with pytest.raises(ConfigError, match="classes"):
@@ -481,3 +481,42 @@ def test_simulate_command_records_every_controller(tmp_path, capsys, monkeypatch
     [default] = (tmp_path / "logs").glob("small_table2-*Z.rrd")
     assert re.fullmatch(r"small_table2-\d{8}T\d{6}Z\.rrd", default.name)
     assert R.summarize_recording(default).entities["/small_table2/fd_lcc/velocity"].samples == 81
+
+
+def test_synthesize_command_records_gains_and_gamma(tmp_path, capsys):
+    """Gains bar chart = the gains file; the recorded |Gamma| curve peaks at the reported
+    global peak (state-space curve vs the synthesis report's string-stability check)."""
+    import json
+
+    from lcc_synth.cli.main import main
+
+    problem = Path(__file__).resolve().parents[1] / "problems" / "synth_cf_lcc_pattern.toml"
+    if not problem.is_file():
+        pytest.skip("problems/synth_cf_lcc_pattern.toml not available")
+    path, gains_path = tmp_path / "syn.rrd", tmp_path / "gains.json"
+    assert main(["synthesize", str(problem), "--rrd", str(path), "--out", str(gains_path)]) == 0
+    doc = json.loads(gains_path.read_text())
+    chunks = _chunks(path)
+    name = R.entity_name(problem.stem)
+    [entity] = [e for e in chunks if e.startswith("/synthesis/") and e.endswith("/gains")]
+    bars = np.array(_static(chunks, entity, "BarChart:values")[0]["buffer"])  # TensorData
+    np.testing.assert_allclose(bars.ravel(), [doc["gains"].get(s, 0.0) for s in doc["state_names"]])
+    report = _static(chunks, entity.replace("/gains", "/report"), "TextDocument:text")
+    assert "h2_true" in report and "h2_lmi_bound" in report
+    [gamma] = [
+        e
+        for e in chunks
+        if e.startswith("/analysis/gamma/") and e.count("/") == 3 and not e.endswith("unit")
+    ]
+    curve = np.array(_static(chunks, gamma, "LineStrips2D:strips")[0])
+    # x = log10 omega on the grid of R.gamma_grid; |Gamma| never above the global peak, and
+    # |Gamma(0)| = 1 for every stabilising gain (the curve starts at omega = 1e-3 rad/s)
+    np.testing.assert_allclose(
+        curve[:, 0], np.log10(R.gamma_grid(doc["gamma_peak_omega"])), rtol=1e-6
+    )
+    assert curve[:, 1].max() <= doc["gamma_peak"] * (1 + 1e-6)
+    assert curve[0, 1] == pytest.approx(1.0, abs=1e-3)
+    if doc["gamma_peak_omega"] > 0:
+        assert curve[:, 1].max() == pytest.approx(doc["gamma_peak"], rel=1e-5)
+    assert name in gamma or "/analysis/gamma/" in gamma
+    assert str(path) in capsys.readouterr().err

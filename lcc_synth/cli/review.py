@@ -122,7 +122,9 @@ def _print_summary(summary, as_json: bool) -> None:
             series = f", {ent.series} series" if ent.series > 1 else ""
             what = f"{ent.samples} samples{series}, t {ent.t_min:g}..{ent.t_max:g} s"
         print(f"  {path:<{width}}  {'/'.join(kinds)}: {what}")
-    metrics = {p: t for p, t in summary.texts.items() if p.endswith(("/metrics", "/status"))}
+    metrics = {
+        p: t for p, t in summary.texts.items() if p.endswith(("/metrics", "/status", "/report"))
+    }
     for path, text in sorted(metrics.items()):
         print(f"\n--- {path}\n{text.rstrip()}")
 

@@ -16,10 +16,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--figure", metavar="PNG", help="design = 'sparsity': write the Pareto-front PNG"
     )
+    from lcc_synth.recording import add_recording_arguments
+
+    add_recording_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     from lcc_synth.problem import load_problem
+    from lcc_synth.recording import record_synthesis_file, recording_path
     from lcc_synth.synthesis.config import spec_from_problem
     from lcc_synth.synthesis.design import synthesize
     from lcc_synth.synthesis.gains_file import write_gains
@@ -27,6 +31,7 @@ def run(args: argparse.Namespace) -> int:
     from lcc_synth.synthesis.report import format_report
 
     spec = spec_from_problem(load_problem(args.problem))
+    rrd = recording_path(args, spec.name)  # bad --rrd fails before the synthesis runs
     try:
         rep = synthesize(spec)
     except SynthesisError as err:
@@ -35,6 +40,9 @@ def run(args: argparse.Namespace) -> int:
                              default=str))
         print(f"lcc-synth synthesize: synthesis failed: {err}", file=sys.stderr)
         return 1
+    if rrd is not None:
+        record_synthesis_file(rrd, rep, spec.system)
+        print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
     written = []
     if args.out:
         written.append(str(write_gains(args.out, rep)))
