@@ -17,6 +17,7 @@ __all__ = [
     "plot_case_grid",
     "plot_snapshots",
     "plot_metric_bars",
+    "plot_region_maps",
 ]
 
 
@@ -392,5 +393,83 @@ def plot_metric_bars(report, path: str | Path, title: str | None = None) -> Path
         fig.suptitle(title)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_region_maps(maps, path: str | Path, baselines=None, titles=None, ncols: int = 2) -> Path:
+    """Figs. 7-8: string-stable regions of one vehicle's gains ``(mu_i, k_i)``.
+
+    Blue: head-to-tail string stable; white: plant stable only; hatched grey: asymptotically
+    unstable. With a baseline map (same grid), the part of the string-stable region that the
+    baseline already had is blue and the expansion red (Fig. 7(c)-(f)).
+
+    Parameters
+    ----------
+    maps : mapping of str to lcc_synth.regions.RegionMap
+        One panel per map, in order.
+    path : str or Path
+        Output PNG.
+    baselines : mapping of str to RegionMap, optional
+        ``{map name: baseline map}``.
+    titles : mapping of str to str, optional
+        Panel titles (default: the map names).
+    ncols : int
+        Panels per row.
+    """
+    import numpy as np
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    plt = _pyplot()
+    path = Path(path)
+    baselines = dict(baselines or {})
+    titles = dict(titles or {})
+    names = list(maps)
+    ncols = max(1, min(ncols, len(names)))
+    nrows = (len(names) + ncols - 1) // ncols
+    fig, axes = plt.subplots(
+        nrows, ncols, figsize=(4.2 * ncols, 3.8 * nrows), squeeze=False, constrained_layout=True
+    )
+    # 0 unstable, 1 stable, 2 string stable (kept), 3 string stable (expansion)
+    cmap = ListedColormap(["#d9d9d9", "#ffffff", "#3b6fb6", "#d62728"])
+    for ax, name in zip(axes.flat, names, strict=False):
+        rm = maps[name]
+        img = rm.labels.astype(int)
+        base = baselines.get(name)
+        if base is not None:
+            img = np.where((img == 2) & (base.labels != 2), 3, img)
+        dmu = (rm.mu[-1] - rm.mu[0]) / max(len(rm.mu) - 1, 1)
+        dk = (rm.k[-1] - rm.k[0]) / max(len(rm.k) - 1, 1)
+        extent = [rm.mu[0] - dmu / 2, rm.mu[-1] + dmu / 2, rm.k[0] - dk / 2, rm.k[-1] + dk / 2]
+        ax.imshow(
+            img.T, origin="lower", extent=extent, cmap=cmap, vmin=-0.5, vmax=3.5,
+            interpolation="nearest", aspect="auto",
+        )
+        if np.any(rm.labels == 0):
+            ax.contourf(
+                rm.mu, rm.k, (rm.labels == 0).T.astype(float), levels=[0.5, 1.5],
+                colors="none", hatches=["///"],
+            )
+        i = rm.vehicle
+        ax.set_xlabel(f"$\\mu_{{{i}}}$")
+        ax.set_ylabel(f"$k_{{{i}}}$")
+        fixed = ", ".join(f"{k}={v:g}" for k, v in rm.fixed.items())
+        sub = f"string stable {100 * rm.string_stable_fraction:.1f}% of grid"
+        ax.set_title(f"{titles.get(name, name)}\n{sub}" + (f"; {fixed}" if fixed else ""),
+                     fontsize=9)
+        ax.axhline(0, color="k", lw=0.4)
+        ax.axvline(0, color="k", lw=0.4)
+    for ax in list(axes.flat)[len(names):]:
+        ax.axis("off")
+    handles = [
+        Patch(facecolor="#3b6fb6", label="string stable"),
+        Patch(facecolor="#d62728", label="string stable: expansion over baseline"),
+        Patch(facecolor="#ffffff", edgecolor="k", label="stable, not string stable"),
+        Patch(facecolor="#d9d9d9", hatch="///", label="unstable"),
+    ]
+    fig.legend(handles=handles, loc="outside lower center", ncols=4, fontsize=8)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
     plt.close(fig)
     return path

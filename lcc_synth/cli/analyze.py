@@ -1,0 +1,203 @@
+"""``lcc-synth analyze PROBLEM.toml [--json] [--png PATH]``.
+
+For the problem's linear system: the linear coefficients and the controllability condition
+(13), the controllable and observable subspaces (which vehicles they contain); for every
+``[cases.NAME]`` gain: closed-loop plant stability, the head-to-tail string-stability verdict
+and the peak ``|Gamma(jw)|`` with its frequency. ``--png`` draws ``|Gamma(jw)|`` of every case
+(Fig. 9).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+HELP = "controllability/observability and head-to-tail string stability of the gain cases"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("problem", help="problem file with [system] and optional [cases.NAME]")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--png", metavar="PATH", help="write |Gamma(jw)| of every case (Fig. 9)")
+
+
+def _fmt(x, spec: str) -> str:
+    return "-" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, spec)
+
+
+def analyze(problem_path: str) -> tuple[dict, dict]:
+    """Everything ``analyze`` reports, as a JSON-ready dict, plus the objects for plotting."""
+    from lcc_synth.controllability import (
+        controllability_report,
+        default_outputs,
+        observability_report,
+    )
+    from lcc_synth.errors import ConfigError
+    from lcc_synth.feedback import closed_loop, input_feedback
+    from lcc_synth.problem import load_problem, system_from
+    from lcc_synth.string_stability import (
+        analysis_options_from,
+        cases_from,
+        closed_loop_eigenvalues,
+        string_stability,
+    )
+
+    prob = load_problem(problem_path)
+    src = str(prob.path)
+    system = system_from(prob.data, src)
+    model = system.linear_model(warn=False)
+    opts = analysis_options_from(prob.data, src)
+    outputs = list(opts.outputs) if opts.outputs else default_outputs(model)
+    for name in outputs:
+        if name not in model.state_names:
+            raise ConfigError(
+                "analysis.outputs",
+                f"unknown state {name!r}; this model has {list(model.state_names)}",
+                src,
+            )
+    cases = cases_from(prob.data, model, src)
+
+    coef = model.coefficients[1 if model.n > 0 else -1]
+    doc: dict = {
+        "problem": prob.name,
+        "file": src,
+        "system": {
+            "kind": system.kind,
+            "m": system.m,
+            "n": system.n,
+            "v_star": system.v_star,
+            "s_star": system.s_star,
+            "hdv_model": system.hdv.name,
+            "n_states": model.nx,
+        },
+        "linear_coefficients": {
+            "alpha1": coef.alpha1,
+            "alpha2": coef.alpha2,
+            "alpha3": coef.alpha3,
+            "eq13_margin": coef.controllability_margin,
+            "eq13_holds": not any("(13)" in p for p in coef.problems()),
+            "problems": coef.problems(),
+        },
+        "controllability": controllability_report(model).as_dict(),
+        "observability": observability_report(model, outputs).as_dict(),
+        "cases": {},
+    }
+    reports = {}
+    for name, case in cases.items():
+        K, kh = input_feedback(model, case.gains)
+        entry = {"label": case.label, "semantics": case.gains.semantics,
+                 "gains": dict(case.gains.gains), "vehicles_used": case.gains.vehicles()}
+        if model.kind == "fd_lcc":
+            Acl, _ = closed_loop(model, K, kh)
+            max_re = float(closed_loop_eigenvalues(Acl).real.max())
+            entry.update(
+                plant_stable=bool(max_re < 0), string_stable=None, gamma_peak=None,
+                gamma_peak_omega=None, max_real_eig=max_re,
+                note="fd_lcc has no head vehicle: head-to-tail string stability is undefined",
+            )
+        else:
+            rep = string_stability(model, K, kh, method=opts.method)
+            reports[name] = (K, kh, rep, case.label)
+            entry.update(rep.as_dict())
+        doc["cases"][name] = entry
+    extra = {"model": model, "options": opts, "reports": reports}
+    return doc, extra
+
+
+def _print_human(doc: dict) -> None:
+    s = doc["system"]
+    c = doc["linear_coefficients"]
+    print(f"{doc['problem']} ({doc['file']})")
+    print(
+        f"system: {s['kind']}, m = {s['m']} HDVs ahead, n = {s['n']} behind, "
+        f"v* = {s['v_star']:g} m/s, s* = {s['s_star']:.4g} m, HDV model {s['hdv_model']}"
+    )
+    print(
+        f"linear coefficients: alpha1 = {c['alpha1']:.6g}, alpha2 = {c['alpha2']:.6g}, "
+        f"alpha3 = {c['alpha3']:.6g}"
+    )
+    verdict = "holds" if c["eq13_holds"] else "VIOLATED"
+    print(f"eq. (13): alpha1 - alpha2 alpha3 + alpha3^2 = {c['eq13_margin']:.6g} ({verdict})")
+    for p in c["problems"]:
+        print(f"  warning: {p}")
+
+    def vehicles(v):
+        return ", ".join(str(i) for i in v) or "none"
+
+    ct = doc["controllability"]
+    print(
+        f"controllability: rank {ct['rank']} of {ct['n_states']} "
+        f"({'controllable' if ct['controllable'] else 'not controllable'}, "
+        f"{'stabilizable' if ct['stabilizable'] else 'NOT stabilizable'}); "
+        f"vehicles inside: {vehicles(ct['vehicles_in_subspace'])}; "
+        f"outside: {vehicles(ct['vehicles_outside'])}"
+        + (f"; partial: {vehicles(ct['vehicles_partial'])}" if ct["vehicles_partial"] else "")
+    )
+    ob = doc["observability"]
+    print(
+        f"observability (outputs {', '.join(ob['outputs'])}): rank {ob['rank']} of "
+        f"{ob['n_states']} ({'observable' if ob['observable'] else 'not observable'}); "
+        f"vehicles inside: {vehicles(ob['vehicles_in_subspace'])}; "
+        f"outside: {vehicles(ob['vehicles_outside'])}"
+        + (f"; partial: {vehicles(ob['vehicles_partial'])}" if ob["vehicles_partial"] else "")
+    )
+    if not doc["cases"]:
+        print("no [cases.NAME] tables: nothing else to analyse")
+        return
+    print()
+    header = (
+        f"{'case':<12} {'label':<12} {'plant':<9} {'string':<10} {'peak |G|':>10} "
+        f"{'at w rad/s':>11} {'c (s^2)':>10} {'max Re lam':>11}"
+    )
+    print(header)
+    print("-" * len(header))
+    for name, e in doc["cases"].items():
+        plant = "stable" if e["plant_stable"] else "UNSTABLE"
+        if e["string_stable"] is None:
+            string = "n/a"
+        else:
+            string = "stable" if e["string_stable"] else "unstable"
+        print(
+            f"{name:<12} {e['label'][:12]:<12} {plant:<9} {string:<10} "
+            f"{_fmt(e.get('gamma_peak'), '10.6f'):>10} "
+            f"{_fmt(e.get('gamma_peak_omega'), '11.4f'):>11} "
+            f"{_fmt(e.get('low_freq_curvature'), '+10.4g'):>10} "
+            f"{_fmt(e.get('max_real_eig'), '11.4f'):>11}"
+        )
+    print(
+        "peak |G| = sup over w > 0 of |Gamma(jw)| (at w = 0: the limit |Gamma(0)| = 1); "
+        "c: |Gamma(jw)|^2 = 1 + c w^2 + ..."
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from lcc_synth.errors import ConfigError
+
+    doc, extra = analyze(args.problem)
+    written = []
+    if args.png:
+        if not extra["reports"]:
+            raise ConfigError(
+                "--png", "needs [cases.NAME] tables on a system with a head vehicle", doc["file"]
+            )
+        import numpy as np
+
+        from lcc_synth.figures import plot_gamma_curves
+        from lcc_synth.string_stability import gamma_state_space
+
+        omega = extra["options"].omega()
+        curves = {}
+        for K, kh, rep, label in extra["reports"].values():
+            mag = np.abs(gamma_state_space(extra["model"], K, kh, omega))
+            curves[label] = (mag, rep)
+        title = f"{doc['problem']}: head-to-tail |Gamma(jw)| (Fig. 9)"
+        written.append(str(plot_gamma_curves(curves, omega, args.png, title=title)))
+    doc["written"] = written
+    if args.json:
+        print(json.dumps(doc))
+    else:
+        _print_human(doc)
+        for w in written:
+            print(f"wrote {w}")
+    return 0

@@ -1,0 +1,95 @@
+"""``lcc-synth regions PROBLEM.toml [--json] [--png PATH] [--step STEP]``.
+
+Computes every ``[maps.NAME]`` string-stable region map of the problem (Figs. 7-8): the
+fractions of the ``(mu_i, k_i)`` grid that are plant stable and head-to-tail string stable,
+and, for a map with a ``baseline``, how much string-stable area it gains over the baseline.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+HELP = "string-stable regions of one vehicle's feedback gains (Figs. 7-8)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("problem", help="problem file with [system] and [maps.NAME] tables")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--png", metavar="PATH", help="write the maps as one PNG (Figs. 7-8)")
+    parser.add_argument(
+        "--step", type=float, metavar="STEP", help="override the grid step of every map"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    import time
+
+    from lcc_synth.errors import ConfigError
+    from lcc_synth.problem import load_problem, system_from
+    from lcc_synth.regions import expansion, region_specs_from, run_region_specs
+
+    prob = load_problem(args.problem)
+    src = str(prob.path)
+    if args.step is not None and not args.step > 0:
+        raise ConfigError("--step", f"must be > 0, got {args.step}")
+    system = system_from(prob.data, src)
+    model = system.linear_model(warn=False)
+    specs, omega = region_specs_from(prob.data, model, src, step=args.step)
+    t0 = time.perf_counter()
+    maps = run_region_specs(model, specs, omega)
+    total = time.perf_counter() - t0
+    doc = {
+        "problem": prob.name,
+        "file": src,
+        "system": {"kind": system.kind, "m": system.m, "n": system.n, "v_star": system.v_star},
+        "n_omega": int(omega.size),
+        "omega_range": [float(omega[0]), float(omega[-1])],
+        "seconds": total,
+        "maps": {},
+    }
+    for name, rm in maps.items():
+        entry = rm.as_dict()
+        entry["title"] = specs[name].title
+        entry["us_per_point"] = 1e6 * rm.seconds / rm.points
+        if specs[name].baseline:
+            entry["baseline"] = specs[name].baseline
+            entry["expansion"] = expansion(rm, maps[specs[name].baseline])
+        doc["maps"][name] = entry
+    written = []
+    if args.png:
+        from lcc_synth.figures import plot_region_maps
+
+        baselines = {n: maps[s.baseline] for n, s in specs.items() if s.baseline}
+        titles = {n: s.title for n, s in specs.items()}
+        written.append(str(plot_region_maps(maps, args.png, baselines, titles)))
+    doc["written"] = written
+    if args.json:
+        print(json.dumps(doc))
+        return 0
+    print(f"{doc['problem']} ({src}): {system.kind}, m = {system.m}, n = {system.n}, "
+          f"v* = {system.v_star:g} m/s; {omega.size} frequencies in "
+          f"[{omega[0]:g}, {omega[-1]:g}] rad/s")
+    header = (
+        f"{'map':<8} {'vehicle':>7} {'grid':>11} {'fixed gains':<22} {'plant st.':>9} "
+        f"{'string st.':>10} {'vs baseline':<22} {'s':>6}"
+    )
+    print(header)
+    print("-" * len(header))
+    for name, e in doc["maps"].items():
+        fixed = ", ".join(f"{k}={v:g}" for k, v in e["fixed_gains"].items()) or "-"
+        vs = "-"
+        if "expansion" in e:
+            x = e["expansion"]
+            vs = f"+{100 * x['gained_fraction']:.2f}% / -{100 * x['lost_fraction']:.2f}%"
+        shape = f"{e['shape'][0]}x{e['shape'][1]}"
+        print(
+            f"{name:<8} {e['vehicle']:>7} {shape:>11} {fixed:<22} "
+            f"{100 * e['plant_stable_fraction']:>8.2f}% {100 * e['string_stable_fraction']:>9.2f}% "
+            f"{vs:<22} {e['seconds']:>6.2f}"
+        )
+    print("fractions of the grid; 'vs baseline': string-stable area gained / lost")
+    print(f"total {total:.2f} s for {sum(m.points for m in maps.values())} points")
+    for w in written:
+        print(f"wrote {w}")
+    return 0
