@@ -39,6 +39,9 @@ __all__ = [
     "aeb_activations",
     "collisions",
     "summary",
+    "per_scenario",
+    "concatenate",
+    "aggregate",
 ]
 
 VEHICLE_SETS = ("cav_and_behind", "all", "hdvs")
@@ -186,6 +189,58 @@ def _stat(x: np.ndarray) -> float:
     return float(np.mean(x)) if x.size else float("nan")
 
 
+def per_scenario(result, config: MetricsConfig | None = None) -> dict[str, np.ndarray]:
+    """Every metric of every scenario of a result: arrays ``(batch,)`` or ``(batch, nv)``.
+
+    Results of several batches (e.g. chunks of a large seed study) concatenate along axis 0
+    before :func:`aggregate`.
+    """
+    cfg = config or MetricsConfig()
+    return {
+        "aave": aave(result, cfg.window, cfg.vehicles),
+        "fuel_ml": fuel(result, cfg.window, cfg.vehicles),
+        "min_spacing": min_spacing(result),
+        "min_ttc": min_time_to_collision(result),
+        "max_abs_velocity_error": max_abs_velocity_error(result),
+        "max_abs_command": max_abs_command(result),
+        "rms_jerk_cav": rms_jerk(result),
+        "aeb_activations": aeb_activations(result),
+        "collisions": collisions(result),
+    }
+
+
+def concatenate(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """Join :func:`per_scenario` dictionaries of several batches."""
+    return {k: np.concatenate([p[k] for p in parts], axis=0) for k in parts[0]}
+
+
+def aggregate(per: dict[str, np.ndarray]) -> dict[str, Any]:
+    """Summary of :func:`per_scenario` arrays (see :func:`summary`)."""
+    a, f = per["aave"], per["fuel_ml"]
+    ms, ttc, mv = per["min_spacing"], per["min_ttc"], per["max_abs_velocity_error"]
+    with np.errstate(invalid="ignore"):
+        return {
+            "aave": _stat(a),
+            "aave_std": float(np.std(a)),
+            "aave_all": a.tolist(),
+            "fuel_ml": _stat(f),
+            "fuel_ml_std": float(np.std(f)),
+            "fuel_ml_all": f.tolist(),
+            "min_spacing": float(np.nanmin(ms[:, 1:])),
+            "collisions": int(per["collisions"].sum()),
+            "aeb_activations": int(per["aeb_activations"].sum()),
+            "max_abs_command": float(np.nanmax(per["max_abs_command"])),
+            "rms_jerk_cav": _stat(per["rms_jerk_cav"]),
+            "min_ttc": float(np.nanmin(ttc[:, 1:])),
+            "per_vehicle": {
+                "max_abs_velocity_error": np.nanmax(mv, axis=0).tolist(),
+                "min_spacing": [float("nan")] + np.nanmin(ms[:, 1:], axis=0).tolist(),
+                "min_ttc": [float("nan")] + np.nanmin(ttc[:, 1:], axis=0).tolist(),
+            },
+            "batch": int(a.shape[0]),
+        }
+
+
 def summary(result, config: MetricsConfig | None = None) -> dict[str, Any]:
     """All metrics of a result; batch statistics where a batch has several scenarios.
 
@@ -193,29 +248,4 @@ def summary(result, config: MetricsConfig | None = None) -> dict[str, Any]:
     scenario); ``min_spacing`` and ``collisions``/``aeb_activations`` are the worst case /
     totals. Per-vehicle lists are ordered head..tail (head spacing is NaN).
     """
-    cfg = config or MetricsConfig()
-    a = aave(result, cfg.window, cfg.vehicles)
-    f = fuel(result, cfg.window, cfg.vehicles)
-    ms = min_spacing(result)
-    mv = max_abs_velocity_error(result)
-    ttc = min_time_to_collision(result)
-    return {
-        "aave": _stat(a),
-        "aave_std": float(np.std(a)),
-        "aave_all": a.tolist(),
-        "fuel_ml": _stat(f),
-        "fuel_ml_std": float(np.std(f)),
-        "fuel_ml_all": f.tolist(),
-        "min_spacing": float(np.nanmin(ms[:, 1:])),
-        "collisions": int(collisions(result).sum()),
-        "aeb_activations": int(aeb_activations(result).sum()),
-        "max_abs_command": float(np.nanmax(max_abs_command(result))),
-        "rms_jerk_cav": _stat(rms_jerk(result)),
-        "min_ttc": float(np.nanmin(ttc[:, 1:])),
-        "per_vehicle": {
-            "max_abs_velocity_error": np.nanmax(mv, axis=0).tolist(),
-            "min_spacing": [float("nan")] + np.nanmin(ms[:, 1:], axis=0).tolist(),
-            "min_ttc": [float("nan")] + np.nanmin(ttc[:, 1:], axis=0).tolist(),
-        },
-        "batch": result.batch,
-    }
+    return aggregate(per_scenario(result, config))

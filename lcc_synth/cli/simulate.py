@@ -30,25 +30,70 @@ def add_arguments(parser) -> None:
     add_recording_arguments(parser)
 
 
+#: Largest recorded batch kept in memory at once (bytes); larger seed studies run in chunks.
+MEMORY_BUDGET = 1.5e9
+
+
+def load(args):
+    """The :class:`~lcc_synth.scenario.SimulationSpec` of ``args.problem`` (+ ``--seeds``)."""
+    from lcc_synth.errors import ConfigError
+    from lcc_synth.scenario import load_spec
+
+    if args.seeds is not None and args.seeds < 1:
+        raise ConfigError("--seeds", f"must be >= 1, got {args.seeds}")
+    return load_spec(args.problem, seeds=args.seeds)
+
+
+def chunks(scenario, budget: float = MEMORY_BUDGET) -> list:
+    """The scenario split into seed chunks whose recorded results fit ``budget`` bytes.
+
+    Every chunk keeps the draws of the whole study (``first_index``), so results do not depend
+    on the chunking.
+    """
+    from dataclasses import replace
+
+    samples = (scenario.steps - 1) // scenario.record_every + 1
+    size = max(1, int(budget // (samples * (scenario.n_vehicles * 4 * 8 + 9))))
+    if scenario.batch <= size:
+        return [scenario]
+    return [
+        replace(
+            scenario,
+            batch=min(size, scenario.batch - b0),
+            first_index=scenario.first_index + b0,
+        )
+        for b0 in range(0, scenario.batch, size)
+    ]
+
+
+def iter_results(spec, budget: float = MEMORY_BUDGET):
+    """Yield ``(chunk, controller_name, SimResult)``, one controller run at a time: every
+    controller on the same draws, seed chunk after seed chunk (a single chunk unless the study
+    exceeds ``budget``)."""
+    from lcc_synth.simulation import simulate
+
+    for i, scenario in enumerate(chunks(spec.scenario, budget)):
+        draws = scenario.draw()
+        for name, ctrl in spec.controllers.items():
+            yield i, name, simulate(scenario, ctrl, draws)
+
+
 def collect(args, on_result=None):
-    """Load the problem and simulate every controller: ``(spec, {name: SimResult})``.
+    """Load the problem and simulate every controller: ``(spec, {name: SimResult})`` with the
+    whole batch in memory (:func:`run` streams seed chunks instead).
 
     ``on_result(spec, name, result)``, when given, is called as soon as each controller's result
     exists (the recording), so an interrupted run keeps the controllers finished before.
     """
-    from lcc_synth.errors import ConfigError
-    from lcc_synth.scenario import load_spec
-    from lcc_synth.simulation import simulate_many
+    from lcc_synth.simulation import simulate
 
-    if args.seeds is not None and args.seeds < 1:
-        raise ConfigError("--seeds", f"must be >= 1, got {args.seeds}")
-    spec = load_spec(args.problem, seeds=args.seeds)
-    if on_result is None:
-        return spec, simulate_many(spec.scenario, spec.controllers)
+    spec = load(args)
+    draws = spec.scenario.draw()
     results = {}
-    for name, ctrl in spec.controllers.items():  # same draws: they depend on the seed only
-        results.update(simulate_many(spec.scenario, {name: ctrl}))
-        on_result(spec, name, results[name])
+    for name, ctrl in spec.controllers.items():
+        results[name] = simulate(spec.scenario, ctrl, draws)
+        if on_result is not None:
+            on_result(spec, name, results[name])
     return spec, results
 
 
@@ -59,29 +104,26 @@ def _pct(base, x):
         return 100.0 * (base - x) / base
 
 
-def report(spec, results) -> dict[str, Any]:
-    """Metric summary of every controller (+ reductions versus the baseline, if any)."""
+def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str, Any]:
+    """Report from the :func:`lcc_synth.metrics.per_scenario` arrays of every controller;
+    ``info[name] = (controller_info, controller_stats, wall_time_s)``."""
     import numpy as np
 
-    from lcc_synth.metrics import aave, fuel, summary
+    from lcc_synth.metrics import aggregate
 
     cfg = spec.metrics
     out: dict[str, Any] = {}
-    for name, res in results.items():
-        entry = summary(res, cfg)
-        entry["controller"] = res.controller_info
-        entry["controller_stats"] = res.controller_stats
-        entry["wall_time_s"] = res.wall_time
+    for name, arrays in per.items():
+        entry = aggregate(arrays)
+        entry["controller"], entry["controller_stats"], entry["wall_time_s"] = info[name]
         out[name] = entry
     if cfg.baseline is not None:
-        base = results[cfg.baseline]
-        a0 = aave(base, cfg.window, cfg.vehicles)
-        f0 = fuel(base, cfg.window, cfg.vehicles)
-        for name, res in results.items():
+        a0, f0 = per[cfg.baseline]["aave"], per[cfg.baseline]["fuel_ml"]
+        for name, arrays in per.items():
             if name == cfg.baseline:
                 continue
-            ra = _pct(a0, aave(res, cfg.window, cfg.vehicles))
-            rf = _pct(f0, fuel(res, cfg.window, cfg.vehicles))
+            ra = _pct(a0, arrays["aave"])
+            rf = _pct(f0, arrays["fuel_ml"])
             out[name]["reduction_vs_baseline"] = {
                 "baseline": cfg.baseline,
                 "aave_pct": float(np.mean(ra)),
@@ -90,6 +132,15 @@ def report(spec, results) -> dict[str, Any]:
                 "fuel_pct_std": float(np.std(rf)),
             }
     return out
+
+
+def report(spec, results) -> dict[str, Any]:
+    """Metric summary of every controller's result (+ reductions versus the baseline)."""
+    from lcc_synth.metrics import per_scenario
+
+    per = {name: per_scenario(r, spec.metrics) for name, r in results.items()}
+    info = {n: (r.controller_info, r.controller_stats, r.wall_time) for n, r in results.items()}
+    return report_from(spec, per, info)
 
 
 def _clean(x):
@@ -165,12 +216,22 @@ def print_table(spec, rep: dict[str, Any], file=None) -> None:
 def run(args) -> int:
     from contextlib import ExitStack
 
+    from lcc_synth.metrics import concatenate, per_scenario
     from lcc_synth.recording import SimulationRecorder
 
     with ExitStack() as stack:  # the recording is finalised however the run ends
         recorder = SimulationRecorder(args, stack)
-        spec, results = collect(args, recorder if recorder.enabled else None)
-        rep = report(spec, results)
+        spec = load(args)
+        parts: dict[str, list] = {name: [] for name in spec.controllers}
+        info: dict[str, tuple] = {}
+        for chunk, name, result in iter_results(spec):
+            if chunk == 0:  # a study too large for memory records its first seed chunk
+                recorder(spec, name, result)
+            parts[name].append(per_scenario(result, spec.metrics))
+            wall = info[name][2] + result.wall_time if name in info else result.wall_time
+            info[name] = (result.controller_info, result.controller_stats, wall)
+            del result
+        rep = report_from(spec, {n: concatenate(p) for n, p in parts.items()}, info)
         recorder.metrics(rep)
     if recorder.path is not None:
         print(f"recording: {recorder.path} (lcc-synth review {recorder.path})", file=sys.stderr)
