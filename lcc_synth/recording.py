@@ -98,6 +98,7 @@ __all__ = [
     "record_region_map",
     "record_gains",
     "record_synthesis",
+    "record_analysis_file",
     "record_synthesis_file",
     "gamma_grid",
     "record_text",
@@ -282,8 +283,11 @@ def simulation_blueprint(scenario: str, controllers: Sequence[str]):
     return rrb.Blueprint(rrb.Horizontal(plots, right, column_shares=[3, 2]), collapse_panels=False)
 
 
-def analysis_blueprint(cases: Sequence[str] = (), regions: Sequence[str] = ()):
-    """Default layout of an analysis recording: |Gamma| curves, region maps, reports."""
+def analysis_blueprint(
+    cases: Sequence[str] = (), regions: Sequence[str] = (), report: bool = False
+):
+    """Default layout of an analysis recording: |Gamma| curves, region maps, reports (and the
+    command's whole report at ``/analysis/report`` when ``report``)."""
     rrb = _rrb()
     views = []
     if cases:
@@ -301,6 +305,8 @@ def analysis_blueprint(cases: Sequence[str] = (), regions: Sequence[str] = ()):
         )
         for r in regions
     ]
+    if report:
+        reports.append(rrb.TextDocumentView(origin="/analysis/report", name="report"))
     if not views:
         views.append(rrb.Spatial2DView(origin="/analysis", name="analysis"))
     parts = [rrb.Grid(*views, name="plots")]
@@ -1076,6 +1082,46 @@ def record_synthesis_file(path: str | Path, rep: Any, system: Any = None) -> Pat
     )
     with open_recording(path, rep.problem, blueprint) as rec:
         record_synthesis(rec, rep, system)
+    return path
+
+
+def record_analysis_file(
+    path: str | Path,
+    name: str,
+    *,
+    gamma: Mapping[str, tuple[np.ndarray, np.ndarray, Mapping[str, Any]]] | None = None,
+    regions: Mapping[str, Any] | None = None,
+    region_reports: Mapping[str, Mapping[str, Any]] | None = None,
+    summary: Mapping[str, Any] | None = None,
+) -> Path:
+    """Write an analysis recording (``lcc-synth analyze`` / ``regions``) to ``path``.
+
+    Parameters
+    ----------
+    gamma : mapping, optional
+        ``{case: (omega, |Gamma(j omega)|, report)}`` (see :func:`record_gamma`).
+    regions : mapping, optional
+        ``{name: RegionMap}`` of :mod:`lcc_synth.regions` (``mu``, ``k``, ``labels[a, b]`` at
+        ``(mu[a], k[b])``; labels 0 unstable, 1 stable, 2 string stable).
+    region_reports : mapping, optional
+        Extra report fields per region map (fractions, fixed gains, expansion...).
+    summary : mapping, optional
+        The command's whole report (e.g. its ``--json`` object): ``/analysis/report``.
+    """
+    gamma = dict(gamma or {})
+    regions = dict(regions or {})
+    path = Path(path)
+    blueprint = analysis_blueprint(list(gamma), list(regions), report=summary is not None)
+    with open_recording(path, name, blueprint) as rec:
+        for case, (omega, mag, report) in gamma.items():
+            record_gamma(rec, case, omega, mag, report)
+        for rname, rm in regions.items():
+            extra = dict((region_reports or {}).get(rname, {}))
+            record_region_map(rec, rname, np.asarray(rm.labels).T, rm.mu, rm.k, extra)
+        if summary is not None:
+            record_text(
+                rec, "/analysis/report", f"# {name}\n\n" + _mapping_markdown("report", summary)
+            )
     return path
 
 

@@ -520,3 +520,46 @@ def test_synthesize_command_records_gains_and_gamma(tmp_path, capsys):
         assert curve[:, 1].max() == pytest.approx(doc["gamma_peak"], rel=1e-5)
     assert name in gamma or "/analysis/gamma/" in gamma
     assert str(path) in capsys.readouterr().err
+
+
+def test_region_maps_and_gamma_curves_of_the_analysis_commands(tmp_path):
+    """``record_analysis_file`` with real region maps (labels[a, b] at (mu[a], k[b])) and a
+    real |Gamma| curve: the image is the labels transposed with k upwards."""
+    regions = pytest.importorskip("lcc_synth.regions")
+    from lcc_synth.string_stability import gamma_state_space
+
+    model = model_from_hdv("lcc", 2, 2, OVM(), 15.0, warn=False)
+    mu = np.linspace(-2.0, 2.0, 9)
+    k = np.linspace(-2.0, 2.0, 7)
+    labels = np.zeros((mu.size, k.size), dtype=np.int8)
+    labels[3:, 2:] = 1
+    labels[5:, 4:] = 2
+    rm = regions.RegionMap("a", -1, mu, k, labels)
+    omega = R.gamma_grid()
+    from lcc_synth.feedback import input_feedback
+
+    K, kh = input_feedback(model, StaticGains({}, "added"))  # the CAV drives like an HDV
+    mag = np.abs(gamma_state_space(model, K, kh, omega))
+    path = R.record_analysis_file(
+        tmp_path / "an.rrd",
+        "fig7",
+        gamma={"hdv only": (omega, mag, {"string_stable": False})},
+        regions={"a": rm},
+        region_reports={"a": {"vehicle": -1}},
+        summary={"problem": "fig7", "cases": {"hdv only": {"gamma_peak": float(mag.max())}}},
+    )
+    chunks = _chunks(path)
+    buf = _static(chunks, "/analysis/regions/a", "SegmentationImage:buffer")
+    img = np.array(buf, dtype=np.uint8).reshape(k.size, mu.size)
+    np.testing.assert_array_equal(img, labels.T[::-1])
+    rep = _static(chunks, "/analysis/regions/a/report", "TextDocument:text")
+    assert f"| fraction string stable | {_fmt_frac(labels)} |" in rep and "| vehicle | -1 |" in rep
+    curve = np.array(_static(chunks, "/analysis/gamma/hdv_only", "LineStrips2D:strips")[0])
+    np.testing.assert_allclose(curve[:, 1], mag, rtol=1e-6)
+    assert mag.max() > 1.0  # the paper's OVM setup is string unstable with HDVs only
+    assert "gamma_peak" in _static(chunks, "/analysis/report", "TextDocument:text")
+    assert R.summarize_recording(path).has_blueprint
+
+
+def _fmt_frac(labels) -> str:
+    return f"{np.count_nonzero(labels == 2) / labels.size:.6g}"
