@@ -349,7 +349,7 @@ class MPCController:
         v_eq = mem.v_eq
         out = np.empty((len(self._families), N))
         for f, fam in enumerate(self._families):
-            base = fam.s_min + fam.t_gap * v_eq
+            base = fam.s_min + self.settings.constraints.margin + fam.t_gap * v_eq
             if fam.vehicle == 0 and self.kind == "fd_lcc":
                 if not math.isfinite(s0):
                     out[f] = -np.inf

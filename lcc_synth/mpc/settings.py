@@ -25,6 +25,8 @@ A problem file selects the MPC with a controller table (every key optional)::
     a_max = 2.0
     s_min = 5.0                # soft safe spacing to the vehicle ahead, ABSOLUTE metres:
     t_gap = 0.8                #   s_0 >= s_min + t_gap * v_0
+    margin = 0.1               # the QP enforces the bounds this much tighter (m): covers the
+                               #   prediction's mismatch with the simulator (Euler steps)
     spacing_ahead = true       # enforce it (needs a vehicle ahead)
     behind = []                # HDVs behind with soft bounds s_i >= s_min_behind + t_gap_behind v_i
     s_min_behind = 5.0
@@ -107,6 +109,7 @@ class Constraints:
     a_max: float = 2.0
     s_min: float = 5.0
     t_gap: float = 0.8
+    margin: float = 0.1
     spacing_ahead: bool = True
     behind: tuple[int, ...] = ()
     s_min_behind: float = 5.0
@@ -219,7 +222,7 @@ def validate(s: MPCSettings, field_prefix: str = "") -> None:
             f"{pre}constraints.a_min",
             f"need a_min < 0 < a_max so that holding speed is allowed, got [{c.a_min}, {c.a_max}]",
         )
-    for name in ("s_min", "t_gap", "s_min_behind", "t_gap_behind"):
+    for name in ("s_min", "t_gap", "margin", "s_min_behind", "t_gap_behind"):
         _pos(getattr(c, name), f"{pre}constraints.{name}")
     for i in c.behind:
         if isinstance(i, bool) or not isinstance(i, int) or i < 1:
@@ -302,6 +305,7 @@ def settings_from_table(table: Mapping[str, Any], field_name: str) -> MPCSetting
         a_max=get_number(ct, "a_max", f"{f}.constraints", dc.a_max),
         s_min=get_number(ct, "s_min", f"{f}.constraints", dc.s_min, lo=0.0),
         t_gap=get_number(ct, "t_gap", f"{f}.constraints", dc.t_gap, lo=0.0),
+        margin=get_number(ct, "margin", f"{f}.constraints", dc.margin, lo=0.0),
         spacing_ahead=get_bool(ct, "spacing_ahead", f"{f}.constraints", dc.spacing_ahead),
         behind=tuple(behind),
         s_min_behind=get_number(ct, "s_min_behind", f"{f}.constraints", dc.s_min_behind, lo=0.0),

@@ -9,6 +9,9 @@ solution, converged to the tight default tolerances (1e-6), is still used.
 
 from __future__ import annotations
 
+import ctypes
+import os
+import sys
 import time
 from dataclasses import dataclass
 
@@ -43,6 +46,43 @@ class SolveResult:
     run_time: float
 
 
+class _SilentStdout:
+    """Discard what C code prints on file descriptor 1 inside the block.
+
+    OSQP prints "Polishing not needed - no active set detected at optimal point" with
+    ``printf`` even when ``verbose`` is off, which would corrupt ``--json`` output. The block
+    flushes Python's and C's buffers, points fd 1 at /dev/null and restores it (a few
+    microseconds per solve).
+    """
+
+    def __init__(self):
+        self._null = os.open(os.devnull, os.O_WRONLY)
+        try:
+            self._libc = ctypes.CDLL(None)
+        except OSError:  # pragma: no cover - no C library handle (not on Linux/macOS)
+            self._libc = None
+        self._saved = -1
+
+    def __enter__(self):
+        try:
+            sys.stdout.flush()
+        except (AttributeError, ValueError):  # pragma: no cover - closed / replaced stdout
+            pass
+        if self._libc is not None:
+            self._libc.fflush(None)
+        self._saved = os.dup(1)
+        os.dup2(self._null, 1)
+        return self
+
+    def __exit__(self, *exc):
+        if self._libc is not None:
+            self._libc.fflush(None)
+        os.dup2(self._saved, 1)
+        os.close(self._saved)
+        self._saved = -1
+        return False
+
+
 class OSQPSolver:
     """One OSQP workspace for the whole run: vectors updated per step, matrices only when the
     model is re-linearised (same sparsity pattern, ``update(Px=..., Ax=...)``).
@@ -64,6 +104,7 @@ class OSQPSolver:
         self._A_pattern = (qp.A.indptr.copy(), qp.A.indices.copy())
         self._solver = osqp.OSQP()
         self._solver.setup(qp.P, q, qp.A, l, u, **settings.osqp_kwargs())
+        self._silent = _SilentStdout() if settings.polish else None
         self.force_failure = False  # test hook: make every solve report a failure
 
     def update_matrices(self, qp: QPMatrices) -> None:
@@ -81,7 +122,11 @@ class OSQPSolver:
         self._solver.update(q=q, l=l, u=u)
         if warm_z is not None and self.settings.warm_start:
             self._solver.warm_start(x=warm_z, y=warm_y)
-        res = self._solver.solve(raise_error=False)
+        if self._silent is not None:
+            with self._silent:
+                res = self._solver.solve(raise_error=False)
+        else:
+            res = self._solver.solve(raise_error=False)
         info = res.info
         ok = info.status_val == OSQP_SOLVED and not self.force_failure
         z = None if res.x is None else np.array(res.x)
