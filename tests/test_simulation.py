@@ -441,3 +441,33 @@ def test_record_every_keeps_every_kth_sample(table2):
     r = simulate(replace(spec.scenario, record_every=10), spec.controllers["fd_lcc"])
     np.testing.assert_array_equal(r.velocity[0], res["fd_lcc"].velocity[0, ::10])
     assert r.dt == pytest.approx(0.1)
+
+
+def test_idm_string_and_hdv_emergency_braking():
+    idm = IDM()
+    sc = Scenario(
+        m=1, n=2, hdv=idm, v_star=15.0, duration=20.0, batch=2, heterogeneity={"T": 0.3},
+        perturbations=(Brake("head", 5.0, 1.0, -2.0),),
+    )  # fmt: skip
+    r = simulate(sc, HDVController("h"))
+    d = r.draws
+    hdv = sc.is_hdv()
+    # each IDM vehicle starts at its own equilibrium (s0 + v T) / sqrt(1 - (v/v0)^4)
+    expect = (idm.s0 + 15.0 * d.hdv_values["T"][:, hdv]) / np.sqrt(1 - (15.0 / idm.v0) ** 4)
+    np.testing.assert_allclose(d.initial_spacing[:, hdv], expect)
+    np.testing.assert_allclose(r.velocity[:, :400], 15.0, atol=1e-9)  # equilibrium until 5 s
+    assert np.nanmin(r.velocity[:, :, 1]) < 14.5 and not r.collided.any()
+    # HDV emergency braking: an inattentive HDV (alpha 0.01, beta 0) behind a CAV that brakes
+    # hard must brake at a_min exactly when eq. (29) holds on its own state
+    inattentive = {"alpha": [0.6, 0.6, 0.01], "beta": [0.9, 0.9, 0.0]}
+    sc = Scenario(m=0, n=1, dt=0.01, duration=8.0, hdv_aeb=True, hdv_values=inattentive,
+                  perturbations=(Brake(0, 1.0, 3.0, -5.0),))  # fmt: skip
+    r = simulate(sc, HDVController("h"))
+    v1, v0, s1 = r.velocity[0, :, 2], r.velocity[0, :, 1], r.spacing[0, :, 2]
+    cond = (v1**2 - v0**2) / (2 * s1) >= 5.0
+    assert cond.sum() > 10 and not r.collided.any()
+    moving = v1 > 5 * 0.01  # the velocity floor takes over in the last step before a stop
+    assert np.all(r.acceleration[0, cond & moving, 2] == -5.0)
+    assert np.all(r.acceleration[0, ~cond, 2] > -5.0)
+    off = simulate(replace(sc, hdv_aeb=False), HDVController("h"))
+    assert off.collided[0, 2]  # without it the inattentive driver crashes
