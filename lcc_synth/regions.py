@@ -155,15 +155,23 @@ class RegionMap:
         return out
 
 
-def grid_axis(lo: float, hi: float, step: float, field_name: str = "grid") -> np.ndarray:
-    """Inclusive grid ``lo, lo + step, ..., hi`` (``hi`` kept when it is on the lattice)."""
+def grid_axis(
+    lo: float, hi: float, step: float, field_name: str = "grid", step_field: str | None = None
+) -> np.ndarray:
+    """Inclusive grid ``lo, lo + step, ..., hi`` (``hi`` kept when it is on the lattice).
+
+    Errors name ``field_name`` (the range) or ``step_field`` (default ``field_name.step``).
+    """
+    step_field = step_field or f"{field_name}.step"
     if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-        raise ConfigError(field_name, f"needs a finite range lo < hi, got [{lo}, {hi}]")
+        raise ConfigError(field_name, f"must be [low, high] with low < high, got {[lo, hi]}")
     if not (np.isfinite(step) and step > 0):
-        raise ConfigError(f"{field_name}.step", f"must be > 0, got {step}")
+        raise ConfigError(step_field, f"must be > 0, got {step}")
     count = int(np.floor((hi - lo) / step + 1e-9)) + 1
     if count > 20001:
-        raise ConfigError(f"{field_name}.step", f"gives {count} points per axis; at most 20001")
+        raise ConfigError(
+            step_field, f"gives {count} points on {field_name} = [{lo}, {hi}]; at most 20001"
+        )
     return lo + step * np.arange(count)
 
 
@@ -456,15 +464,6 @@ _REGION_KEYS = [
 ]
 
 
-def _axis(table, key, field, default_range, step):
-    from lcc_synth.problem import get_number_list
-
-    lo, hi = get_number_list(table, key, field, default_range, length=2)
-    if not lo < hi:
-        raise ConfigError(f"{field}.{key}", f"must be [low, high] with low < high, got {[lo, hi]}")
-    return grid_axis(lo, hi, step, f"{field}.{key}")
-
-
 def region_specs_from(
     data: Mapping, model: LCCModel, source: str | None = None, step: float | None = None
 ) -> tuple[dict[str, RegionSpec], np.ndarray]:
@@ -492,6 +491,10 @@ def region_specs_from(
         d_step = get_number(opts, "step", "regions", 0.02, lo=0.0, lo_open=True)
         d_mu = get_number_list(opts, "mu", "regions", [-10.0, 10.0], length=2)
         d_k = get_number_list(opts, "k", "regions", [-10.0, 10.0], length=2)
+        step_field = "--step" if step is not None else "regions.step"
+        d_step_used = step if step is not None else d_step
+        mu_default = grid_axis(*d_mu, d_step_used, "regions.mu", step_field)
+        k_default = grid_axis(*d_k, d_step_used, "regions.k", step_field)
         w_lo = get_number(opts, "omega_min", "regions", 1e-3, lo=0.0, lo_open=True)
         w_hi = get_number(opts, "omega_max", "regions", 1e2, lo=w_lo, lo_open=True)
         per_dec = get_int(opts, "per_decade", "regions", DEFAULT_PER_DECADE, lo=10, hi=100_000)
@@ -533,11 +536,17 @@ def region_specs_from(
                     raise ConfigError(
                         f"{field}.gains.{own}", "is the map's own axis; remove it from gains"
                     )
-            st = step if step is not None else get_number(
-                t, "step", field, d_step, lo=0.0, lo_open=True
-            )
-            mu = _axis(t, "mu", field, d_mu, st)
-            k = _axis(t, "k", field, d_k, st)
+            if any(key in t for key in ("mu", "k", "step")):
+                st = step if step is not None else get_number(
+                    t, "step", field, d_step, lo=0.0, lo_open=True
+                )
+                sf = step_field if step is not None else f"{field}.step"
+                lo_hi = get_number_list(t, "mu", field, d_mu, length=2)
+                mu = grid_axis(*lo_hi, st, f"{field}.mu", sf)
+                lo_hi = get_number_list(t, "k", field, d_k, length=2)
+                k = grid_axis(*lo_hi, st, f"{field}.k", sf)
+            else:
+                mu, k = mu_default, k_default
             baseline = get_str(t, "baseline", field, None) if "baseline" in t else None
             title = get_str(t, "title", field, name)
             specs[name] = RegionSpec(name, vehicle, mu, k, gains, baseline, title)
