@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 
 HELP = "controllability/observability and head-to-tail string stability of the gain cases"
 
@@ -20,6 +21,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("problem", help="problem file with [system] and optional [cases.NAME]")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--png", metavar="PATH", help="write |Gamma(jw)| of every case (Fig. 9)")
+    from lcc_synth.recording import add_recording_arguments
+
+    add_recording_arguments(parser)
 
 
 def _fmt(x, spec: str) -> str:
@@ -173,8 +177,23 @@ def _print_human(doc: dict) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from lcc_synth.errors import ConfigError
+    from lcc_synth.recording import record_analysis_file, recording_path
 
+    recording_path(args, "check")  # a bad --rrd fails before the analysis runs
     doc, extra = analyze(args.problem)
+    rrd = recording_path(args, doc["problem"])
+    if rrd is not None:
+        import numpy as np
+
+        from lcc_synth.string_stability import gamma_state_space
+
+        omega = extra["options"].omega()
+        curves = {
+            name: (omega, np.abs(gamma_state_space(extra["model"], K, kh, omega)), rep.as_dict())
+            for name, (K, kh, rep, _label) in extra["reports"].items()
+        }
+        record_analysis_file(rrd, doc["problem"], gamma=curves, summary=doc)
+        print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
     written = []
     if args.png:
         if not extra["reports"]:

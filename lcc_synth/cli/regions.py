@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 HELP = "string-stable regions of one vehicle's feedback gains (Figs. 7-8)"
 
@@ -20,6 +21,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--step", type=float, metavar="STEP", help="override the grid step of every map"
     )
+    from lcc_synth.recording import add_recording_arguments
+
+    add_recording_arguments(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -27,9 +31,11 @@ def run(args: argparse.Namespace) -> int:
 
     from lcc_synth.errors import ConfigError
     from lcc_synth.problem import load_problem, system_from
+    from lcc_synth.recording import record_analysis_file, recording_path
     from lcc_synth.regions import expansion, region_specs_from, run_region_specs
 
     prob = load_problem(args.problem)
+    rrd = recording_path(args, prob.name)  # a bad --rrd fails before the maps are computed
     src = str(prob.path)
     if args.step is not None and not args.step > 0:
         raise ConfigError("--step", f"must be > 0, got {args.step}")
@@ -56,6 +62,10 @@ def run(args: argparse.Namespace) -> int:
             entry["baseline"] = specs[name].baseline
             entry["expansion"] = expansion(rm, maps[specs[name].baseline])
         doc["maps"][name] = entry
+    if rrd is not None:
+        reports = {n: {k: v for k, v in e.items() if k != "labels"} for n, e in doc["maps"].items()}
+        record_analysis_file(rrd, prob.name, regions=maps, region_reports=reports, summary=doc)
+        print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
     written = []
     if args.png:
         from lcc_synth.figures import plot_region_maps
