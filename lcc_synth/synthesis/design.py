@@ -16,6 +16,7 @@ from lcc_synth.synthesis.h2 import (
     lmi_full_state,
     make_plant,
     riccati_gain,
+    single_thread_blas,
 )
 from lcc_synth.synthesis.report import SynthesisReport, check_gain, evaluate_gain
 from lcc_synth.synthesis.sparsity import sparsity_sweep
@@ -61,6 +62,7 @@ def baseline_check(spec: SynthesisSpec, plant: H2Plant) -> dict:
     }
 
 
+@single_thread_blas
 def synthesize(spec: SynthesisSpec) -> SynthesisReport:
     """Synthesise the gain of ``spec`` and check it.
 

@@ -42,6 +42,7 @@ LMI designs work on the whole state, and the gains on the states ahead act as fe
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import asdict, dataclass, field
 
@@ -66,7 +67,26 @@ __all__ = [
     "LMIResult",
     "lmi_full_state",
     "STABILITY_TOL",
+    "single_thread_blas",
 ]
+
+def single_thread_blas(fn):
+    """Run ``fn`` with single-threaded BLAS/LAPACK (threadpoolctl).
+
+    The synthesis works on matrices of at most a few hundred rows, where OpenBLAS's threads cost
+    far more than they gain: polishing an 82-state structured design took 9.8 s with the
+    default threads on a loaded 2-core machine and 0.5 s with one thread.
+    """
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=1, user_api="blas"):
+            return fn(*args, **kwargs)
+
+    return wrapper
+
 
 #: a closed loop counts as stable when every eigenvalue has real part below ``-STABILITY_TOL``
 STABILITY_TOL = 1e-9
@@ -329,6 +349,7 @@ def h2_norm(plant: H2Plant, g: np.ndarray) -> float:
     return math.sqrt(J) if math.isfinite(J) else math.inf
 
 
+@single_thread_blas
 def riccati_gain(plant: H2Plant) -> tuple[np.ndarray, np.ndarray]:
     """Unstructured H2-optimal gain ``g = -R^-1 B' P`` from the CARE; returns ``(g, P)``."""
     check_stabilisable(plant)

@@ -28,7 +28,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.synthesis.h2 import H2Plant, SynthesisError, h2_cost, riccati_gain
+from lcc_synth.synthesis.h2 import (
+    H2Plant,
+    SynthesisError,
+    h2_cost,
+    riccati_gain,
+    single_thread_blas,
+)
 from lcc_synth.synthesis.structured import pattern_mask, polish
 
 __all__ = ["ParetoPoint", "SparsityResult", "admm_group", "sparsity_sweep"]
@@ -141,6 +147,7 @@ def admm_group(
     return G
 
 
+@single_thread_blas
 def sparsity_sweep(
     plant: H2Plant,
     gammas: list[float] | None = None,

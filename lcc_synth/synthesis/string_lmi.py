@@ -32,7 +32,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.synthesis.h2 import H2Plant, LMIResult, SynthesisError, h2_cost, solve_checked
+from lcc_synth.synthesis.h2 import (
+    H2Plant,
+    LMIResult,
+    SynthesisError,
+    h2_cost,
+    single_thread_blas,
+    solve_checked,
+)
 from lcc_synth.synthesis.structured import PolishResult, _x_blocks, pattern_mask, polish
 
 __all__ = ["StringResult", "string_lmi", "string_aware_h2", "string_check"]
@@ -135,6 +142,7 @@ class StringResult:
     timings: dict[str, float] = field(default_factory=dict)
 
 
+@single_thread_blas
 def string_aware_h2(
     plant: H2Plant,
     vehicles: Iterable[int],

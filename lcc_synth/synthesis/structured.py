@@ -38,6 +38,7 @@ from lcc_synth.synthesis.h2 import (
     h2_cost,
     max_real_eig,
     riccati_gain,
+    single_thread_blas,
     solve_checked,
 )
 
@@ -240,6 +241,7 @@ def _am_direction(plant: H2Plant, g, L, P, mask) -> np.ndarray:
     return d
 
 
+@single_thread_blas
 def polish(
     plant: H2Plant,
     g0: np.ndarray,
@@ -247,6 +249,7 @@ def polish(
     tol: float = 1e-7,
     max_iter: int = 500,
     accept: Callable[[np.ndarray], bool] | None = None,
+    max_rejected: int = 10,
 ) -> PolishResult:
     """Minimise the true H2 cost over gains with the pattern ``mask``, from stabilising ``g0``.
 
@@ -258,6 +261,9 @@ def polish(
     accept : callable, optional
         Extra feasibility test on a trial gain (e.g. string stability); a step is accepted only
         when it holds (feasible-direction descent). ``g0`` must satisfy it.
+    max_rejected : int
+        Per direction, give up after this many Armijo-acceptable steps that ``accept`` refused
+        (the direction points out of the feasible set; the next direction is tried).
 
     Raises
     ------
@@ -288,12 +294,17 @@ def polish(
             if not slope < 0:
                 continue
             t = 1.0
+            rejected = 0  # steps refused by `accept` (each costs a global check)
             for _ in range(40):
                 trial = g + t * d
                 Jt, Lt, Pt = h2_cost(plant, trial)
-                if Jt <= J + 1e-4 * t * slope and (accept is None or accept(trial)):
-                    step_found = True
-                    break
+                if Jt <= J + 1e-4 * t * slope:
+                    if accept is None or accept(trial):
+                        step_found = True
+                        break
+                    rejected += 1
+                    if rejected > max_rejected:
+                        break
                 t *= 0.5
             if step_found:
                 break
@@ -348,6 +359,7 @@ def _initial_gain(plant: H2Plant, mask: np.ndarray) -> tuple[np.ndarray, str]:
     raise SynthesisError("no stabilising initial gain found for this pattern")
 
 
+@single_thread_blas
 def structured_h2(
     plant: H2Plant,
     vehicles: Iterable[int],
