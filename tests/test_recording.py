@@ -563,3 +563,37 @@ def test_region_maps_and_gamma_curves_of_the_analysis_commands(tmp_path):
 
 def _fmt_frac(labels) -> str:
     return f"{np.count_nonzero(labels == 2) / labels.size:.6g}"
+
+
+def test_analyze_and_regions_commands_record(tmp_path, capsys):
+    """The recorded |Gamma| peaks / region fractions equal the commands' --json reports."""
+    import json
+
+    from lcc_synth.cli.main import main
+
+    problems = Path(__file__).resolve().parents[1] / "problems"
+    fig9, regions = problems / "paper_fig9_cases.toml", problems / "paper_fig7_fig8_regions.toml"
+    if not (fig9.is_file() and regions.is_file()):
+        pytest.skip("paper problem files not available")
+    a = tmp_path / "a.rrd"
+    assert main(["analyze", str(fig9), "--json", "--rrd", str(a)]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    chunks = _chunks(a)
+    for name, case in doc["cases"].items():
+        if case.get("gamma_peak") is None:
+            continue
+        curve = np.array(_static(chunks, f"/analysis/gamma/{name}", "LineStrips2D:strips")[0])
+        assert curve[:, 1].max() <= case["gamma_peak"] * (1 + 1e-6)  # grid max <= global sup
+    r = tmp_path / "r.rrd"
+    assert main(["regions", str(regions), "--json", "--step", "1.0", "--rrd", str(r)]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    chunks = _chunks(r)
+    for name, entry in doc["maps"].items():
+        buf = _static(chunks, f"/analysis/regions/{name}", "SegmentationImage:buffer")
+        img = np.array(buf, dtype=np.uint8)
+        assert np.count_nonzero(img == 2) / img.size == pytest.approx(
+            entry["string_stable_fraction"]
+        )
+        assert np.count_nonzero(img >= 1) / img.size == pytest.approx(
+            entry["plant_stable_fraction"]
+        )
