@@ -1,0 +1,487 @@
+"""Monte Carlo robustness sweeps on Dask (``lcc-synth sweep``).
+
+A sweep runs ``count`` random scenarios for every controller of a problem file and reports,
+per controller, the mean and the 5th / 95th percentiles of the metrics and the counts of
+collisions, emergency brakings and MPC fallbacks.
+
+What is random
+--------------
+Every scenario ``i`` (``0 <= i < count``) draws, from ``(seed, i)`` only, its heterogeneous HDV
+parameters (``[scenario.heterogeneity]``), its reaction delays (``[scenario.delay]``), and the
+realisations of the HDV acceleration noise (``hdv_accel_noise``) and of the V2V packet losses
+and measurement noise (``[scenario.v2v]``; latency is a fixed setting of the file). This is the
+simulator's own draw (:attr:`lcc_synth.simulation.Scenario.first_index`), so a scenario's
+result does not depend on how scenarios are grouped into tasks, nor on the worker running it.
+
+Execution
+---------
+Scenarios are cut into tasks of ``batch_size`` consecutive indices; a task simulates its
+scenarios as ONE batch per controller (the simulator's batch axis; all controllers on the same
+draws) and returns the per-scenario metrics. Tasks run on a Dask cluster (a ``LocalCluster`` of
+processes by default, or any scheduler address) with retries; Dask recomputes the tasks of a
+worker that dies. ``h2`` controllers are synthesised once, in the client; workers receive plain
+controller tables and build (and cache, per process and thread) the controllers themselves.
+
+Problem file
+------------
+``[hdv]``, ``[system]``, ``[scenario]`` (as ``lcc-synth simulate``; ``batch`` is ignored),
+``[metrics]``, ``[controllers.NAME]`` (as ``lcc-synth run``: ``hdv``, ``static``,
+``gains_file``, ``mpc`` or a synthesised ``h2``) and::
+
+    [sweep]
+    count = 1000        # scenarios, >= 1
+    batch_size = 50     # scenarios per Dask task, >= 1
+"""
+
+from __future__ import annotations
+
+import hashlib
+import pickle
+import threading
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lcc_synth.errors import ConfigError
+from lcc_synth.metrics import MetricsConfig
+from lcc_synth.problem import (
+    Problem,
+    System,
+    check_keys,
+    get_int,
+    get_table,
+    load_problem,
+    system_from,
+)
+from lcc_synth.simulation import Scenario
+
+__all__ = [
+    "SWEEP_METRICS",
+    "SWEEP_COUNTS",
+    "MAX_COUNT",
+    "SweepSpec",
+    "SweepResult",
+    "load_sweep",
+    "chunks",
+    "scenario_metrics",
+    "run_chunk",
+    "aggregate",
+    "run_sweep",
+    "local_cluster",
+    "format_summary",
+]
+
+#: Per-scenario metrics of a sweep -> label (distributions: mean, p5, p95).
+SWEEP_METRICS: dict[str, str] = {
+    "aave": "AAVE (m/s)",
+    "fuel_ml": "fuel (mL)",
+    "min_spacing": "min spacing (m)",
+    "min_ttc": "min TTC (s)",
+    "max_abs_command": "max |u| (m/s²)",
+    "rms_jerk_cav": "CAV RMS jerk (m/s³)",
+}
+#: Per-scenario counts of a sweep (summed over the scenarios).
+SWEEP_COUNTS = ("collisions", "aeb_activations", "fallbacks")
+MAX_COUNT = 10_000_000
+_MAX_BATCH = 100_000
+_TOP_KEYS = ["name", "description", "hdv", "system", "scenario", "metrics", "controllers", "sweep"]
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """A parsed sweep problem (see the module docstring)."""
+
+    name: str
+    system: System
+    scenario: Scenario
+    metrics: MetricsConfig
+    controllers: dict[str, dict[str, Any]]
+    count: int
+    batch_size: int
+    hdv_table: dict[str, Any] = field(default_factory=dict)
+    source: str | None = None
+
+    @property
+    def seed(self) -> int:
+        return self.scenario.seed
+
+
+def _count(value, field_name: str, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or not 1 <= value <= hi:
+        raise ConfigError(field_name, f"must be an integer in [1, {hi}], got {value!r}")
+    return int(value)
+
+
+def load_sweep(
+    path: str | Path | Problem,
+    count: int | None = None,
+    batch_size: int | None = None,
+    seed: int | None = None,
+    controllers: Sequence[str] | None = None,
+) -> SweepSpec:
+    """Read a sweep problem file; ``count``, ``batch_size``, ``seed`` override the file.
+
+    Raises
+    ------
+    ConfigError
+        A bad table or value, an unknown controller name, counts out of range.
+    """
+    from lcc_synth.comparison import SUITE_TYPES, select_names
+    from lcc_synth.problem import get_str
+    from lcc_synth.scenario import metrics_from, scenario_from
+
+    problem = path if isinstance(path, Problem) else load_problem(path)
+    src = str(problem.path)
+    try:
+        data = problem.data
+        check_keys(data, _TOP_KEYS, "")
+        system = system_from(data, src)
+        scenario = scenario_from(data, system, problem.path.parent)
+        metrics = metrics_from(data, system)
+        sw = get_table(data, "sweep", "sweep")
+        check_keys(sw, ["count", "batch_size"], "sweep")
+        n = get_int(sw, "count", "sweep", 100, lo=1, hi=MAX_COUNT)
+        bs = get_int(sw, "batch_size", "sweep", 50, lo=1, hi=_MAX_BATCH)
+        if count is not None:
+            n = _count(count, "--count", MAX_COUNT)
+        if batch_size is not None:
+            bs = _count(batch_size, "--batch-size", _MAX_BATCH)
+        if seed is not None:
+            if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+                raise ConfigError("--seed", f"must be an integer >= 0, got {seed!r}")
+            scenario = replace(scenario, seed=int(seed))
+        scenario = replace(scenario, batch=1, first_index=0, name=problem.name)
+        tables = get_table(data, "controllers", "controllers", required=True)
+        if not tables:
+            raise ConfigError("controllers", "needs at least one [controllers.NAME] table")
+        names = select_names(list(tables), controllers, "--controllers")
+        ctrls = {}
+        for name in names:
+            t = tables[name]
+            if not isinstance(t, dict):
+                raise ConfigError(f"controllers.{name}", "must be a table")
+            get_str(t, "type", f"controllers.{name}", choices=SUITE_TYPES)
+            if "layouts" in t:
+                raise ConfigError(f"controllers.{name}.layouts", "a sweep has one layout")
+            ctrls[name] = dict(t)
+        return SweepSpec(
+            name=problem.name,
+            system=system,
+            scenario=scenario,
+            metrics=metrics,
+            controllers=ctrls,
+            count=n,
+            batch_size=min(bs, n),
+            hdv_table=dict(get_table(data, "hdv", "hdv")),
+            source=src,
+        )
+    except ConfigError as err:
+        raise err.with_source(src) if not err.source else err from None
+
+
+def chunks(count: int, batch_size: int) -> list[tuple[int, int]]:
+    """``[(start, stop), ...]`` covering ``0..count-1`` with at most ``batch_size`` each."""
+    count = _count(count, "count", MAX_COUNT)
+    batch_size = _count(batch_size, "batch_size", _MAX_BATCH)
+    return [(s, min(s + batch_size, count)) for s in range(0, count, batch_size)]
+
+
+# --------------------------------------------------------------------------------------------
+# The task
+# --------------------------------------------------------------------------------------------
+
+
+def scenario_metrics(result, config: MetricsConfig) -> dict[str, np.ndarray]:
+    """Per-scenario metrics of one batched result (``(batch,)`` arrays), from
+    :mod:`lcc_synth.metrics`: AAVE, fuel, worst spacing and time to collision over the
+    vehicles, max |u|, CAV RMS jerk, collided vehicles and emergency-braking steps."""
+    from lcc_synth import metrics as mt
+
+    ms = mt.min_spacing(result)[:, 1:]
+    ttc = mt.min_time_to_collision(result)[:, 1:]
+    return {
+        "aave": mt.aave(result, config.window, config.vehicles),
+        "fuel_ml": mt.fuel(result, config.window, config.vehicles),
+        "min_spacing": np.nanmin(ms, axis=1),
+        "min_ttc": np.nanmin(ttc, axis=1),
+        "max_abs_command": mt.max_abs_command(result),
+        "rms_jerk_cav": mt.rms_jerk(result),
+        "collisions": mt.collisions(result).astype(np.int64),
+        "aeb_activations": mt.aeb_activations(result).astype(np.int64),
+    }
+
+
+_CACHE: dict[tuple[str, int], dict[str, Any]] = {}
+_CACHE_LOCK = threading.Lock()
+
+
+def _token(*parts: Any) -> str:
+    return hashlib.sha256(pickle.dumps(parts)).hexdigest()
+
+
+def _controllers(tables: Mapping[str, Mapping[str, Any]], system: System, source: str | None):
+    """Controllers of ``tables``, built once per process and thread (MPCs hold solver state)."""
+    from lcc_synth.comparison import build_controllers
+
+    key = (_token(dict(tables), system, source), threading.get_ident())
+    with _CACHE_LOCK:
+        ctrls = _CACHE.get(key)
+    if ctrls is None:
+        ctrls = build_controllers(tables, system, source)
+        for c in ctrls.values():
+            if hasattr(c, "history"):
+                c.record = False  # an MPC's per-step history is not needed here
+        with _CACHE_LOCK:
+            _CACHE[key] = ctrls
+    return ctrls
+
+
+def run_chunk(
+    scenario: Scenario,
+    system: System,
+    tables: Mapping[str, Mapping[str, Any]],
+    config: MetricsConfig,
+    source: str | None,
+    start: int,
+    stop: int,
+) -> dict[str, Any]:
+    """Simulate scenarios ``start .. stop - 1`` with every controller (one batch each).
+
+    Returns ``{"start", "stop", "metrics": {controller: {metric: (stop - start,) array}},
+    "fallbacks": {controller: int}, "wall_time": s}``.
+    """
+    from lcc_synth.simulation import simulate
+
+    t0 = time.perf_counter()
+    ctrls = _controllers(tables, system, source)
+    sc = replace(scenario, batch=stop - start, first_index=start)
+    draws = sc.draw()
+    metrics, fallbacks = {}, {}
+    for name, ctrl in ctrls.items():
+        res = simulate(sc, ctrl, draws)
+        metrics[name] = scenario_metrics(res, config)
+        fallbacks[name] = int((res.controller_stats or {}).get("fallbacks", 0) or 0)
+    return {
+        "start": start,
+        "stop": stop,
+        "metrics": metrics,
+        "fallbacks": fallbacks,
+        "wall_time": time.perf_counter() - t0,
+    }
+
+
+# --------------------------------------------------------------------------------------------
+# Aggregation
+# --------------------------------------------------------------------------------------------
+
+
+def _dist(x: np.ndarray) -> dict[str, Any]:
+    x = np.asarray(x, dtype=float)
+    ok = x[np.isfinite(x)]
+    if ok.size == 0:
+        return {"mean": None, "p5": None, "p95": None, "n": 0}
+    return {
+        "mean": float(ok.mean()),
+        "p5": float(np.percentile(ok, 5)),
+        "p95": float(np.percentile(ok, 95)),
+        "n": int(ok.size),
+    }
+
+
+def aggregate(
+    samples: Mapping[str, Mapping[str, np.ndarray]], fallbacks: Mapping[str, int]
+) -> dict[str, dict[str, Any]]:
+    """Per controller: ``{metric: {mean, p5, p95, n}}`` over the finite per-scenario values
+    (``n`` of them: a collided scenario has no AAVE / fuel; a vehicle that never closes in has
+    an infinite time to collision), and the counts ``collisions`` (collided vehicles),
+    ``collision_scenarios``, ``aeb_activations`` (steps), ``aeb_scenarios``, ``fallbacks``
+    (MPC fallback steps) and ``scenarios``."""
+    out = {}
+    for name, per in samples.items():
+        entry: dict[str, Any] = {k: _dist(per[k]) for k in SWEEP_METRICS}
+        coll = np.asarray(per["collisions"])
+        aeb = np.asarray(per["aeb_activations"])
+        entry["collisions"] = int(coll.sum())
+        entry["collision_scenarios"] = int(np.count_nonzero(coll))
+        entry["aeb_activations"] = int(aeb.sum())
+        entry["aeb_scenarios"] = int(np.count_nonzero(aeb))
+        entry["fallbacks"] = int(fallbacks.get(name, 0))
+        entry["scenarios"] = int(coll.size)
+        out[name] = entry
+    return out
+
+
+@dataclass
+class SweepResult:
+    """A finished sweep.
+
+    Attributes
+    ----------
+    summary : dict
+        :func:`aggregate` of the samples (the ``results`` of ``--json``).
+    samples : dict
+        ``{controller: {metric: (count,) array}}`` in scenario order.
+    fallbacks : dict
+        ``{controller: MPC fallback steps}``.
+    tables : dict
+        Controller tables sent to the workers (``h2`` resolved to its gains).
+    designs : dict
+        ``{controller: SynthesisReport}`` of the synthesised controllers.
+    info : dict
+        Count, batch size, tasks, seed, scheduler, wall time, throughput.
+    """
+
+    summary: dict[str, dict[str, Any]]
+    samples: dict[str, dict[str, np.ndarray]]
+    fallbacks: dict[str, int]
+    tables: dict[str, dict[str, Any]]
+    designs: dict[str, Any]
+    info: dict[str, Any]
+
+
+def local_cluster(n_workers: int = 2, local_directory: str | None = None):
+    """A ``LocalCluster`` of ``n_workers`` single-threaded processes, no dashboard, scratch
+    space in ``local_directory`` (a temporary directory by default)."""
+    import tempfile
+
+    from dask.distributed import LocalCluster
+
+    n_workers = _count(n_workers, "--workers", 256)
+    return LocalCluster(
+        n_workers=n_workers,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        local_directory=local_directory or tempfile.mkdtemp(prefix="lcc-sweep-dask-"),
+        silence_logs=40,
+    )
+
+
+def run_sweep(
+    spec: SweepSpec,
+    client: Any = None,
+    progress: bool = True,
+    retries: int = 3,
+) -> SweepResult:
+    """Run the sweep: synthesise ``h2`` controllers here, then every task on ``client``.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+    client : dask.distributed.Client, optional
+        Where the tasks run; ``None`` runs them one after the other in this process (the same
+        task function: useful to check a cluster's results).
+    progress : bool
+        Progress bars on stderr (synthesis, scenarios done).
+    retries : int
+        Retries of a failing task (a task lost with its worker is recomputed by Dask).
+    """
+    from lcc_synth.comparison import prepare_controllers, progress_bar
+
+    t_all = time.perf_counter()
+    with progress_bar(len(spec.controllers), "controllers (synthesis)", progress) as bar:
+
+        def step(name: str) -> None:
+            bar.set_postfix_str(name)
+            bar.update(1)
+
+        tables, designs = prepare_controllers(
+            spec.controllers, spec.system, "sweep", spec.hdv_table, spec.source, spec.name,
+            on_step=step,
+        )
+    t_design = time.perf_counter() - t_all
+    # fail early, in the client, on a controller that cannot be built
+    from lcc_synth.comparison import build_controllers
+
+    build_controllers(tables, spec.system, spec.source)
+
+    parts = chunks(spec.count, spec.batch_size)
+    args = (spec.scenario, spec.system, tables, spec.metrics, spec.source)
+    names = list(tables)
+    samples = {
+        c: {k: np.full(spec.count, np.nan) for k in (*SWEEP_METRICS, "collisions",
+                                                    "aeb_activations")}
+        for c in names
+    }
+    fallbacks = dict.fromkeys(names, 0)
+    task_times = []
+    t0 = time.perf_counter()
+
+    def store(out: dict[str, Any]) -> None:
+        s, e = out["start"], out["stop"]
+        for c, per in out["metrics"].items():
+            for k, v in per.items():
+                samples[c][k][s:e] = v
+            fallbacks[c] += out["fallbacks"][c]
+        task_times.append(out["wall_time"])
+
+    with progress_bar(spec.count, "scenarios", progress) as bar:
+        bar.unit = "scenario"
+        if client is None:
+            for s, e in parts:
+                store(run_chunk(*args, s, e))
+                bar.update(e - s)
+        else:
+            from dask.distributed import as_completed
+
+            token = _token(args)[:16]
+            futures = [
+                client.submit(
+                    run_chunk, *args, s, e, retries=retries, pure=False,
+                    key=f"lcc-sweep-{token}-{s}-{e}",
+                )
+                for s, e in parts
+            ]
+            for fut in as_completed(futures):
+                out = fut.result()
+                store(out)
+                bar.update(out["stop"] - out["start"])
+    wall = time.perf_counter() - t0
+    for c in names:
+        for k in ("collisions", "aeb_activations"):
+            samples[c][k] = samples[c][k].astype(np.int64)
+    info = {
+        "count": spec.count,
+        "batch_size": spec.batch_size,
+        "tasks": len(parts),
+        "seed": spec.seed,
+        "controllers": names,
+        "scheduler": None if client is None else str(client.scheduler.address),
+        "synthesis_time_s": t_design,
+        "wall_time_s": wall,
+        "total_time_s": time.perf_counter() - t_all,
+        "task_time_s_sum": float(sum(task_times)),
+        "scenarios_per_s": spec.count / wall if wall > 0 else None,
+        "runs_per_s": spec.count * len(names) / wall if wall > 0 else None,
+    }
+    return SweepResult(aggregate(samples, fallbacks), samples, fallbacks, tables, designs, info)
+
+
+def format_summary(summary: Mapping[str, Mapping[str, Any]]) -> str:
+    """Plain-text table: one row per controller, ``mean [p5, p95]`` per metric, then counts."""
+    fmt = {"aave": ".3f", "fuel_ml": ".1f", "min_spacing": ".2f", "min_ttc": ".2f",
+           "max_abs_command": ".2f", "rms_jerk_cav": ".2f"}
+
+    def cell(d: Mapping[str, Any], f: str) -> str:
+        if d["mean"] is None:
+            return "n/a"
+        return f"{d['mean']:{f}} [{d['p5']:{f}}, {d['p95']:{f}}]"
+
+    head = ["controller", *(SWEEP_METRICS[k] for k in SWEEP_METRICS), "collisions (scen.)",
+            "AEB steps (scen.)", "MPC fallbacks"]
+    rows = []
+    for name, e in summary.items():
+        rows.append(
+            [name, *(cell(e[k], fmt[k]) for k in SWEEP_METRICS),
+             f"{e['collisions']} ({e['collision_scenarios']})",
+             f"{e['aeb_activations']} ({e['aeb_scenarios']})", str(e["fallbacks"])]
+        )
+    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(head)]
+    lines = ["  ".join(h.ljust(w) for h, w in zip(head, widths, strict=True))]
+    lines.append("  ".join("-" * w for w in widths))
+    lines += ["  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)) for r in rows]
+    return "\n".join(lines)

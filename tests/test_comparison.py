@@ -1,0 +1,335 @@
+"""The comparison suite (``lcc-synth run``) on a shortened problem: every number of its table
+must equal a direct ``simulate`` + ``metrics`` call with independently built controllers."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lcc_synth.cli.main import main
+from lcc_synth.comparison import (
+    SUITE_METRICS,
+    controller_table,
+    format_table,
+    load_suite,
+    markdown_table,
+    run_suite,
+    write_csv,
+    write_json,
+)
+from lcc_synth.controllers import build_controller
+from lcc_synth.errors import ConfigError
+from lcc_synth.metrics import (
+    aave,
+    aeb_activations,
+    collisions,
+    fuel,
+    max_abs_command,
+    min_spacing,
+    min_time_to_collision,
+)
+from lcc_synth.problem import Problem, load_problem
+from lcc_synth.simulation import simulate
+
+SHORT = """
+name = "short_suite"
+
+[hdv]
+model = "ovm"
+alpha = 0.6
+beta = 0.9
+s_st = 5.0
+s_go = 35.0
+v_max = 30.0
+
+[metrics]
+window = [5.0, 20.0]
+
+[layouts.tail3]
+kind = "cf_lcc"
+m = 0
+n = 3
+v_star = 15.0
+
+[layouts.mid]
+kind = "lcc"
+m = 1
+n = 1
+v_star = 15.0
+
+[scenarios.brake]
+layout = "tail3"
+duration = 20.0
+metrics = { window = [5.0, 15.0] }
+
+[[scenarios.brake.perturbations]]
+type = "brake"
+vehicle = 1
+start = 5.0
+duration = 1.0
+decel = -5.0
+
+[scenarios.sine]
+layout = "mid"
+duration = 20.0
+
+[[scenarios.sine.perturbations]]
+type = "sine"
+amplitude = 0.5
+period = 6.0
+start = 5.0
+
+[scenarios.noisy]
+layout = "tail3"
+duration = 20.0
+seed = 3
+hdv_accel_noise = 0.2
+heterogeneity = { alpha = 0.1 }
+delay = { mean = 0.3, spread = 0.1 }
+v2v = { loss_rate = 0.3, latency = 0.05 }
+
+[[scenarios.noisy.perturbations]]
+type = "brake_profile"
+start = 5.0
+decel = -4.0
+decel_time = 1.0
+hold_time = 2.0
+accel = 2.0
+accel_time = 2.0
+
+[controllers.all_hdv]
+type = "hdv"
+
+[controllers.paper]
+type = "static"
+
+[controllers.paper.layouts.tail3]
+kind = "cf_lcc"
+semantics = "replace"
+gains = { s_0 = 0.1, v_0 = -0.5, s_1 = -0.2, v_1 = 0.05 }
+
+[controllers.paper.layouts.mid]
+semantics = "added"
+gains = { s_-1 = 1.0, v_-1 = -1.0, s_1 = -1.0, v_1 = -1.0 }
+
+[controllers.h2]
+type = "h2"
+design = "structured"
+semantics = "replace"
+pattern = [1]
+
+[controllers.h2.weights]
+q_s = 0.1
+q_v = 1.0
+accel = 1.0
+
+[controllers.h2.layouts.mid]
+semantics = "added"
+weights = { head = 1.0 }
+
+[controllers.mpc]
+type = "mpc"
+sample_time = 0.1
+horizon = 15
+"""
+
+
+@pytest.fixture(scope="module")
+def problem_file(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("suite") / "short.toml"
+    path.write_text(SHORT)
+    return path
+
+
+@pytest.fixture(scope="module")
+def suite_run(problem_file):
+    suite = load_suite(problem_file)
+    return suite, run_suite(suite, progress=False)
+
+
+def _direct_h2(problem_file: Path, layout: str):
+    """The h2 gain synthesised straight from the synthesis package (no comparison code)."""
+    from lcc_synth.synthesis.config import spec_from_problem
+    from lcc_synth.synthesis.design import synthesize
+
+    data = load_problem(problem_file).data
+    synth = {"design": "structured", "semantics": "replace", "pattern": [1],
+             "weights": {"q_s": 0.1, "q_v": 1.0, "accel": 1.0}}
+    if layout == "mid":
+        synth["semantics"] = "added"
+        synth["weights"] = {**synth["weights"], "head": 1.0}
+    prob = Problem(problem_file, {"name": "direct", "hdv": data["hdv"],
+                                  "system": data["layouts"][layout], "synthesis": synth})
+    return synthesize(spec_from_problem(prob))
+
+
+def test_suite_table_equals_direct_simulation(suite_run, problem_file):
+    suite, run = suite_run
+    data = load_problem(problem_file).data
+    assert list(run.table) == ["brake", "sine", "noisy"]
+    for per in run.table.values():
+        assert list(per) == ["all_hdv", "paper", "h2", "mpc"]
+    for sname, ss in suite.scenarios.items():
+        layout = data["scenarios"][sname]["layout"]
+        system = suite.layouts[layout]
+        rep = _direct_h2(problem_file, layout)
+        paper = dict(data["controllers"]["paper"]["layouts"][layout], type="static")
+        direct = {
+            "all_hdv": build_controller("all_hdv", {"type": "hdv"}, system),
+            "paper": build_controller("paper", paper, system),
+            "h2": build_controller(
+                "h2",
+                {"type": "static", "kind": rep.kind, "semantics": rep.semantics,
+                 "gains": rep.gains},
+                system,
+            ),
+            "mpc": build_controller(
+                "mpc", {"type": "mpc", "sample_time": 0.1, "horizon": 15}, system
+            ),
+        }
+        w = tuple(data["scenarios"][sname].get("metrics", {}).get("window", [5.0, 20.0]))
+        for cname, ctrl in direct.items():
+            res = simulate(ss.scenario, ctrl)  # its own draws: identical by seed
+            row = run.table[sname][cname]
+            expect = {
+                "aave": float(aave(res, w)[0]),
+                "fuel_ml": float(fuel(res, w)[0]),
+                "min_spacing": float(np.nanmin(min_spacing(res)[0, 1:])),
+                "min_ttc": float(np.nanmin(min_time_to_collision(res)[0, 1:])),
+                "max_abs_command": float(max_abs_command(res)[0]),
+                "aeb_activations": int(aeb_activations(res)[0]),
+                "collisions": int(collisions(res)[0]),
+            }
+            assert set(row) == set(SUITE_METRICS)
+            for key, value in expect.items():
+                assert row[key] == pytest.approx(value, rel=1e-12, abs=0), (sname, cname, key)
+
+
+def test_controllers_are_built_per_layout(suite_run):
+    suite, run = suite_run
+    # the paper's gains come from each layout's override, the h2 gain is designed per layout
+    assert run.tables["tail3"]["paper"]["gains"] == {"s_0": 0.1, "v_0": -0.5, "s_1": -0.2,
+                                                      "v_1": 0.05}
+    assert run.tables["mid"]["paper"]["semantics"] == "added"
+    d_tail, d_mid = run.designs["tail3"]["h2"], run.designs["mid"]["h2"]
+    assert (d_tail.m, d_tail.n, d_tail.kind) == (0, 3, "cf_lcc")
+    assert (d_mid.m, d_mid.n, d_mid.kind) == (1, 1, "lcc")
+    # the pattern (CAV + HDV 1) is respected exactly: zeros elsewhere
+    for d in (d_tail, d_mid):
+        for state, g in d.gains.items():
+            vehicle = int(state.split("_", 1)[1])
+            if vehicle not in (0, 1):
+                assert g == 0.0, state
+    assert run.controllers["mid"]["mpc"].m == 1
+
+
+def test_controller_table_merges_recursively():
+    table = {"type": "h2", "weights": {"q_s": 0.1, "accel": 1.0},
+             "layouts": {"a": {"weights": {"head": 1.0}, "semantics": "added"}}}
+    assert controller_table(table, "a") == {
+        "type": "h2", "weights": {"q_s": 0.1, "accel": 1.0, "head": 1.0}, "semantics": "added"
+    }
+    assert controller_table(table, "b") == {"type": "h2", "weights": {"q_s": 0.1, "accel": 1.0}}
+
+
+def test_writers_round_trip(suite_run, tmp_path):
+    _, run = suite_run
+    path = write_csv(run.table, tmp_path / "t.csv")
+    with path.open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 12
+    for r in rows:
+        src = run.table[r["scenario"]][r["controller"]]
+        for key in SUITE_METRICS:
+            v = src[key]
+            if isinstance(v, float) and math.isnan(v):
+                assert r[key] == ""
+            else:
+                assert float(r[key]) == pytest.approx(float(v), rel=1e-15)
+    doc = json.loads(write_json(run.table, tmp_path / "t.json").read_text())
+    assert list(doc) == ["results"]
+    assert doc["results"]["sine"]["paper"]["aave"] == run.table["sine"]["paper"]["aave"]
+    md = markdown_table(run.table)
+    assert md.count("\n") == 2 + 12
+    assert "| brake | h2 |" in md
+    text = format_table(run.table)
+    assert "AAVE (m/s)" in text and "mpc" in text
+
+
+def test_selection_and_bad_names(problem_file):
+    suite = load_suite(problem_file, scenarios=["sine", "brake"], controllers=["paper"])
+    assert list(suite.scenarios) == ["brake", "sine"]  # file order
+    assert list(suite.controllers) == ["paper"]
+    assert suite.layouts_used() == ["tail3", "mid"]
+    with pytest.raises(ConfigError, match="--scenarios.*unknown name.*nope"):
+        load_suite(problem_file, scenarios=["nope"])
+    with pytest.raises(ConfigError, match="--controllers.*unknown name"):
+        load_suite(problem_file, controllers=["paper", "lqr"])
+    with pytest.raises(ConfigError, match="--controllers"):
+        load_suite(problem_file, controllers=[""])
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "field"),
+    [
+        ('layout = "mid"', 'layout = "nowhere"', "scenarios.sine.layout"),
+        ("[controllers.paper.layouts.mid]", "[controllers.paper.layouts.other]",
+         "controllers.paper.layouts.other"),
+        ('type = "hdv"', 'type = "lqr"', "controllers.all_hdv.type"),
+        ("duration = 20.0\nmetrics", "duration = -1.0\nmetrics", "scenarios.brake.duration"),
+        ("n = 3", "n = 0", "layouts.tail3.n"),
+        ("q_s = 0.1", "q_s = -0.1", "controllers.h2.weights.q_s"),
+    ],
+)
+def test_bad_suite_files(tmp_path, old, new, field):
+    path = tmp_path / "bad.toml"
+    assert old in SHORT
+    path.write_text(SHORT.replace(old, new, 1))
+    with pytest.raises(ConfigError) as info:
+        suite = load_suite(path)
+        run_suite(suite, progress=False)  # synthesis keys are checked when synthesising
+    assert info.value.field.startswith(field), info.value.field
+    assert info.value.source == str(path)
+
+
+def test_cli_bad_input_exits_2(problem_file, capsys, tmp_path):
+    assert main(["run", str(problem_file), "--scenarios", "nope", "--no-record"]) == 2
+    err = capsys.readouterr().err
+    assert "--scenarios" in err and "nope" in err
+    assert main(["run", str(tmp_path / "missing.toml"), "--no-record"]) == 2
+    assert main(["run", str(problem_file), "--controllers", "x", "--no-record"]) == 2
+
+
+def test_cli_run_json_files_and_recording(problem_file, capsys, tmp_path):
+    from lcc_synth.recording import summarize_recording
+
+    rrd = tmp_path / "suite.rrd"
+    code = main([
+        "run", str(problem_file), "--json", "--scenarios", "brake,sine",
+        "--controllers", "all_hdv,paper", "--out", str(tmp_path / "res"), "--rrd", str(rrd),
+        "--no-progress", "--record-every", "10",
+    ])
+    assert code == 0
+    out = capsys.readouterr().out
+    doc = json.loads(out)  # exactly one JSON object on stdout
+    assert list(doc) == ["results"]
+    assert set(doc["results"]) == {"brake", "sine"}
+    assert set(doc["results"]["sine"]) == {"all_hdv", "paper"}
+    assert set(doc["results"]["sine"]["paper"]) == set(SUITE_METRICS)
+    (run_dir,) = (tmp_path / "res").iterdir()
+    assert run_dir.name.startswith("short_suite-")
+    names = {p.name for p in run_dir.iterdir()}
+    assert {"table.md", "table.csv", "table.json", "details.json", "profiles_brake.png",
+            "profiles_sine.png", "gamma_tail3.png", "gamma_mid.png"} <= names
+    assert json.loads((run_dir / "table.json").read_text()) == doc
+    summary = summarize_recording(rrd)
+    paths = set(summary.entities)
+    for s in ("brake", "sine"):
+        for c in ("all_hdv", "paper"):
+            assert any(p.startswith(f"/{s}/{c}/velocity") for p in paths), (s, c)
+    assert any(p.startswith("/analysis/gamma/mid.paper") for p in paths)
