@@ -579,7 +579,9 @@ def string_stability(
         Feedback on the model's input, as :func:`lcc_synth.feedback.input_feedback` returns.
     method : {"grid", "hamiltonian"}
         Global search of ``sup |Gamma(jw)|``: dense grid + pole frequencies + golden-section
-        refinement, or Boyd-Balakrishnan level sets (see the module docstring).
+        refinement, or Boyd-Balakrishnan level sets (see the module docstring). The
+        Hamiltonian method reports ``interior_peak`` only when it is the global supremum, and
+        an unstable plant's formal response is always searched on the grid.
     """
     _check_head(model)
     if method not in ("grid", "hamiltonian"):
@@ -591,10 +593,15 @@ def string_stability(
     max_re = float(eigs.real.max())
     plant_stable = bool(max_re < 0.0)
     singular = np.any(np.abs(eigs) < 1e-12)
-    if singular:
-        g0, curv, crel = float("nan"), float("nan"), float("nan")
-    else:
-        g0, curv, crel = low_frequency_curvature(Acl, h, c)
+    g0, curv, crel = float("nan"), float("nan"), float("nan")
+    if not singular:
+        with np.errstate(all="ignore"):
+            try:
+                g0, curv, crel = low_frequency_curvature(Acl, h, c)
+            except (np.linalg.LinAlgError, ValueError):
+                pass
+        if not (np.isfinite(g0) and np.isfinite(curv)):
+            g0, curv, crel = float("nan"), float("nan"), float("nan")
 
     solver = _hessenberg_solver(Acl, h, c)
 
