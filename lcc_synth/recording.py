@@ -227,12 +227,14 @@ def vehicle_colors(m: int, n: int) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 
 
-def simulation_blueprint(scenario: str, controllers: Sequence[str]):
+def simulation_blueprint(scenario: str, controllers: Sequence[str], mpc: Sequence[str] = ()):
     """Default layout of a simulation recording.
 
     Left: one row per quantity (velocity, spacing, acceleration), one time-series view per
     controller side by side. Right: the road view of every controller, the CAV command of all
-    controllers overlaid, the comparison metrics and each controller's description.
+    controllers overlaid, the comparison metrics and each controller's description; for the
+    MPC controllers named in ``mpc``, tabs with their solve times / status and their predicted
+    velocities.
     """
     rrb = _rrb()
     s = entity_name(scenario)
@@ -270,15 +272,27 @@ def simulation_blueprint(scenario: str, controllers: Sequence[str]):
         contents=[f"+ /{s}/{c}/cav/**" for c in ctrls],
         name="CAV command u_cmd (m/s²) and AEB",
     )
-    texts = rrb.Tabs(
+    tabs = [
         rrb.TextDocumentView(origin=f"/{s}/metrics", name="metrics"),
         *[
             rrb.TextDocumentView(origin=f"/{s}/{c}/controller", name=f"{c}: controller")
             for c in ctrls
         ],
         rrb.TextDocumentView(origin=f"/{s}/status", name="status"),
-        name="reports",
-    )
+    ]
+    for c in (entity_name(x) for x in mpc):
+        tabs += [
+            rrb.TimeSeriesView(
+                origin=f"/{s}/{c}/mpc",
+                contents=[f"+ /{s}/{c}/mpc/solve_time_ms", f"+ /{s}/{c}/mpc/status"],
+                name=f"{c}: MPC solve time (ms), status",
+            ),
+            rrb.Spatial2DView(
+                origin=f"/{s}/{c}/mpc/predicted/velocity",
+                name=f"{c}: predicted velocity (x: s ahead, y: m/s)",
+            ),
+        ]
+    texts = rrb.Tabs(*tabs, name="reports")
     right = rrb.Vertical(road, u_cmd, texts, row_shares=[2, 1, 2])
     return rrb.Blueprint(rrb.Horizontal(plots, right, column_shares=[3, 2]), collapse_panels=False)
 
@@ -801,7 +815,12 @@ class SimulationRecorder:
         if self.rec is None:
             self.scenario = spec.name
             self.path = recording_path(self.args, spec.name)
-            blueprint = simulation_blueprint(spec.name, list(spec.controllers))
+            mpc = [
+                n
+                for n, c in dict(spec.controllers).items()
+                if callable(getattr(c, "history", None))
+            ]
+            blueprint = simulation_blueprint(spec.name, list(spec.controllers), mpc)
             self.rec = self.stack.enter_context(open_recording(self.path, spec.name, blueprint))
         controller = dict(spec.controllers).get(name)
         history = None

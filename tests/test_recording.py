@@ -423,6 +423,8 @@ def test_mpc_controller_history_reaches_the_recording(tmp_path):
     _, plans = _temporal(chunks, "/mpc_demo/mpc/mpc/predicted/u", "LineStrips2D:strips")
     assert len(plans) == len(hist["t"])
     np.testing.assert_allclose(np.array(plans[5])[0, :, 1], hist["plan"][0, 5], rtol=1e-6)
+    origins = {v["space_origin"] for v in R.summarize_recording(path).views}
+    assert {"/mpc_demo/mpc/mpc", "/mpc_demo/mpc/mpc/predicted/velocity"} <= origins
 
 
 SMALL_PROBLEM = """
