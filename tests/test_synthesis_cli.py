@@ -48,8 +48,8 @@ def fd_result(tmp_path_factory):
 
 
 def test_fd_problem_json_and_gains_file(fd_result, capsys):
-    rc = main(["synthesize", str(PROBLEMS / "synth_fd_lcc_pattern.toml"), "--json",
-               "--out", str(fd_result)])
+    rc = main(["synthesize", "--no-record", str(PROBLEMS / "synth_fd_lcc_pattern.toml"),
+               "--json", "--out", str(fd_result)])
     cap = capsys.readouterr()
     assert rc == 0
     doc = json.loads(cap.out)  # exactly one JSON object on stdout
@@ -72,7 +72,8 @@ def test_gains_file_runs_in_simulator_and_beats_paper_on_table2(fd_result):
     """Nonlinear Table II scenario: the synthesised FD-LCC gain (q_a-weighted) has lower AAVE
     and fuel than the paper's hand-picked gain on the same pattern."""
     if not fd_result.exists():
-        main(["synthesize", str(PROBLEMS / "synth_fd_lcc_pattern.toml"), "--out", str(fd_result)])
+        main(["synthesize", "--no-record", str(PROBLEMS / "synth_fd_lcc_pattern.toml"),
+              "--out", str(fd_result)])
     from lcc_synth.controllers import build_controller
     from lcc_synth.metrics import summary
     from lcc_synth.scenario import load_spec
@@ -92,7 +93,7 @@ def test_gains_file_runs_in_simulator_and_beats_paper_on_table2(fd_result):
 
 def test_text_report_and_full_state_cross_check(tmp_path, capsys):
     p = write(tmp_path, 'design = "full_state"\ncross_check = true', kind="cf_lcc")
-    assert main(["synthesize", str(p)]) == 0
+    assert main(["synthesize", "--no-record", str(p)]) == 0
     out = capsys.readouterr().out
     assert "true H2 norm" in out and "riccati_vs_lmi_h2_rel" in out and "string stable" in out
 
@@ -117,7 +118,7 @@ def test_text_report_and_full_state_cross_check(tmp_path, capsys):
 )
 def test_bad_fields_exit_2(tmp_path, capsys, synthesis, field):
     p = write(tmp_path, synthesis)
-    assert main(["synthesize", str(p)]) == 2
+    assert main(["synthesize", "--no-record", str(p)]) == 2
     err = capsys.readouterr().err
     assert field in err and str(p) in err
     assert len(err.strip().splitlines()) == 1
@@ -130,7 +131,7 @@ def test_infeasible_synthesis_exits_1(tmp_path, capsys):
         "[synthesis.weights]\nhead = 1.0",
         kind="lcc", m=2, n=2,
     )
-    assert main(["synthesize", str(p), "--json"]) == 1
+    assert main(["synthesize", "--no-record", str(p), "--json"]) == 1
     cap = capsys.readouterr()
     doc = json.loads(cap.out)
     assert doc["ok"] is False and "string-stability LMI" in doc["error"]
@@ -152,7 +153,7 @@ def test_bad_gains_file_is_config_error(tmp_path):
 def test_sparsity_cli_writes_pareto_png(tmp_path, capsys):
     p = write(tmp_path, 'design = "sparsity"\n[synthesis.sparsity]\nn_gamma = 6', n=4)
     png = tmp_path / "front.png"
-    assert main(["synthesize", str(p), "--json", "--figure", str(png)]) == 0
+    assert main(["synthesize", "--no-record", str(p), "--json", "--figure", str(png)]) == 0
     doc = json.loads(capsys.readouterr().out)
     front = [q for q in doc["pareto"] if q["on_front"]]
     assert [q["count"] for q in front] == sorted(q["count"] for q in front)

@@ -13,6 +13,8 @@
     cross_check = true        # full_state: also solve the other method and compare
     tol = 1e-7                # polishing tolerance (relative gradient norm), in (0, 1e-2]
     max_iter = 500            # polishing iterations, >= 1
+    band = 4                  # structured "lmi": coupling range (vehicles) of the non-heard
+                              # block of X in the convex restriction, 0..50 (wider = tighter)
 
     [synthesis.weights]       # see lcc_synth.synthesis.h2.Weights
     q_s = 1.0                 # spacing errors, > 0
@@ -81,6 +83,7 @@ class SynthesisSpec:
     cross_check: bool = True
     tol: float = 1e-7
     max_iter: int = 500
+    band: int = 4
     sparsity: dict[str, Any] = field(default_factory=dict)
     string_gamma: float = 1.0
     polish_steps: int = 200
@@ -123,7 +126,7 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec:
             t,
             [
                 "design", "semantics", "pattern", "method", "cross_check", "tol", "max_iter",
-                "weights", "sparsity", "string", "baseline",
+                "band", "weights", "sparsity", "string", "baseline",
             ],
             "synthesis",
         )
@@ -142,6 +145,7 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec:
         cross_check = get_bool(t, "cross_check", "synthesis", True)
         tol = get_number(t, "tol", "synthesis", 1e-7, lo=0.0, hi=1e-2, lo_open=True)
         max_iter = get_int(t, "max_iter", "synthesis", 500, lo=1, hi=100000)
+        band = get_int(t, "band", "synthesis", 4, lo=0, hi=50)
 
         w = get_table(t, "weights", "synthesis.weights")
         wkeys = ["q_s", "q_v", "q_a", "q_p", "r", "head", "accel", "position"]
@@ -215,6 +219,7 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec:
             cross_check=cross_check,
             tol=tol,
             max_iter=max_iter,
+            band=band,
             sparsity=sparsity,
             string_gamma=string_gamma,
             polish_steps=polish_steps,

@@ -130,7 +130,9 @@ def synthesize(spec: SynthesisSpec) -> SynthesisReport:
             if spec.method == "lmi":
                 g = lmi.g
     elif spec.design == "structured":
-        res = structured_h2(plant, vehicles, spec.method, tol=spec.tol, max_iter=spec.max_iter)
+        res = structured_h2(
+            plant, vehicles, spec.method, tol=spec.tol, max_iter=spec.max_iter, band=spec.band
+        )
         g, mask = res.g, res.mask
         bound, restr = (res.h2_lmi_bound, res.h2_restriction) if res.lmi else (None, None)
         if res.lmi is not None:

@@ -8,7 +8,7 @@ Convex step (mixed H2/H-infinity with a common Lyapunov matrix, Clarabel):
                [[A X + X A' + B Z + Z' B', h, X c'],
                 [h',                      -gamma, 0 ],              (bounded-real lemma)
                 [c X,                      0, -gamma]] <= 0,
-               X block diagonal on the pattern (sparsity invariance), Z zero off the pattern
+               X = blkdiag(X_P, X_N) on heard / other states, Z zero off the pattern
 
 with ``h`` the head-velocity input column of the design plant and ``c`` the tail velocity.
 ``g = Z X^-1`` then satisfies ``sup_w |Gamma(jw)| <= gamma`` and ``J(g) <= tr(QX) + RW``.
@@ -40,7 +40,7 @@ from lcc_synth.synthesis.h2 import (
     single_thread_blas,
     solve_checked,
 )
-from lcc_synth.synthesis.structured import PolishResult, _x_blocks, pattern_mask, polish
+from lcc_synth.synthesis.structured import PolishResult, pattern_mask, polish
 
 __all__ = ["StringResult", "string_lmi", "string_aware_h2", "string_check"]
 
@@ -78,14 +78,13 @@ def string_lmi(
     h, c = _head_tail(plant)
     nx = plant.nx
     mask = np.asarray(mask, bool)
-    blocks = _x_blocks(plant, mask)
     X = cp.Variable((nx, nx), symmetric=True)
     cons = []
-    inblock = np.zeros((nx, nx), bool)
-    for b in blocks:
-        inblock[np.ix_(b, b)] = True
-    # zeros of X and Z as constraints here: the string-stability designs are small (m = n = 2)
-    cons.append(cp.multiply(~inblock, X) == 0)
+    # X = blkdiag(X_P, X_N) (heard / other states) makes g = Z X^-1 structured; the zeros are
+    # constraints here: the string-stability designs are small (m = n = 2)
+    inblock = np.equal.outer(mask, mask)
+    if not np.all(inblock):
+        cons.append(cp.multiply(~inblock, X) == 0)
     Z = cp.Variable((1, nx))
     cons.append(Z[0, np.flatnonzero(~mask)] == 0) if np.any(~mask) else None
     W = cp.Variable((1, 1), symmetric=True)
@@ -112,8 +111,8 @@ def string_lmi(
     status, dt = solve_checked(
         prob,
         f"string-stability LMI (gamma = {gamma:g})",
-        "; no gain of this pattern is certified string stable by the LMI (a common, "
-        "block-diagonal Lyapunov matrix: conservative, hear more vehicles or raise gamma)",
+        "; no gain of this pattern is certified string stable by the LMI (one common, "
+        "block-diagonal Lyapunov matrix is conservative: hear more vehicles or raise gamma)",
     )
     Xv, Zv = X.value, Z.value
     g = np.linalg.solve(Xv.T, Zv.T).ravel()

@@ -3,13 +3,14 @@
 Two stages, both keeping the pattern exactly (forbidden entries are structural zeros, never
 small numbers):
 
-1. :func:`convex_restriction` -- sparsity invariance. With ``X`` block diagonal, one full block
-   on the states of the heard vehicles and 2x2 blocks on every other vehicle, and ``Z`` zero
+1. :func:`convex_restriction` -- sparsity invariance. With ``X = blkdiag(X_P, X_N)`` (a full
+   block on the states of the heard vehicles, a banded PSD block on the others) and ``Z`` zero
    outside the heard states, ``g = Z X^-1`` has the pattern. The zeros are built into the
    variables (cvxpy variables only exist for the free entries), and the Lyapunov LMI, whose
    sparsity is then banded, is split by chordal decomposition into small PSD cones over the
    cliques of its sparsity graph, so the SDP grows linearly with the string length. It gives a
-   feasible structured gain and an upper bound on its H2 norm (often loose).
+   feasible structured gain and an upper bound on its H2 norm (loose for long strings: the
+   band of ``X_N`` limits how far the certificate couples the vehicles).
 2. :func:`polish` -- descent on the TRUE closed-loop H2 cost ``J(g)`` restricted to the pattern.
    Each step solves two Lyapunov equations (O(nx^3)); the direction is the Anderson-Moore
    step (the minimiser of ``J`` for frozen Gramians on the pattern), falling back to the
@@ -109,10 +110,26 @@ def _cliques(adj: np.ndarray) -> list[np.ndarray]:
     return out
 
 
+def _windows(blocks: list[np.ndarray], band: int) -> list[np.ndarray]:
+    """Index sets of the PSD terms of ``X_N``: windows of ``band + 1`` consecutive vehicles."""
+    if band <= 0 or len(blocks) <= 1:
+        return list(blocks)
+    k = min(band + 1, len(blocks))
+    return [np.concatenate(blocks[i : i + k]) for i in range(len(blocks) - k + 1)]
+
+
 def convex_restriction(
-    plant: H2Plant, mask: np.ndarray, eps: float = 1e-7, chordal: bool = True
+    plant: H2Plant, mask: np.ndarray, eps: float = 1e-7, chordal: bool = True, band: int = 4
 ) -> LMIResult:
     """Feasible structured gain and an upper bound on its H2 norm (sparsity invariance).
+
+    ``X = blkdiag(X_P, X_N)`` over the heard states P and the others N, ``Z`` zero on N, so
+    ``g = Z X^-1 = [Z_P X_P^-1, 0]`` has the pattern for ANY ``X_N``. ``X_N`` is parametrised
+    as ``eps I + sum_k F_k' T_k F_k`` with ``T_k >= 0`` on windows of ``band + 1`` consecutive
+    vehicles: every PSD matrix with that band (chordal) sparsity has this form, so ``X_N`` is a
+    banded PSD matrix with its zeros built in (``band = 0``: 2x2 blocks per vehicle). A wider
+    band tightens the bound (a full ``X_N`` is the least conservative) at the price of larger
+    cliques in the Lyapunov LMI.
 
     Parameters
     ----------
@@ -120,16 +137,18 @@ def convex_restriction(
     mask : numpy.ndarray
         Boolean mask of allowed gain entries (see :func:`pattern_mask`).
     eps : float
-        Lower bound on the eigenvalues of each block of X.
+        Lower bound on the eigenvalues of X.
     chordal : bool
         Decompose the Lyapunov LMI over the cliques of its sparsity graph (default). ``False``
         imposes it as one dense PSD constraint (for cross-checks; much slower for long strings).
+    band : int
+        Coupling range of ``X_N`` in vehicles (>= 0).
 
     Raises
     ------
     SynthesisError
-        Infeasible restriction (the block-diagonal Lyapunov matrix cannot certify any gain of
-        this pattern) or solver failure.
+        Infeasible restriction (no gain of this pattern is certified by such an X) or solver
+        failure.
     """
     import cvxpy as cp
     import scipy.sparse as sp
@@ -137,25 +156,30 @@ def convex_restriction(
     nx = plant.nx
     mask = np.asarray(mask, bool)
     blocks = _x_blocks(plant, mask)
-    # X = sum_b E_b' X_b E_b ; Z = z E_P
-    xb = [cp.Variable((len(b), len(b)), symmetric=True) for b in blocks]
     P_idx = blocks[0]
-    z = cp.Variable((1, len(P_idx)))
-    cons = [x >> eps * np.eye(x.shape[0]) for x in xb]
+    N_idx = np.flatnonzero(~mask)
+    windows = _windows(blocks[1:], int(band))
 
     def sel(idx):
         return sp.csr_matrix((np.ones(len(idx)), (np.arange(len(idx)), idx)), shape=(len(idx), nx))
 
-    E = [sel(b) for b in blocks]
-    X = sum(e.T @ x @ e for e, x in zip(E, xb, strict=True))
-    Z = z @ E[0]
+    XP = cp.Variable((len(P_idx), len(P_idx)), symmetric=True)
+    T = [cp.Variable((len(w), len(w)), symmetric=True) for w in windows]
+    z = cp.Variable((1, len(P_idx)))
+    cons = [XP >> eps * np.eye(len(P_idx))] + [t >> 0 for t in T]
+    EP = sel(P_idx)
+    X = EP.T @ XP @ EP + sum(sel(w).T @ t @ sel(w) for w, t in zip(windows, T, strict=True))
+    X_const = np.zeros((nx, nx))
+    X_const[N_idx, N_idx] = eps
+    X = X + X_const
+    Z = z @ EP
     A, B, Bw = plant.A, plant.B, plant.Bw
     AX = A @ X
     BZ = B @ Z
     M = AX + AX.T + BZ + BZ.T + Bw @ Bw.T
     # sparsity graph of M
     xpat = np.zeros((nx, nx), bool)
-    for b in blocks:
+    for b in [P_idx, *windows]:
         xpat[np.ix_(b, b)] = True
     zpat = np.zeros((nx, nx), bool)
     zpat[np.ix_(np.flatnonzero(B.ravel() != 0), P_idx)] = True
@@ -173,40 +197,43 @@ def convex_restriction(
         flat = rows * nx + cols  # row-major index into the nx*nx matrix
         MS = M + Ssum
         cons.append(cp.reshape(MS, (nx * nx,), order="C")[flat] == 0)
-        n_cones = len(cl)
+        cones = [len(c) for c in cl]
     else:
         cons.append(-(M + M.T) / 2 >> 0)
-        n_cones = 1
+        cones = [nx]
     W = cp.Variable((1, 1), symmetric=True)
-    cons.append(cp.bmat([[W, z], [z.T, xb[0]]]) >> 0)
+    cons.append(cp.bmat([[W, z], [z.T, XP]]) >> 0)
     obj = cp.Minimize(
-        sum(cp.trace(plant.Q[np.ix_(b, b)] @ x) for b, x in zip(blocks, xb, strict=True))
+        cp.trace(plant.Q[np.ix_(P_idx, P_idx)] @ XP)
+        + sum(cp.trace(plant.Q[np.ix_(w, w)] @ t) for w, t in zip(windows, T, strict=True))
+        + float(np.trace(plant.Q @ X_const))
         + plant.r * W[0, 0]
     )
     prob = cp.Problem(obj, cons)
     status, dt = solve_checked(
         prob,
         "structured H2 convex restriction",
-        "; the block-diagonal restriction certifies no gain of this pattern (use "
-        "method = 'direct' to polish from the truncated Riccati gain)",
+        "; the restriction certifies no gain of this pattern (use method = 'direct' to "
+        "polish from the truncated Riccati gain)",
     )
-    Xv = np.zeros((nx, nx))
-    for b, x in zip(blocks, xb, strict=True):
-        Xv[np.ix_(b, b)] = x.value
+    Xv = X_const.copy()
+    Xv[np.ix_(P_idx, P_idx)] += XP.value
+    for w, t in zip(windows, T, strict=True):
+        Xv[np.ix_(w, w)] += t.value
     g = np.zeros(nx)
-    g[P_idx] = np.linalg.solve(xb[0].value.T, z.value.T).ravel()
+    g[P_idx] = np.linalg.solve(XP.value.T, z.value.T).ravel()
     Zv = np.zeros((1, nx))
     Zv[0, P_idx] = z.value
     Mv = A @ Xv + Xv @ A.T + B @ Zv + Zv.T @ B.T + Bw @ Bw.T
     residual = float(max(np.max(np.linalg.eigvalsh((Mv + Mv.T) / 2)), 0.0))
+    cones += [len(P_idx), *(len(w) for w in windows), len(P_idx) + 1]
     return LMIResult(
         g,
         math.sqrt(max(prob.value, 0.0)),
         status,
         dt,
         residual,
-        {"n_psd_cones": n_cones + len(xb) + 1, "largest_cone": max(len(c) for c in cl) if chordal
-         else nx},
+        {"n_psd_cones": len(cones), "largest_cone": max(cones), "band": int(band)},
     )
 
 
@@ -366,6 +393,7 @@ def structured_h2(
     method: str = "lmi",
     tol: float = 1e-7,
     max_iter: int = 500,
+    band: int = 4,
 ) -> StructuredResult:
     """Structured H2 design on the pattern "CAV + ``vehicles``".
 
@@ -375,6 +403,8 @@ def structured_h2(
         ``"lmi"``: convex restriction (bound + feasible gain), then polishing from the better
         of that gain and the truncated Riccati gain. ``"direct"``: no SDP, polish from the
         truncated Riccati gain (or a CAV damping gain): the fast path for long strings.
+    band : int
+        Coupling range (vehicles) of the non-heard block of X in the convex restriction.
     """
     mask = pattern_mask(plant, vehicles)
     timings = {}
@@ -382,7 +412,7 @@ def structured_h2(
     starts = []
     if method == "lmi":
         t0 = time.perf_counter()
-        lmi = convex_restriction(plant, mask)
+        lmi = convex_restriction(plant, mask, band=band)
         timings["lmi"] = time.perf_counter() - t0
         J_lmi, _, _ = h2_cost(plant, lmi.g)
         if not math.isfinite(J_lmi):
