@@ -55,7 +55,8 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
     het = get_table(sc, "heterogeneity", f"{f}.heterogeneity")
     heterogeneity = {k: get_number(het, k, f"{f}.heterogeneity", lo=0.0) for k in het}
     delay_t = get_table(sc, "delay", f"{f}.delay")
-    check_keys(delay_t, ["mean", "spread"], f"{f}.delay")
+    check_keys(delay_t, ["mean", "spread", "model"], f"{f}.delay")
+    delay_model = get_str(delay_t, "model", f"{f}.delay", "full", choices=["full", "perception"])
     delay = get_number(delay_t, "mean", f"{f}.delay", 0.0, lo=0.0)
     spread = get_number(delay_t, "spread", f"{f}.delay", 0.0, lo=0.0, hi=delay)
     v2v_t = get_table(sc, "v2v", f"{f}.v2v")
@@ -102,6 +103,7 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
         heterogeneity=heterogeneity,
         delay=delay,
         delay_spread=spread,
+        delay_model=delay_model,
         hdv_accel_noise=get_number(sc, "hdv_accel_noise", f, 0.0, lo=0.0),
         v2v=v2v,
         seed=get_int(sc, "seed", f, 0, lo=0),

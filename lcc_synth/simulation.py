@@ -13,9 +13,11 @@ the acceleration ``a_k`` of every vehicle is computed from the state at sample `
 Per step:
 
 * HDVs: car-following law (OVM or IDM, per-vehicle parameters) on the spacing, relative speed
-  and own speed seen ``delay`` seconds earlier (a ring buffer of past states; the history
-  before ``t_start`` is the equilibrium cruise), plus optional white acceleration noise, clipped
-  to ``[a_min, a_max]``; optionally emergency braking (eq. 29) on the current state.
+  and own speed seen ``delay`` seconds earlier (``delay_model = "full"``; a ring buffer of past
+  states, the history before ``t_start`` being the equilibrium cruise) or on the delayed
+  spacing and relative speed with the current own speed (``"perception"``), plus optional white
+  acceleration noise, clipped to ``[a_min, a_max]``; optionally emergency braking (eq. 29) on
+  the current state.
 * CAV: the controller's command (held between controller samples: zero-order hold) clipped to
   ``[a_min, a_max]``, then emergency braking, eq. (29): ``a_min`` when
   ``(v_0^2 - v_-1^2) / (2 s_0) >= |a_min|`` on the CAV's exact state.
@@ -173,6 +175,10 @@ class Scenario:
         Base reaction delay (s) of the HDVs, broadcastable to ``(batch, nv)``.
     delay_spread : float
         Every HDV adds ``U[-delay_spread, delay_spread]`` to its delay.
+    delay_model : {"full", "perception"}
+        ``full``: the whole state the HDV reacts to (spacing, relative speed, own speed) is
+        ``delay`` old; ``perception``: spacing and relative speed are ``delay`` old, the own
+        speed is current.
     hdv_accel_noise : float
         Standard deviation of white acceleration noise on every HDV (m/s^2).
     v2v : V2V
@@ -210,6 +216,7 @@ class Scenario:
     heterogeneity: Mapping[str, float] = field(default_factory=dict)
     delay: Any = 0.0
     delay_spread: float = 0.0
+    delay_model: str = "full"
     hdv_accel_noise: float = 0.0
     v2v: V2V = field(default_factory=V2V)
     seed: int = 0
@@ -225,6 +232,11 @@ class Scenario:
             val = getattr(self, key)
             if isinstance(val, bool) or not isinstance(val, int | np.integer) or val < lo:
                 raise ConfigError(f"scenario.{key}", f"must be an integer >= {lo}, got {val!r}")
+        if self.delay_model not in ("full", "perception"):
+            raise ConfigError(
+                "scenario.delay.model",
+                f'must be "full" or "perception", got {self.delay_model!r}',
+            )
         if self.spacing_reference not in ("nominal", "own_equilibrium"):
             raise ConfigError(
                 "scenario.spacing_reference",
@@ -493,8 +505,8 @@ def _observe(b, k, p, v, hp, hv, L, lat, loss, noise, seed, sid0, cav, obs_s, ob
 
 @numba.njit(cache=True, nogil=True)
 def _advance(
-    b0, b1, k0, k1, p, v, hp, hv, L, delay_steps, code, params, nom_code, nom_params,
-    dt, t_start, a_min, a_max, cav, cav_aeb, hdv_aeb, noise_std, seed, sid0,
+    b0, b1, k0, k1, p, v, hp, hv, L, delay_steps, delay_own, code, params, nom_code,
+    nom_params, dt, t_start, a_min, a_max, cav, cav_aeb, hdv_aeb, noise_std, seed, sid0,
     acc_ovr, spd_ovr, mode, ratio, u_hold, Ks, Kv, Kp, hdv_law, v_star, s_ref, p_ref,
     loss, lat, obs_noise, obs_s, obs_v, obs_p, alive, collided, ctime,
     stride, out_p, out_v, out_a, out_s, out_u, out_aeb,
@@ -589,7 +601,7 @@ def _advance(
                         sl = (k - d + L) % L
                         s = hp[sl, b, j - 1] - hp[sl, b, j]
                         ds = hv[sl, b, j - 1] - hv[sl, b, j]
-                        vv = hv[sl, b, j]
+                        vv = hv[sl, b, j] if delay_own else v[b, j]
                     a = _hdv_accel(code, params[b, j], s, ds, vv)
                     if noise_std > 0.0:
                         a += noise_std * _normal(seed, sid0 + b, j, k, 0)
@@ -772,7 +784,8 @@ def simulate(
 
     def advance_range(b0, b1, k0, k1, mode, Ks, Kv, Kp, hdv_law):
         _advance(
-            b0, b1, k0, k1, p, v, hp, hv, L, delay_steps, code, params, code, nom_params,
+            b0, b1, k0, k1, p, v, hp, hv, L, delay_steps, sc.delay_model == "full", code,
+            params, code, nom_params,
             float(dt), float(sc.t_start), float(sc.a_min), float(sc.a_max), cav,
             bool(sc.cav_aeb), bool(sc.hdv_aeb), float(sc.hdv_accel_noise), int(sc.seed),
             int(sc.first_index),

@@ -57,6 +57,7 @@ def test_paper_problem_files_load():
     assert ac.scenario.batch == 7
     assert dict(ac.scenario.heterogeneity) == {"alpha": 0.1, "beta": 0.1, "s_go": 5.0}
     assert ac.scenario.delay == 0.4 and ac.scenario.delay_spread == 0.1
+    assert ac.scenario.delay_model == "perception"
 
 
 def test_full_scenario_table(tmp_path):
@@ -129,6 +130,7 @@ def test_perturbation_overrides_table():
         ("[scenario]\ndtt = 0.1", "scenario.dtt"),
         ("[scenario.delay]\nmean = -0.1", "scenario.delay.mean"),
         ("[scenario.delay]\nmean = 0.1\nspread = 0.2", "scenario.delay.spread"),
+        ("[scenario.delay]\nmean = 0.1\nmodel = \"late\"", "scenario.delay.model"),
         ("[scenario.v2v]\nloss_rate = 1.5", "scenario.v2v.loss_rate"),
         ("[scenario.v2v]\nloss_rate = -0.1", "scenario.v2v.loss_rate"),
         ("[scenario.v2v]\nloss_rate = [0.1, 0.2]", "scenario.v2v.loss_rate"),
