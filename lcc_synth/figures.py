@@ -18,6 +18,7 @@ __all__ = [
     "plot_snapshots",
     "plot_metric_bars",
     "plot_region_maps",
+    "plot_mpc_predictions",
 ]
 
 
@@ -471,5 +472,82 @@ def plot_region_maps(maps, path: str | Path, baselines=None, titles=None, ncols:
     fig.legend(handles=handles, loc="outside lower center", ncols=4, fontsize=8)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_mpc_predictions(
+    result,
+    history,
+    path: str | Path,
+    every: float = 2.0,
+    window: tuple[float, float] | None = None,
+    s_min: float = 5.0,
+    t_gap: float = 0.8,
+    title: str | None = None,
+    run: int = 0,
+) -> Path:
+    """The CAV's velocity and spacing with the MPC's predicted trajectories and the bound.
+
+    Parameters
+    ----------
+    result : lcc_synth.simulation.SimResult
+        The MPC's run.
+    history : dict
+        ``MPCController.history()`` of that run.
+    path : str or Path
+        Output PNG.
+    every : float
+        Draw the prediction made every ``every`` seconds.
+    window : (float, float), optional
+        Time range to draw (default the whole run).
+    s_min, t_gap : float
+        The absolute spacing bound ``s_0 >= s_min + t_gap v_0`` drawn on the spacing panel.
+    """
+    import numpy as np
+
+    plt = _pyplot()
+    path = Path(path)
+    cav = result.cav
+    j = result.m  # the CAV's block in the MPC's model (vehicles -m..n)
+    t = result.t
+    lo, hi = window if window is not None else (t[0], t[-1])
+    sel = (t >= lo) & (t <= hi)
+    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True, constrained_layout=True)
+    v0 = result.velocity[run, :, cav]
+    s0 = result.spacing[run, :, cav]
+    axes[0].plot(t[sel], result.velocity[run, sel, 0], color="#d4a017", lw=1.5, label="head")
+    axes[0].plot(t[sel], v0[sel], color="#1f5fbf", lw=1.8, label="CAV")
+    axes[1].plot(t[sel], s0[sel], color="#1f5fbf", lw=1.8, label="CAV spacing")
+    axes[1].plot(t[sel], (s_min + t_gap * v0)[sel], color="r", lw=1.0, ls="--",
+                 label=f"bound {s_min:g} m + {t_gap:g} s * v0")  # fmt: skip
+    th = history["t"]
+    pt = history["pred_time"]
+    step = max(1, int(round(every / (th[1] - th[0])))) if th.size > 1 else 1
+    first = True
+    for k in range(0, th.size, step):
+        if not lo <= th[k] <= hi:
+            continue
+        pv = history["predicted_velocity"][run, k, :, j]
+        ps = history["predicted_spacing"][run, k, :, j]
+        if not np.all(np.isfinite(pv)):
+            continue
+        label = "MPC prediction" if first else None
+        kw = {"color": "0.45", "lw": 0.8, "alpha": 0.8, "label": label}
+        axes[0].plot(th[k] + pt, pv, **kw)
+        if np.all(np.isfinite(ps)):
+            axes[1].plot(th[k] + pt, ps, **kw)
+        first = False
+    axes[0].set_ylabel("velocity (m/s)")
+    axes[1].set_ylabel("spacing (m)")
+    axes[1].set_xlabel("time (s)")
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8, loc="lower right")
+        ax.set_xlim(lo, hi)
+    if title:
+        fig.suptitle(title)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
     return path

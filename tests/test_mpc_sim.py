@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from lcc_synth.metrics import summary
+from lcc_synth.mpc.report import bound_margin, safety_summary
 from lcc_synth.scenario import load_spec
 from lcc_synth.simulation import simulate
 
@@ -27,19 +28,13 @@ def _one_numba_thread():
     numba.set_num_threads(before)
 
 
-def _bound_margin(result, s_min=5.0, t_gap=0.8):
-    """``s0 - (s_min + t_gap v0)`` of the CAV at every simulation step, ``(batch, T)``."""
-    cav = result.cav
-    return result.spacing[:, :, cav] - (s_min + t_gap * result.velocity[:, :, cav])
-
-
 def test_head_brake_spacing_bound_holds_without_emergency_braking():
     spec = load_spec(PROBLEMS / "mpc_head_brake.toml")
     mpc = simulate(spec.scenario, spec.controllers["mpc"])
     assert not mpc.collided.any()
     assert not mpc.aeb_active.any()
     # the absolute bound s0 >= 5 m + 0.8 s * v0 at every 0.01 s step, not only at samples
-    assert _bound_margin(mpc).min() >= 0.0
+    assert bound_margin(mpc).min() >= 0.0
     st = mpc.controller_stats
     assert st["fallbacks"] == 0 and st["qp_failures"] == {} and st["violation_steps"] == 0
     assert st["solves"] == 600
@@ -49,7 +44,11 @@ def test_head_brake_spacing_bound_holds_without_emergency_braking():
     # emergency brake and comes within a metre of the head vehicle
     paper = simulate(spec.scenario, spec.controllers["cf_lcc_paper"])
     assert paper.aeb_active.any()
-    assert _bound_margin(paper).min() < -5.0
+    assert bound_margin(paper).min() < -5.0
+    safe = safety_summary(paper)
+    assert safe["bound_violation_steps"] > 100 and safe["max_bound_violation_m"] > 5.0
+    safe = safety_summary(mpc)
+    assert safe["bound_violation_steps"] == 0 and safe["fallbacks"] == 0
     # and the MPC smooths the string better than the CAV driving as an HDV
     hdv = simulate(spec.scenario, spec.controllers["all_hdv"])
     assert summary(mpc, spec.metrics)["aave"] < summary(hdv, spec.metrics)["aave"]
@@ -62,7 +61,7 @@ def test_heterogeneous_noisy_lossy_head_brake():
     assert res.scenario.v2v.loss_rate == pytest.approx(0.2)
     assert not res.collided.any()
     assert not res.aeb_active.any()
-    assert _bound_margin(res).min() >= 0.0
+    assert bound_margin(res).min() >= 0.0
     st = res.controller_stats
     assert st["fallbacks"] == 0 and st["errors"] == 0
     assert st["solves"] == 2 * 600

@@ -1,0 +1,59 @@
+"""Safety summary of simulated runs against the MPC's absolute spacing bound.
+
+The bound ``s_0 >= s_min + t_gap v_0`` of :class:`~lcc_synth.mpc.settings.Constraints` is
+checked on the simulator's trajectories (every integration step, not only the controller's
+samples) for ANY controller, so the MPC and the static gains are judged by the same rule.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+__all__ = ["bound_margin", "safety_summary"]
+
+
+def bound_margin(result, s_min: float = 5.0, t_gap: float = 0.8) -> np.ndarray:
+    """``s_0 - (s_min + t_gap v_0)`` of the CAV at every recorded step, ``(batch, T)`` (m).
+
+    Negative entries violate the bound; NaN after a collision.
+    """
+    cav = result.cav
+    return result.spacing[:, :, cav] - (s_min + t_gap * result.velocity[:, :, cav])
+
+
+def safety_summary(result, s_min: float = 5.0, t_gap: float = 0.8) -> dict[str, Any]:
+    """Bound violations of one run plus the MPC's statistics when the controller has them.
+
+    Returns
+    -------
+    dict
+        ``bound_violation_steps`` (recorded steps below the bound, all batch members),
+        ``max_bound_violation_m``, ``min_bound_margin_m``, ``aeb_activations``, ``collisions``,
+        and for an MPC ``fallbacks``, ``qp_failures``, ``slack_steps``, ``step_time_ms``
+        (median / p99 / max) and ``osqp_time_ms``.
+    """
+    margin = bound_margin(result, s_min, t_gap)
+    with np.errstate(invalid="ignore"):
+        viol = np.where(np.isfinite(margin), np.maximum(-margin, 0.0), 0.0)
+    out: dict[str, Any] = {
+        "bound": {"s_min": s_min, "t_gap": t_gap},
+        "bound_violation_steps": int(np.count_nonzero(viol > 0.0)),
+        "max_bound_violation_m": float(viol.max()) if viol.size else 0.0,
+        "min_bound_margin_m": float(np.nanmin(margin)) if np.isfinite(margin).any() else None,
+        "aeb_activations": int(np.count_nonzero(result.aeb_active)),
+        "collisions": int(np.count_nonzero(result.collided)),
+    }
+    st = result.controller_stats or {}
+    if "step_time_ms" in st:
+        out.update(
+            {
+                "fallbacks": st["fallbacks"],
+                "qp_failures": st["qp_failures"],
+                "slack_steps": st["slack_steps"],
+                "step_time_ms": {k: st["step_time_ms"][k] for k in ("median", "p99", "max")},
+                "osqp_time_ms": {k: st["osqp_time_ms"][k] for k in ("median", "p99", "max")},
+            }
+        )
+    return out
