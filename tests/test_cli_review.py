@@ -85,8 +85,15 @@ def _listening(port: int) -> bool:
         return s.connect_ex(("127.0.0.1", port)) == 0
 
 
-def test_web_viewer_serves_on_localhost_and_stops_on_ctrl_c(rrd):
+@pytest.mark.parametrize("display", [None, ":97"])
+def test_web_viewer_serves_on_localhost_and_stops_on_ctrl_c(rrd, display):
+    """No display -> web viewer; a display that does not work (no X server on :97) -> the
+    native viewer fails at once and review falls back to the web viewer."""
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    if display is not None:
+        if os.path.exists(f"/tmp/.X11-unix/X{display[1:]}"):
+            pytest.skip(f"an X server runs on {display}")
+        env["DISPLAY"] = display
     proc = subprocess.Popen(
         [sys.executable, "-m", "lcc_synth.cli.main", "review", str(rrd)],
         stdout=subprocess.PIPE,
@@ -101,15 +108,20 @@ def test_web_viewer_serves_on_localhost_and_stops_on_ctrl_c(rrd):
         url, web_port, grpc_port = m.group(1), int(m.group(2)), int(m.group(3))
         with urllib.request.urlopen(url, timeout=10) as resp:
             assert resp.status == 200
+        with urllib.request.urlopen(f"http://127.0.0.1:{web_port}/re_viewer.js", timeout=10) as r:
+            assert r.status == 200  # the viewer itself is served (offline, no CDN)
         # bound to 127.0.0.1 only: the ports are not open on any other local address
         viewer_pids = _viewer_pids(web_port)
         assert viewer_pids or not os.path.isdir("/proc/net"), "no process listens on the web port"
         for addr in _other_local_addresses():
-            with socket.socket() as s:
-                s.settimeout(0.2)
-                assert s.connect_ex((addr, web_port)) != 0
+            for port in (web_port, grpc_port):
+                with socket.socket() as s:
+                    s.settimeout(0.2)
+                    assert s.connect_ex((addr, port)) != 0
         proc.send_signal(signal.SIGINT)  # Ctrl-C
         assert proc.wait(timeout=15) == 0
+        if display is not None:
+            assert "serving the web viewer instead" in proc.stderr.read()
         deadline = time.monotonic() + 10
         while (_listening(web_port) or _listening(grpc_port)) and time.monotonic() < deadline:
             time.sleep(0.1)

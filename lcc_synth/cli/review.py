@@ -148,61 +148,87 @@ def _serve(binary: Path, path: Path, args: argparse.Namespace, env: dict[str, st
             signal.signal(sig, handler)
 
 
+def _tail(log) -> str:
+    log.seek(0)
+    return "\n  ".join(log.read().decode(errors="replace").strip().splitlines()[-5:])
+
+
+def _viewer(cmd: list[str], env: dict[str, str], log) -> subprocess.Popen:
+    return subprocess.Popen(
+        cmd,
+        stdin=subprocess.DEVNULL,
+        stdout=log,
+        stderr=log,
+        env=env,
+        start_new_session=True,  # our Ctrl-C stops it through _stop, never half of it
+    )
+
+
+def _wait(proc: subprocess.Popen, log) -> int:
+    """Wait for the viewer until it exits or we are interrupted (then stop it)."""
+    try:
+        rc = proc.wait()
+    except KeyboardInterrupt:
+        _stop(proc)
+        print("stopped", file=sys.stderr)
+        return 0
+    finally:
+        _stop(proc)
+    if rc not in (0, -signal.SIGINT, -signal.SIGTERM, 130):
+        print(f"lcc-synth review: the viewer failed:\n  {_tail(log)}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def _serve_until_stopped(
     binary: Path, path: Path, args: argparse.Namespace, env: dict[str, str]
 ) -> int:
-    web = not has_display() or args.web
-    cmd = [str(binary), str(path)]
-    if web:
+    grpc_port = _check_port(args.port, "--port")
+    # Every mode binds the viewer's own gRPC server to 127.0.0.1 (Rerun's default: 0.0.0.0).
+    base = [str(binary), str(path), "--bind", "127.0.0.1", "--port", str(grpc_port)]
+    with tempfile.TemporaryFile(mode="w+b") as log:
+        if not args.web and has_display():
+            proc = _viewer(base, env, log)
+            try:
+                proc.wait(timeout=3.0)
+            except subprocess.TimeoutExpired:
+                print(f"Opened {path} in the Rerun viewer (Ctrl-C here closes it).", flush=True)
+                return _wait(proc, log)
+            except KeyboardInterrupt:
+                _stop(proc)
+                return 0
+            if proc.returncode == 0:
+                return 0
+            print(
+                f"lcc-synth review: the native viewer could not start ({_tail(log)}); "
+                "serving the web viewer instead",
+                file=sys.stderr,
+            )
+            log.seek(0)
+            log.truncate()
+            grpc_port = _check_port(args.port, "--port")
+            base = [str(binary), str(path), "--bind", "127.0.0.1", "--port", str(grpc_port)]
         web_port = _check_port(args.web_port, "--web-port")
-        grpc_port = _check_port(args.port, "--port")
         if web_port == grpc_port:
             raise ConfigError("--port", f"must differ from --web-port ({web_port})")
-        cmd += [
-            "--serve-web", "--bind", "127.0.0.1",
-            "--web-viewer-port", str(web_port), "--port", str(grpc_port),
-        ]  # fmt: skip
-    with tempfile.TemporaryFile(mode="w+b") as log:
-        proc = subprocess.Popen(
-            cmd,
-            stdin=subprocess.DEVNULL,
-            stdout=log,
-            stderr=log,
-            env=env,
-            start_new_session=True,  # our Ctrl-C stops it through _stop, never half of it
-        )
+        proc = _viewer([*base, "--serve-web", "--web-viewer-port", str(web_port)], env, log)
         try:
-            if web:
-                deadline = time.monotonic() + 30.0
-                while not _listening(web_port):
-                    if proc.poll() is not None or time.monotonic() > deadline:
-                        _stop(proc)
-                        log.seek(0)
-                        tail = log.read().decode(errors="replace").strip().splitlines()[-5:]
-                        print(
-                            "lcc-synth review: the web viewer did not start:\n  "
-                            + "\n  ".join(tail),
-                            file=sys.stderr,
-                        )
-                        return 1
-                    time.sleep(0.1)
-                print(f"Serving {path} on 127.0.0.1 only; open {web_url(web_port, grpc_port)}")
-                print("Press Ctrl-C to stop.", flush=True)
-            else:
-                print(f"Opened {path} in the Rerun viewer (Ctrl-C here closes it).", flush=True)
-            rc = proc.wait()
+            deadline = time.monotonic() + 30.0
+            while not _listening(web_port):
+                if proc.poll() is not None or time.monotonic() > deadline:
+                    _stop(proc)
+                    print(
+                        f"lcc-synth review: the web viewer did not start:\n  {_tail(log)}",
+                        file=sys.stderr,
+                    )
+                    return 1
+                time.sleep(0.1)
         except KeyboardInterrupt:
             _stop(proc)
-            print("stopped", file=sys.stderr)
             return 0
-        finally:
-            _stop(proc)
-        if rc not in (0, -signal.SIGINT, -signal.SIGTERM, 130):
-            log.seek(0)
-            tail = log.read().decode(errors="replace").strip().splitlines()[-5:]
-            print("lcc-synth review: the viewer failed:\n  " + "\n  ".join(tail), file=sys.stderr)
-            return 1
-    return 0
+        print(f"Serving {path} on 127.0.0.1 only; open {web_url(web_port, grpc_port)}")
+        print("Press Ctrl-C to stop.", flush=True)
+        return _wait(proc, log)
 
 
 def run(args: argparse.Namespace) -> int:
