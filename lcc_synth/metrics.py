@@ -14,6 +14,7 @@ Vehicle sets: ``"cav_and_behind"`` (the paper's "sum over i = 0..10": CAV and th
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -184,9 +185,12 @@ def collisions(result) -> np.ndarray:
     return result.collided.sum(axis=1)
 
 
-def _stat(x: np.ndarray) -> float:
+def _stat(x: np.ndarray, fn=np.nanmean) -> float:
+    """Batch statistic over the scenarios where ``x`` is defined (NaN when none is)."""
     x = np.asarray(x, dtype=float)
-    return float(np.mean(x)) if x.size else float("nan")
+    if not np.isfinite(x).any():
+        return float("nan")
+    return float(fn(x))
 
 
 def per_scenario(result, config: MetricsConfig | None = None) -> dict[str, np.ndarray]:
@@ -196,6 +200,12 @@ def per_scenario(result, config: MetricsConfig | None = None) -> dict[str, np.nd
     before :func:`aggregate`.
     """
     cfg = config or MetricsConfig()
+    with warnings.catch_warnings():  # all-NaN slices: scenarios stopped by a collision
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return _per_scenario(result, cfg)
+
+
+def _per_scenario(result, cfg: MetricsConfig) -> dict[str, np.ndarray]:
     return {
         "aave": aave(result, cfg.window, cfg.vehicles),
         "fuel_ml": fuel(result, cfg.window, cfg.vehicles),
@@ -218,14 +228,16 @@ def aggregate(per: dict[str, np.ndarray]) -> dict[str, Any]:
     """Summary of :func:`per_scenario` arrays (see :func:`summary`)."""
     a, f = per["aave"], per["fuel_ml"]
     ms, ttc, mv = per["min_spacing"], per["min_ttc"], per["max_abs_velocity_error"]
-    with np.errstate(invalid="ignore"):
+    with warnings.catch_warnings():  # all-NaN slices: scenarios stopped by a collision
+        warnings.simplefilter("ignore", RuntimeWarning)
         return {
             "aave": _stat(a),
-            "aave_std": float(np.std(a)),
+            "aave_std": _stat(a, np.nanstd),
             "aave_all": a.tolist(),
             "fuel_ml": _stat(f),
-            "fuel_ml_std": float(np.std(f)),
+            "fuel_ml_std": _stat(f, np.nanstd),
             "fuel_ml_all": f.tolist(),
+            "scenarios_with_collision": int((per["collisions"] > 0).sum()),
             "min_spacing": float(np.nanmin(ms[:, 1:])),
             "collisions": int(per["collisions"].sum()),
             "aeb_activations": int(per["aeb_activations"].sum()),
@@ -246,6 +258,8 @@ def summary(result, config: MetricsConfig | None = None) -> dict[str, Any]:
 
     Scalars are means over the batch (``*_std`` the standard deviations, ``*_all`` every
     scenario); ``min_spacing`` and ``collisions``/``aeb_activations`` are the worst case /
-    totals. Per-vehicle lists are ordered head..tail (head spacing is NaN).
+    totals. A scenario that collided has NaN AAVE and fuel: the means and deviations are over
+    the other scenarios, and ``scenarios_with_collision`` counts them (NaN when all collided).
+    Per-vehicle lists are ordered head..tail (head spacing is NaN).
     """
     return aggregate(per_scenario(result, config))

@@ -382,8 +382,32 @@ class Draws:
 class SimResult:
     """Trajectories of a batch of runs with one controller.
 
-    Arrays are ``(batch, T, n_vehicles)`` with columns head, ahead, CAV, behind; ``spacing``
-    column 0 is NaN; after a collision a scenario's samples are NaN.
+    Attributes
+    ----------
+    t : numpy.ndarray
+        ``(T,)`` recorded sample times.
+    position, velocity, acceleration, spacing : numpy.ndarray
+        ``(batch, T, n_vehicles)``, columns head, HDVs ahead, CAV, HDVs behind. ``acceleration``
+        is the applied one (after limits, emergency braking, perturbations); ``spacing[..., 0]``
+        is NaN. After a collision every later sample of that scenario is NaN.
+    u_cmd : numpy.ndarray
+        ``(batch, T)`` CAV command before limits and emergency braking (held between samples).
+    aeb_active : numpy.ndarray
+        ``(batch, T)`` bool, the CAV's emergency braking overrode the command.
+    collided, collision_time : numpy.ndarray
+        ``(batch, n_vehicles)``: vehicle reached spacing <= 0, and when (NaN if never).
+    m, n, cav : int
+        Layout and the CAV's column.
+    v_star, s_star : numpy.ndarray
+        ``(batch,)`` nominal equilibrium.
+    controller, controller_info, controller_stats
+        Name, ``describe()`` and ``stats()`` of the controller.
+    dt, sim_dt : float
+        Spacing of the recorded samples and simulation step.
+    scenario, draws
+        What was simulated (per-vehicle parameters, delays, initial spacings).
+    wall_time : float
+        Seconds spent in :func:`simulate`.
     """
 
     t: np.ndarray

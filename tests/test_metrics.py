@@ -161,3 +161,19 @@ def test_summary_batch_statistics():
     assert s["per_vehicle"]["max_abs_velocity_error"] == [0.0, 1.0, 0.0]
     ms = s["per_vehicle"]["min_spacing"]
     assert len(ms) == 3 and np.isnan(ms[0])
+
+
+def test_summary_skips_collided_scenarios_and_counts_them():
+    v = np.full((3, 5, 3), 15.0)
+    v[1, :, 1] = 17.0
+    v[2, 3:] = np.nan  # scenario 2 collided at sample 2: NaN afterwards
+    r = make_result(v, n=1)
+    r.collided[2, 1] = True
+    s = summary(r, MetricsConfig(window=(0.0, 2.0)))
+    assert np.isnan(s["aave_all"][2])
+    assert s["aave"] == pytest.approx(np.mean(s["aave_all"][:2]))
+    assert s["scenarios_with_collision"] == 1 and s["collisions"] == 1
+    r.collided[:, 1] = True
+    r.velocity[:] = np.nan
+    s = summary(r, MetricsConfig(window=(0.0, 2.0)))
+    assert np.isnan(s["aave"]) and s["scenarios_with_collision"] == 3

@@ -124,12 +124,15 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
                 continue
             ra = _pct(a0, arrays["aave"])
             rf = _pct(f0, arrays["fuel_ml"])
+            ok = np.isfinite(ra) & np.isfinite(rf)  # scenarios without a collision in either
+            nan = float("nan")
             out[name]["reduction_vs_baseline"] = {
                 "baseline": cfg.baseline,
-                "aave_pct": float(np.mean(ra)),
-                "aave_pct_std": float(np.std(ra)),
-                "fuel_pct": float(np.mean(rf)),
-                "fuel_pct_std": float(np.std(rf)),
+                "aave_pct": float(np.mean(ra[ok])) if ok.any() else nan,
+                "aave_pct_std": float(np.std(ra[ok])) if ok.any() else nan,
+                "fuel_pct": float(np.mean(rf[ok])) if ok.any() else nan,
+                "fuel_pct_std": float(np.std(rf[ok])) if ok.any() else nan,
+                "scenarios": int(ok.sum()),
             }
     return out
 
