@@ -39,6 +39,10 @@ def test_chordal_restriction_equals_the_dense_lmi():
     assert a.info["largest_cone"] < p.nx
     # the restriction's bound really bounds the true H2 norm of its gain
     assert h2_norm(p, a.g) <= a.bound * (1 + 1e-6)
+    # a wider band of X_N contains the narrower one: the bound can only tighten
+    bounds = [convex_restriction(p, mask, band=b).bound for b in (0, 1, 4)]
+    assert bounds[0] >= bounds[1] * (1 - 1e-6) and bounds[1] >= bounds[2] * (1 - 1e-6)
+    assert bounds[2] < 0.9 * bounds[0]
 
 
 @pytest.mark.parametrize("kind", ["fd_lcc", "cf_lcc"])
