@@ -86,10 +86,15 @@ def _listening(port: int) -> bool:
 
 
 @pytest.mark.parametrize("display", [None, ":97"])
-def test_web_viewer_serves_on_localhost_and_stops_on_ctrl_c(rrd, display):
+def test_web_viewer_serves_on_localhost_and_stops_on_ctrl_c(rrd, display, tmp_path):
     """No display -> web viewer; a display that does not work (no X server on :97) -> the
-    native viewer fails at once and review falls back to the web viewer."""
+    native viewer fails at once and review falls back to the web viewer. Rerun's analytics
+    stay off: nothing is written to the (temporary) home, config or data directories."""
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    home = tmp_path / "home"
+    home.mkdir()
+    env.update(HOME=str(home), XDG_CONFIG_HOME=str(home / ".config"),
+               XDG_DATA_HOME=str(home / ".local" / "share"))  # fmt: skip
     if display is not None:
         if os.path.exists(f"/tmp/.X11-unix/X{display[1:]}"):
             pytest.skip(f"an X server runs on {display}")
@@ -128,6 +133,7 @@ def test_web_viewer_serves_on_localhost_and_stops_on_ctrl_c(rrd, display):
         assert not _listening(web_port) and not _listening(grpc_port)
         for pid in viewer_pids:  # the viewer process itself is gone (not orphaned)
             assert not _alive(pid)
+        assert list(home.rglob("*")) == []  # no analytics config, id or event files
     finally:
         if proc.poll() is None:
             proc.kill()

@@ -1,15 +1,18 @@
 """``lcc-synth review PATH.rrd``: open a recording in the Rerun viewer, or summarise it.
 
 * With a display (``DISPLAY`` / ``WAYLAND_DISPLAY`` on Linux, always on macOS and Windows) the
-  native viewer opens the file.
-* Without one (or with ``--web``) the web viewer is served on 127.0.0.1 only (Rerun binds
+  native viewer opens the file; if it cannot start (e.g. no usable X server) review falls back
+  to the web viewer.
+* Without a display (or with ``--web``) the web viewer is served on 127.0.0.1 only (Rerun binds
   0.0.0.0 by default) and the address to open is printed.
+* In both modes the viewer's gRPC server is bound to 127.0.0.1 too.
 * ``--summary`` prints what the recording holds (entities, time range, samples, the metrics
   and reports) without a viewer; with ``--json`` as one JSON object.
 
 The viewer is the ``rerun`` executable of the ``rerun-sdk`` wheel, started directly (not via the
-Python wrapper script) in its own process group, with Rerun's usage analytics off; Ctrl-C (or
-any exit) stops it and everything it started.
+Python wrapper script, which would leave the real viewer running when stopped) in its own
+process group, with Rerun's usage analytics off (:func:`lcc_synth.recording.viewer_environment`);
+Ctrl-C, SIGTERM or SIGHUP stop it.
 """
 
 from __future__ import annotations
