@@ -493,3 +493,28 @@ def test_appendix_c_reductions_over_seeds_bracket_the_paper():
         assert abs(ra.mean() - pa) < 2 * ra.std(), (name, ra.mean(), ra.std())
         assert abs(rf.mean() - pf) < 2 * rf.std(), (name, rf.mean(), rf.std())
     assert np.all(aave(res["fd_lcc"]) < a0)
+
+
+def test_fd_lcc_position_state_pulls_the_cav_back_to_its_schedule(table2):
+    """FD-LCC's -p_0 state: with a positive gain the CAV returns to the position it would have
+    had cruising at v* (the Table II demo gains alone let it fall back for good); the compiled
+    law and the Python call agree."""
+    spec, res = table2
+    sc = replace(spec.scenario, duration=80.0)
+    gains = {"-p_0": 0.2, "v_0": -0.8, "s_1": -0.2, "v_1": 0.05, "s_2": -0.1, "v_2": 0.05}
+    ctrl = static("fd_p", gains, "fd_lcc", 0, 10)
+    r = simulate(sc, ctrl)
+    cav = r.cav
+
+    def lag(res):
+        p = res.position[0, :, cav]
+        return p[-1] - p[0] - 15.0 * (res.t[-1] - res.t[0])
+
+    assert abs(lag(r)) < 0.05
+    assert lag(res["fd_lcc"]) < -1.0  # the demo gains: the CAV lost ground for good
+
+    class Slow(StaticGainController):
+        linear_law = None
+
+    slow = simulate(sc, Slow("fd_p", ctrl.gains, ctrl.model))
+    np.testing.assert_allclose(slow.velocity, r.velocity, atol=1e-12)
