@@ -195,24 +195,45 @@ def chunks(count: int, batch_size: int) -> list[tuple[int, int]]:
 # --------------------------------------------------------------------------------------------
 
 
-def scenario_metrics(result, config: MetricsConfig) -> dict[str, np.ndarray]:
-    """Per-scenario metrics of one batched result (``(batch,)`` arrays), from
-    :mod:`lcc_synth.metrics`: AAVE, fuel, worst spacing and time to collision over the
-    vehicles, max |u|, CAV RMS jerk, collided vehicles and emergency-braking steps."""
+_BATCH_FIELDS = (
+    "position", "velocity", "acceleration", "spacing", "u_cmd", "aeb_active", "collided",
+    "collision_time", "v_star", "s_star",
+)
+
+
+def _member(result, b: int):
+    """Scenario ``b`` of a batched result as a batch of one (views, no copies)."""
+    return replace(result, **{k: getattr(result, k)[b : b + 1] for k in _BATCH_FIELDS})
+
+
+def _one(result, config: MetricsConfig) -> dict[str, float | int]:
     from lcc_synth import metrics as mt
 
-    ms = mt.min_spacing(result)[:, 1:]
-    ttc = mt.min_time_to_collision(result)[:, 1:]
     return {
-        "aave": mt.aave(result, config.window, config.vehicles),
-        "fuel_ml": mt.fuel(result, config.window, config.vehicles),
-        "min_spacing": np.nanmin(ms, axis=1),
-        "min_ttc": np.nanmin(ttc, axis=1),
-        "max_abs_command": mt.max_abs_command(result),
-        "rms_jerk_cav": mt.rms_jerk(result),
-        "collisions": mt.collisions(result).astype(np.int64),
-        "aeb_activations": mt.aeb_activations(result).astype(np.int64),
+        "aave": mt.aave(result, config.window, config.vehicles)[0],
+        "fuel_ml": mt.fuel(result, config.window, config.vehicles)[0],
+        "min_spacing": np.nanmin(mt.min_spacing(result)[0, 1:]),
+        "min_ttc": np.nanmin(mt.min_time_to_collision(result)[0, 1:]),
+        "max_abs_command": mt.max_abs_command(result)[0],
+        "rms_jerk_cav": mt.rms_jerk(result)[0],
+        "collisions": mt.collisions(result)[0],
+        "aeb_activations": mt.aeb_activations(result)[0],
     }
+
+
+def scenario_metrics(result, config: MetricsConfig) -> dict[str, np.ndarray]:
+    """Per-scenario metrics of a batched result (``(batch,)`` arrays), from
+    :mod:`lcc_synth.metrics`: AAVE, fuel, worst spacing and time to collision over the
+    vehicles, max |u|, CAV RMS jerk, collided vehicles and emergency-braking steps.
+
+    Each scenario is reduced on its own, so its numbers are bit-for-bit the same whatever the
+    batch it was simulated in (a reduction over a whole batch may round differently).
+    """
+    rows = [_one(_member(result, b), config) for b in range(result.batch)]
+    out = {k: np.array([r[k] for r in rows], dtype=float) for k in SWEEP_METRICS}
+    for k in ("collisions", "aeb_activations"):
+        out[k] = np.array([r[k] for r in rows], dtype=np.int64)
+    return out
 
 
 _CACHE: dict[tuple[str, int], dict[str, Any]] = {}

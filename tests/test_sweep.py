@@ -1,0 +1,261 @@
+"""Monte Carlo sweeps: chunked runs equal one direct batched simulation, whatever the batch
+size and wherever they run (in process or on a local Dask cluster, even if a worker dies)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from lcc_synth.cli.main import main
+from lcc_synth.comparison import build_controllers
+from lcc_synth.errors import ConfigError
+from lcc_synth.simulation import simulate
+from lcc_synth.sweep import (
+    SWEEP_METRICS,
+    aggregate,
+    chunks,
+    load_sweep,
+    run_sweep,
+    scenario_metrics,
+)
+
+SWEEP = """
+name = "small_sweep"
+
+[hdv]
+model = "ovm"
+alpha = 0.6
+beta = 0.9
+s_st = 5.0
+s_go = 35.0
+v_max = 30.0
+
+[system]
+kind = "cf_lcc"
+m = 0
+n = 3
+v_star = 15.0
+
+[scenario]
+duration = 12.0
+seed = 11
+hdv_accel_noise = 0.2
+spacing_reference = "own_equilibrium"
+heterogeneity = { alpha = 0.1, beta = 0.1, s_go = 5.0 }
+delay = { mean = 0.3, spread = 0.2 }
+v2v = { loss_rate = 0.3, latency = 0.05, spacing_noise = 0.2, velocity_noise = 0.1 }
+
+[[scenario.perturbations]]
+type = "brake_profile"
+start = 2.0
+decel = -5.0
+decel_time = 1.5
+hold_time = 2.0
+accel = 2.0
+accel_time = 3.0
+
+[metrics]
+window = [2.0, 12.0]
+
+[sweep]
+count = 8
+batch_size = 3
+
+[controllers.all_hdv]
+type = "hdv"
+
+[controllers.paper]
+type = "static"
+semantics = "replace"
+gains = { s_0 = 0.1, v_0 = -0.5, s_1 = -0.2, v_1 = 0.05, s_2 = -0.1, v_2 = 0.05 }
+
+[controllers.mpc]
+type = "mpc"
+sample_time = 0.1
+horizon = 10
+"""
+
+KEYS = (*SWEEP_METRICS, "collisions", "aeb_activations")
+
+
+@pytest.fixture(scope="module")
+def problem_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("sweep") / "small.toml"
+    path.write_text(SWEEP)
+    return path
+
+
+@pytest.fixture(scope="module")
+def direct(problem_file):
+    """Every scenario of the sweep in ONE batch, straight through simulate + metrics."""
+    spec = load_sweep(problem_file)
+    sc = replace(spec.scenario, batch=spec.count)
+    draws = sc.draw()
+    ctrls = build_controllers(spec.controllers, spec.system, spec.source)
+    out, fallbacks = {}, {}
+    for name, ctrl in ctrls.items():
+        res = simulate(sc, ctrl, draws)
+        out[name] = scenario_metrics(res, spec.metrics)
+        fallbacks[name] = int(res.controller_stats.get("fallbacks", 0))
+    return out, fallbacks
+
+
+@pytest.fixture(scope="module")
+def serial(problem_file):
+    return run_sweep(load_sweep(problem_file), client=None, progress=False)
+
+
+def _assert_same_samples(a, b):
+    assert list(a) == list(b)
+    for c in a:
+        for k in KEYS:
+            np.testing.assert_array_equal(
+                np.asarray(a[c][k]), np.asarray(b[c][k]), err_msg=f"{c}.{k}"
+            )
+
+
+def test_scenarios_are_random_and_varied(direct):
+    out, _ = direct
+    aave = out["all_hdv"]["aave"]
+    assert np.all(np.isfinite(aave))
+    assert np.unique(aave).size == aave.size  # every scenario draws its own HDVs and noise
+
+
+@pytest.mark.parametrize("batch_size", [1, 3, 8])
+def test_chunked_sweep_equals_one_batch(problem_file, direct, batch_size):
+    spec = load_sweep(problem_file, batch_size=batch_size)
+    res = run_sweep(spec, client=None, progress=False)
+    assert res.info["tasks"] == len(chunks(8, batch_size))
+    out, fallbacks = direct
+    _assert_same_samples(res.samples, out)
+    assert res.fallbacks == fallbacks
+
+
+def test_aggregate_matches_numpy(serial, direct):
+    out, fallbacks = direct
+    summary = serial.summary
+    for c, per in out.items():
+        for k in SWEEP_METRICS:
+            x = per[k][np.isfinite(per[k])]
+            assert summary[c][k]["n"] == x.size
+            assert summary[c][k]["mean"] == pytest.approx(x.mean(), rel=1e-12)
+            assert summary[c][k]["p5"] == pytest.approx(np.percentile(x, 5), rel=1e-12)
+            assert summary[c][k]["p95"] == pytest.approx(np.percentile(x, 95), rel=1e-12)
+        assert summary[c]["collisions"] == int(per["collisions"].sum())
+        assert summary[c]["collision_scenarios"] == int(np.count_nonzero(per["collisions"]))
+        assert summary[c]["aeb_activations"] == int(per["aeb_activations"].sum())
+        assert summary[c]["fallbacks"] == fallbacks[c]
+        assert summary[c]["scenarios"] == 8
+    # hand-made case: NaN (a collided run) is left out, counts add up
+    agg = aggregate(
+        {"x": {**{k: np.array([1.0, np.nan, 3.0]) for k in SWEEP_METRICS},
+               "collisions": np.array([0, 2, 0]), "aeb_activations": np.array([0, 5, 1])}},
+        {"x": 4},
+    )["x"]
+    assert agg["aave"]["mean"] == 2.0 and agg["aave"]["n"] == 2
+    assert (agg["collisions"], agg["collision_scenarios"]) == (2, 1)
+    assert (agg["aeb_activations"], agg["aeb_scenarios"], agg["fallbacks"]) == (6, 2, 4)
+
+
+def test_seed_changes_the_draws(problem_file, serial):
+    other = run_sweep(load_sweep(problem_file, seed=12, count=3), client=None, progress=False)
+    assert not np.array_equal(other.samples["paper"]["aave"], serial.samples["paper"]["aave"][:3])
+
+
+@pytest.fixture(scope="module")
+def client():
+    from dask.distributed import Client
+
+    from lcc_synth.sweep import local_cluster
+
+    cluster = local_cluster(2)
+    cl = Client(cluster)
+    yield cl
+    cl.close()
+    cluster.close()
+
+
+def test_local_cluster_equals_serial(problem_file, client, serial):
+    res = run_sweep(load_sweep(problem_file, batch_size=2), client=client, progress=False)
+    assert res.info["scheduler"].startswith("tcp://127.0.0.1")
+    assert res.info["tasks"] == 4
+    _assert_same_samples(res.samples, serial.samples)
+    assert res.summary == serial.summary
+
+
+def test_worker_death_loses_nothing(problem_file, client, serial):
+    """Kill a worker process while tasks run: Dask recomputes its tasks elsewhere."""
+    spec = load_sweep(problem_file, batch_size=1)
+    box = {}
+    thread = threading.Thread(
+        target=lambda: box.setdefault("res", run_sweep(spec, client=client, progress=False))
+    )
+    pids = client.run(os.getpid)  # {worker address: process id} (local cluster)
+    thread.start()
+    killed = None
+    deadline = time.monotonic() + 60
+    while killed is None and time.monotonic() < deadline and thread.is_alive():
+        busy = [w for w, tasks in client.processing().items() if tasks]
+        if busy:
+            killed = busy[0]
+            os.kill(pids[killed], signal.SIGKILL)  # dies in the middle of its task
+        time.sleep(0.01)
+    thread.join(timeout=180)
+    assert killed is not None
+    assert "res" in box
+    _assert_same_samples(box["res"].samples, serial.samples)
+    # the nanny restarted the killed worker under a new address
+    deadline = time.monotonic() + 30
+    while killed in client.scheduler_info()["workers"] and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert killed not in client.scheduler_info()["workers"]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"count": 0}, "--count"),
+        ({"count": 10**9}, "--count"),
+        ({"batch_size": 0}, "--batch-size"),
+        ({"seed": -1}, "--seed"),
+        ({"controllers": ["nope"]}, "--controllers"),
+    ],
+)
+def test_bad_overrides(problem_file, kwargs, field):
+    with pytest.raises(ConfigError) as info:
+        load_sweep(problem_file, **kwargs)
+    assert info.value.field == field
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "field"),
+    [
+        ("count = 8", "count = 0", "sweep.count"),
+        ("batch_size = 3", "batch_size = -2", "sweep.batch_size"),
+        ("batch_size = 3", "batch_size = 3\nworkers = 2", "sweep.workers"),
+        ("loss_rate = 0.3", "loss_rate = 1.5", "scenario.v2v.loss_rate"),
+        ('type = "hdv"', 'type = "hdv"\nlayouts = { x = {} }', "controllers.all_hdv.layouts"),
+    ],
+)
+def test_bad_sweep_files(tmp_path, old, new, field):
+    path = tmp_path / "bad.toml"
+    assert old in SWEEP
+    path.write_text(SWEEP.replace(old, new, 1))
+    with pytest.raises(ConfigError) as info:
+        load_sweep(path)
+    assert info.value.field == field
+    assert info.value.source == str(path)
+
+
+def test_cli_bad_counts_exit_2(problem_file, capsys):
+    assert main(["sweep", str(problem_file), "--count", "0"]) == 2
+    assert "--count" in capsys.readouterr().err
+    assert main(["sweep", str(problem_file), "--workers", "0"]) == 2
+    assert "--workers" in capsys.readouterr().err
+    assert main(["sweep", str(problem_file), "--controllers", "lqr"]) == 2
