@@ -7,6 +7,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from lcc_synth.controllers import Controller, build_controller
 from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import VEHICLE_SETS, MetricsConfig
@@ -31,7 +33,7 @@ __all__ = ["SimulationSpec", "scenario_from", "metrics_from", "controllers_from"
 _SCENARIO_KEYS = [
     "dt", "duration", "t_start", "a_min", "a_max", "cav_aeb", "hdv_aeb", "seed", "batch",
     "record_every", "spacing_reference", "hdv_accel_noise", "heterogeneity", "delay", "v2v",
-    "perturbations",
+    "perturbations", "hdv_values",
 ]  # fmt: skip
 
 
@@ -52,6 +54,20 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
     f = "scenario"
     sc = get_table(data, "scenario", f)
     check_keys(sc, _SCENARIO_KEYS, f)
+    hv_t = get_table(sc, "hdv_values", f"{f}.hdv_values")
+    hdv_values = None
+    if hv_t:
+        from lcc_synth.simulation import MODEL_PARAMS
+
+        allowed = MODEL_PARAMS[system.hdv.name]
+        check_keys(hv_t, allowed, f"{f}.hdv_values")
+        hdv_values = {}
+        hdv_cols = [j for j in range(system.m + system.n + 2) if j not in (0, system.m + 1)]
+        for key in hv_t:
+            vals = get_number_list(hv_t, key, f"{f}.hdv_values", length=len(hdv_cols))
+            full = np.full(system.m + system.n + 2, float(getattr(system.hdv, key)))
+            full[hdv_cols] = vals
+            hdv_values[key] = full
     het = get_table(sc, "heterogeneity", f"{f}.heterogeneity")
     heterogeneity = {k: get_number(het, k, f"{f}.heterogeneity", lo=0.0) for k in het}
     delay_t = get_table(sc, "delay", f"{f}.delay")
@@ -100,6 +116,7 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
         cav_aeb=get_bool(sc, "cav_aeb", f, True),
         hdv_aeb=get_bool(sc, "hdv_aeb", f, False),
         perturbations=perturbations,
+        hdv_values=hdv_values,
         heterogeneity=heterogeneity,
         delay=delay,
         delay_spread=spread,

@@ -232,3 +232,13 @@ def test_mpc_type_is_built_lazily(tmp_path):
     with pytest.raises(ConfigError) as err:
         load_spec(path)
     assert err.value.field.startswith("controllers.m")
+
+
+def test_explicit_per_hdv_values(tmp_path):
+    spec = load_spec(write(tmp_path, "[scenario.hdv_values]\nalpha = [0.5, 0.7, 0.8]\n"))
+    d = spec.scenario.draw()
+    assert d.hdv_values["alpha"][0].tolist() == [0.6, 0.5, 0.6, 0.7, 0.8]  # head, -1, CAV, 1, 2
+    with pytest.raises(ConfigError, match="scenario.hdv_values.alpha"):
+        load_spec(write(tmp_path, "[scenario.hdv_values]\nalpha = [0.5, 0.7]\n"))
+    with pytest.raises(ConfigError, match="scenario.hdv_values.v0"):
+        load_spec(write(tmp_path, "[scenario.hdv_values]\nv0 = [1, 2, 3]\n"))
