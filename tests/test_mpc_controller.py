@@ -259,3 +259,116 @@ def test_stats_and_history_shapes():
     ramp = 0.1 * np.arange(4)
     np.testing.assert_allclose(h["predicted_velocity"][:, :, 0, 0], [15.0 + ramp] * 2)
     np.testing.assert_allclose(h["predicted_spacing"][:, :, 0, 0], [S_STAR + ramp] * 2)
+
+
+# ------------------------------------------------------------------------------ options
+
+
+def test_relinearization_updates_the_same_solver_with_new_matrices(monkeypatch):
+    """When v_eq drifts past the threshold the HDV model is re-linearised and the SAME OSQP
+    workspace gets the new matrix values: its solution equals an exact solve of the QP at the
+    new equilibrium and differs from the one at the old equilibrium."""
+    from lcc_synth.mpc import solver as mpc_solver
+    from lcc_synth.mpc.solver import solve_exact
+
+    calls = []
+    original = mpc_solver.OSQPSolver.solve
+
+    def spy(self, q, l, u, warm_z=None, warm_y=None):
+        res = original(self, q, l, u, warm_z, warm_y)
+        calls.append((q.copy(), l.copy(), u.copy(), res))
+        return res
+
+    monkeypatch.setattr(mpc_solver.OSQPSolver, "solve", spy)
+    ctrl = mpc_controller_from_table(
+        "mpc",
+        {"type": "mpc", "horizon": 15,
+         "prediction": {"relinearize": True, "relinearize_threshold": 0.5,
+                        "equilibrium_window": 0.1}},
+        _system("cf_lcc", 0, 3),
+    )
+    ctrl.reset(_ctx(0, 3))
+    solver_before = ctrl._members[0].solver
+    qp_before = ctrl._members[0].qp
+    x = np.array([0.2, 0.1, -0.3, 0.2, 0.3, -0.1, 0.0, 0.4])
+    ctrl(_obs(0.0, x, 0, 0.0))
+    assert ctrl.stats()["relinearizations"] == 0
+    # the head (and with a 0.1 s window, v_eq) drops to 6 m/s: spacings follow s*(6)
+    s6 = HDV.equilibrium_spacing(6.0)
+    o = _obs(0.1, x, 0, -9.0)
+    o.spacing[0, 1:] += s6 - S_STAR
+    o.velocity[0, 1:] -= 9.0
+    ctrl(o)
+    mem = ctrl._members[0]
+    assert ctrl.stats()["relinearizations"] == 1
+    assert mem.lin.v_lin == pytest.approx(6.0)
+    assert mem.solver is solver_before
+    q, lo, hi, res = calls[-1]
+    new_qp = ctrl.formulation.matrices(linearize("cf_lcc", 0, 3, HDV, 6.0, ctrl.settings))
+    z_new = solve_exact(new_qp, q, lo, hi)
+    z_old = solve_exact(qp_before, q, lo, hi)
+    assert res.z[0] == pytest.approx(z_new[0], abs=1e-6)
+    assert abs(z_old[0] - z_new[0]) > 1e-4
+    # the cached matrices of the old equilibrium are untouched by OSQP's in-place updates
+    fresh_old = ctrl.formulation.matrices(linearize("cf_lcc", 0, 3, HDV, 15.0, ctrl.settings))
+    np.testing.assert_array_equal(qp_before.P.data, fresh_old.P.data)
+    np.testing.assert_array_equal(qp_before.A.data, fresh_old.A.data)
+
+
+def test_pattern_change_is_refused():
+    from lcc_synth.mpc.formulation import Formulation
+    from lcc_synth.mpc.solver import OSQPSolver
+
+    ctrl = mpc_controller_from_table("mpc", {"type": "mpc", "horizon": 6}, _system())
+    ctrl.reset(_ctx(0, 3))
+    other = Formulation("cf_lcc", 8, MPCSettings(horizon=6, weights=ctrl.settings.weights),
+                        np.ones(8), [])
+    qp_other = other.matrices(ctrl._members[0].lin)
+    solver: OSQPSolver = ctrl._members[0].solver
+    with pytest.raises(RuntimeError, match="sparsity pattern"):
+        solver.update_matrices(qp_other)
+
+
+def test_head_accel_prediction_holds_the_measured_acceleration():
+    ctrl = mpc_controller_from_table(
+        "mpc",
+        {"type": "mpc", "horizon": 20,
+         "prediction": {"head": "accel", "head_accel_hold": 1.0, "equilibrium": "fixed"}},
+        _system("cf_lcc", 0, 3),
+    )
+    ctrl.reset(_ctx(0, 3))
+    x = np.zeros(8)
+    ctrl(_obs(0.0, x, 0, 0.0))
+    ctrl(_obs(0.1, x, 0, -0.5))  # head: -0.5 m/s in 0.1 s = -5 m/s^2
+    d = ctrl.history()["d"][0, -1]
+    k = np.arange(20)
+    np.testing.assert_allclose(d, -0.5 - 5.0 * np.minimum(0.1 * k, 1.0), atol=1e-9)
+
+
+def test_batch_members_are_independent_through_relinearization():
+    """Member 1 re-linearises (its head drops to 6 m/s); member 0 must give exactly what a
+    single-member controller gives on the same observations (shared caches, private solvers)."""
+    table = {"type": "mpc", "horizon": 15,
+             "prediction": {"relinearize": True, "relinearize_threshold": 0.5,
+                            "equilibrium_window": 0.1}}
+    pair = mpc_controller_from_table("mpc", table, _system("cf_lcc", 0, 3))
+    single = mpc_controller_from_table("mpc", table, _system("cf_lcc", 0, 3))
+    pair.reset(_ctx(0, 3, batch=2))
+    single.reset(_ctx(0, 3, batch=1))
+    rng = np.random.default_rng(5)
+    s6 = HDV.equilibrium_spacing(6.0)
+    for k in range(6):
+        x = 0.3 * rng.normal(size=8)
+        a = _obs(0.1 * k, x, 0, 0.0)
+        b = _obs(0.1 * k, x, 0, -9.0 if k >= 2 else 0.0)
+        if k >= 2:
+            b.spacing[0, 1:] += s6 - S_STAR
+            b.velocity[0, 1:] -= 9.0
+        both = Observation(a.t, *(np.vstack([u, w]) for u, w in
+                                  ((a.spacing, b.spacing), (a.velocity, b.velocity),
+                                   (a.position, b.position))))
+        u_pair = pair(both)
+        u_single = single(a)
+        assert u_pair[0] == u_single[0]
+    assert pair.stats()["relinearizations"] == 1
+    assert single.stats()["relinearizations"] == 0

@@ -103,7 +103,10 @@ class OSQPSolver:
         self._P_pattern = (qp.P.indptr.copy(), qp.P.indices.copy())
         self._A_pattern = (qp.A.indptr.copy(), qp.A.indices.copy())
         self._solver = osqp.OSQP()
-        self._solver.setup(qp.P, q, qp.A, l, u, **settings.osqp_kwargs())
+        # OSQP keeps the arrays given to setup() as its workspace and writes later matrix
+        # updates into them: give it private copies (the QPMatrices are cached and shared by
+        # the batch members and by later re-linearisations).
+        self._solver.setup(qp.P.copy(), q, qp.A.copy(), l, u, **settings.osqp_kwargs())
         self._silent = _SilentStdout() if settings.polish else None
         self.force_failure = False  # test hook: make every solve report a failure
 
@@ -115,7 +118,7 @@ class OSQPSolver:
         ):
             if not (np.array_equal(M.indptr, indptr) and np.array_equal(M.indices, indices)):
                 raise RuntimeError(f"the sparsity pattern of {what} changed")
-        self._solver.update(Px=qp.P.data, Ax=qp.A.data)
+        self._solver.update(Px=qp.P.data.copy(), Ax=qp.A.data.copy())
 
     def solve(self, q, l, u, warm_z=None, warm_y=None) -> SolveResult:
         """Update the vectors, warm-start (optional) and solve."""
