@@ -273,7 +273,7 @@ def run_chunk(
     """Simulate scenarios ``start .. stop - 1`` with every controller (one batch each).
 
     Returns ``{"start", "stop", "metrics": {controller: {metric: (stop - start,) array}},
-    "fallbacks": {controller: int}, "wall_time": s}``.
+    "fallbacks": {controller: int}, "sim_time": {controller: s}, "wall_time": s}``.
     """
     from lcc_synth.simulation import simulate
 
@@ -281,9 +281,11 @@ def run_chunk(
     ctrls = _controllers(tables, system, source)
     sc = replace(scenario, batch=stop - start, first_index=start)
     draws = sc.draw()
-    metrics, fallbacks = {}, {}
+    metrics, fallbacks, times = {}, {}, {}
     for name, ctrl in ctrls.items():
+        t1 = time.perf_counter()
         res = simulate(sc, ctrl, draws)
+        times[name] = time.perf_counter() - t1
         metrics[name] = scenario_metrics(res, config)
         fallbacks[name] = int((res.controller_stats or {}).get("fallbacks", 0) or 0)
     return {
@@ -291,6 +293,7 @@ def run_chunk(
         "stop": stop,
         "metrics": metrics,
         "fallbacks": fallbacks,
+        "sim_time": times,
         "wall_time": time.perf_counter() - t0,
     }
 
@@ -429,6 +432,7 @@ def run_sweep(
         for c in names
     }
     fallbacks = dict.fromkeys(names, 0)
+    sim_time = dict.fromkeys(names, 0.0)
     task_times = []
     t0 = time.perf_counter()
 
@@ -438,6 +442,7 @@ def run_sweep(
             for k, v in per.items():
                 samples[c][k][s:e] = v
             fallbacks[c] += out["fallbacks"][c]
+            sim_time[c] += out["sim_time"][c]
         task_times.append(out["wall_time"])
 
     with progress_bar(spec.count, "scenarios", progress) as bar:
@@ -476,6 +481,7 @@ def run_sweep(
         "wall_time_s": wall,
         "total_time_s": time.perf_counter() - t_all,
         "task_time_s_sum": float(sum(task_times)),
+        "simulation_time_s": sim_time,
         "scenarios_per_s": spec.count / wall if wall > 0 else None,
         "runs_per_s": spec.count * len(names) / wall if wall > 0 else None,
     }

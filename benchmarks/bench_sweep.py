@@ -1,0 +1,70 @@
+"""Throughput of a Monte Carlo sweep on a local Dask cluster (``lcc-synth sweep``).
+
+Runs ``problems/sweep_robustness.toml`` (4 controllers: all_hdv, paper, h2, mpc; 10 HDVs behind
+a CF-LCC CAV; 40 s at dt = 0.01 s; the MPC at 0.1 s with horizon 50) on a LocalCluster of
+2 single-threaded worker processes and prints the wall time, scenarios per second and, per
+controller, the simulation time summed over the workers.
+
+Usage: python benchmarks/bench_sweep.py [--count 1000] [--batch-size 50] [--workers 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from dask.distributed import Client
+
+from lcc_synth.sweep import load_sweep, local_cluster, run_sweep
+
+PROBLEM = Path(__file__).resolve().parents[1] / "problems" / "sweep_robustness.toml"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--count", type=int, default=1000)
+    ap.add_argument("--batch-size", type=int, default=50)
+    ap.add_argument("--workers", type=int, default=2)
+    args = ap.parse_args()
+    spec = load_sweep(PROBLEM, count=args.count, batch_size=args.batch_size)
+    t0 = time.perf_counter()
+    cluster = local_cluster(args.workers)
+    client = Client(cluster)
+    t_start = time.perf_counter() - t0
+    try:
+        res = run_sweep(spec, client=client, progress=False)
+    finally:
+        client.close()
+        cluster.close()
+    info = res.info
+    sc = spec.scenario
+    nv = sc.n_vehicles
+    print(
+        f"{spec.name}: {spec.count} scenarios x {len(res.summary)} controllers, "
+        f"{info['tasks']} tasks of {spec.batch_size}, {args.workers} workers; "
+        f"{sc.steps} steps x {nv} vehicles per scenario"
+    )
+    print(f"cluster start-up   {t_start:7.1f} s")
+    print(f"synthesis (client) {info['synthesis_time_s']:7.1f} s")
+    print(
+        f"sweep wall time    {info['wall_time_s']:7.1f} s  -> {info['scenarios_per_s']:.2f} "
+        f"scenarios/s, {info['runs_per_s']:.2f} scenario-controller runs/s"
+    )
+    print(f"task time (sum)    {info['task_time_s_sum']:7.1f} s")
+    for name, t in info["simulation_time_s"].items():
+        vsteps = spec.count * sc.steps * nv / t
+        print(
+            f"  {name:10s} simulation {t:7.1f} s worker time, {1e3 * t / spec.count:7.1f} ms per "
+            f"scenario, {vsteps / 1e6:6.2f} M vehicle-steps/s per worker"
+        )
+    for name, e in res.summary.items():
+        print(
+            f"  {name:10s} collisions {e['collisions']} ({e['collision_scenarios']} scenarios), "
+            f"AEB steps {e['aeb_activations']} ({e['aeb_scenarios']} scenarios), "
+            f"fallbacks {e['fallbacks']}"
+        )
+
+
+if __name__ == "__main__":
+    main()
