@@ -17,8 +17,10 @@ At every sample (``sample_time``, default 0.1 s; the simulator holds the command
    the reference vehicle's measured acceleration held for ``head_accel_hold`` seconds
    (``head = "accel"``; velocity never below 0).
 4. **Re-linearisation** (option): when ``|v_eq - v_lin| > relinearize_threshold`` the HDV model
-   is re-linearised at ``v_eq`` and OSQP gets the new matrix values (same pattern). The model is
-   cached per linearisation velocity (0.01 m/s grid) so batch members share the evaluation.
+   is re-linearised at ``v_eq`` rounded to a quarter of the threshold, and OSQP gets the new
+   matrix values (same pattern, ``update(Px=..., Ax=...)``). Linearisations are cached on that
+   grid, so batch members and returns to an earlier speed reuse them; a new one costs one
+   CasADi evaluation and one Riccati solve (tens of ms, see ``benchmarks/bench_mpc.py``).
 5. **QP** (:mod:`lcc_synth.mpc.formulation`) solved by OSQP with warm start from the shifted
    previous solution. The safe spacing to the vehicle ahead is in ABSOLUTE metres,
    ``s_0 >= s_min + t_gap v_0`` with ``s_0 = s_eq + s~_0`` and ``v_0 = v_eq + v~_0``, soft with an
@@ -368,8 +370,9 @@ class MPCController:
         if abs(mem.v_eq - mem.lin.v_lin) <= pred.relinearize_threshold:
             return
         t0 = time.perf_counter()
+        grid = pred.relinearize_threshold / 4.0
         try:
-            lin, qp, K, kh = self._linearization(mem.v_eq)
+            lin, qp, K, kh = self._linearization(round(mem.v_eq / grid) * grid)
             mem.solver.update_matrices(qp)
         except Exception as err:
             self._st["relinearize_failures"] += 1
