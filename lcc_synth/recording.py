@@ -22,6 +22,7 @@ Simulation (:func:`record_simulation`), under ``/<scenario>/<controller>/``:
                        (m), y = ``ROAD_Y_SCALE`` x velocity error (m/s), as in the paper's Fig. 11;
                        CAV blue, HDVs grey, head vehicle yellow; labels = vehicle names
 ``road/equilibrium``   ``LineStrips2D`` (static), the zero-velocity-error line
+``events``             ``TextLog`` on the timeline: CAV emergency braking on/off, collisions
 ``metrics``            ``TextDocument`` (markdown), the run's metrics table
 ``controller``         ``TextDocument`` (markdown), ``describe()`` and ``stats()`` of the controller
 ``mpc/solve_time_ms``  ``Scalars`` (MPC runs only) solve time of every controller step
@@ -279,6 +280,9 @@ def simulation_blueprint(scenario: str, controllers: Sequence[str], mpc: Sequenc
             for c in ctrls
         ],
         rrb.TextDocumentView(origin=f"/{s}/status", name="status"),
+        rrb.TextLogView(
+            origin=f"/{s}", contents=[f"+ /{s}/{c}/events" for c in ctrls], name="events"
+        ),
     ]
     for c in (entity_name(x) for x in mpc):
         tabs += [
@@ -604,6 +608,32 @@ def _comparison_markdown(scenario: str, rows: Mapping[str, Mapping[str, Any]]) -
     return "\n".join(lines) + "\n"
 
 
+def _record_events(rec, entity, t, aeb_on, collided, ctime, names, limit: int = 1000) -> None:
+    """``TextLog`` events on the timeline: emergency braking on/off (WARN), collisions
+    (ERROR); at most ``limit`` AEB edges (a chattering AEB would flood the log)."""
+    rr = _rr()
+    edges = np.flatnonzero(np.diff(aeb_on.astype(np.int8), prepend=np.int8(0)))
+    times, texts, levels = [], [], []
+    for k in edges[:limit]:
+        times.append(t[k])
+        texts.append("CAV emergency braking ON" if aeb_on[k] else "CAV emergency braking off")
+        levels.append("WARN")
+    for i in np.flatnonzero(collided):
+        times.append(ctime[i])
+        texts.append(f"COLLISION: {names[i]} hit the vehicle ahead")
+        levels.append("ERROR")
+    if not times:
+        return
+    order = np.argsort(times, kind="stable")
+    rec.send_columns(
+        entity,
+        indexes=[_time_column(np.asarray(times, dtype=np.float64)[order])],
+        columns=rr.TextLog.columns(
+            text=[texts[i] for i in order], level=[levels[i] for i in order]
+        ),
+    )
+
+
 def record_simulation(
     rec: Any,
     result: Any,
@@ -735,6 +765,7 @@ def record_simulation(
     crash = [f"{names[i]} at t = {_fmt(float(ctime[i]))} s" for i in np.flatnonzero(collided)]
     aeb_on = np.asarray(result.aeb_active)[run].astype(bool)
     episodes = int(np.count_nonzero(aeb_on[1:] & ~aeb_on[:-1]) + bool(aeb_on[0])) if T else 0
+    _record_events(rec, f"{base}/events", t_all, aeb_on, collided, ctime, names)
     state.runs[(s, c)] = _RunFacts(
         names,
         f"collisions: {', '.join(crash) if crash else 'none'}; emergency braking: "

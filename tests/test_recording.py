@@ -599,3 +599,37 @@ def test_analyze_and_regions_commands_record(tmp_path, capsys):
         assert np.count_nonzero(img >= 1) / img.size == pytest.approx(
             entry["plant_stable_fraction"]
         )
+
+
+def test_collisions_and_emergency_braking_are_events_on_the_timeline(tmp_path):
+    """A CAV that ignores a hard-braking head vehicle: AEB edges and the collision appear as
+    TextLog events at the simulator's times; NaN samples after the collision stay NaN."""
+    model = model_from_hdv("lcc", 1, 2, OVM(), 15.0, warn=False)
+    sc = Scenario(
+        m=1, n=2, duration=20.0, perturbations=(Brake(vehicle="head", start=1.0, duration=3.0),)
+    )
+    res = simulate(sc, StaticGainController("blind", StaticGains({}, "replace"), model))
+    assert res.collided[0].any() and res.aeb_active[0].any()  # the scenario does what we need
+    path = tmp_path / "crash.rrd"
+    with R.open_recording(path, "crash", R.simulation_blueprint("crash", ["blind"])) as rec:
+        R.record_simulation(rec, res, "crash")
+    chunks = _chunks(path)
+    t_ns, texts = _temporal(chunks, "/crash/blind/events", "TextLog:text")
+    _, levels = _temporal(chunks, "/crash/blind/events", "TextLog:level")
+    aeb = res.aeb_active[0].astype(int)
+    edges = np.flatnonzero(np.diff(aeb, prepend=0))
+    expected = sorted(
+        [(round(res.t[k] * 1e9), "AEB", aeb[k]) for k in edges]
+        + [
+            (round(res.collision_time[0, i] * 1e9), "COL", i)
+            for i in np.flatnonzero(res.collided[0])
+        ]
+    )
+    assert list(t_ns) == [e[0] for e in expected]
+    for (_, kind, _), text, level in zip(expected, texts, levels, strict=True):
+        assert (kind == "COL") == ("COLLISION" in text[0]) and level[0] == (
+            "ERROR" if kind == "COL" else "WARN"
+        )
+    _, vel = _temporal(chunks, "/crash/blind/velocity", "Scalars:scalars")
+    np.testing.assert_array_equal(np.isnan(np.array(vel)), np.isnan(res.velocity[0]))
+    assert "collisions: cav at t = " in R.summarize_recording(path).texts["/crash/blind/metrics"]
