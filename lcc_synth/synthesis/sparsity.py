@@ -75,7 +75,7 @@ def _groups(plant: H2Plant) -> dict[int, np.ndarray]:
     return {int(v): np.flatnonzero(veh == v) for v in dict.fromkeys(veh)}
 
 
-def _f_step(plant, F, U, rho, iters=5, tol=1e-9):
+def _f_step(plant, F, U, rho, iters=2, tol=1e-9):
     """``min J(F) + rho/2 ||F - U||^2`` from stabilising ``F`` (AM direction + Armijo)."""
     J, L, P = h2_cost(plant, F)
     f = J + 0.5 * rho * float(np.sum((F - U) ** 2))
@@ -154,6 +154,7 @@ def sparsity_sweep(
     reweight: bool = True,
     rho: float = 10.0,
     n_gamma: int = 12,
+    refine: int = 12,
 ) -> SparsityResult:
     """Sweep the group penalty and return the patterns found and their Pareto front.
 
@@ -162,6 +163,13 @@ def sparsity_sweep(
     gammas : list of float, optional
         Penalties (>= 0) in increasing order; default ``n_gamma`` values log-spaced over
         ``[1e-3, 10] * J*`` (``J*`` the unstructured optimal squared H2 cost).
+    reweight : bool
+        Group weights from the unstructured optimum (else uniform).
+    rho : float
+        ADMM penalty parameter.
+    refine : int
+        At most this many extra penalties, each the geometric mean of two neighbouring
+        penalties whose patterns differ by more than one vehicle (fills gaps in the front).
     """
     t0 = time.perf_counter()
     g_opt, _ = riccati_gain(plant)
@@ -181,16 +189,43 @@ def sparsity_sweep(
         raise ConfigError("sparsity.gammas", "must be finite numbers >= 0")
     gammas = sorted(gammas)
     found: dict[tuple[int, ...], tuple[float, np.ndarray]] = {}
+    runs: list[tuple[float, tuple[int, ...], np.ndarray]] = []
+
+    def run(gamma: float, F0: np.ndarray) -> tuple[np.ndarray, tuple[int, ...]]:
+        G = admm_group(plant, gamma, F0, w, rho=rho)
+        heard = tuple(v for v in others if np.any(G[groups[v]] != 0))
+        runs.append((gamma, heard, G))
+        if heard not in found or gamma < found[heard][0]:
+            found[heard] = (gamma, G)
+        return G, heard
+
+    def stabilising(G: np.ndarray) -> bool:
+        return math.isfinite(h2_cost(plant, G)[0])
+
     F = g_opt.copy()
     for gamma in gammas:
-        G = admm_group(plant, gamma, F, w, rho=rho)
-        if math.isfinite(h2_cost(plant, G)[0]):
+        G, heard = run(gamma, F)
+        if stabilising(G):
             F = G  # warm start along the sweep (G has the exact zeros)
-        heard = tuple(v for v in others if np.any(G[groups[v]] != 0))
-        if heard not in found:
-            found[heard] = (gamma, G)
         if not heard:
             break  # larger penalties keep the CAV-only pattern
+    # refinement: bisect (geometrically) between penalties whose patterns differ by more than
+    # one vehicle, warm-started from the smaller penalty's gain
+    for _ in range(int(refine)):
+        rs = sorted(runs, key=lambda r: r[0])
+        gap = next(
+            (
+                (a, b)
+                for a, b in zip(rs, rs[1:], strict=False)
+                if len(a[1]) - len(b[1]) > 1 and b[0] > 1.01 * a[0]
+            ),
+            None,
+        )
+        if gap is None:
+            break
+        a, b = gap
+        gm = math.sqrt(a[0] * b[0]) if a[0] > 0 else b[0] / 10.0
+        run(gm, a[2] if stabilising(a[2]) else g_opt)
     # every sweep ends at the CAV-only and all-vehicles patterns for a complete front
     found.setdefault((), (math.inf, np.zeros(plant.nx)))
     found.setdefault(tuple(others), (0.0, g_opt))
