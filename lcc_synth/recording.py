@@ -25,8 +25,11 @@ Simulation (:func:`record_simulation`), under ``/<scenario>/<controller>/``:
 ``events``             ``TextLog`` on the timeline: CAV emergency braking on/off, collisions
 ``metrics``            ``TextDocument`` (markdown), the run's metrics table
 ``controller``         ``TextDocument`` (markdown), ``describe()`` and ``stats()`` of the controller
-``mpc/solve_time_ms``  ``Scalars`` (MPC runs only) solve time of every controller step
-``mpc/predicted``      ``LineStrips2D`` (MPC runs only) predicted trajectories over time
+``mpc/solve_time_ms``  ``Scalars`` (MPC only): whole controller step and OSQP time per step (ms)
+``mpc/status``         ``Scalars`` (MPC only): status code (0 QP, 1 shifted plan, 2 static gain,
+                       3 hold) and 1 when a fallback was used
+``mpc/predicted/*``    ``LineStrips2D`` (MPC only): ``u``, ``velocity``, ``spacing`` plans at
+                       each recorded controller step (x = seconds ahead, y = value)
 =====================  =========================================================================
 
 ``/<scenario>/metrics`` (markdown) compares every controller recorded so far and
@@ -40,13 +43,16 @@ Analysis (:func:`record_gamma`, :func:`record_region_map`) under ``/analysis/``:
 the line |Gamma| = 1) and ``gamma/<case>/report`` (markdown); ``regions/<name>`` (a
 ``SegmentationImage`` of classes 0 = plant unstable, 1 = stable, 2 = string stable, with an
 annotation context naming them) and ``regions/<name>/report`` (markdown: axes and fractions).
-Synthesis (:func:`record_gains`) under ``/synthesis/<name>/``: ``gains`` (``BarChart`` of the
-gain on every state), ``report`` (markdown: state names, gains, norms, verdicts).
+``/analysis/report`` holds the analysis command's whole report (:func:`record_analysis_file`).
+Synthesis (:func:`record_synthesis`, :func:`record_gains`) under ``/synthesis/<name>/``:
+``gains`` (``BarChart`` of the gain on every state), ``report`` (markdown: state names, gains,
+true H2, LMI bound, verdicts, solver), ``pareto/front`` and ``pareto/patterns`` (sparsity
+designs: x = vehicles heard, y = true H2); the |Gamma| curve of the gain as above.
 
 Interrupted runs: :func:`open_recording` is a context manager that flushes and finalises the
-file on every exit (exception, ``KeyboardInterrupt``), records the interruption in
-``/<scenario>/status``, and every ``record_*`` function flushes what it wrote, so the file always
-holds everything recorded up to the interruption.
+file on every exit (exception, ``KeyboardInterrupt``) and records the interruption in
+``/<scenario>/status``; the commands record each controller as soon as its result exists
+(:class:`SimulationRecorder`), so the file holds everything finished before the interruption.
 
 Rerun's usage analytics live in its viewer/CLI binary, not in the logging SDK (writing a file
 sends nothing). Rerun 0.41 documents only ``rerun analytics disable`` (a per-user setting); its
