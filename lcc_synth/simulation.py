@@ -483,13 +483,17 @@ def _normal(seed, b, j, k, ch):
 @numba.njit(cache=True, inline="always")
 def _hdv_accel(code, pr, s, ds, v):
     """OVM (code 0) or IDM (code 1) acceleration; mirrors hdv.ovm_accel / hdv.idm_accel."""
+    return _hdv_accel6(code, pr[0], pr[1], pr[2], pr[3], pr[4], pr[5], s, ds, v)
+
+
+@numba.njit(cache=True, inline="always")
+def _hdv_accel6(code, p0, p1, p2, p3, p4, p5, s, ds, v):
+    """:func:`_hdv_accel` with the six parameters as scalars (no array view in the loop)."""
     if code == 0:
-        s_st = pr[2]
-        s_go = pr[3]
-        sc = min(max(s, s_st), s_go)
-        vd = 0.5 * pr[4] * (1.0 - math.cos(math.pi * (sc - s_st) / (s_go - s_st)))
-        return pr[0] * (vd - v) + pr[1] * ds
-    v0, T, s0, a, b, delta = pr[0], pr[1], pr[2], pr[3], pr[4], pr[5]
+        sc = min(max(s, p2), p3)
+        vd = 0.5 * p4 * (1.0 - math.cos(math.pi * (sc - p2) / (p3 - p2)))
+        return p0 * (vd - v) + p1 * ds
+    v0, T, s0, a, b, delta = p0, p1, p2, p3, p4, p5
     vp = max(v, 0.0)
     s_des = s0 + max(vp * T - vp * ds / (2.0 * math.sqrt(a * b)), 0.0)
     return a * (1.0 - (vp / v0) ** delta - (s_des / max(s, 1e-3)) ** 2)
@@ -626,7 +630,10 @@ def _advance(
                         s = hp[sl, b, j - 1] - hp[sl, b, j]
                         ds = hv[sl, b, j - 1] - hv[sl, b, j]
                         vv = hv[sl, b, j] if delay_own else v[b, j]
-                    a = _hdv_accel(code, params[b, j], s, ds, vv)
+                    a = _hdv_accel6(
+                        code, params[b, j, 0], params[b, j, 1], params[b, j, 2],
+                        params[b, j, 3], params[b, j, 4], params[b, j, 5], s, ds, vv,
+                    )  # fmt: skip
                     if noise_std > 0.0:
                         a += noise_std * _normal(seed, sid0 + b, j, k, 0)
                     a = min(max(a, a_min), a_max)
