@@ -187,6 +187,12 @@ def _other_local_addresses() -> list[str]:
     return [a for a in addrs if not a.startswith("127.")]
 
 
-def test_port_validation(rrd):
+def test_port_validation(rrd, capsys):
     assert main(["review", "--web", "--web-port", "70000", str(rrd)]) == 2
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        assert main(["review", "--web", "--port", str(port), str(rrd)]) == 2
+    assert f"port {port} on 127.0.0.1 is in use" in capsys.readouterr().err
     assert np.isfinite(review._free_port())

@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -72,6 +73,8 @@ def _free_port() -> int:
 def _check_port(value: int, field: str) -> int:
     if not 0 <= value <= 65535:
         raise ConfigError(field, f"must be a port in [1, 65535] (0 = pick a free one), got {value}")
+    if value and _listening(value):
+        raise ConfigError(field, f"port {value} on 127.0.0.1 is in use; choose another (0 = free)")
     return value or _free_port()
 
 
@@ -151,9 +154,14 @@ def _serve(binary: Path, path: Path, args: argparse.Namespace, env: dict[str, st
             signal.signal(sig, handler)
 
 
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+
+
 def _tail(log) -> str:
+    """The viewer's last log lines, without terminal colour codes."""
     log.seek(0)
-    return "\n  ".join(log.read().decode(errors="replace").strip().splitlines()[-5:])
+    text = _ANSI.sub("", log.read().decode(errors="replace")).strip()
+    return "\n  ".join(text.splitlines()[-5:])
 
 
 def _viewer(cmd: list[str], env: dict[str, str], log) -> subprocess.Popen:
