@@ -368,8 +368,11 @@ class SweepResult:
 
 
 def local_cluster(n_workers: int = 2, local_directory: str | None = None):
-    """A ``LocalCluster`` of ``n_workers`` single-threaded processes, no dashboard, scratch
-    space in ``local_directory`` (a temporary directory by default)."""
+    """A ``LocalCluster`` of ``n_workers`` single-threaded processes on 127.0.0.1, scratch
+    space in ``local_directory`` (a temporary directory by default).
+
+    The scheduler's HTTP endpoint (health, metrics; the dashboard if bokeh is installed)
+    listens on a free port of 127.0.0.1 only, never on the fixed port 8787."""
     import tempfile
 
     from dask.distributed import LocalCluster
@@ -379,7 +382,8 @@ def local_cluster(n_workers: int = 2, local_directory: str | None = None):
         n_workers=n_workers,
         threads_per_worker=1,
         processes=True,
-        dashboard_address=None,
+        host="127.0.0.1",
+        dashboard_address="127.0.0.1:0",
         local_directory=local_directory or tempfile.mkdtemp(prefix="lcc-sweep-dask-"),
         silence_logs=40,
     )

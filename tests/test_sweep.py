@@ -259,3 +259,33 @@ def test_cli_bad_counts_exit_2(problem_file, capsys):
     assert main(["sweep", str(problem_file), "--workers", "0"]) == 2
     assert "--workers" in capsys.readouterr().err
     assert main(["sweep", str(problem_file), "--controllers", "lqr"]) == 2
+
+
+def test_cli_sweep_json_and_files(problem_file, serial, capsys, tmp_path):
+    import json
+
+    from lcc_synth.comparison import json_safe
+
+    code = main([
+        "sweep", str(problem_file), "--count", "4", "--batch-size", "3", "--workers", "1",
+        "--json", "--no-progress", "--out", str(tmp_path),
+    ])
+    assert code == 0
+    doc = json.loads(capsys.readouterr().out)  # exactly one JSON object on stdout
+    assert list(doc) == ["results", "sweep"]
+    assert doc["sweep"]["count"] == 4 and doc["sweep"]["tasks"] == 2
+    first4 = {c: {k: v[:4] for k, v in per.items()} for c, per in serial.samples.items()}
+    # fallbacks are per-run totals: compare everything else with the serial samples
+    expect = json_safe(aggregate(first4, dict.fromkeys(first4, 0)))
+    for c, want in expect.items():
+        got = doc["results"][c]
+        assert got["fallbacks"] >= 0  # run totals: not comparable with a sub-sample
+        for key, value in want.items():
+            if isinstance(value, dict):
+                assert got[key] == pytest.approx(value, rel=1e-12), (c, key)
+            elif key != "fallbacks":
+                assert got[key] == value, (c, key)
+    (run_dir,) = tmp_path.iterdir()
+    assert {p.name for p in run_dir.iterdir()} == {"sweep.json", "samples.csv",
+                                                    "distributions.png"}
+    assert json.loads((run_dir / "sweep.json").read_text()) == doc
