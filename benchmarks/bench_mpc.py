@@ -41,7 +41,6 @@ def main() -> None:
     args = ap.parse_args()
 
     import casadi as ca
-    import numba
 
     from lcc_synth.mpc import mpc_controller_from_table
     from lcc_synth.mpc import solver as mpc_solver
@@ -51,9 +50,6 @@ def main() -> None:
     from lcc_synth.scenario import load_spec
     from lcc_synth.simulation import simulate
 
-    # The simulator re-enters its parallel numba loop every controller sample; on 2 shared
-    # cores each parallel launch costs ~10 ms of wall time, unrelated to the controller.
-    numba.set_num_threads(1)
     spec = load_spec(args.problem)
     table = load_problem(args.problem).data["controllers"]["mpc"]
 

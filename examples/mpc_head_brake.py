@@ -29,9 +29,6 @@ def main() -> int:
     ap.add_argument("--out", default="mpc_head_brake")
     args = ap.parse_args()
 
-    import numba
-
-    numba.set_num_threads(1)  # Python controller: avoid a parallel launch per 0.1 s sample
     spec = load_spec(args.problem)
     results = simulate_many(spec.scenario, spec.controllers)
     rep = report(spec, results)

@@ -16,18 +16,6 @@ from lcc_synth.simulation import simulate
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 
 
-@pytest.fixture(autouse=True)
-def _one_numba_thread():
-    """The simulator's parallel numba loop is re-entered every 0.1 s by a Python controller;
-    on a loaded 2-core machine each parallel launch costs ~10 ms, so run it on one thread."""
-    import numba
-
-    before = numba.get_num_threads()
-    numba.set_num_threads(1)
-    yield
-    numba.set_num_threads(before)
-
-
 def test_head_brake_spacing_bound_holds_without_emergency_braking():
     spec = load_spec(PROBLEMS / "mpc_head_brake.toml")
     mpc = simulate(spec.scenario, spec.controllers["mpc"])
