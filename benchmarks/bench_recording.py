@@ -44,9 +44,9 @@ def main() -> None:
     metrics = {name: summary(res, spec.metrics) for name, res in results.items()}
 
     t0 = time.perf_counter()
-    from lcc_synth import recording as R
+    import rerun  # noqa: F401
 
-    R._rr()
+    from lcc_synth import recording as R
     t_import = time.perf_counter() - t0
 
     res0 = next(iter(results.values()))

@@ -1,0 +1,150 @@
+"""Rerun recordings (``.rrd``) of simulation, analysis and synthesis runs.
+
+Submodules: :mod:`~lcc_synth.recording.core` (opening a recording, names, colours),
+:mod:`~lcc_synth.recording.layout` (blueprints), :mod:`~lcc_synth.recording.simulation`,
+:mod:`~lcc_synth.recording.analysis` (what gets recorded), :mod:`~lcc_synth.recording.cli`
+(command flags and the recorder), :mod:`~lcc_synth.recording.reader` (summaries, viewer).
+Everything public is importable from ``lcc_synth.recording``.
+
+Every recording command writes one file, by default ``logs/<problem>-<UTC timestamp>.rrd``
+(see :func:`recording_path`), with a default blueprint so that opening it in the Rerun viewer
+(``lcc-synth review PATH.rrd``) immediately shows what matters.
+
+Entity layout (stable: tests and users rely on these names)
+-----------------------------------------------------------
+Timeline ``time``: simulated time in seconds (a Rerun *duration* timeline, stored in ns).
+``<scenario>`` is the problem name and ``<controller>`` the controller name, both reduced to the
+characters ``[A-Za-z0-9_.-]`` (others become ``_``).
+
+Simulation (:func:`record_simulation`), under ``/<scenario>/<controller>/``:
+
+=====================  =========================================================================
+``velocity``           ``Scalars``, one series per vehicle (head, HDVs ahead, CAV, HDVs behind)
+``spacing``            ``Scalars``, one series per vehicle except the head vehicle
+``acceleration``       ``Scalars``, one series per vehicle (applied acceleration)
+``cav/u_cmd``          ``Scalars``, the CAV command before limits and emergency braking
+``cav/aeb_active``     ``Scalars``, 1 while the CAV's emergency braking is active, else 0
+``road``               ``Points2D``, every vehicle over time: x = position relative to the CAV
+                       (m), y = ``ROAD_Y_SCALE`` x velocity error (m/s), as in the paper's Fig. 11;
+                       CAV blue, HDVs grey, head vehicle yellow; labels = vehicle names
+``road/equilibrium``   ``LineStrips2D`` (static), the zero-velocity-error line
+``events``             ``TextLog`` on the timeline: CAV emergency braking on/off, collisions
+``metrics``            ``TextDocument`` (markdown), the run's metrics table
+``controller``         ``TextDocument`` (markdown), ``describe()`` and ``stats()`` of the controller
+``mpc/solve_time_ms``  ``Scalars`` (MPC only): whole controller step and OSQP time per step (ms)
+``mpc/status``         ``Scalars`` (MPC only): status code (0 QP, 1 shifted plan, 2 static gain,
+                       3 hold) and 1 when a fallback was used
+``mpc/predicted/*``    ``LineStrips2D`` (MPC only): ``u``, ``velocity``, ``spacing`` plans at
+                       each recorded controller step (x = seconds ahead, y = value)
+=====================  =========================================================================
+
+``/<scenario>/metrics`` (markdown) compares every controller recorded so far and
+``/<scenario>/status`` says whether the run completed or was interrupted (and by what).
+
+Vehicle names in series and labels: ``head``, ``hdv-2``, ``hdv-1`` (ahead of the CAV), ``cav``,
+``hdv1``, ``hdv2``... (behind), i.e. the paper's vehicle index; series colors as above.
+
+Analysis (:func:`record_gamma`, :func:`record_region_map`) under ``/analysis/``:
+``gamma/<case>`` (``LineStrips2D``: x = log10 omega, y = |Gamma(j omega)|, with ``gamma/unit``
+the line |Gamma| = 1) and ``gamma/<case>/report`` (markdown); ``regions/<name>`` (a
+``SegmentationImage`` of classes 0 = plant unstable, 1 = stable, 2 = string stable, with an
+annotation context naming them) and ``regions/<name>/report`` (markdown: axes and fractions).
+``/analysis/report`` holds the analysis command's whole report (:func:`record_analysis_file`).
+Synthesis (:func:`record_synthesis`, :func:`record_gains`) under ``/synthesis/<name>/``:
+``gains`` (``BarChart`` of the gain on every state), ``report`` (markdown: state names, gains,
+true H2, LMI bound, verdicts, solver), ``pareto/front`` and ``pareto/patterns`` (sparsity
+designs: x = vehicles heard, y = true H2); the |Gamma| curve of the gain as above.
+
+Interrupted runs: :func:`open_recording` is a context manager that flushes and finalises the
+file on every exit (exception, ``KeyboardInterrupt``) and records the interruption in
+``/<scenario>/status``; the commands record each controller as soon as its result exists
+(:class:`SimulationRecorder`), so the file holds everything finished before the interruption.
+
+Rerun's usage analytics live in its viewer/CLI binary, not in the logging SDK (writing a file
+sends nothing). Rerun 0.41 documents only ``rerun analytics disable`` (a per-user setting); its
+analytics pipeline also switches itself off whenever the ``CI`` environment variable is set, so
+every Rerun process started here gets ``CI=1`` in its own environment
+(:func:`viewer_environment`), leaving the user's settings and our own process untouched.
+"""
+
+from __future__ import annotations
+
+from lcc_synth.recording.analysis import (
+    gamma_grid,
+    record_analysis_file,
+    record_gains,
+    record_gamma,
+    record_region_map,
+    record_synthesis,
+    record_synthesis_file,
+)
+from lcc_synth.recording.cli import (
+    SimulationRecorder,
+    add_recording_arguments,
+    recording_decimation,
+    recording_path,
+)
+from lcc_synth.recording.core import (
+    APP_ID,
+    COLOR_CAV,
+    COLOR_HDV,
+    COLOR_HEAD,
+    ROAD_Y_SCALE,
+    entity_name,
+    open_recording,
+    record_text,
+    vehicle_colors,
+    vehicle_names,
+)
+from lcc_synth.recording.layout import (
+    analysis_blueprint,
+    simulation_blueprint,
+    synthesis_blueprint,
+)
+from lcc_synth.recording.reader import (
+    EntitySummary,
+    RecordingSummary,
+    rerun_binary,
+    summarize_recording,
+    viewer_environment,
+)
+from lcc_synth.recording.simulation import (
+    record_metrics,
+    record_mpc_history,
+    record_simulation,
+)
+
+__all__ = [
+    "APP_ID",
+    "ROAD_Y_SCALE",
+    "COLOR_CAV",
+    "COLOR_HDV",
+    "COLOR_HEAD",
+    "add_recording_arguments",
+    "recording_path",
+    "recording_decimation",
+    "entity_name",
+    "vehicle_names",
+    "vehicle_colors",
+    "simulation_blueprint",
+    "analysis_blueprint",
+    "synthesis_blueprint",
+    "open_recording",
+    "record_simulation",
+    "record_metrics",
+    "SimulationRecorder",
+    "record_mpc_history",
+    "record_gamma",
+    "record_region_map",
+    "record_gains",
+    "record_synthesis",
+    "record_analysis_file",
+    "record_synthesis_file",
+    "gamma_grid",
+    "record_text",
+    "viewer_environment",
+    "rerun_binary",
+    "RecordingSummary",
+    "EntitySummary",
+    "summarize_recording",
+]

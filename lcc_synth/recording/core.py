@@ -1,0 +1,320 @@
+"""Core of the recordings: constants, entity and vehicle names, colours, opening a
+recording, and the low-level writers and markdown helpers the ``record_*`` modules share."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import uuid
+import weakref
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lcc_synth.errors import ConfigError
+
+APP_ID = "lcc_synth"
+#: Road view: metres of screen height per m/s of velocity error (the 2D view keeps aspect 1:1).
+ROAD_Y_SCALE = 10.0
+COLOR_CAV = (31, 119, 180)
+COLOR_HDV = (150, 150, 150)
+COLOR_HEAD = (230, 180, 0)
+#: Colors of controllers in overlay views (u_cmd of all controllers in one plot).
+_PALETTE = [
+    (31, 119, 180), (214, 39, 40), (44, 160, 44), (148, 103, 189),
+    (255, 127, 14), (140, 86, 75), (227, 119, 194), (23, 190, 207),
+]  # fmt: skip
+_REGION_COLORS = {0: (235, 235, 235), 1: (170, 170, 170), 2: (31, 119, 180)}
+_REGION_LABELS = {0: "plant unstable", 1: "stable, not string stable", 2: "string stable"}
+
+
+def _rr():
+    """Import rerun lazily (heavy: ~1 s); the CLI keeps ``--help`` fast."""
+    import rerun as rr
+
+    return rr
+
+
+def _rrb():
+    import rerun.blueprint as rrb
+
+    return rrb
+
+
+_BAD = re.compile(r"[^A-Za-z0-9_.\-]")
+
+
+def entity_name(name: str) -> str:
+    """``name`` reduced to one safe entity-path part (``[A-Za-z0-9_.-]``, others -> ``_``)."""
+    cleaned = _BAD.sub("_", str(name).strip())
+    if not cleaned or set(cleaned) <= {"."}:
+        raise ConfigError("name", f"cannot be used as a recording entity name: {name!r}")
+    return cleaned
+
+
+def vehicle_names(m: int, n: int) -> list[str]:
+    """Names of the ``m + n + 2`` array columns: ``head, hdv-m..hdv-1, cav, hdv1..hdvn``."""
+    return (
+        ["head"]
+        + [f"hdv{i}" for i in range(-m, 0)]
+        + ["cav"]
+        + [f"hdv{i}" for i in range(1, n + 1)]
+    )
+
+
+def vehicle_colors(m: int, n: int) -> np.ndarray:
+    """``(m + n + 2, 3)`` uint8 colors: head yellow, HDVs grey, CAV blue (the paper's figures)."""
+    colors = np.tile(np.array(COLOR_HDV, dtype=np.uint8), (m + n + 2, 1))
+    colors[0] = COLOR_HEAD
+    colors[m + 1] = COLOR_CAV
+    return colors
+
+
+@contextmanager
+def open_recording(
+    path: str | Path, name: str, blueprint: Any = None, scenario: str | None = None
+) -> Iterator[Any]:
+    """Open a Rerun recording that writes to ``path``; yields the ``rerun.RecordingStream``.
+
+    The file is flushed and finalised on every exit. On an exception (a controller raising,
+    ``KeyboardInterrupt``...) ``/<scenario>/status`` records the interruption and the exception
+    propagates; everything recorded before stays in a readable file.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.rrd`` file (its directory is created).
+    name : str
+        Recording name shown by the viewer (e.g. the problem name).
+    blueprint : rerun.blueprint.Blueprint, optional
+        The default layout saved in the file.
+    scenario : str, optional
+        Entity prefix of the status document (default: ``name``).
+    """
+    rr = _rr()
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ConfigError("--rrd", f"cannot create directory {str(path.parent)!r}: {err}") from None
+    if not os.access(path.parent, os.W_OK):
+        raise ConfigError("--rrd", f"directory {str(path.parent)!r} is not writable")
+    status = f"/{entity_name(scenario or name)}/status"
+    rec = rr.RecordingStream(APP_ID, recording_id=uuid.uuid4())
+    rec.save(path, default_blueprint=blueprint)
+    rec.send_recording_name(name)
+    started = datetime.now(UTC).isoformat(timespec="seconds")
+    record_text(rec, status, f"# Status\n\nstarted {started}: **running**\n")
+    with rec:  # flush + finalise the file sink on every exit (Rerun 0.41 context manager)
+        try:
+            yield rec
+        except GeneratorExit:  # the with-block was abandoned (interpreter exit): just finalise
+            raise
+        except BaseException as err:
+            what = type(err).__name__ + (f": {err}" if str(err) else "")
+            record_text(
+                rec,
+                status,
+                f"# Status\n\nstarted {started}: **interrupted** by `{what}`; the recording holds "
+                "everything recorded before the interruption.\n",
+            )
+            raise
+        else:
+            done = datetime.now(UTC).isoformat(timespec="seconds")
+            record_text(rec, status, f"# Status\n\nstarted {started}, **complete** {done}\n")
+
+
+def record_text(rec: Any, entity: str, markdown: str) -> None:
+    """Log a static markdown ``TextDocument`` at ``entity`` (the latest one wins)."""
+    rr = _rr()
+    rec.log(entity, rr.TextDocument(markdown, media_type=rr.MediaType.MARKDOWN), static=True)
+
+
+def _sample_indices(T: int, every: int) -> np.ndarray:
+    idx = np.arange(0, T, every)
+    if idx[-1] != T - 1:
+        idx = np.append(idx, T - 1)
+    return idx
+
+
+def _time_column(t: np.ndarray):
+    """The ``time`` timeline (seconds -> ns, rounded: Rerun's float path truncates, which puts
+    e.g. 2.05 s at 2049999999 ns)."""
+    rr = _rr()
+    ns = np.round(np.asarray(t, dtype=np.float64) * 1e9).astype(np.int64)
+    return rr.TimeColumn("time", duration=ns.astype("timedelta64[ns]"))
+
+
+class _ArrowBatch:
+    """A ready pyarrow array as a Rerun component batch (``as_arrow_array`` protocol)."""
+
+    def __init__(self, array):
+        self.array = array
+
+    def as_arrow_array(self):
+        return self.array
+
+
+def _rows(rr: Any, descriptor: Any, flat: Any, rows: int, per_row: int):
+    """``rows`` rows of ``per_row`` instances each: a component column over ``flat`` without
+    copying (``Scalars.columns(...).partition(...)`` copies the data several times)."""
+    offsets = np.arange(0, rows * per_row + 1, per_row, dtype=np.int32)
+    return rr.ComponentColumn(descriptor, _ArrowBatch(flat), offsets=offsets)
+
+
+def _send_series(rec: Any, entity: str, t: Any, values: np.ndarray, names, colors) -> None:
+    """One entity with ``values.shape[1]`` scalar series (one ``send_columns`` call); ``t`` is
+    the times (s) or a ready ``TimeColumn``."""
+    import pyarrow as pa
+
+    rr = _rr()
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    rows, k = values.shape
+    rec.log(
+        entity,
+        rr.SeriesLines(
+            names=list(names), colors=np.asarray(colors, dtype=np.uint8), widths=[1.5] * k
+        ),
+        static=True,
+    )
+    flat = pa.array(values.reshape(-1), type=pa.float64())  # NaN stays NaN (a gap)
+    column = _rows(rr, rr.Scalars.descriptor_scalars(), flat, rows, k)
+    tcol = _time_column(t) if isinstance(t, np.ndarray) else t
+    rec.send_columns(entity, indexes=[tcol], columns=[column])
+
+
+def _flush_started(rec: Any) -> None:
+    """Start writing what was logged without waiting (the context manager's exit waits)."""
+    rec.flush(timeout_sec=0.0)
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, bool) or value is None:
+        return str(value)
+    if isinstance(value, int | np.integer):
+        return str(int(value))
+    if isinstance(value, float | np.floating):
+        v = float(value)
+        if math.isnan(v):
+            return "—"
+        return f"{v:.6g}" if (v == 0 or 1e-3 <= abs(v) < 1e6) else f"{v:.4e}"
+    return str(value)
+
+
+def _cell(text: Any) -> str:
+    """Text safe inside a markdown table cell."""
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    return value
+
+
+def _is_scalar(value: Any) -> bool:
+    return isinstance(value, str | bool | int | float | np.generic) or value is None
+
+
+def _mapping_markdown(
+    title: str, data: Mapping[str, Any], vehicles: Sequence[str] | None = None
+) -> str:
+    """Markdown of a (possibly nested) mapping: scalars as a table, per-vehicle lists as a
+    vehicle table, anything else as JSON."""
+    lines = [f"## {title}", ""]
+    scalars = {k: v for k, v in data.items() if _is_scalar(v)}
+    if scalars:
+        lines += ["| quantity | value |", "|---|---|"]
+        lines += [f"| {_cell(k)} | {_cell(_fmt(v))} |" for k, v in scalars.items()]
+        lines.append("")
+    rest = {k: v for k, v in data.items() if k not in scalars}
+    for key, value in rest.items():
+        if (
+            isinstance(value, Mapping)
+            and vehicles is not None
+            and value
+            and all(
+                isinstance(v, list | tuple | np.ndarray) and len(v) == len(vehicles)
+                for v in value.values()
+            )
+        ):
+            cols = list(value)
+            lines += [f"### {key} (per vehicle, head to tail)", ""]
+            lines += ["| vehicle | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
+            for i, veh in enumerate(vehicles):
+                lines.append(f"| {veh} | " + " | ".join(_fmt(value[c][i]) for c in cols) + " |")
+            lines.append("")
+        elif isinstance(value, Mapping) and all(_is_scalar(v) for v in value.values()) and value:
+            lines += [f"### {key}", "", "| name | value |", "|---|---|"]
+            lines += [f"| {k} | {_fmt(v)} |" for k, v in value.items()]
+            lines.append("")
+        else:
+            lines += [
+                f"### {key}",
+                "",
+                "```json",
+                json.dumps(_jsonable(value), indent=1),
+                "```",
+                "",
+            ]
+    return "\n".join(lines)
+
+
+@dataclass
+class _RunFacts:
+    """What the metrics document of a recorded run always shows (from the result itself)."""
+
+    vehicles: list[str]
+    events: str
+    row: dict[str, Any]
+
+
+@dataclass
+class _RecState:
+    """Per-recording state: comparison rows per scenario, run facts, colors handed out."""
+
+    rows: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
+    runs: dict[tuple[str, str], _RunFacts] = field(default_factory=dict)
+    colors: dict[str, tuple[int, int, int]] = field(default_factory=dict)
+
+    def color(self, key: str) -> tuple[int, int, int]:
+        if key not in self.colors:
+            self.colors[key] = _PALETTE[len(self.colors) % len(_PALETTE)]
+        return self.colors[key]
+
+
+_STATES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _state(rec: Any) -> _RecState:
+    try:
+        return _STATES.setdefault(rec, _RecState())
+    except TypeError:  # not weak-referenceable (a test double): no shared state
+        return _RecState()
+
+
+def _comparison_markdown(scenario: str, rows: Mapping[str, Mapping[str, Any]]) -> str:
+    ctrls = list(rows)
+    keys: list[str] = []
+    for row in rows.values():
+        keys += [k for k, v in row.items() if _is_scalar(v) and k not in keys]
+    lines = [f"# {scenario}: metrics", ""]
+    lines += ["| metric | " + " | ".join(ctrls) + " |", "|---|" + "---|" * len(ctrls)]
+    for k in keys:
+        lines.append(f"| {k} | " + " | ".join(_fmt(rows[c].get(k, "")) for c in ctrls) + " |")
+    return "\n".join(lines) + "\n"

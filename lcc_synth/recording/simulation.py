@@ -1,0 +1,317 @@
+"""Recording simulation results: trajectories, road view, events, metrics, MPC history."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from lcc_synth.errors import ConfigError
+from lcc_synth.recording.core import (
+    _PALETTE,
+    ROAD_Y_SCALE,
+    _comparison_markdown,
+    _flush_started,
+    _fmt,
+    _is_scalar,
+    _mapping_markdown,
+    _rows,
+    _rr,
+    _RunFacts,
+    _sample_indices,
+    _send_series,
+    _state,
+    _time_column,
+    entity_name,
+    record_text,
+    vehicle_colors,
+    vehicle_names,
+)
+
+
+def _record_events(rec, entity, t, aeb_on, collided, ctime, names, limit: int = 1000) -> None:
+    """``TextLog`` events on the timeline: emergency braking on/off (WARN), collisions
+    (ERROR); at most ``limit`` AEB edges (a chattering AEB would flood the log)."""
+    rr = _rr()
+    edges = np.flatnonzero(np.diff(aeb_on.astype(np.int8), prepend=np.int8(0)))
+    times, texts, levels = [], [], []
+    for k in edges[:limit]:
+        times.append(t[k])
+        texts.append("CAV emergency braking ON" if aeb_on[k] else "CAV emergency braking off")
+        levels.append("WARN")
+    for i in np.flatnonzero(collided):
+        times.append(ctime[i])
+        texts.append(f"COLLISION: {names[i]} hit the vehicle ahead")
+        levels.append("ERROR")
+    if not times:
+        return
+    order = np.argsort(times, kind="stable")
+    rec.send_columns(
+        entity,
+        indexes=[_time_column(np.asarray(times, dtype=np.float64)[order])],
+        columns=rr.TextLog.columns(
+            text=[texts[i] for i in order], level=[levels[i] for i in order]
+        ),
+    )
+
+
+def record_simulation(
+    rec: Any,
+    result: Any,
+    scenario: str,
+    *,
+    controller: str | None = None,
+    metrics: Mapping[str, Any] | None = None,
+    decimate: int = 1,
+    run: int = 0,
+    mpc_history: Any = None,
+) -> str:
+    """Record one controller's simulation (one batch member) and flush it.
+
+    Parameters
+    ----------
+    rec : rerun.RecordingStream
+        From :func:`open_recording`.
+    result : lcc_synth.simulation.SimResult
+        Arrays ``(batch, T, n_vehicles)`` etc. (see the simulator's contract).
+    scenario : str
+        Entity prefix (the problem name).
+    controller : str, optional
+        Entity name of the controller (default ``result.controller``); e.g. ``"fd_lcc_seed3"``
+        to record several batch members of one controller.
+    metrics : mapping, optional
+        The run's metrics (e.g. the ``--json`` shape of ``lcc-synth simulate``): scalars go into
+        the per-controller and comparison tables, per-vehicle lists into a vehicle table.
+    decimate : int
+        Record every ``decimate``-th step (the last step is always recorded).
+    run : int
+        Which batch member to record.
+    mpc_history : optional
+        An MPC controller's per-step history (see :func:`record_mpc_history`).
+
+    Returns
+    -------
+    str
+        The entity prefix ``/<scenario>/<controller>``.
+    """
+    if isinstance(decimate, bool) or not isinstance(decimate, int | np.integer) or decimate < 1:
+        raise ConfigError("decimate", f"must be an integer >= 1, got {decimate!r}")
+    rr = _rr()
+    t_all = np.asarray(result.t, dtype=np.float64)
+    velocity = np.asarray(result.velocity)
+    batch, T, nv = velocity.shape
+    if not 0 <= run < batch:
+        raise ConfigError("run", f"must be in [0, {batch - 1}], got {run}")
+    m, n, cav = int(result.m), int(result.n), int(result.cav)
+    if nv != m + n + 2 or cav != m + 1 or t_all.shape != (T,):
+        raise ConfigError(
+            "result",
+            f"inconsistent SimResult shapes: velocity {velocity.shape}, m={m}, n={n}, cav={cav}",
+        )
+    s = entity_name(scenario)
+    c = entity_name(controller if controller is not None else result.controller)
+    base = f"/{s}/{c}"
+    idx = _sample_indices(T, int(decimate))
+    t = t_all[idx]
+    tcol = _time_column(t)
+    names = vehicle_names(m, n)
+    colors = vehicle_colors(m, n)
+    label = [f"{c} {v}" for v in names]
+
+    vel = velocity[run, idx]
+    _send_series(rec, f"{base}/velocity", tcol, vel, label, colors)
+    _send_series(
+        rec,
+        f"{base}/spacing",
+        tcol,
+        np.asarray(result.spacing)[run, idx, 1:],
+        label[1:],
+        colors[1:],
+    )
+    _send_series(
+        rec, f"{base}/acceleration", tcol, np.asarray(result.acceleration)[run, idx], label, colors
+    )
+    state = _state(rec)
+    u_color = state.color(base)  # one color per controller: u_cmd of all controllers overlaid
+    u_cmd = np.asarray(result.u_cmd)[run, idx, None]
+    _send_series(rec, f"{base}/cav/u_cmd", tcol, u_cmd, [f"{c} u_cmd"], [u_color])
+    aeb = np.asarray(result.aeb_active)[run, idx].astype(np.float64)[:, None]
+    _send_series(rec, f"{base}/cav/aeb_active", tcol, aeb, [f"{c} AEB active"], [(214, 39, 40)])
+
+    # Road view (Fig. 11): x = position relative to the CAV, y = scaled velocity error.
+    pos = np.asarray(result.position)[run, idx]
+    v_star = float(np.asarray(result.v_star).reshape(-1)[run])
+    xy = np.empty((len(idx), nv, 2), dtype=np.float32)
+    xy[..., 0] = pos - pos[:, cav : cav + 1]
+    xy[..., 1] = ROAD_Y_SCALE * (vel - v_star)
+    rec.log(
+        f"{base}/road",
+        rr.Points2D.from_fields(colors=colors, radii=[1.5] * nv, labels=names, show_labels=False),
+        static=True,
+    )
+    import pyarrow as pa
+
+    item = pa.list_(pa.field("item", pa.float32(), nullable=False), 2)
+    points = pa.FixedSizeListArray.from_arrays(pa.array(xy.reshape(-1)), type=item)
+    rec.send_columns(
+        f"{base}/road",
+        indexes=[tcol],
+        columns=[_rows(rr, rr.Points2D.descriptor_positions(), points, len(idx), nv)],
+    )
+    x_lo, x_hi = float(np.nanmin(xy[..., 0])), float(np.nanmax(xy[..., 0]))
+    rec.log(
+        f"{base}/road/equilibrium",
+        rr.LineStrips2D([[[x_lo - 5.0, 0.0], [x_hi + 5.0, 0.0]]], colors=[(90, 90, 90)], radii=0.2),
+        static=True,
+    )
+
+    # Texts: controller description and metrics.
+    info = dict(getattr(result, "controller_info", {}) or {})
+    stats = dict(getattr(result, "controller_stats", {}) or {})
+    s_star = float(np.asarray(result.s_star).reshape(-1)[run])
+    header = (
+        f"# {c}\n\nscenario `{scenario}`, run {run} of {batch}; m = {m} ahead, n = {n} behind; "
+        f"v* = {_fmt(v_star)} m/s, s* = {_fmt(s_star)} m; {T} steps recorded every {decimate}.\n\n"
+    )
+    record_text(
+        rec,
+        f"{base}/controller",
+        header
+        + _mapping_markdown("description", info)
+        + "\n"
+        + _mapping_markdown("run statistics", stats),
+    )
+    collided = np.asarray(result.collided)[run]
+    ctime = np.asarray(result.collision_time)[run]
+    crash = [f"{names[i]} at t = {_fmt(float(ctime[i]))} s" for i in np.flatnonzero(collided)]
+    aeb_on = np.asarray(result.aeb_active)[run].astype(bool)
+    episodes = int(np.count_nonzero(aeb_on[1:] & ~aeb_on[:-1]) + bool(aeb_on[0])) if T else 0
+    _record_events(rec, f"{base}/events", t_all, aeb_on, collided, ctime, names)
+    state.runs[(s, c)] = _RunFacts(
+        names,
+        f"collisions: {', '.join(crash) if crash else 'none'}; emergency braking: "
+        f"{episodes} episode(s), {int(aeb_on.sum())} sample(s) active",
+        {"collisions": len(crash), "aeb_episodes": episodes},
+    )
+    record_metrics(rec, scenario, c, metrics or {})
+    if mpc_history is not None:
+        record_mpc_history(rec, base, mpc_history, run=run)
+    _flush_started(rec)
+    return base
+
+
+def record_metrics(rec: Any, scenario: str, controller: str, metrics: Mapping[str, Any]) -> None:
+    """(Re)write the metrics document of a recorded run and the scenario's comparison table.
+
+    ``controller`` is the name given to :func:`record_simulation`. Use it when the metrics are
+    only known after every controller ran (e.g. reductions versus a baseline).
+    """
+    s, c = entity_name(scenario), entity_name(controller)
+    state = _state(rec)
+    facts = state.runs.get((s, c))
+    if facts is None:
+        raise ConfigError("controller", f"{controller!r} was not recorded in scenario {scenario!r}")
+    mdict = {k: v for k, v in dict(metrics).items() if k not in ("controller", "controller_stats")}
+    record_text(
+        rec,
+        f"/{s}/{c}/metrics",
+        f"# {c}: metrics\n\n"
+        + (_mapping_markdown("metrics", mdict, facts.vehicles) if mdict else "")
+        + f"\n{facts.events}\n",
+    )
+    rows = state.rows.setdefault(s, {})
+    rows[c] = {**facts.row, **{k: v for k, v in mdict.items() if _is_scalar(v)}}
+    record_text(rec, f"/{s}/metrics", _comparison_markdown(scenario, rows))
+    _flush_started(rec)
+
+
+#: ``lcc_synth.mpc`` per-step status codes (its ``STATUS_CODES``); 0 = QP solved.
+_MPC_STATUS = {0: "qp", 1: "shifted_plan", 2: "static_gain", 3: "hold"}
+
+
+def record_mpc_history(
+    rec: Any, base: str, history: Mapping[str, Any], run: int = 0, plan_every: int | None = None
+) -> None:
+    """Record an MPC controller's per-step history under ``<base>/mpc/``.
+
+    ``history`` is ``MPCController.history()`` of :mod:`lcc_synth.mpc`: ``t (S,)`` controller
+    step times; per scenario ``(B, S, ...)``: ``step_time`` and ``osqp_time`` (s), ``status``
+    (0 QP, 1 shifted plan, 2 static gain, 3 hold), ``plan (B, S, N)`` planned model inputs,
+    ``predicted_velocity`` / ``predicted_spacing`` ``(B, S, N+1, V)`` and ``pred_time (N+1,)``
+    offsets (s); arrays without the batch axis are accepted too.
+
+    Entities: ``mpc/solve_time_ms`` (series: whole step, OSQP), ``mpc/status`` (status code and
+    1 when a fallback was used), and ``mpc/predicted/{u,velocity,spacing}``: ``LineStrips2D``
+    at each recorded controller step, x = seconds ahead of that step, y = the predicted value
+    (one strip per vehicle), so scrubbing the timeline shows the plan of the moment.
+    ``plan_every`` records every k-th plan (default: at most about 200 plans).
+    """
+    import pyarrow as pa
+
+    rr = _rr()
+    if "t" not in history:
+        raise ConfigError("mpc_history", "needs the controller step times 't'")
+    t = np.asarray(history["t"], dtype=np.float64).reshape(-1)
+    S = t.size
+    if S == 0:
+        return
+
+    def member(key: str, per_step_ndim: int):
+        if key not in history or history[key] is None:
+            return None
+        x = np.asarray(history[key])
+        if x.ndim == per_step_ndim + 2:  # (B, S, ...)
+            if not 0 <= run < x.shape[0]:
+                raise ConfigError("run", f"must be in [0, {x.shape[0] - 1}], got {run}")
+            x = x[run]
+        return x[:S]
+
+    tcol = _time_column(t)
+    times = [member(k, 0) for k in ("step_time", "osqp_time", "solve_time")]
+    times = [(k, x) for k, x in zip(("step", "OSQP", "solve"), times, strict=True) if x is not None]
+    if times:
+        vals = np.column_stack([x.astype(np.float64) * 1e3 for _, x in times])
+        _send_series(
+            rec, f"{base}/mpc/solve_time_ms", tcol, vals, [f"{k} time (ms)" for k, _ in times],
+            _PALETTE[: len(times)],
+        )  # fmt: skip
+    status = member("status", 0)
+    if status is not None:
+        code = status.astype(np.float64)
+        vals = np.column_stack([code, (code > 0).astype(np.float64)])
+        names = ["status (" + ", ".join(f"{k} {v}" for k, v in _MPC_STATUS.items()) + ")",
+                 "fallback used"]  # fmt: skip
+        _send_series(rec, f"{base}/mpc/status", tcol, vals, names, [(90, 90, 90), (214, 39, 40)])
+
+    every = plan_every or max(1, S // 200)
+    steps = np.arange(0, S, every)
+    offsets = history.get("pred_time")
+    for key, label in (("plan", "u"), ("predicted_velocity", "velocity"),
+                       ("predicted_spacing", "spacing")):  # fmt: skip
+        pred = member(key, 1 if key == "plan" else 2)
+        if pred is None:
+            continue
+        pred = np.asarray(pred, dtype=np.float64)[steps]
+        if pred.ndim == 2:
+            pred = pred[:, :, None]
+        K, H, V = pred.shape
+        if offsets is not None:
+            x = np.asarray(offsets, dtype=np.float64)[:H]
+        elif "dt" in history:
+            x = float(history["dt"]) * np.arange(H)
+        else:
+            raise ConfigError("mpc_history", f"{key} needs 'pred_time' or 'dt'")
+        xy = np.empty((K, V, H, 2), dtype=np.float32)
+        xy[..., 0] = x[None, None, :]
+        xy[..., 1] = np.transpose(pred, (0, 2, 1))
+        item = pa.list_(pa.field("item", pa.float32(), nullable=False), 2)
+        pts = pa.FixedSizeListArray.from_arrays(pa.array(xy.reshape(-1)), type=item)
+        strip_off = np.arange(0, K * V * H + 1, H, dtype=np.int32)
+        strips = pa.ListArray.from_arrays(pa.array(strip_off), pts)
+        rec.send_columns(
+            f"{base}/mpc/predicted/{label}",
+            indexes=[_time_column(t[steps])],
+            columns=[_rows(rr, rr.LineStrips2D.descriptor_strips(), strips, K, V)],
+        )
+    _flush_started(rec)
