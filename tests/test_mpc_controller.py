@@ -372,3 +372,17 @@ def test_batch_members_are_independent_through_relinearization():
         assert u_pair[0] == u_single[0]
     assert pair.stats()["relinearizations"] == 1
     assert single.stats()["relinearizations"] == 0
+
+
+def test_pickle_round_trip_drops_the_run_state():
+    import pickle
+
+    ctrl = mpc_controller_from_table("mpc", {"type": "mpc", "horizon": 10}, _system())
+    ctrl.reset(_ctx(0, 3))
+    x = np.array([0.5, -0.2, 0.1, 0.3, -0.4, 0.0, 0.2, 0.1])
+    u = ctrl(_obs(0.0, x, 0, 0.0))
+    copy = pickle.loads(pickle.dumps(ctrl))
+    with pytest.raises(RuntimeError, match="reset"):
+        copy(_obs(0.0, x, 0, 0.0))
+    copy.reset(_ctx(0, 3))
+    assert copy(_obs(0.0, x, 0, 0.0))[0] == pytest.approx(u[0], abs=1e-12)

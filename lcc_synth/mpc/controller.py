@@ -178,6 +178,13 @@ class MPCController:
         self._ctx: ControlContext | None = None
         self._reset_stats()
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Picklable without the run state (OSQP workspaces); call :meth:`reset` after."""
+        state = dict(self.__dict__)
+        state["_members"] = []
+        state["_ctx"] = None
+        return state
+
     # ---------------------------------------------------------------- setup helpers
 
     def _clip_v(self, v: float) -> float:
