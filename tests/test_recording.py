@@ -241,7 +241,7 @@ def test_interrupted_run_leaves_a_readable_file(tmp_path, exc):
             R.record_simulation(rec, first, "rec test")
             simulate(sc, RaisingController(exc))  # raises mid-run (t = 2 s of 4 s)
     summary = R.summarize_recording(path)  # full read of a finalised file (footer included)
-    assert summary.has_blueprint
+    assert summary.has_blueprint and summary.finalized
     assert "/rec_test/all_hdv/velocity" in summary.entities
     assert summary.entities["/rec_test/all_hdv/velocity"].samples == len(first.t)
     assert not any("raiser" in p for p in summary.entities)
@@ -633,3 +633,29 @@ def test_collisions_and_emergency_braking_are_events_on_the_timeline(tmp_path):
     _, vel = _temporal(chunks, "/crash/blind/velocity", "Scalars:scalars")
     np.testing.assert_array_equal(np.isnan(np.array(vel)), np.isnan(res.velocity[0]))
     assert "collisions: cav at t = " in R.summarize_recording(path).texts["/crash/blind/metrics"]
+
+
+def test_killed_process_leaves_the_flushed_controllers_readable(tmp_path):
+    """A process killed after recording a controller (no finalisation, no footer): the file
+    still reads back, marked not finalised, with that controller's data."""
+    import subprocess
+    import sys
+
+    path = tmp_path / "killed.rrd"
+    code = (
+        "import os\n"
+        "from lcc_synth.simulation import Scenario, simulate\n"
+        "from lcc_synth.controllers import HDVController\n"
+        "from lcc_synth import recording as R\n"
+        "r = simulate(Scenario(m=0, n=2, duration=3.0), HDVController('h'))\n"
+        f"cm = R.open_recording({str(path)!r}, 'k')\n"
+        "rec = cm.__enter__()\n"
+        "R.record_simulation(rec, r, 'k')\n"
+        "rec.flush()\n"
+        "os._exit(9)  # killed: no context-manager exit\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=120)
+    assert proc.returncode == 9, proc.stderr.decode()
+    s = R.summarize_recording(path)
+    assert not s.finalized
+    assert s.entities["/k/h/velocity"].samples == 300

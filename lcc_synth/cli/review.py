@@ -117,6 +117,8 @@ def _print_summary(summary, as_json: bool) -> None:
     print(f"application  {summary.application_id}; recording id {', '.join(summary.recording_ids)}")
     views = f" ({len(summary.views)} views)" if summary.views else ""
     print(f"blueprint    {'yes' if summary.has_blueprint else 'no'}{views}")
+    if not summary.finalized:
+        print("file         not finalised (the writing process was killed); data up to then")
     print(f"time range   {f'{tr[0]:g} .. {tr[1]:g} s' if tr else 'none (static data only)'}")
     print(f"entities     {len(summary.entities)}")
     width = max((len(p) for p in summary.entities), default=10)

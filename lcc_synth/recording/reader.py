@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -63,6 +64,9 @@ class RecordingSummary:
     entities: dict[str, EntitySummary]
     texts: dict[str, str]
     views: list[dict[str, str]] = field(default_factory=list)
+    #: False when the file has no footer: the writing process was killed (the data flushed
+    #: before that is still readable).
+    finalized: bool = True
 
     @property
     def time_range(self) -> tuple[float, float] | None:
@@ -97,6 +101,7 @@ class RecordingSummary:
             },
             "texts": dict(sorted(self.texts.items())),
             "views": self.views,
+            "finalized": self.finalized,
         }
 
 
@@ -110,13 +115,16 @@ def _open_reader(path: str | Path):
     from rerun.chunk import RrdReader
 
     try:
-        reader = RrdReader(p)
-        recordings = reader.recordings()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            reader = RrdReader(p)
+            recordings = reader.recordings()
     except Exception as err:  # the bindings raise various errors on non-rrd input
         raise ConfigError("path", f"not a readable Rerun recording (.rrd): {err}", str(p)) from None
     if not recordings:
         raise ConfigError("path", "the file holds no Rerun recording", str(p))
-    return reader, recordings
+    finalized = not any("no footer" in str(w.message) for w in caught)
+    return reader, recordings, finalized
 
 
 def summarize_recording(path: str | Path) -> RecordingSummary:
@@ -126,7 +134,7 @@ def summarize_recording(path: str | Path) -> RecordingSummary:
     """
     import pyarrow as pa
 
-    reader, recordings = _open_reader(path)
+    reader, recordings, finalized = _open_reader(path)
     entities: dict[str, EntitySummary] = {}
     texts: dict[str, str] = {}
     try:
@@ -189,4 +197,5 @@ def summarize_recording(path: str | Path) -> RecordingSummary:
         entities=entities,
         texts=texts,
         views=views,
+        finalized=finalized,
     )
