@@ -22,10 +22,12 @@ At every sample (``sample_time``, default 0.1 s; the simulator holds the command
    grid, so batch members and returns to an earlier speed reuse them; a new one costs one
    CasADi evaluation and one Riccati solve (tens of ms, see ``benchmarks/bench_mpc.py``).
 5. **QP** (:mod:`lcc_synth.mpc.formulation`) solved by OSQP with warm start from the shifted
-   previous solution. The safe spacing to the vehicle ahead is in ABSOLUTE metres,
-   ``s_0 >= s_min + t_gap v_0`` with ``s_0 = s_eq + s~_0`` and ``v_0 = v_eq + v~_0``, soft with an
-   exact l1 penalty (FD-LCC: ``s_0`` predicted from the measured spacing, the vehicle ahead
-   moving with the head prediction).
+   previous solution. The cost regulates the string towards the equilibrium consistent with the
+   PREDICTED head velocity. The safe spacing to the vehicle ahead is in ABSOLUTE metres,
+   ``s_0 >= s_min + t_gap v_0`` with ``s_0 = s_eq + s~_0`` and ``v_0 = v_eq + v~_0``, enforced
+   ``constraints.margin`` tighter (default 0.1 m: covers the mismatch between the exact ZOH
+   prediction and the simulator's Euler steps), soft with an exact l1 penalty (FD-LCC: ``s_0``
+   predicted from the measured spacing, the vehicle ahead moving with the head prediction).
 6. **Fallback chain** when the QP is not solved (status other than ``solved``, non-finite
    data, any exception): the previous plan shifted by one step (while it lasts), else a static
    gain (``fallback_gains_file`` if configured, else the paper's Section V-B gain for FD-/CF-LCC
@@ -50,7 +52,13 @@ import numpy as np
 from lcc_synth.controllers import ControlContext, Observation
 from lcc_synth.errors import ConfigError
 from lcc_synth.feedback import StaticGains, cav_feedback
-from lcc_synth.mpc.formulation import Family, Formulation, Linearization, linearize
+from lcc_synth.mpc.formulation import (
+    Family,
+    Formulation,
+    Linearization,
+    linearize,
+    state_weights,
+)
 from lcc_synth.mpc.settings import MPCSettings, settings_from_table
 from lcc_synth.mpc.solver import POLISH_NAMES, OSQPSolver
 
@@ -159,7 +167,7 @@ class MPCController:
         model = self._lin0.model
         self._families = self._make_families(model)
         self.formulation = Formulation(
-            self.kind, model.nx, settings, _state_weights(model, settings), self._families
+            self.kind, model.nx, settings, state_weights(model, settings), self._families
         )
         self._shift_z, self._shift_y = self.formulation.shift_indices()
         self.fallback = fallback if fallback is not None else paper_fallback_gains(
@@ -650,12 +658,6 @@ class MPCController:
 
 _HIST_KEYS = ("u", "u_model", "status", "osqp_time", "iterations", "slack", "v_eq", "v_lin",
               "x0", "d", "plan", "lin")
-
-
-def _state_weights(model, settings):
-    from lcc_synth.mpc.formulation import state_weights
-
-    return state_weights(model, settings)
 
 
 def _load_gains_file(path: Path, system, field_name: str) -> StaticGains:
