@@ -47,6 +47,7 @@ def main() -> None:
     import rerun  # noqa: F401
 
     from lcc_synth import recording as R
+
     t_import = time.perf_counter() - t0
 
     res0 = next(iter(results.values()))
