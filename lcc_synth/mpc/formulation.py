@@ -30,14 +30,19 @@ cross term ``w_u K_law' u`` when the total acceleration of CF-LCC is weighted); 
 zero position weight it is solved on the model without the marginal ``-p_0`` state, which no
 other state depends on (its row and column of ``P`` are zero).
 
-The model matrices ``theta = (Ad, Bd, Hd, P, K_law, k_h)`` are CasADi symbols too, so the
-sparsity pattern of the Hessian and of the constraint matrix is structural and never changes:
-re-linearising at a new equilibrium only re-evaluates the numeric values (one CasADi call) and
-hands them to OSQP with ``update(Px=..., Ax=...)``. The vectors are affine in the step parameter
+The condensation is written symbolically in CasADi (MX): every predicted state is an affine
+map ``x_k = Xu_k U + Xp_k p`` built by the recursion above, each cost term a residual
+``r = Ru U + Rp p`` with weight ``W`` contributing ``2 Ru' W Ru`` to the Hessian and
+``2 Ru' W Rp`` to the linear-term map. The model matrices ``theta = (Ad, Bd, Hd, P, x_dir, K_law,
+k_h)`` are CasADi symbols too, so the sparsity pattern of the Hessian and of the constraint
+matrix is structural and never changes: re-linearising at a new equilibrium only re-evaluates
+the numeric values (one call of the CasADi function) and hands them to OSQP with
+``update(Px=..., Ax=...)``. The vectors are affine in the step parameter
 ``p = [x_0, d_0..d_{N-1}, u_{-1}]``: ``q = Qp p + q0`` and the constraint offset ``Gp p + g0``
 (``q0`` holds the l1 slack penalty), extracted as dense matrices once per linearisation, so a
-control step is two small
-matrix-vector products plus the OSQP update and solve.
+control step is two small matrix-vector products plus the OSQP update and solve.
+(``tests/test_mpc_qp.py`` checks these matrices against the cost and constraints evaluated by
+simulating the prediction model in numpy.)
 """
 
 from __future__ import annotations
@@ -222,7 +227,8 @@ def _to_csc(dm) -> sp.csc_matrix:
 class Formulation:
     """The symbolic QP of one MPC layout (kind, sizes, weights, constraint families).
 
-    Built once per controller (about 0.3 s); :meth:`matrices` evaluates it at a linearisation.
+    Built once per controller (about 0.15 s); :meth:`matrices` evaluates it at a linearisation
+    (about 10 ms for n = 10, N = 50).
 
     Parameters
     ----------
@@ -254,57 +260,80 @@ class Formulation:
         Bd = ca.MX.sym("Bd", nx, 1)
         Hd = ca.MX.sym("Hd", nx, 1)
         P = ca.MX.sym("P", nx, nx)
-        xdir = ca.MX.sym("xdir", nx)
+        xdir = ca.MX.sym("xdir", nx, 1)
         theta = [Ad, Bd, Hd, P, xdir]
-        if kind == "cf_lcc":
+        cf = kind == "cf_lcc"
+        if cf:
             K = ca.MX.sym("K", 1, nx)
             kh = ca.MX.sym("kh")
             theta += [K, kh]
-        x0 = ca.MX.sym("x0", nx)
-        d = ca.MX.sym("d", N)
-        u_prev = ca.MX.sym("u_prev")
-        U = ca.MX.sym("U", N)
-        E = ca.MX.sym("E", F * N)
-        Qd = ca.DM(np.asarray(q, dtype=float))
+        npar = self.n_param
+        Qd = ca.DM(np.diag(np.asarray(q, dtype=float)))
 
-        x = x0
-        J = 0
-        g_in = []
-        g_sp = [[] for _ in range(F)]
-        a_prev = u_prev
+        def unit(n: int, i: int):
+            return ca.DM(ca.Sparsity.triplet(1, n, [0], [i]), 1.0)
+
+        # x_k = Xu[k] U + Xp[k] p, with p = [x0, d, u_prev] (structural zeros kept sparse)
+        Xu = [ca.MX(nx, N)]
+        Xp = [ca.MX(ca.horzcat(ca.DM.eye(nx), ca.DM(nx, N + 1)))]
+        au, ap = [], []  # total CAV acceleration a_k = au[k] U + ap[k] p
         for k in range(N):
-            a_k = K @ x + kh * d[k] + U[k] if kind == "cf_lcc" else U[k]
-            g_in.append(a_k)
-            weighted = a_k if w.input_on == "total" else U[k]
-            x = Ad @ x + Bd * U[k] + Hd * d[k]
-            J += w.input * weighted**2
-            if w.jerk > 0:
-                J += w.jerk * (weighted - a_prev) ** 2
-            a_prev = weighted
-            if k < N - 1:
-                r = x - xdir * d[k + 1]
-                J += ca.dot(Qd * r, r)
-            for f, fam in enumerate(self.families):
-                g_sp[f].append(x[fam.s_index] - fam.t_gap * x[fam.v_index] + E[f * N + k])
-        r = x - xdir * d[N - 1]
-        J += ca.bilin(P, r, r)
-        if F:
-            J += w.slack * ca.sum1(E) + w.slack_quadratic * ca.dot(E, E)
-        z = ca.vertcat(U, E)
-        p = ca.vertcat(x0, d, u_prev)
-        g = ca.vertcat(*g_in, *[r for fam_rows in g_sp for r in fam_rows], E)
+            if cf:
+                au.append(K @ Xu[k] + unit(N, k))
+                ap.append(K @ Xp[k] + kh * unit(npar, nx + k))
+            else:
+                au.append(ca.MX(unit(N, k)))
+                ap.append(ca.MX(1, npar))
+            Xu.append(Ad @ Xu[k] + Bd @ unit(N, k))
+            Xp.append(Ad @ Xp[k] + Hd @ unit(npar, nx + k))
 
-        H, grad = ca.hessian(J, z)
-        zero = ca.MX.zeros(z.shape)
-        grad0 = ca.substitute(grad, z, zero)
-        g_at0 = ca.substitute(g, z, zero)
-        Qp = ca.jacobian(grad0, p)
-        Gp = ca.jacobian(g_at0, p)
-        pzero = ca.MX.zeros(p.shape)
-        q0 = ca.substitute(grad0, p, pzero)
-        g0 = ca.substitute(g_at0, p, pzero)
-        A = ca.jacobian(g, z)
-        self._fun = ca.Function("mpc_qp", theta, [ca.triu(H), A, Qp, Gp, q0, g0])
+        Huu = ca.MX(N, N)
+        Qp_u = ca.MX(N, npar)
+
+        def add(Ru, Rp, W):
+            nonlocal Huu, Qp_u
+            WRu = W @ Ru
+            Huu += 2 * (Ru.T @ WRu)
+            Qp_u += 2 * (WRu.T @ Rp)
+
+        # stage and terminal cost on r_k = x_k - x_dir d_k (terminal: d_{N-1})
+        for k in range(1, N + 1):
+            i = min(k, N - 1)
+            add(Xu[k], Xp[k] - xdir @ unit(npar, nx + i), Qd if k < N else P)
+        # input (total acceleration or model input) and jerk
+        if w.input_on == "total" and cf:
+            Wu, Wp = ca.vertcat(*au), ca.vertcat(*ap)
+        else:
+            Wu, Wp = ca.MX(ca.DM.eye(N)), ca.MX(N, npar)
+        add(Wu, Wp, ca.DM(w.input))
+        if w.jerk > 0:
+            prev_u = ca.vertcat(ca.MX(1, N), Wu[: N - 1, :])
+            prev_p = ca.vertcat(ca.MX(unit(npar, npar - 1)), Wp[: N - 1, :])
+            add(Wu - prev_u, Wp - prev_p, ca.DM(w.jerk))
+
+        # Hessian, linear term, constraints
+        FN = F * N
+        H = ca.blockcat([[Huu, ca.MX(N, FN)], [ca.MX(FN, N), ca.MX(2 * w.slack_quadratic
+                                                                     * ca.DM.eye(FN))]])
+        Qp = ca.vertcat(Qp_u, ca.MX(FN, npar))
+        q0 = ca.vertcat(ca.DM(N, 1), ca.DM.ones(FN, 1) * w.slack)
+        rows_u = [ca.horzcat(ca.vertcat(*au), ca.MX(N, FN))]
+        rows_p = [ca.vertcat(*ap)]
+        for f, fam in enumerate(self.families):
+            c = ca.DM(ca.Sparsity.triplet(1, nx, [0, 0], [fam.s_index, fam.v_index]),
+                      [1.0, -fam.t_gap])  # fmt: skip
+            slack = ca.DM(ca.Sparsity.triplet(N, FN, list(range(N)),
+                                              [f * N + k for k in range(N)]), 1.0)  # fmt: skip
+            rows_u.append(ca.horzcat(ca.vertcat(*[c @ Xu[k] for k in range(1, N + 1)]), slack))
+            rows_p.append(ca.vertcat(*[c @ Xp[k] for k in range(1, N + 1)]))
+        rows_u.append(ca.horzcat(ca.MX(FN, N), ca.MX(ca.DM.eye(FN))))
+        rows_p.append(ca.MX(FN, npar))
+        A = ca.vertcat(*rows_u)
+        Gp = ca.vertcat(*rows_p)
+        g0 = ca.DM(self.nc, 1)
+        self._fun = ca.Function(
+            "mpc_qp", theta, [ca.triu(H), A, Qp, Gp, ca.MX(q0), ca.MX(g0)]
+        )
 
     def theta(self, lin: Linearization) -> list:
         """Numeric arguments of the CasADi function for ``lin``."""
