@@ -305,7 +305,8 @@ def model_from_dict(data: dict, field: str = "hdv") -> OVM | IDM:
     for key, value in data.items():
         if key not in allowed:
             raise ConfigError(
-                f"{field}.{key}", f"unknown parameter for model {kind!r}; allowed: {sorted(allowed)}"
+                f"{field}.{key}",
+                f"unknown parameter for model {kind!r}; allowed: {sorted(allowed)}",
             )
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise ConfigError(f"{field}.{key}", f"must be a number, got {value!r}")
