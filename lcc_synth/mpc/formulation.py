@@ -180,6 +180,28 @@ def terminal_cost(
     return P
 
 
+_BLAS_CONTROLLER = None
+
+
+def _single_thread_blas():
+    """Context limiting BLAS/LAPACK to one thread (``threadpoolctl``).
+
+    The Riccati solve on 22 states takes ~2 ms single-threaded; with OpenBLAS's thread pool on
+    two busy cores it took 2-40 ms and stalled once for 1.9 s (measured), which a control loop
+    cannot afford.
+    """
+    global _BLAS_CONTROLLER
+    try:
+        from threadpoolctl import ThreadpoolController
+    except ImportError:  # pragma: no cover - declared dependency
+        from contextlib import nullcontext
+
+        return nullcontext()
+    if _BLAS_CONTROLLER is None:
+        _BLAS_CONTROLLER = ThreadpoolController()
+    return _BLAS_CONTROLLER.limit(limits=1, user_api="blas")
+
+
 def linearize(
     kind: str,
     m: int,
@@ -189,6 +211,11 @@ def linearize(
     settings: MPCSettings,
 ) -> Linearization:
     """Linearise the HDV model at ``v_lin`` and build the discrete prediction model."""
+    with _single_thread_blas():
+        return _linearize(kind, m, n, hdv, v_lin, settings)
+
+
+def _linearize(kind, m, n, hdv, v_lin, settings) -> Linearization:
     model = model_from_hdv(kind, m, n, hdv, v_lin, warn=False)
     Ad, BH = discretize(model.A, np.hstack([model.B, model.H]), settings.sample_time)
     Bd, Hd = BH[:, 0].copy(), BH[:, 1].copy()
