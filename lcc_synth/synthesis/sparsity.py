@@ -213,17 +213,14 @@ def sparsity_sweep(
     # one vehicle, warm-started from the smaller penalty's gain
     for _ in range(int(refine)):
         rs = sorted(runs, key=lambda r: r[0])
-        gap = next(
-            (
-                (a, b)
-                for a, b in zip(rs, rs[1:], strict=False)
-                if len(a[1]) - len(b[1]) > 1 and b[0] > 1.01 * a[0]
-            ),
-            None,
-        )
-        if gap is None:
+        gaps = [
+            (a, b)
+            for a, b in zip(rs, rs[1:], strict=False)
+            if len(a[1]) - len(b[1]) > 1 and b[0] > 1.01 * a[0]
+        ]
+        if not gaps:
             break
-        a, b = gap
+        a, b = min(gaps, key=lambda ab: len(ab[1][1]))  # sparse end of the front first
         gm = math.sqrt(a[0] * b[0]) if a[0] > 0 else b[0] / 10.0
         run(gm, a[2] if stabilising(a[2]) else g_opt)
     # every sweep ends at the CAV-only and all-vehicles patterns for a complete front
