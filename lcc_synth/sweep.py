@@ -19,8 +19,10 @@ Scenarios are cut into tasks of ``batch_size`` consecutive indices; a task simul
 scenarios as ONE batch per controller (the simulator's batch axis; all controllers on the same
 draws) and returns the per-scenario metrics. Tasks run on a Dask cluster (a ``LocalCluster`` of
 processes by default, or any scheduler address) with retries; Dask recomputes the tasks of a
-worker that dies. ``h2`` controllers are synthesised once, in the client; workers receive plain
-controller tables and build (and cache, per process and thread) the controllers themselves.
+worker that dies. ``h2`` controllers are synthesised once, in the client, and ``gains_file``
+controllers are read there; workers receive plain controller tables and build (and cache, per
+process and thread) the controllers themselves (an MPC's ``fallback_gains_file`` is read on
+the worker: give it a path the workers can read).
 
 Problem file
 ------------
@@ -389,6 +391,37 @@ def local_cluster(n_workers: int = 2, local_directory: str | None = None):
     )
 
 
+def _inline_gains_file(name: str, table: Mapping[str, Any], spec: SweepSpec) -> dict[str, Any]:
+    """A ``gains_file`` controller as a ``static`` table holding the file's gains, read here in
+    the client: workers of a remote cluster need not see the file."""
+    if table.get("type") != "gains_file":
+        return dict(table)
+    from lcc_synth.problem import get_str
+    from lcc_synth.synthesis.gains_file import read_gains
+
+    field_name = f"controllers.{name}"
+    check_keys(table, ["type", "file", "sample_time"], field_name)
+    path = Path(get_str(table, "file", field_name))
+    if not path.is_absolute() and spec.source:
+        path = Path(spec.source).parent / path
+    try:
+        gains, doc = read_gains(path)
+    except ConfigError as err:
+        raise ConfigError(f"{field_name}.file ({err.field})", err.message, spec.source) from None
+    if (doc["m"], doc["n"]) != (spec.system.m, spec.system.n):
+        raise ConfigError(
+            f"{field_name}.file",
+            f"{path} holds gains for m={doc['m']}, n={doc['n']}; the problem has "
+            f"m={spec.system.m}, n={spec.system.n}",
+            spec.source,
+        )
+    out = {"type": "static", "kind": doc["kind"], "semantics": gains.semantics,
+           "gains": dict(gains.gains)}
+    if "sample_time" in table:
+        out["sample_time"] = table["sample_time"]
+    return out
+
+
 def run_sweep(
     spec: SweepSpec,
     client: Any = None,
@@ -422,6 +455,7 @@ def run_sweep(
             on_step=step,
         )
     t_design = time.perf_counter() - t_all
+    tables = {name: _inline_gains_file(name, t, spec) for name, t in tables.items()}
     # fail early, in the client, on a controller that cannot be built
     from lcc_synth.comparison import build_controllers
 

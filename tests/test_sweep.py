@@ -289,3 +289,27 @@ def test_cli_sweep_json_and_files(problem_file, serial, capsys, tmp_path):
     assert {p.name for p in run_dir.iterdir()} == {"sweep.json", "samples.csv",
                                                     "distributions.png"}
     assert json.loads((run_dir / "sweep.json").read_text()) == doc
+
+
+def _gains_doc(n: int) -> dict:
+    gains = {"s_0": 0.1, "v_0": -0.5, "s_1": -0.2, "v_1": 0.05, "s_2": -0.1, "v_2": 0.05}
+    names = [f"{q}_{i}" for i in range(n + 1) for q in ("s", "v")]
+    return {"kind": "cf_lcc", "m": 0, "n": n, "semantics": "replace", "state_names": names,
+            "K": [gains.get(s, 0.0) for s in names], "gains": {s: gains.get(s, 0.0) for s in names}}
+
+
+def test_gains_file_is_read_in_the_client(tmp_path, serial):
+    import json
+
+    (tmp_path / "g.json").write_text(json.dumps(_gains_doc(3)))
+    text = SWEEP + '\n[controllers.from_file]\ntype = "gains_file"\nfile = "g.json"\n'
+    (tmp_path / "p.toml").write_text(text)
+    spec = load_sweep(tmp_path / "p.toml", count=3, controllers=["paper", "from_file"])
+    res = run_sweep(spec, client=None, progress=False)
+    assert res.tables["from_file"]["type"] == "static"  # plain data for remote workers
+    for k in KEYS:
+        np.testing.assert_array_equal(res.samples["from_file"][k], res.samples["paper"][k])
+        np.testing.assert_array_equal(res.samples["paper"][k], serial.samples["paper"][k][:3])
+    (tmp_path / "g.json").write_text(json.dumps(_gains_doc(4)))
+    with pytest.raises(ConfigError, match="m=0, n=4"):
+        run_sweep(load_sweep(tmp_path / "p.toml", count=1), client=None, progress=False)
