@@ -375,20 +375,28 @@ def local_cluster(n_workers: int = 2, local_directory: str | None = None):
 
     The scheduler's HTTP endpoint (health, metrics; the dashboard if bokeh is installed)
     listens on a free port of 127.0.0.1 only, never on the fixed port 8787."""
+    import shutil
     import tempfile
+    import weakref
 
     from dask.distributed import LocalCluster
 
     n_workers = _count(n_workers, "--workers", 256)
-    return LocalCluster(
+    scratch = None
+    if local_directory is None:
+        scratch = local_directory = tempfile.mkdtemp(prefix="lcc-sweep-dask-")
+    cluster = LocalCluster(
         n_workers=n_workers,
         threads_per_worker=1,
         processes=True,
         host="127.0.0.1",
         dashboard_address="127.0.0.1:0",
-        local_directory=local_directory or tempfile.mkdtemp(prefix="lcc-sweep-dask-"),
+        local_directory=local_directory,
         silence_logs=40,
     )
+    if scratch is not None:  # removed with the cluster object
+        weakref.finalize(cluster, shutil.rmtree, scratch, True)
+    return cluster
 
 
 def _inline_gains_file(name: str, table: Mapping[str, Any], spec: SweepSpec) -> dict[str, Any]:
