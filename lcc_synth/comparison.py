@@ -68,6 +68,7 @@ __all__ = [
     "write_csv",
     "write_json",
     "progress_bar",
+    "run_directory",
 ]
 
 #: Metrics of the comparison table: key of :func:`lcc_synth.metrics.summary` -> (header, format).
@@ -356,6 +357,23 @@ def metrics_row(result: SimResult, config: MetricsConfig) -> dict[str, float | i
 
     s = summary(result, config)
     return {key: s[key] for key in SUITE_METRICS}
+
+
+def run_directory(root: str | Path, name: str, stamp: str) -> Path:
+    """A new directory ``root/<name>-<stamp>`` (``-2``, ``-3``... appended if it exists)."""
+    from lcc_synth.recording import entity_name
+
+    base = Path(root) / f"{entity_name(name)}-{stamp}"
+    path, k = base, 1
+    while True:
+        try:
+            path.mkdir(parents=True, exist_ok=False)
+            return path
+        except FileExistsError:
+            k += 1
+            path = base.with_name(f"{base.name}-{k}")
+        except OSError as err:
+            raise ConfigError("--out", f"cannot create {str(path)!r}: {err}") from None
 
 
 def progress_bar(total: int, desc: str, enabled: bool = True):

@@ -101,13 +101,13 @@ def run(args: argparse.Namespace) -> int:
         gamma_curves,
         json_safe,
         load_suite,
+        run_directory,
         run_suite,
         write_csv,
         write_json,
         write_markdown,
     )
     from lcc_synth.recording import (
-        entity_name,
         open_recording,
         record_gains,
         record_gamma,
@@ -121,9 +121,9 @@ def run(args: argparse.Namespace) -> int:
     suite = load_suite(problem, _names(args.scenarios), _names(args.controllers))
     now = datetime.now(UTC)
     stamp = now.strftime("%Y%m%dT%H%M%SZ")
-    out_dir = Path(args.out) / f"{entity_name(suite.name)}-{stamp}"
     rrd = recording_path(args, suite.name, now=now)
     every = recording_decimation(args)
+    out_dir = run_directory(args.out, suite.name, stamp)  # fail early on an unwritable --out
     ctrl_names = list(suite.controllers)
     layouts = suite.layouts_used()
     has_head = [lname for lname in layouts if suite.layouts[lname].kind != "fd_lcc"]

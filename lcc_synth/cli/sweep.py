@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from pathlib import Path
 
 HELP = "Monte Carlo robustness sweep of every controller on a Dask cluster"
 
@@ -71,9 +70,8 @@ def run(args: argparse.Namespace) -> int:
     import csv
     from datetime import UTC, datetime
 
-    from lcc_synth.comparison import json_safe
+    from lcc_synth.comparison import json_safe, run_directory
     from lcc_synth.errors import ConfigError
-    from lcc_synth.recording import entity_name
     from lcc_synth.sweep import SWEEP_METRICS, format_summary, load_sweep, run_sweep
     from lcc_synth.synthesis.h2 import SynthesisError
 
@@ -82,7 +80,6 @@ def run(args: argparse.Namespace) -> int:
     if args.scheduler is None and not 1 <= args.workers <= 256:
         raise ConfigError("--workers", f"must be an integer in [1, 256], got {args.workers}")
     stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
-    out_dir = Path(args.out) / f"{entity_name(spec.name)}-{stamp}"
     log = sys.stderr if args.json else sys.stdout
     progress = not args.no_progress
 
@@ -99,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
             cluster.close()
 
     doc = json_safe({"results": result.summary, "sweep": result.info})
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = run_directory(args.out, spec.name, stamp)
     (out_dir / "sweep.json").write_text(json.dumps(doc, indent=2) + "\n")
     with (out_dir / "samples.csv").open("w", newline="") as fh:
         w = csv.writer(fh)
