@@ -333,3 +333,21 @@ def test_cli_run_json_files_and_recording(problem_file, capsys, tmp_path):
         for c in ("all_hdv", "paper"):
             assert any(p.startswith(f"/{s}/{c}/velocity") for p in paths), (s, c)
     assert any(p.startswith("/analysis/gamma/mid.paper") for p in paths)
+
+
+def test_default_problem_is_the_showcase_and_reproduces_table_ii():
+    from lcc_synth.cli.run import default_problem
+
+    path = default_problem()
+    assert path == Path(__file__).resolve().parents[1] / "problems" / "showcase.toml"
+    full = load_suite(path)
+    assert list(full.scenarios) == ["brake_behind", "head_sine", "head_brake", "heterogeneous"]
+    assert list(full.controllers) == ["all_hdv", "paper", "h2", "mpc"]
+    assert {s.layout for s in full.scenarios.values()} == {"string10", "sec5a"}
+    suite = load_suite(path, scenarios=["brake_behind"], controllers=["all_hdv", "paper"])
+    table = run_suite(suite, progress=False).table["brake_behind"]
+    # Table II of the paper: "all HDVs" and CF-LCC columns
+    assert round(table["all_hdv"]["aave"], 2) == 0.89
+    assert round(table["all_hdv"]["fuel_ml"], 2) == 392.86
+    assert round(table["paper"]["aave"], 2) == 0.81
+    assert round(table["paper"]["fuel_ml"], 2) == 340.56
