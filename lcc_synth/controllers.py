@@ -11,6 +11,7 @@ The paper's vehicle index ``i`` (-m..n) is array column ``i + m + 1``.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
@@ -165,14 +166,15 @@ def _law_from_gains(gains, m: int, n: int) -> LinearLaw:
     return LinearLaw(Ks, Kv, Kp, gains.semantics == "added")
 
 
-class _LinearController:
+class _LinearController(ABC):
     """Shared evaluation of a :class:`LinearLaw` (see :class:`StaticGainController`)."""
 
     name: str
     sample_time: float | None
 
-    def _law(self, ctx: ControlContext) -> LinearLaw:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abstractmethod
+    def _law(self, ctx: ControlContext) -> LinearLaw:
+        """The linear law this controller applies in ``ctx``."""
 
     def reset(self, ctx: ControlContext) -> None:
         self._ctx = ctx
