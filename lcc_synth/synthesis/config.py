@@ -18,6 +18,8 @@
 
     [synthesis.weights]       # see lcc_synth.synthesis.h2.Weights
     q_s = 1.0                 # spacing errors, > 0
+    q_s0 = 1.0                # the CAV's own spacing error s_0, > 0 (default: q_s); a stiff
+                              # s_0 keeps the CAV's spacing when the head changes speed
     q_v = 1.0                 # velocity errors, > 0
     q_a = 0.0                 # every HDV's acceleration (smooth driving / fuel proxy), >= 0
     q_p = 0.1                 # FD-LCC -p_0 when position = "weight", > 0
@@ -148,10 +150,10 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec:
         band = get_int(t, "band", "synthesis", 4, lo=0, hi=50)
 
         w = get_table(t, "weights", "synthesis.weights")
-        wkeys = ["q_s", "q_v", "q_a", "q_p", "r", "head", "accel", "position"]
+        wkeys = ["q_s", "q_s0", "q_v", "q_a", "q_p", "r", "head", "accel", "position"]
         check_keys(w, wkeys, "synthesis.weights")
         kw = {}
-        for key, dflt in (("q_s", 1.0), ("q_v", 1.0), ("r", 1.0)):
+        for key, dflt in (("q_s", 1.0), ("q_s0", None), ("q_v", 1.0), ("r", 1.0)):
             kw[key] = get_number(w, key, "synthesis.weights", dflt, lo=0.0, lo_open=True)
         for key, dflt in (("q_a", 0.0), ("q_p", 0.1), ("head", 0.0), ("accel", 1.0)):
             kw[key] = get_number(w, key, "synthesis.weights", dflt, lo=0.0)

@@ -112,6 +112,14 @@ class Weights:
     ----------
     q_s, q_v : float
         Weight on every spacing error / velocity error squared (``Q`` diagonal), > 0.
+    q_s0 : float or None
+        Weight on the CAV's own spacing error ``s_0`` (LCC, CF-LCC), > 0; ``None`` (default)
+        = ``q_s``. The H2 cost measures errors from the fixed equilibrium ``v*`` and its
+        disturbances are zero-mean noise, so it never sees a lasting change of the head
+        vehicle's speed: after a speed change ``dv`` the CAV settles at the spacing error
+        ``-(sum_i g_si s_e + dv sum_i g_vi) / g_s0`` (``s_e`` the HDVs' equilibrium spacing
+        change), which only a stiff ``g_s0`` keeps small. Weighting ``s_0`` alone buys that
+        stiffness without weighting the HDVs' spacings. No effect on FD-LCC (no ``s_0``).
     q_a : float
         Weight on every HDV's acceleration squared, >= 0 (``a_i`` is the HDV's velocity row of
         ``A``, linear in the state, so ``Q += q_a sum_i A_vi' A_vi`` stays a state weight; the
@@ -137,12 +145,18 @@ class Weights:
     head: float = 0.0
     accel: float = 1.0
     position: str = "drop"
+    q_s0: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("q_s", "q_v", "r"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
                 raise ConfigError(f"weights.{name}", f"must be a finite number > 0, got {v!r}")
+        v = self.q_s0
+        if v is not None and not (
+            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) and v > 0
+        ):
+            raise ConfigError("weights.q_s0", f"must be a finite number > 0, got {v!r}")
         for name in ("q_a", "q_p", "head", "accel"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
@@ -153,6 +167,11 @@ class Weights:
             )
         if self.head == 0 and self.accel == 0:
             raise ConfigError("weights", "head and accel disturbance weights cannot both be 0")
+
+    @property
+    def cav_spacing(self) -> float:
+        """Weight of the CAV's own spacing error ``s_0`` (``q_s`` unless ``q_s0`` is set)."""
+        return self.q_s if self.q_s0 is None else self.q_s0
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -174,7 +193,8 @@ class H2Plant:
     A, B, Bw : numpy.ndarray
         Design plant ``A_d``, input ``B`` (nx, 1), disturbances ``B_w`` (nx, nw).
     q : numpy.ndarray
-        Diagonal state weights (``q_s``, ``q_v``, ``q_p``) on the design states.
+        Diagonal state weights (``q_s``, ``q_s0`` on ``s_0``, ``q_v``, ``q_p``) on the design
+        states.
     Q : numpy.ndarray
         The state weight ``diag(q) + q_a sum_i A_vi' A_vi`` (symmetric, banded).
     r : float
@@ -269,12 +289,14 @@ def make_plant(model: LCCModel, semantics: str = "replace", weights: Weights | N
             "design for; set weights.accel > 0",
         )
     Bw = np.column_stack(cols)
-    q = np.array(
-        [
-            weights.q_p if nm == "-p_0" else (weights.q_s if nm.startswith("s_") else weights.q_v)
-            for nm in (names[i] for i in keep)
-        ]
-    )
+    def state_weight(nm: str) -> float:
+        if nm == "-p_0":
+            return weights.q_p
+        if nm == "s_0":
+            return weights.cav_spacing
+        return weights.q_s if nm.startswith("s_") else weights.q_v
+
+    q = np.array([state_weight(names[i]) for i in keep])
     Q = np.diag(q)
     if weights.q_a > 0:
         veh = np.repeat(np.array(model.vehicles), 2)[keep]
