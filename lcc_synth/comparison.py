@@ -590,11 +590,16 @@ def format_table(table: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> str:
 
 def markdown_table(table: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> str:
     """The table as GitHub Markdown."""
-    head = _headers()
+    head = [_md_escape(h) for h in _headers()]
     align = ["---"] * 2 + ["---:"] * (len(head) - 2)
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join(align) + "|"]
-    lines += ["| " + " | ".join(r) + " |" for r in _rows(table)]
+    lines += ["| " + " | ".join(_md_escape(c) for c in r) + " |" for r in _rows(table)]
     return "\n".join(lines) + "\n"
+
+
+def _md_escape(cell: str) -> str:
+    """Escape ``|`` so that a cell like ``max |u|`` does not split a Markdown column."""
+    return cell.replace("|", "\\|")
 
 
 def write_markdown(

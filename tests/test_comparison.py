@@ -257,6 +257,9 @@ def test_writers_round_trip(suite_run, tmp_path):
     md = markdown_table(run.table)
     assert md.count("\n") == 2 + 12
     assert "| brake | h2 |" in md
+    # every row has as many columns as the header ("max |u|" must not add columns)
+    n_cols = {line.replace("\\|", "").count("|") for line in md.strip().splitlines()}
+    assert n_cols == {len(SUITE_METRICS) + 3}
     text = format_table(run.table)
     assert "AAVE (m/s)" in text and "mpc" in text
 
