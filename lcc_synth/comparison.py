@@ -12,7 +12,8 @@ A *suite* problem file (``lcc-synth run``, e.g. ``problems/showcase.toml``) desc
 * ``[controllers.NAME]``: the controller tables of ``lcc-synth simulate`` (``type = "hdv" |
   "static" | "gains_file" | "mpc"``), plus ``type = "h2"``: a gain synthesised for each layout
   by :mod:`lcc_synth.synthesis`, whose other keys are those of the ``[synthesis]`` table of
-  ``lcc-synth synthesize`` (``design``, ``pattern``, ``weights``...; ``sample_time`` optional).
+  ``lcc-synth synthesize`` (``design``, ``pattern``, ``weights``...) plus the optional
+  ``sample_time``, ``equilibrium`` and ``equilibrium_tau`` of the static controller.
   ``[controllers.NAME.layouts.LAYOUT]`` overrides keys for one layout (merged recursively),
   e.g. the paper's gains, which differ between the Table II string and the Section V-A string.
 
@@ -282,7 +283,8 @@ def synthesize_table(
     from lcc_synth.synthesis.config import spec_from_problem
     from lcc_synth.synthesis.design import synthesize
 
-    synth = {k: v for k, v in table.items() if k not in ("type", "sample_time")}
+    passed = ("sample_time", "equilibrium", "equilibrium_tau")  # keys of the static controller
+    synth = {k: v for k, v in table.items() if k != "type" and k not in passed}
     data = {
         "name": label,
         "hdv": dict(hdv_table),
@@ -305,8 +307,9 @@ def synthesize_table(
         "semantics": rep.semantics,
         "gains": dict(rep.gains),
     }
-    if "sample_time" in table:
-        out["sample_time"] = table["sample_time"]
+    for key in passed:
+        if key in table:
+            out[key] = table[key]
     return out, rep
 
 

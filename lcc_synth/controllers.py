@@ -11,8 +11,9 @@ The paper's vehicle index ``i`` (-m..n) is array column ``i + m + 1``.
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -27,6 +28,7 @@ __all__ = [
     "HDVController",
     "StaticGainController",
     "CONTROLLER_TYPES",
+    "EQUILIBRIA",
     "build_controller",
 ]
 
@@ -143,12 +145,22 @@ class LinearLaw:
     with the nominal HDV model ``F_hdv`` of the :class:`ControlContext` and ``t_0`` the first
     sample. Arrays are indexed by vehicle column (head = 0). The simulator evaluates this law
     inside its compiled loop (no Python call per step); ``__call__`` evaluates the same law.
+
+    With ``equilibrium_decay`` set (the only state of the law), ``v*`` above is replaced by an
+    estimate ``w`` clipped to ``v_bounds``, and every ``s_ref_j`` is shifted by
+    ``s_e(w) - s_e(v*)`` (``s_e`` the nominal model's equilibrium spacing). ``w`` starts at the
+    nominal ``v*``; after each controller sample, which uses the current ``w``, it moves
+    towards the observed velocity ``y`` of the vehicle right ahead of the CAV:
+    ``w <- y + (w - y) * equilibrium_decay``, the exact discretisation of ``tau dw/dt = y - w``
+    with ``y`` held over the sample period ``Ts`` (``equilibrium_decay = exp(-Ts / tau)``).
     """
 
     Ks: np.ndarray
     Kv: np.ndarray
     Kp: float = 0.0
     hdv_law: bool = False
+    equilibrium_decay: float | None = None
+    v_bounds: tuple[float, float] = (0.0, float("inf"))
 
 
 def _law_from_gains(gains, m: int, n: int) -> LinearLaw:
@@ -181,6 +193,7 @@ class _LinearController(ABC):
         self._law_cache = self._law(ctx)
         self._p_ref = None
         self._t_ref = None
+        self._v_hat = np.array(ctx.v_star, dtype=float, copy=True)
 
     def linear_law(self, ctx: ControlContext) -> LinearLaw:
         """The law for ``ctx`` (the simulator runs it in its compiled loop)."""
@@ -190,6 +203,13 @@ class _LinearController(ABC):
         ctx, law = self._ctx, self._law_cache
         cav = ctx.cav
         vs = ctx.v_star
+        s_ref = ctx.spacing_reference()
+        if law.equilibrium_decay is not None:
+            vs = np.clip(self._v_hat, *law.v_bounds)
+            shift = ctx.hdv.equilibrium_spacing(vs) - ctx.hdv.equilibrium_spacing(ctx.v_star)
+            s_ref = s_ref + np.asarray(shift, dtype=float).reshape(-1)[:, None]
+            y = obs.velocity[:, cav - 1]
+            self._v_hat = y + (self._v_hat - y) * law.equilibrium_decay
         u = np.zeros(obs.velocity.shape[0])
         if law.hdv_law:
             u += ctx.hdv.accel(
@@ -199,7 +219,7 @@ class _LinearController(ABC):
             )
         cols = np.flatnonzero(law.Ks)
         if cols.size:
-            u += (obs.spacing[:, cols] - ctx.spacing_reference()[:, cols]) @ law.Ks[cols]
+            u += (obs.spacing[:, cols] - s_ref[:, cols]) @ law.Ks[cols]
         cols = np.flatnonzero(law.Kv)
         if cols.size:
             u += (obs.velocity[:, cols] - vs[:, None]) @ law.Kv[cols]
@@ -207,7 +227,7 @@ class _LinearController(ABC):
             if self._p_ref is None:
                 self._p_ref = obs.position[:, cav].copy()
                 self._t_ref = obs.t
-            u += law.Kp * -(obs.position[:, cav] - self._p_ref - vs * (obs.t - self._t_ref))
+            u += law.Kp * -(obs.position[:, cav] - self._p_ref - ctx.v_star * (obs.t - self._t_ref))
         return u
 
     def stats(self) -> dict[str, Any]:
@@ -249,14 +269,67 @@ class StaticGainController(_LinearController):
         The linear model the gains are written for (checked: every name must be a state).
     sample_time : float, optional
         Controller period (s); default every simulation step.
+    equilibrium : {"fixed", "estimated"}
+        The equilibrium ``(v*, s*)`` the errors are taken from. ``"fixed"`` (default): the
+        nominal ``v*`` and the spacing reference of the context, for the whole run.
+        ``"estimated"``: the velocity errors use an estimate ``v_hat`` of the equilibrium
+        velocity, a first-order low-pass (time constant ``equilibrium_tau``, exact
+        discretisation per controller sample, started at the nominal ``v*``) of the velocity
+        of the vehicle right ahead of the CAV as the CAV observes it (its own sensing of its
+        predecessor: the same value its HDV law uses for the relative speed; in the simulator
+        it goes through the ``[scenario.v2v]`` model of that vehicle's column, exact when that
+        link is ideal). The paper (Section II-B, remark after eq. 14) obtains ``v*`` from the
+        head vehicle's steady velocity; in steady state every vehicle ahead moves at it. The
+        spacing references move with it by ``s_e(v_hat) - s_e(v*)``, ``s_e`` the nominal HDV
+        model's equilibrium spacing; ``v_hat`` is clipped into the model's valid range
+        (1 %..99 % of ``v_max`` for the OVM, of ``v0`` for the IDM). While the vehicle ahead
+        cruises at exactly ``v*`` both options give the same run, bit for bit. Not for
+        ``fd_lcc`` (no vehicle ahead).
+    equilibrium_tau : float
+        Time constant (s, > 0) of the estimate; default 1.0. Only with ``"estimated"``.
     """
 
-    def __init__(self, name: str, gains, model, sample_time: float | None = None):
+    def __init__(
+        self,
+        name: str,
+        gains,
+        model,
+        sample_time: float | None = None,
+        equilibrium: str = "fixed",
+        equilibrium_tau: float | None = None,
+    ):
+        from lcc_synth.errors import ConfigError
+
         gains.check(model)
+        if equilibrium not in EQUILIBRIA:
+            raise ConfigError(
+                "equilibrium", f"must be one of {list(EQUILIBRIA)}, got {equilibrium!r}"
+            )
+        if equilibrium == "fixed":
+            if equilibrium_tau is not None:
+                raise ConfigError(
+                    "equilibrium_tau", 'only applies with equilibrium = "estimated"'
+                )
+        else:
+            if model.kind == "fd_lcc":
+                raise ConfigError(
+                    "equilibrium",
+                    'must be "fixed" for fd_lcc: FD-LCC has no vehicle ahead of the CAV to '
+                    "estimate the equilibrium velocity from",
+                )
+            equilibrium_tau = 1.0 if equilibrium_tau is None else equilibrium_tau
+            tau = float(equilibrium_tau) if isinstance(equilibrium_tau, int | float) else None
+            if isinstance(equilibrium_tau, bool) or tau is None or not (0.0 < tau < np.inf):
+                raise ConfigError(
+                    "equilibrium_tau", f"must be a number of seconds > 0, got {equilibrium_tau!r}"
+                )
+            equilibrium_tau = tau
         self.name = name
         self.gains = gains
         self.model = model
         self.sample_time = sample_time
+        self.equilibrium = equilibrium
+        self.equilibrium_tau = equilibrium_tau
 
     def _law(self, ctx: ControlContext) -> LinearLaw:
         from lcc_synth.errors import ConfigError
@@ -267,16 +340,29 @@ class StaticGainController(_LinearController):
                 f"gains are for m={self.model.m}, n={self.model.n}; the scenario has "
                 f"m={ctx.m}, n={ctx.n}",
             )
-        return _law_from_gains(self.gains, ctx.m, ctx.n)
+        law = _law_from_gains(self.gains, ctx.m, ctx.n)
+        if self.equilibrium == "fixed":
+            return law
+        ts = ctx.dt if self.sample_time is None else float(self.sample_time)
+        v_lim = float(getattr(ctx.hdv, "v_max", None) or ctx.hdv.v0)
+        return replace(
+            law,
+            equilibrium_decay=math.exp(-ts / self.equilibrium_tau),
+            v_bounds=(0.01 * v_lim, 0.99 * v_lim),
+        )
 
     def describe(self) -> dict[str, Any]:
-        return {
+        out = {
             "type": "static",
             "kind": self.model.kind,
             "semantics": self.gains.semantics,
             "gains": dict(self.gains.gains),
             "sample_time": self.sample_time,
+            "equilibrium": self.equilibrium,
         }
+        if self.equilibrium == "estimated":
+            out["equilibrium_tau"] = self.equilibrium_tau
+        return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -284,6 +370,12 @@ class StaticGainController(_LinearController):
 # --------------------------------------------------------------------------------------------
 
 CONTROLLER_TYPES = ("hdv", "static", "gains_file", "mpc")
+
+#: Equilibrium options of the static-gain controllers (see :class:`StaticGainController`).
+EQUILIBRIA = ("fixed", "estimated")
+
+
+_EQ_KEYS = ("equilibrium", "equilibrium_tau")
 
 
 def _sample_time(table, field: str) -> float | None:
@@ -315,7 +407,7 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
     from lcc_synth.errors import ConfigError
     from lcc_synth.feedback import SEMANTICS, StaticGains
     from lcc_synth.models import KINDS, model_from_hdv
-    from lcc_synth.problem import check_keys, get_str, get_table
+    from lcc_synth.problem import check_keys, get_number, get_str, get_table
 
     field = f"controllers.{name}"
     try:
@@ -334,13 +426,14 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
             check_keys(table, ["type", "sample_time"], field)
             return HDVController(name, _sample_time(table, field))
         if ctype == "static":
-            check_keys(table, ["type", "kind", "semantics", "gains", "sample_time"], field)
+            check_keys(table, ["type", "kind", "semantics", "gains", "sample_time", *_EQ_KEYS],
+                       field)  # fmt: skip
             kind = get_str(table, "kind", field, system.kind, choices=KINDS)
             semantics = get_str(table, "semantics", field, "added", choices=SEMANTICS)
             raw = get_table(table, "gains", f"{field}.gains", required=True)
             where = field
         else:
-            check_keys(table, ["type", "file", "sample_time"], field)
+            check_keys(table, ["type", "file", "sample_time", *_EQ_KEYS], field)
             rel = get_str(table, "file", field)
             path = Path(rel)
             if not path.is_absolute() and source:
@@ -369,10 +462,24 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
                 raise ConfigError(f"{field}.file", f"{path}: gains must be an object")
             where = f"{field}.file"
         sample_time = _sample_time(table, field)
+        equilibrium = get_str(table, "equilibrium", field, "fixed", choices=EQUILIBRIA)
+        tau = None
+        if "equilibrium_tau" in table:
+            if equilibrium != "estimated":
+                raise ConfigError(
+                    f"{field}.equilibrium_tau", 'only applies with equilibrium = "estimated"'
+                )
+            tau = get_number(table, "equilibrium_tau", field, lo=0.0, lo_open=True)
+        if equilibrium == "estimated" and kind == "fd_lcc":
+            raise ConfigError(
+                f"{field}.equilibrium",
+                'must be "fixed" for fd_lcc: FD-LCC has no vehicle ahead of the CAV to '
+                "estimate the equilibrium velocity from",
+            )
         try:
             gains = StaticGains(raw, semantics)
             model = model_from_hdv(kind, system.m, system.n, system.hdv, system.v_star, warn=False)
-            ctrl = StaticGainController(name, gains, model, sample_time)
+            ctrl = StaticGainController(name, gains, model, sample_time, equilibrium, tau)
         except ConfigError as err:
             raise ConfigError(f"{where}.{err.field}", f"{err.message} (kind {kind!r})") from None
         return ctrl

@@ -33,9 +33,10 @@ with probability ``1 - loss_rate``; a lost packet leaves the last received value
 spacing, velocity and position are exact.
 
 The stepping loop is compiled with numba. Controllers with a fixed linear law (the CAV as an
-HDV, static gains; see :class:`~lcc_synth.controllers.LinearLaw`) are evaluated inside the
-compiled loop; any other controller is called from Python once per controller sample and the
-compiled loop advances the scenarios between samples.
+HDV, static gains, with the fixed or the estimated equilibrium; see
+:class:`~lcc_synth.controllers.LinearLaw`) are evaluated inside the compiled loop; any other
+controller is called from Python once per controller sample and the compiled loop advances the
+scenarios between samples.
 """
 
 from __future__ import annotations
@@ -499,6 +500,14 @@ def _hdv_accel6(code, p0, p1, p2, p3, p4, p5, s, ds, v):
     return a * (1.0 - (vp / v0) ** delta - (s_des / max(s, 1e-3)) ** 2)
 
 
+@numba.njit(cache=True, inline="always")
+def _eq_spacing(code, pr, v):
+    """Equilibrium spacing at ``v``; mirrors OVM / IDM ``equilibrium_spacing``."""
+    if code == 0:
+        return pr[2] + (pr[3] - pr[2]) / math.pi * math.acos(1.0 - 2.0 * v / pr[4])
+    return (pr[2] + v * pr[1]) / math.sqrt(1.0 - (v / pr[0]) ** pr[5])
+
+
 @numba.njit(cache=True)
 def _observe(b, k, p, v, hp, hv, L, lat, loss, noise, seed, sid0, cav, obs_s, obs_v, obs_p):
     """Update the CAV's received values of scenario ``b`` at sample ``k`` (V2V model)."""
@@ -536,6 +545,7 @@ def _advance(
     b0, b1, k0, k1, p, v, hp, hv, L, delay_steps, delay_own, code, params, nom_code,
     nom_params, dt, t_start, a_min, a_max, cav, cav_aeb, hdv_aeb, noise_std, seed, sid0,
     acc_ovr, spd_ovr, mode, ratio, u_hold, Ks, Kv, Kp, hdv_law, v_star, s_ref, p_ref,
+    est_decay, v_lo, v_hi, v_hat,
     loss, lat, obs_noise, obs_s, obs_v, obs_p, alive, collided, ctime,
     stride, out_p, out_v, out_a, out_s, out_u, out_aeb,
 ):  # fmt: skip
@@ -544,7 +554,9 @@ def _advance(
     Releases the GIL: disjoint scenario ranges run on several threads at once.
 
     ``mode`` 1 evaluates the linear law (Ks, Kv, Kp, hdv_law) at every ``ratio``-th sample;
-    mode 0 applies the held command ``u_hold`` (set by a Python controller).
+    mode 0 applies the held command ``u_hold`` (set by a Python controller). ``est_decay >= 0``
+    takes the law's errors from the equilibrium estimate ``v_hat`` (``(batch,)``, updated in
+    place; see :class:`~lcc_synth.controllers.LinearLaw`), ``est_decay < 0`` from ``v_star``.
     """
     nv = p.shape[1]
     abs_min = abs(a_min)
@@ -598,12 +610,21 @@ def _advance(
                         nom_code, nom_params, obs_s[b, cav],
                         obs_v[b, cav - 1] - obs_v[b, cav], obs_v[b, cav],
                     )  # fmt: skip
+                ve = v_star[b]
+                sh = 0.0
+                if est_decay >= 0.0:
+                    ve = min(max(v_hat[b], v_lo), v_hi)
+                    sh = _eq_spacing(nom_code, nom_params, ve) - _eq_spacing(
+                        nom_code, nom_params, v_star[b]
+                    )
+                    y = obs_v[b, cav - 1]
+                    v_hat[b] = y + (v_hat[b] - y) * est_decay
                 for j in range(1, nv):
                     if Ks[j] != 0.0:
-                        u += Ks[j] * (obs_s[b, j] - s_ref[b, j])
+                        u += Ks[j] * (obs_s[b, j] - (s_ref[b, j] + sh))
                 for j in range(nv):
                     if Kv[j] != 0.0:
-                        u += Kv[j] * (obs_v[b, j] - v_star[b])
+                        u += Kv[j] * (obs_v[b, j] - ve)
                 if Kp != 0.0:
                     u -= Kp * (obs_p[b, cav] - p_ref[b] - v_star[b] * (t - t_start))
                 u_hold[b] = u
@@ -813,6 +834,11 @@ def simulate(
     ctime = np.full((B, nv), np.nan)
     u_hold = np.zeros(B)
 
+    v_hat = v_star.copy()
+    est = (-1.0, 0.0, 0.0)  # (decay, v_lo, v_hi); decay < 0: errors from the fixed v*
+    if law is not None and law.equilibrium_decay is not None:
+        est = (float(law.equilibrium_decay), *map(float, law.v_bounds))
+
     def advance_range(b0, b1, k0, k1, mode, Ks, Kv, Kp, hdv_law):
         _advance(
             b0, b1, k0, k1, p, v, hp, hv, L, delay_steps, sc.delay_model == "full", code,
@@ -821,7 +847,8 @@ def simulate(
             bool(sc.cav_aeb), bool(sc.hdv_aeb), float(sc.hdv_accel_noise), int(sc.seed),
             int(sc.first_index),
             acc_ovr, spd_ovr, mode, ratio, u_hold, Ks, Kv, float(Kp), bool(hdv_law),
-            v_star, s_ref, p_ref, loss, lat, obs_noise, obs_s, obs_v, obs_p,
+            v_star, s_ref, p_ref, est[0], est[1], est[2], v_hat,
+            loss, lat, obs_noise, obs_s, obs_v, obs_p,
             alive, collided, ctime, stride, out_p, out_v, out_a, out_s, out_u, out_aeb,
         )  # fmt: skip
 

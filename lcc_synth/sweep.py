@@ -408,7 +408,8 @@ def _inline_gains_file(name: str, table: Mapping[str, Any], spec: SweepSpec) -> 
     from lcc_synth.synthesis.gains_file import read_gains
 
     field_name = f"controllers.{name}"
-    check_keys(table, ["type", "file", "sample_time"], field_name)
+    passed = ("sample_time", "equilibrium", "equilibrium_tau")  # static-controller keys
+    check_keys(table, ["type", "file", *passed], field_name)
     path = Path(get_str(table, "file", field_name))
     if not path.is_absolute() and spec.source:
         path = Path(spec.source).parent / path
@@ -425,8 +426,9 @@ def _inline_gains_file(name: str, table: Mapping[str, Any], spec: SweepSpec) -> 
         )
     out = {"type": "static", "kind": doc["kind"], "semantics": gains.semantics,
            "gains": dict(gains.gains)}
-    if "sample_time" in table:
-        out["sample_time"] = table["sample_time"]
+    for key in passed:
+        if key in table:
+            out[key] = table[key]
     return out
 
 

@@ -374,20 +374,27 @@ def test_latency_delivers_old_values_and_noise_is_reproducible():
     np.testing.assert_array_equal(vt, r.velocity[0, :, 2])
 
 
-def test_compiled_law_equals_python_call_under_v2v_effects():
+@pytest.mark.parametrize("equilibrium", ["fixed", "estimated"])
+def test_compiled_law_equals_python_call_under_v2v_effects(equilibrium):
     """The static controller inside the compiled loop and through its Python __call__ see the
-    same observations (loss, latency, noise) and produce the same run."""
+    same observations (loss, latency, noise) and produce the same run; with the equilibrium
+    estimate too (the vehicle ahead, an HDV, is received through the same lossy link)."""
     gains = {"s_-1": 0.5, "v_-1": -0.3, "v_0": -0.4, "s_1": -0.2, "v_1": 0.1, "v_2": 0.05}
     sc = v2v_scenario(loss_rate=0.3, latency=0.2, spacing_noise=0.2, velocity_noise=0.05)
-    fast = static("g", gains, "lcc", 1, 2, semantics="added", sample_time=0.05)
+    tau = 0.7 if equilibrium == "estimated" else None
+    model = model_from_hdv("lcc", 1, 2, OVM(), 15.0, warn=False)
+    fast = StaticGainController("g", StaticGains(gains, "added"), model, 0.05, equilibrium, tau)
 
     class Slow(StaticGainController):
         linear_law = None
 
-    slow = Slow("g", fast.gains, fast.model, sample_time=0.05)
+    slow = Slow("g", fast.gains, fast.model, 0.05, equilibrium, tau)
     a, b = simulate(sc, fast), simulate(sc, slow)
     np.testing.assert_allclose(a.velocity, b.velocity, atol=1e-12)
     np.testing.assert_allclose(a.u_cmd, b.u_cmd, atol=1e-12)
+    if equilibrium == "estimated":  # the estimate does change the run
+        fixed = simulate(sc, static("g", gains, "lcc", 1, 2, semantics="added", sample_time=0.05))
+        assert np.abs(fixed.u_cmd - a.u_cmd).max() > 1e-3
 
 
 def test_controller_sample_time_zero_order_hold():
