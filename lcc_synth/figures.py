@@ -31,6 +31,18 @@ def _pyplot():
     return plt
 
 
+def _save(fig, path: Path, title: str | None = None, dpi: int = 110) -> Path:
+    """Add the optional suptitle, write ``fig`` to ``path`` (creating folders), close it."""
+    import matplotlib.pyplot as plt
+
+    if title:
+        fig.suptitle(title)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return path
+
+
 def plot_control_energy(sweep, path: str | Path) -> Path:
     """Fig. 5: ``lambda_min(W(t))`` and ``tr(W(t)^{-1})`` against the number of HDVs ``n``.
 
@@ -67,10 +79,7 @@ def plot_control_energy(sweep, path: str | Path) -> Path:
     kinds = {r.kind for reports in sweep.reports.values() for r in reports}
     names = {"fd_lcc": "FD-LCC", "cf_lcc": "CF-LCC"}
     fig.suptitle(f"Control energy of {', '.join(names.get(k, k) for k in sorted(kinds))} (Fig. 5)")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path, dpi=120)
 
 
 def plot_pareto_front(pareto, h2_full: float, path: str | Path, title: str | None = None) -> Path:
@@ -112,10 +121,7 @@ def plot_pareto_front(pareto, h2_full: float, path: str | Path, title: str | Non
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title(title or "Sparsity-promoting H2 design")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path, dpi=120)
 
 
 def plot_profiles(results, path: str | Path, title: str | None = None, run: int = 0) -> Path:
@@ -169,12 +175,7 @@ def plot_profiles(results, path: str | Path, title: str | None = None, run: int 
     if keep:
         axes[0, 0].legend([handles[i] for i in keep], [labels[i] for i in keep], fontsize=8,
                           loc="lower right")
-    if title:
-        fig.suptitle(title)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path, title, dpi=110)
 
 
 def plot_gamma_curves(curves, omega, path: str | Path, title: str | None = None) -> Path:
@@ -202,10 +203,7 @@ def plot_gamma_curves(curves, omega, path: str | Path, title: str | None = None)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title(title or "Head-to-tail transfer")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path, dpi=120)
 
 
 def plot_sweep_distributions(samples, path: str | Path, metrics=None, title: str | None = None):
@@ -248,12 +246,7 @@ def plot_sweep_distributions(samples, path: str | Path, metrics=None, title: str
         ax.tick_params(axis="x", labelrotation=20, labelsize=8)
     for ax in list(axes.flat)[len(keys):]:
         ax.axis("off")
-    if title:
-        fig.suptitle(title)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path, title, dpi=110)
 
 
 def plot_case_grid(
@@ -311,12 +304,7 @@ def plot_case_grid(
     for ax in axes[:, 0]:
         ax.set_ylabel("velocity (m/s)" if quantity == "velocity" else "spacing (m)")
     axes.flat[0].legend(fontsize=7, loc="lower right")
-    if title:
-        fig.suptitle(title)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path, title, dpi=110)
 
 
 def plot_snapshots(
@@ -360,12 +348,7 @@ def plot_snapshots(
             if row == 1:
                 ax.set_xlabel("position rel. to CAV (m)")
         axes[row, 0].set_ylabel(f"{labels[row]}\nv - v* (m/s)")
-    if title:
-        fig.suptitle(title)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path, title, dpi=110)
 
 
 def plot_metric_bars(report, path: str | Path, title: str | None = None) -> Path:
@@ -390,12 +373,7 @@ def plot_metric_bars(report, path: str | Path, title: str | None = None) -> Path
         ax.set_ylabel(unit)
         ax.set_ylim(0, max(vals) * 1.25)
         ax.grid(True, axis="y", alpha=0.3)
-    if title:
-        fig.suptitle(title)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path, title, dpi=110)
 
 
 def plot_region_maps(maps, path: str | Path, baselines=None, titles=None, ncols: int = 2) -> Path:
@@ -470,10 +448,7 @@ def plot_region_maps(maps, path: str | Path, baselines=None, titles=None, ncols:
         Patch(facecolor="#d9d9d9", hatch="///", label="unstable"),
     ]
     fig.legend(handles=handles, loc="outside lower center", ncols=4, fontsize=8)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, path, dpi=120)
 
 
 def plot_mpc_predictions(
@@ -545,9 +520,4 @@ def plot_mpc_predictions(
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8, loc="lower right")
         ax.set_xlim(lo, hi)
-    if title:
-        fig.suptitle(title)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path, title, dpi=110)
