@@ -449,14 +449,23 @@ def controllability_report(
         controllable; Corollary 2: for CCC only the CAV.
     """
     dec = kalman_decomposition(model.A, model.B, tol)
+    fields = _subspace_fields(model, dec, membership_tol)
+    return ControllabilityReport(
+        **fields,
+        controllable=fields["rank"] == model.nx,
+        uncontrollable_eigenvalues=uncontrollable_modes(model.A, model.B, tol, dec),
+    )
+
+
+def _subspace_fields(model: LCCModel, dec: Staircase, membership_tol: float) -> dict:
+    """The fields shared by the controllability and observability reports."""
     basis = dec.T[:, : dec.n_c]
     inside, outside, partial = _classify(model, basis, membership_tol)
-    rank = basis.shape[1]
-    return ControllabilityReport(
+    return dict(
         kind=model.kind,
         m=model.m,
         n=model.n,
-        rank=rank,
+        rank=basis.shape[1],
         n_states=model.nx,
         vehicles_in_subspace=inside,
         vehicles_outside=outside,
@@ -466,8 +475,6 @@ def controllability_report(
         min_accepted=dec.min_accepted,
         max_rejected=dec.max_rejected,
         membership_tol=membership_tol,
-        controllable=rank == model.nx,
-        uncontrollable_eigenvalues=uncontrollable_modes(model.A, model.B, tol, dec),
     )
 
 
@@ -516,23 +523,5 @@ def observability_report(
         raise ConfigError("outputs", "needs at least one measured state name")
     C = model.output_matrix(outputs)
     dec = kalman_decomposition(model.A.T, C.T, tol)
-    basis = dec.T[:, : dec.n_c]
-    inside, outside, partial = _classify(model, basis, membership_tol)
-    rank = basis.shape[1]
-    return ObservabilityReport(
-        kind=model.kind,
-        m=model.m,
-        n=model.n,
-        rank=rank,
-        n_states=model.nx,
-        vehicles_in_subspace=inside,
-        vehicles_outside=outside,
-        vehicles_partial=partial,
-        basis=basis,
-        tolerance=dec.tol,
-        min_accepted=dec.min_accepted,
-        max_rejected=dec.max_rejected,
-        membership_tol=membership_tol,
-        outputs=outputs,
-        observable=rank == model.nx,
-    )
+    fields = _subspace_fields(model, dec, membership_tol)
+    return ObservabilityReport(**fields, outputs=outputs, observable=fields["rank"] == model.nx)

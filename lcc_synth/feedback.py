@@ -29,7 +29,7 @@ import numpy as np
 from lcc_synth.errors import ConfigError
 from lcc_synth.models import LCCModel
 
-__all__ = ["SEMANTICS", "StaticGains", "cav_feedback", "input_feedback", "closed_loop"]
+__all__ = ["SEMANTICS", "StaticGains", "hdv_law", "cav_feedback", "input_feedback", "closed_loop"]
 
 SEMANTICS = ("added", "replace")
 _STATE_RE = re.compile(r"^(-p_0|[sv]_-?\d+)$")
@@ -108,7 +108,7 @@ class StaticGains:
         return K
 
 
-def _hdv_law(model: LCCModel) -> tuple[np.ndarray, float]:
+def hdv_law(model: LCCModel) -> tuple[np.ndarray, float]:
     """The CAV's HDV law ``a1 s0 - a2 v0 + a3 v_-1`` as ``(K, kh)`` on the model's state."""
     c = model.coefficients[0]
     K = np.zeros(model.nx)
@@ -126,7 +126,7 @@ def cav_feedback(model: LCCModel, gains: StaticGains) -> tuple[np.ndarray, float
     K = gains.vector(model)
     if gains.semantics == "replace":
         return K, 0.0
-    K_law, kh = _hdv_law(model)
+    K_law, kh = hdv_law(model)
     return K + K_law, kh
 
 
@@ -135,7 +135,7 @@ def input_feedback(model: LCCModel, gains: StaticGains) -> tuple[np.ndarray, flo
     holds the CAV's HDV law): ``input = K x + kh v_h``."""
     K, kh = cav_feedback(model, gains)
     if model.kind == "cf_lcc":
-        K_law, kh_law = _hdv_law(model)
+        K_law, kh_law = hdv_law(model)
         return K - K_law, kh - kh_law
     return K, kh
 

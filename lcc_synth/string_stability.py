@@ -53,7 +53,7 @@ import scipy.linalg as sla
 from scipy.sparse.csgraph import connected_components
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.feedback import _hdv_law, closed_loop
+from lcc_synth.feedback import closed_loop, hdv_law
 from lcc_synth.hdv import LinearCoefficients
 from lcc_synth.models import LCCModel
 
@@ -196,7 +196,7 @@ def closed_form_gains(
     K = np.asarray(K, dtype=float).reshape(-1)
     if K.shape[0] != model.nx:
         raise ConfigError("gain", f"needs {model.nx} entries for this model, got {K.shape[0]}")
-    K_law, kh_law = _hdv_law(model)
+    K_law, kh_law = hdv_law(model)
     if model.kind == "cf_lcc":  # the model's input is u_hat; the HDV law is inside A
         K_added, kh_added = K.copy(), float(kh)
     else:

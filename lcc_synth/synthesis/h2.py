@@ -37,7 +37,7 @@ asymptotically stable in every state.
 In general LCC the vehicles ahead of the CAV are not controllable from ``u`` but stable (their
 HDV blocks do not depend on anything behind them): the plant is stabilisable, the Riccati and
 LMI designs work on the whole state, and the gains on the states ahead act as feed-forward.
-:func:`check_stabilisable` verifies this (PBH test on the unstable modes).
+:func:`check_stabilisable` verifies this (uncontrollable modes of the Kalman decomposition).
 """
 
 from __future__ import annotations
@@ -322,13 +322,12 @@ def make_plant(model: LCCModel, semantics: str = "replace", weights: Weights | N
 
 
 def check_stabilisable(plant: H2Plant, tol: float = 1e-9) -> None:
-    """PBH test: every mode with Re >= -tol must be controllable; else :class:`SynthesisError`."""
-    eig = np.linalg.eigvals(plant.A)
-    nx = plant.nx
-    for lam in eig[eig.real >= -tol]:
-        M = np.hstack([lam * np.eye(nx) - plant.A, plant.B])
-        s = np.linalg.svd(M, compute_uv=False)
-        if s[-1] <= 1e-9 * max(1.0, s[0]):
+    """Every uncontrollable mode (Kalman decomposition, :mod:`lcc_synth.controllability`) must
+    have Re < -tol; else :class:`SynthesisError`."""
+    from lcc_synth.controllability import uncontrollable_modes
+
+    for lam in uncontrollable_modes(plant.A, plant.B):
+        if lam.real >= -tol:
             raise SynthesisError(
                 f"the plant is not stabilisable: mode {lam:.4g} is not controllable from the CAV",
                 {"mode": [lam.real, lam.imag]},
