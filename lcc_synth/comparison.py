@@ -508,7 +508,8 @@ def gamma_curves(
     """
     from lcc_synth.controllers import HDVController, StaticGainController
     from lcc_synth.feedback import StaticGains, input_feedback
-    from lcc_synth.string_stability import gamma_state_space, string_stability
+    from lcc_synth.string_stability import string_stability
+    from lcc_synth.transfer import gamma_state_space
 
     if system.kind == "fd_lcc":
         return {}

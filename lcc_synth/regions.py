@@ -44,12 +44,8 @@ import numpy as np
 from lcc_synth.errors import ConfigError
 from lcc_synth.feedback import StaticGains, input_feedback
 from lcc_synth.models import LCCModel
-from lcc_synth.string_stability import (
-    LOW_FREQ_TOL,
-    PEAK_TOL,
-    closed_form_gains,
-    gamma_polynomials,
-)
+from lcc_synth.string_stability import LOW_FREQ_TOL, PEAK_TOL
+from lcc_synth.transfer import closed_form_gains, gamma_polynomials
 
 __all__ = [
     "UNSTABLE",

@@ -49,27 +49,24 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 
 import numpy as np
-import scipy.linalg as sla
-from scipy.sparse.csgraph import connected_components
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.feedback import closed_loop, hdv_law
-from lcc_synth.hdv import LinearCoefficients
+from lcc_synth.feedback import closed_loop
 from lcc_synth.models import LCCModel
+from lcc_synth.transfer import (
+    check_head,
+    closed_loop_eigenvalues,
+    hessenberg_solver,
+    low_frequency_curvature,
+    tail_output,
+    transfer_response,
+)
 
 __all__ = [
     "StringStabilityReport",
     "GRID_PER_DECADE",
     "LOW_FREQ_TOL",
     "PEAK_TOL",
-    "phi_gamma",
-    "closed_form_gains",
-    "gamma_closed_form",
-    "gamma_polynomials",
-    "gamma_state_space",
-    "transfer_response",
-    "closed_loop_eigenvalues",
-    "low_frequency_curvature",
     "hinf_norm_hamiltonian",
     "level_crossings",
     "string_stability",
@@ -84,9 +81,6 @@ GRID_PER_DECADE = 120
 LOW_FREQ_TOL = 1e-9
 PEAK_TOL = 1e-9
 _GOLDEN_ITERS = 45
-_SMALL_BATCH = 16
-
-CoefSpec = LinearCoefficients | Mapping[int, LinearCoefficients]
 
 
 # --------------------------------------------------------------------------------------------
@@ -140,306 +134,6 @@ class StringStabilityReport:
                 out[key] = None
         return out
 
-
-# --------------------------------------------------------------------------------------------
-# Closed form (eq. 24, Appendix A)
-# --------------------------------------------------------------------------------------------
-
-
-def phi_gamma(coef: LinearCoefficients) -> tuple[np.ndarray, np.ndarray]:
-    """``phi(s) = a3 s + a1`` and ``gamma(s) = s^2 + a2 s + a1`` (highest power first)."""
-    return (
-        np.array([coef.alpha3, coef.alpha1], dtype=float),
-        np.array([1.0, coef.alpha2, coef.alpha1], dtype=float),
-    )
-
-
-def _per_vehicle(coefs: CoefSpec, m: int, n: int) -> dict[int, LinearCoefficients]:
-    if isinstance(coefs, LinearCoefficients):
-        return {i: coefs for i in range(-m, n + 1)}
-    out = dict(coefs)
-    missing = [i for i in range(-m, n + 1) if i not in out]
-    if missing:
-        raise ConfigError("coefficients", f"missing linear coefficients of vehicles {missing}")
-    return out
-
-
-def _check_gains(mu: Mapping[int, float], k: Mapping[int, float], m: int, n: int) -> None:
-    for name, table in (("mu", mu), ("k", k)):
-        for i in table:
-            if not (-m <= int(i) <= n):
-                raise ConfigError(
-                    f"{name}[{i}]", f"vehicle index must be in [{-m}, {n}] (m={m}, n={n})"
-                )
-
-
-def _cav_polys(c0: LinearCoefficients, mu0: float, k0: float, kh: float):
-    """CAV law ``(a1 + mu0) s_0 + (k0 - a2) v_0 + (a3 + kh) v_ahead`` -> (phi_0, gamma_0)."""
-    phi0 = np.array([c0.alpha3 + kh, c0.alpha1 + mu0])
-    gam0 = np.array([1.0, c0.alpha2 - k0, c0.alpha1 + mu0])
-    return phi0, gam0
-
-
-def closed_form_gains(
-    model: LCCModel, K: np.ndarray, kh: float = 0.0
-) -> tuple[dict[int, float], dict[int, float], float]:
-    """Translate input feedback ``(K, kh)`` into the paper's ``mu_i, k_i`` (eq. 23).
-
-    Returns ``(mu, k, kh_extra)``: the gains *added* to the CAV's HDV law (``mu[0]``/``k[0]``
-    add to ``a1``/``-a2``; ``k[-1]`` adds to ``a3``), and for ``m = 0`` the gain added to ``a3``
-    on the head velocity. Any static CAV command on an LCC model has this form.
-    """
-    if model.kind == "fd_lcc":
-        raise ConfigError(
-            "system.kind", "fd_lcc has no head vehicle: the head-to-tail transfer is undefined"
-        )
-    K = np.asarray(K, dtype=float).reshape(-1)
-    if K.shape[0] != model.nx:
-        raise ConfigError("gain", f"needs {model.nx} entries for this model, got {K.shape[0]}")
-    K_law, kh_law = hdv_law(model)
-    if model.kind == "cf_lcc":  # the model's input is u_hat; the HDV law is inside A
-        K_added, kh_added = K.copy(), float(kh)
-    else:
-        K_added, kh_added = K - K_law, float(kh) - kh_law
-    mu = {i: float(K_added[2 * j]) for j, i in enumerate(model.vehicles)}
-    kk = {i: float(K_added[2 * j + 1]) for j, i in enumerate(model.vehicles)}
-    return mu, kk, kh_added
-
-
-def gamma_closed_form(
-    coefs: CoefSpec,
-    mu: Mapping[int, float],
-    k: Mapping[int, float],
-    m: int,
-    n: int,
-    s,
-    kh: float = 0.0,
-):
-    """Evaluate eq. (24), ``Gamma(s) = G(s) (phi/gamma)^(n+m)``, at complex ``s``.
-
-    Parameters
-    ----------
-    coefs : LinearCoefficients or mapping
-        Homogeneous coefficients (exactly the paper's formula) or one set per vehicle index
-        ``-m..n`` (index 0: the CAV's HDV law). Heterogeneous strings use the product of the
-        vehicles' own ``phi_j/gamma_j`` in place of each power of ``phi/gamma``.
-    mu, k : mapping of int to float
-        Spacing and velocity gains ``mu_i, k_i`` per vehicle index (missing: 0). ``mu[0]``,
-        ``k[0]`` add to the CAV's ``a1``/``-a2``.
-    m, n : int
-        HDVs ahead / behind.
-    s : complex array_like
-        Laplace variable (``1j * omega`` for the frequency response).
-    kh : float
-        For ``m = 0`` only: gain added to ``a3`` on the head velocity.
-    """
-    _check_gains(mu, k, m, n)
-    c = _per_vehicle(coefs, m, n)
-    s = np.asarray(s, dtype=complex)
-    T = {}
-    H = {}
-    for i in [*range(-m, 0), *range(1, n + 1)]:
-        ph, ga = phi_gamma(c[i])
-        phv, gav = np.polyval(ph, s), np.polyval(ga, s)
-        T[i] = phv / gav
-        H[i] = mu.get(i, 0.0) * (gav / phv - 1.0) + k.get(i, 0.0) * s
-    phi0, gam0 = _cav_polys(c[0], mu.get(0, 0.0), k.get(0, 0.0), kh if m == 0 else 0.0)
-    if m > 0 and kh:
-        raise ConfigError("kh", "only for m = 0 (with m > 0 use k[-1])")
-    num = np.polyval(phi0, s).astype(complex)
-    for i in range(-m, 0):
-        inv = np.ones_like(s)
-        for j in range(i + 1, 0):
-            inv = inv / T[j]
-        num = num + H[i] * inv  # homogeneous: H_i (phi/gamma)^(i+1)
-    den = np.polyval(gam0, s).astype(complex)
-    prod = np.ones_like(s)
-    for i in range(1, n + 1):
-        prod = prod * T[i]
-        den = den - H[i] * prod  # homogeneous: H_i (phi/gamma)^i
-    G = num / den
-    out = G
-    for i in T:
-        out = out * T[i]  # homogeneous: (phi/gamma)^(n+m)
-    return out
-
-
-def gamma_polynomials(
-    coefs: CoefSpec,
-    mu: Mapping[int, float],
-    k: Mapping[int, float],
-    m: int,
-    n: int,
-    kh: float = 0.0,
-) -> tuple[np.ndarray, np.ndarray]:
-    """``Gamma = num / den`` as exact polynomials (highest power first).
-
-    ``den`` is the closed-loop characteristic polynomial (degree ``2(m+n+1)``, monic):
-    ``prod_{P} gamma_j * [gamma_0 prod_F gamma_j - sum_{i in F} h_i(s) prod_{j<i} phi_j
-    prod_{j>i} gamma_j]`` with ``h_i = mu_i (gamma_i - phi_i) + k_i s phi_i``; ``num`` is
-    ``prod_F phi_j * [phi_0 prod_P phi_j + sum_{i in P} h_i ...]``. Both are affine in every
-    single pair ``(mu_i, k_i)``: the fact the region maps exploit. Products of quadratics only:
-    no cancellation, no root finding.
-    """
-    _check_gains(mu, k, m, n)
-    if m > 0 and kh:
-        raise ConfigError("kh", "only for m = 0 (with m > 0 use k[-1])")
-    c = _per_vehicle(coefs, m, n)
-    pg = {i: phi_gamma(c[i]) for i in c if i != 0}
-
-    def h(i):
-        ph, ga = pg[i]
-        return np.polyadd(
-            mu.get(i, 0.0) * np.polysub(ga, np.concatenate([[0.0], ph])),
-            k.get(i, 0.0) * np.polymul([1.0, 0.0], ph),
-        )
-
-    def prod(polys):
-        out = np.array([1.0])
-        for p in polys:
-            out = np.polymul(out, p)
-        return out
-
-    phi0, gam0 = _cav_polys(c[0], mu.get(0, 0.0), k.get(0, 0.0), kh if m == 0 else 0.0)
-    P = list(range(-m, 0))
-    F = list(range(1, n + 1))
-    # ahead part: V_0 numerator over prod_P gamma
-    num_p = prod([phi0] + [pg[j][0] for j in P])
-    for i in P:
-        term = prod([h(i)] + [pg[j][0] for j in P if j < i] + [pg[j][1] for j in P if j > i])
-        num_p = np.polyadd(num_p, term)
-    den_f = prod([gam0] + [pg[j][1] for j in F])
-    for i in F:
-        term = prod([h(i)] + [pg[j][0] for j in F if j < i] + [pg[j][1] for j in F if j > i])
-        den_f = np.polysub(den_f, term)
-    num = np.polymul(num_p, prod([pg[j][0] for j in F]))
-    den = np.polymul(den_f, prod([pg[j][1] for j in P]))
-    return np.trim_zeros(num, "f"), den
-
-
-# --------------------------------------------------------------------------------------------
-# State space
-# --------------------------------------------------------------------------------------------
-
-
-def _hessenberg_solver(A: np.ndarray, b: np.ndarray, c: np.ndarray, chunk: int = 512):
-    """A function ``s -> c (s I - A)^-1 b`` (see :func:`transfer_response`), reduction done once."""
-    A = np.asarray(A, dtype=float)
-    b = np.asarray(b, dtype=float).reshape(-1)
-    c = np.asarray(c, dtype=float).reshape(-1)
-    nx = A.shape[0]
-    Hs, Q = sla.hessenberg(A, calc_q=True)
-    bh = Q.T @ b
-    ch = c @ Q
-    diag = np.arange(nx)
-
-    def solve(s):
-        s = np.asarray(s, dtype=complex)
-        out = np.empty(s.shape, dtype=complex)
-        flat = s.reshape(-1)
-        res = out.reshape(-1)
-        for start in range(0, flat.size, chunk):
-            z = flat[start : start + chunk]
-            N = z.size
-            M = np.broadcast_to(-Hs, (N, nx, nx)).astype(complex)
-            M[:, diag, diag] += z[:, None]
-            if N < _SMALL_BATCH:  # a few frequencies: one batched LAPACK LU (partial pivoting)
-                r = np.broadcast_to(bh, (N, nx)).astype(complex)[..., None]
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    try:
-                        y = np.linalg.solve(M, r)[..., 0]
-                    except np.linalg.LinAlgError:
-                        y = np.full((N, nx), np.inf + 0j)
-                res[start : start + N] = y @ ch
-                continue
-            r = np.broadcast_to(bh, (N, nx)).astype(complex)
-            for j in range(nx - 1):
-                swap = np.abs(M[:, j + 1, j]) > np.abs(M[:, j, j])
-                if swap.any():
-                    idx = np.nonzero(swap)[0]
-                    top = M[idx, j, j:].copy()
-                    M[idx, j, j:] = M[idx, j + 1, j:]
-                    M[idx, j + 1, j:] = top
-                    rt = r[idx, j].copy()
-                    r[idx, j] = r[idx, j + 1]
-                    r[idx, j + 1] = rt
-                piv = M[:, j, j]
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    lam = np.where(piv != 0, M[:, j + 1, j] / piv, 0.0)
-                M[:, j + 1, j + 1 :] -= lam[:, None] * M[:, j, j + 1 :]
-                r[:, j + 1] -= lam * r[:, j]
-            y = np.empty((N, nx), dtype=complex)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                for j in range(nx - 1, -1, -1):
-                    acc = r[:, j] - np.einsum("ij,ij->i", M[:, j, j + 1 :], y[:, j + 1 :])
-                    y[:, j] = acc / M[:, j, j]
-            res[start : start + N] = y @ ch
-        return out
-
-    return solve
-
-
-def transfer_response(
-    A: np.ndarray, b: np.ndarray, c: np.ndarray, s, chunk: int = 512
-) -> np.ndarray:
-    """``c (s I - A)^-1 b`` for every complex ``s`` (SISO), numerically stable and vectorised.
-
-    ``A`` is reduced once to upper Hessenberg form ``A = Q Hs Q^T`` (orthogonal); each
-    ``(s I - Hs) y = Q^T b`` is then solved by Gaussian elimination of the single subdiagonal
-    with row pivoting between the two candidate rows (backward stable, O(nx^2) per ``s``),
-    vectorised over ``s`` in chunks; batches of fewer than 16 values use one batched LAPACK LU
-    solve with partial pivoting (also backward stable, less Python overhead).
-    """
-    return _hessenberg_solver(A, b, c, chunk)(np.atleast_1d(np.asarray(s, dtype=complex)))
-
-
-def _tail_output(model: LCCModel) -> np.ndarray:
-    c = np.zeros(model.nx)
-    c[model.tail_velocity_index] = 1.0
-    return c
-
-
-def _check_head(model: LCCModel) -> None:
-    if model.kind == "fd_lcc":
-        raise ConfigError(
-            "system.kind", "fd_lcc has no head vehicle: the head-to-tail transfer is undefined"
-        )
-
-
-def gamma_state_space(model: LCCModel, K: np.ndarray, kh: float = 0.0, omega=None) -> np.ndarray:
-    """``Gamma(j omega)`` from the closed-loop state space (input feedback ``K``, ``kh``)."""
-    _check_head(model)
-    Acl, Hcl = closed_loop(model, K, kh)
-    omega = np.asarray(omega, dtype=float)
-    return transfer_response(Acl, Hcl, _tail_output(model), 1j * omega)
-
-
-def closed_loop_eigenvalues(Acl: np.ndarray) -> np.ndarray:
-    """Eigenvalues of ``Acl`` computed per strongly connected block (exact permutation to
-    block-triangular form), so uncoupled identical vehicles do not scatter each other's."""
-    Acl = np.asarray(Acl, dtype=float)
-    ncomp, labels = connected_components(Acl != 0, directed=True, connection="strong")
-    parts = []
-    for comp in range(ncomp):
-        idx = np.nonzero(labels == comp)[0]
-        parts.append(np.linalg.eigvals(Acl[np.ix_(idx, idx)]))
-    return np.concatenate(parts)
-
-
-def low_frequency_curvature(Acl: np.ndarray, h: np.ndarray, c: np.ndarray):
-    """``(g0, c2, c_rel)``: ``Gamma(0)``, the curvature ``c`` of ``|Gamma(jw)|^2 = g0^2 + c w^2
-    + O(w^4)`` and ``c`` relative to its two terms (``c = g1^2 - g0 g2``, Taylor coefficients of
-    ``Gamma`` at 0 from three solves with ``Acl``)."""
-    lu = sla.lu_factor(Acl)
-    y1 = sla.lu_solve(lu, np.asarray(h, float).reshape(-1))
-    y2 = sla.lu_solve(lu, y1)
-    y3 = sla.lu_solve(lu, y2)
-    g0 = -float(c @ y1)
-    g1 = -float(c @ y2)
-    g2 = -2.0 * float(c @ y3)
-    curv = g1 * g1 - g0 * g2
-    scale = g1 * g1 + abs(g0 * g2)
-    return g0, curv, (curv / scale if scale > 0 else 0.0)
 
 
 # --------------------------------------------------------------------------------------------
@@ -583,11 +277,11 @@ def string_stability(
         Hamiltonian method reports ``interior_peak`` only when it is the global supremum, and
         an unstable plant's formal response is always searched on the grid.
     """
-    _check_head(model)
+    check_head(model)
     if method not in ("grid", "hamiltonian"):
         raise ConfigError("method", f"must be 'grid' or 'hamiltonian', got {method!r}")
     Acl, Hcl = closed_loop(model, K, kh)
-    c = _tail_output(model)
+    c = tail_output(model)
     h = Hcl.reshape(-1)
     eigs = closed_loop_eigenvalues(Acl)
     max_re = float(eigs.real.max())
@@ -603,7 +297,7 @@ def string_stability(
         if not (np.isfinite(g0) and np.isfinite(curv)):
             g0, curv, crel = float("nan"), float("nan"), float("nan")
 
-    solver = _hessenberg_solver(Acl, h, c)
+    solver = hessenberg_solver(Acl, h, c)
 
     def mag(w):
         return np.abs(solver(1j * np.asarray(w, float)))

@@ -528,7 +528,7 @@ def test_region_maps_and_gamma_curves_of_the_analysis_commands(tmp_path):
     """``record_analysis_file`` with real region maps (labels[a, b] at (mu[a], k[b])) and a
     real |Gamma| curve: the image is the labels transposed with k upwards."""
     regions = pytest.importorskip("lcc_synth.regions")
-    from lcc_synth.string_stability import gamma_state_space
+    from lcc_synth.transfer import gamma_state_space
 
     model = model_from_hdv("lcc", 2, 2, OVM(), 15.0, warn=False)
     mu = np.linspace(-2.0, 2.0, 9)

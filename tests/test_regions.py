@@ -18,7 +18,8 @@ from lcc_synth.regions import (
     hurwitz,
     region_map,
 )
-from lcc_synth.string_stability import closed_form_gains, gamma_polynomials, string_stability
+from lcc_synth.string_stability import string_stability
+from lcc_synth.transfer import closed_form_gains, gamma_polynomials
 
 PAPER = OVM().linear_coefficients(15.0)
 MODEL = general_lcc(2, 2, PAPER)

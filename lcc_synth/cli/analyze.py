@@ -40,12 +40,8 @@ def analyze(problem_path: str) -> tuple[dict, dict]:
     from lcc_synth.errors import ConfigError
     from lcc_synth.feedback import closed_loop, input_feedback
     from lcc_synth.problem import load_problem, system_from
-    from lcc_synth.string_stability import (
-        analysis_options_from,
-        cases_from,
-        closed_loop_eigenvalues,
-        string_stability,
-    )
+    from lcc_synth.string_stability import analysis_options_from, cases_from, string_stability
+    from lcc_synth.transfer import closed_loop_eigenvalues
 
     prob = load_problem(problem_path)
     src = str(prob.path)
@@ -185,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
     if rrd is not None:
         import numpy as np
 
-        from lcc_synth.string_stability import gamma_state_space
+        from lcc_synth.transfer import gamma_state_space
 
         omega = extra["options"].omega()
         curves = {
@@ -203,7 +199,7 @@ def run(args: argparse.Namespace) -> int:
         import numpy as np
 
         from lcc_synth.figures import plot_gamma_curves
-        from lcc_synth.string_stability import gamma_state_space
+        from lcc_synth.transfer import gamma_state_space
 
         omega = extra["options"].omega()
         curves = {}

@@ -171,7 +171,7 @@ def record_synthesis(rec: Any, rep: Any, system: Any = None) -> None:
                 static=True,
             )
     if system is not None and rep.kind != "fd_lcc":
-        from lcc_synth.string_stability import gamma_state_space
+        from lcc_synth.transfer import gamma_state_space
 
         model = system.linear_model(warn=False)
         omega = gamma_grid(rep.check.gamma_peak_omega)
