@@ -7,10 +7,14 @@ from __future__ import annotations
 
 import time
 
-from lcc_synth.controllability import controllability_report, default_outputs, observability_report
-from lcc_synth.energy import gramian
-from lcc_synth.hdv import OVM
-from lcc_synth.models import fd_lcc, general_lcc
+from lcc_synth.analysis.controllability import (
+    controllability_report,
+    default_outputs,
+    observability_report,
+)
+from lcc_synth.analysis.energy import gramian
+from lcc_synth.models.hdv import OVM
+from lcc_synth.models.linear import fd_lcc, general_lcc
 
 
 def _per_call(fn, repeat: int) -> float:

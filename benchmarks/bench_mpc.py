@@ -47,8 +47,8 @@ def main() -> None:
     from lcc_synth.mpc.formulation import Formulation
     from lcc_synth.mpc.solver import OSQPSolver, solve_rebuild
     from lcc_synth.problem import load_problem
-    from lcc_synth.scenario import load_spec
-    from lcc_synth.simulation import simulate
+    from lcc_synth.simulation.engine import simulate
+    from lcc_synth.simulation.scenario import load_spec
 
     spec = load_spec(args.problem)
     table = load_problem(args.problem).data["controllers"]["mpc"]

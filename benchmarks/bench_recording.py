@@ -30,8 +30,8 @@ def main() -> None:
     args = ap.parse_args()
 
     from lcc_synth.metrics import summary
-    from lcc_synth.scenario import load_spec
-    from lcc_synth.simulation import simulate_many
+    from lcc_synth.simulation.engine import simulate_many
+    from lcc_synth.simulation.scenario import load_spec
 
     spec = load_spec(args.problem)
     simulate_many(spec.scenario, spec.controllers)  # warm-up (numba)

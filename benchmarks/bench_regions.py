@@ -3,7 +3,7 @@
 mu, k in [-10, 10] with step 0.02 (1001 x 1001 = 1,002,001 points) for each of vehicles -2, -1,
 1, 2 (m = n = 2, OVM at v* = 15 m/s, no other gains), with the default frequency grid. Prints
 the wall time and the cost per grid point, and for comparison the cost of the exact per-point
-check (:func:`lcc_synth.string_stability.string_stability`) that the map replaces.
+check (:func:`lcc_synth.analysis.string_stability.string_stability`) that the map replaces.
 
 Usage: python benchmarks/bench_regions.py [STEP]   (default 0.02)
 """
@@ -15,11 +15,11 @@ import time
 
 import numpy as np
 
-from lcc_synth.feedback import StaticGains, input_feedback
-from lcc_synth.hdv import OVM
-from lcc_synth.models import general_lcc
-from lcc_synth.regions import grid_axis, region_frequency_grid, region_map
-from lcc_synth.string_stability import string_stability
+from lcc_synth.analysis.regions import grid_axis, region_frequency_grid, region_map
+from lcc_synth.analysis.string_stability import string_stability
+from lcc_synth.models.feedback import StaticGains, input_feedback
+from lcc_synth.models.hdv import OVM
+from lcc_synth.models.linear import general_lcc
 
 
 def main(argv: list[str]) -> int:

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from dask.distributed import Client
 
-from lcc_synth.sweep import load_sweep, local_cluster, run_sweep
+from lcc_synth.experiments.sweep import load_sweep, local_cluster, run_sweep
 
 PROBLEM = Path(__file__).resolve().parents[1] / "problems" / "sweep_robustness.toml"
 

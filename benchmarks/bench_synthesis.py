@@ -46,8 +46,8 @@ def main() -> None:
 
     import cvxpy  # noqa: F401  (import cost outside the timings)
 
-    from lcc_synth.hdv import OVM
-    from lcc_synth.models import model_from_hdv
+    from lcc_synth.models.hdv import OVM
+    from lcc_synth.models.linear import model_from_hdv
     from lcc_synth.synthesis.h2 import (
         Weights,
         h2_norm,

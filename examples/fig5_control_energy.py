@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import sys
 
-from lcc_synth.energy import energy_vs_size
+from lcc_synth.analysis.energy import energy_vs_size
 from lcc_synth.figures import plot_control_energy
-from lcc_synth.hdv import OVM, linear_coefficients
+from lcc_synth.models.hdv import OVM, linear_coefficients
 
 
 def main(argv: list[str]) -> int:

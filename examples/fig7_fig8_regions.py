@@ -14,9 +14,9 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from lcc_synth.analysis.regions import expansion, region_specs_from, run_region_specs
 from lcc_synth.figures import plot_region_maps
 from lcc_synth.problem import load_problem, system_from
-from lcc_synth.regions import expansion, region_specs_from, run_region_specs
 
 PROBLEM = Path(__file__).resolve().parents[1] / "problems" / "paper_fig7_fig8_regions.toml"
 

@@ -48,9 +48,9 @@ def plot_control_energy(sweep, path: str | Path) -> Path:
 
     Parameters
     ----------
-    sweep : lcc_synth.energy.EnergySweep
-        Result of :func:`lcc_synth.energy.energy_vs_size`; one curve per horizon, each ending
-        at the last size before ``W(t)`` became numerically singular (marked in the legend).
+    sweep : lcc_synth.analysis.energy.EnergySweep
+        Result of :func:`lcc_synth.analysis.energy.energy_vs_size`; one curve per horizon, each
+        ending at the last size before ``W(t)`` became numerically singular (marked in the legend).
     path : str or Path
         Output PNG.
 
@@ -129,7 +129,7 @@ def plot_profiles(results, path: str | Path, title: str | None = None, run: int 
 
     Parameters
     ----------
-    results : mapping of str to lcc_synth.simulation.SimResult
+    results : mapping of str to lcc_synth.simulation.engine.SimResult
         ``{controller: result}`` of one scenario (same layout for all).
     path : str or Path
         Output PNG.
@@ -185,7 +185,8 @@ def plot_gamma_curves(curves, omega, path: str | Path, title: str | None = None)
     ----------
     curves : mapping of str to (magnitude, report)
         ``{label: (|Gamma| on omega, StringStabilityReport)}``, e.g. from
-        :func:`lcc_synth.comparison.gamma_curves`; the legend gives each peak and verdict.
+        :func:`lcc_synth.experiments.comparison.gamma_curves`; the legend gives each peak and
+        verdict.
     omega : array_like
         Frequencies (rad/s).
     path : str or Path
@@ -259,7 +260,7 @@ def plot_case_grid(
 
     Parameters
     ----------
-    results : mapping of str to lcc_synth.simulation.SimResult
+    results : mapping of str to lcc_synth.simulation.engine.SimResult
     path : str or Path
     quantity : {"velocity", "spacing"}
     xlim : (float, float)
@@ -316,7 +317,7 @@ def plot_snapshots(
 
     Parameters
     ----------
-    baseline, lcc : lcc_synth.simulation.SimResult
+    baseline, lcc : lcc_synth.simulation.engine.SimResult
         Two runs of the same scenario.
     times : sequence of float
         Moments to draw (s); the nearest recorded sample is used.
@@ -385,7 +386,7 @@ def plot_region_maps(maps, path: str | Path, baselines=None, titles=None, ncols:
 
     Parameters
     ----------
-    maps : mapping of str to lcc_synth.regions.RegionMap
+    maps : mapping of str to lcc_synth.analysis.regions.RegionMap
         One panel per map, in order.
     path : str or Path
         Output PNG.
@@ -466,7 +467,7 @@ def plot_mpc_predictions(
 
     Parameters
     ----------
-    result : lcc_synth.simulation.SimResult
+    result : lcc_synth.simulation.engine.SimResult
         The MPC's run.
     history : dict
         ``MPCController.history()`` of that run.

@@ -1,6 +1,6 @@
 """Performance and safety metrics of simulation results (Section V-B and beyond).
 
-Every function takes a :class:`~lcc_synth.simulation.SimResult` and returns one value per
+Every function takes a :class:`~lcc_synth.simulation.engine.SimResult` and returns one value per
 scenario of the batch (``(batch,)``) or per scenario and vehicle (``(batch, n_vehicles)``,
 columns head..tail).
 
@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.perturbations import vehicle_column
+from lcc_synth.simulation.perturbations import vehicle_column
 
 __all__ = [
     "VEHICLE_SETS",

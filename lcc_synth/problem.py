@@ -34,8 +34,8 @@ from pathlib import Path
 from typing import Any
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.hdv import IDM, OVM, model_from_dict
-from lcc_synth.models import KINDS, LCCModel, model_from_hdv
+from lcc_synth.models.hdv import IDM, OVM, model_from_dict
+from lcc_synth.models.linear import KINDS, LCCModel, model_from_hdv
 
 __all__ = [
     "Problem",

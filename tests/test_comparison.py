@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 
 from lcc_synth.cli.main import main
-from lcc_synth.comparison import (
+from lcc_synth.controllers.static import build_controller
+from lcc_synth.errors import ConfigError
+from lcc_synth.experiments.comparison import (
     SUITE_METRICS,
     controller_table,
     format_table,
@@ -22,8 +24,6 @@ from lcc_synth.comparison import (
     write_csv,
     write_json,
 )
-from lcc_synth.controllers import build_controller
-from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import (
     aave,
     aeb_activations,
@@ -34,7 +34,7 @@ from lcc_synth.metrics import (
     min_time_to_collision,
 )
 from lcc_synth.problem import Problem, load_problem
-from lcc_synth.simulation import simulate
+from lcc_synth.simulation.engine import simulate
 
 SHORT = """
 name = "short_suite"

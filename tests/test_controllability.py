@@ -13,7 +13,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from lcc_synth.controllability import (
+from lcc_synth.analysis.controllability import (
     controllability_report,
     default_outputs,
     kalman_decomposition,
@@ -21,8 +21,8 @@ from lcc_synth.controllability import (
     structural_split,
 )
 from lcc_synth.errors import ConfigError
-from lcc_synth.hdv import OVM, LinearCoefficients
-from lcc_synth.models import ccc, cf_lcc, fd_lcc, general_lcc
+from lcc_synth.models.hdv import OVM, LinearCoefficients
+from lcc_synth.models.linear import ccc, cf_lcc, fd_lcc, general_lcc
 
 PAPER = OVM().linear_coefficients(15.0)
 # Rational alphas on the boundary of eq. (13): alpha1 = alpha2 alpha3 - alpha3^2 = 27/50.

@@ -8,7 +8,7 @@ import pytest
 import scipy.linalg as sla
 from scipy.integrate import quad_vec, solve_ivp
 
-from lcc_synth.energy import (
+from lcc_synth.analysis.energy import (
     COND_LIMIT,
     NumericallySingularError,
     energy_report,
@@ -17,8 +17,8 @@ from lcc_synth.energy import (
     min_energy_input,
 )
 from lcc_synth.errors import ConfigError
-from lcc_synth.hdv import OVM, LinearCoefficients
-from lcc_synth.models import cf_lcc, fd_lcc, general_lcc
+from lcc_synth.models.hdv import OVM, LinearCoefficients
+from lcc_synth.models.linear import cf_lcc, fd_lcc, general_lcc
 
 PAPER = OVM(alpha=0.6, beta=0.9, v_max=30.0, s_st=5.0, s_go=35.0).linear_coefficients(15.0)
 HET = [LinearCoefficients(0.8, 1.4, 0.7), LinearCoefficients(1.1, 1.9, 0.5)]
@@ -135,7 +135,7 @@ def test_report_as_dict():
 
 
 def test_energy_vs_size_stops_at_the_first_singular_size(tmp_path):
-    from lcc_synth.energy import energy_vs_size
+    from lcc_synth.analysis.energy import energy_vs_size
     from lcc_synth.figures import plot_control_energy
 
     sweep = energy_vs_size(PAPER, horizons=(10.0, 30.0), n_max=12)

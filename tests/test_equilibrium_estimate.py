@@ -18,15 +18,15 @@ import numpy as np
 import pytest
 
 from lcc_synth.cli.main import main
-from lcc_synth.controllers import StaticGainController, build_controller
+from lcc_synth.controllers.static import StaticGainController, build_controller
 from lcc_synth.errors import ConfigError
-from lcc_synth.feedback import StaticGains
-from lcc_synth.hdv import IDM, OVM
-from lcc_synth.models import model_from_hdv
-from lcc_synth.perturbations import Profile
+from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.hdv import IDM, OVM
+from lcc_synth.models.linear import model_from_hdv
 from lcc_synth.problem import System, load_problem
-from lcc_synth.scenario import load_spec
-from lcc_synth.simulation import Scenario, simulate
+from lcc_synth.simulation.engine import Scenario, simulate
+from lcc_synth.simulation.perturbations import Profile
+from lcc_synth.simulation.scenario import load_spec
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 PAPER_CF = {"s_0": 0.1, "v_0": -0.5, "s_1": -0.2, "v_1": 0.05, "s_2": -0.1, "v_2": 0.05}
@@ -127,7 +127,7 @@ def test_estimate_is_clipped_into_the_models_range():
 @pytest.fixture(scope="module")
 def showcase_brake():
     """paper and h2 on the showcase head brake, with the file's estimate and with a fixed v*."""
-    from lcc_synth.comparison import load_suite, run_suite
+    from lcc_synth.experiments.comparison import load_suite, run_suite
     from lcc_synth.problem import Problem
 
     base = load_problem(PROBLEMS / "showcase.toml")

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.feedback import StaticGains, cav_feedback, closed_loop, input_feedback
-from lcc_synth.hdv import OVM, LinearCoefficients
-from lcc_synth.models import cf_lcc, fd_lcc, general_lcc
+from lcc_synth.models.feedback import StaticGains, cav_feedback, closed_loop, input_feedback
+from lcc_synth.models.hdv import OVM, LinearCoefficients
+from lcc_synth.models.linear import cf_lcc, fd_lcc, general_lcc
 
 PAPER = OVM().linear_coefficients(15.0)
 HET = [

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.hdv import (
+from lcc_synth.models.hdv import (
     IDM,
     OVM,
     ControllabilityWarning,
@@ -17,7 +17,7 @@ from lcc_synth.hdv import (
     linear_coefficients,
     model_from_dict,
 )
-from lcc_synth.hdv import numeric_linear_coefficients as numeric
+from lcc_synth.models.hdv import numeric_linear_coefficients as numeric
 
 PAPER = OVM(alpha=0.6, beta=0.9, s_st=5.0, s_go=35.0, v_max=30.0)
 

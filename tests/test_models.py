@@ -8,8 +8,8 @@ import pytest
 import scipy.signal
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.hdv import OVM, LinearCoefficients
-from lcc_synth.models import (
+from lcc_synth.models.hdv import OVM, LinearCoefficients
+from lcc_synth.models.linear import (
     build_model,
     ccc,
     cf_lcc,

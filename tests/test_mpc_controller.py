@@ -8,10 +8,10 @@ import json
 import numpy as np
 import pytest
 
-from lcc_synth.controllers import ControlContext, Observation, build_controller
+from lcc_synth.controllers.static import ControlContext, Observation, build_controller
 from lcc_synth.errors import ConfigError
-from lcc_synth.feedback import StaticGains, cav_feedback
-from lcc_synth.hdv import OVM
+from lcc_synth.models.feedback import StaticGains, cav_feedback
+from lcc_synth.models.hdv import OVM
 from lcc_synth.mpc import MPCController, mpc_controller_from_table
 from lcc_synth.mpc.formulation import linearize
 from lcc_synth.mpc.settings import MPCSettings

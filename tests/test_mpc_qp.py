@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import scipy.linalg as sla
 
-from lcc_synth.hdv import OVM
+from lcc_synth.models.hdv import OVM
 from lcc_synth.mpc.formulation import Family, Formulation, linearize, state_weights
 from lcc_synth.mpc.settings import Constraints, MPCSettings, Weights
 from lcc_synth.mpc.solver import OSQPSolver, solve_exact

@@ -15,15 +15,15 @@ pytest.importorskip("rerun")
 from rerun.chunk import RrdReader  # noqa: E402
 
 from lcc_synth import recording as R  # noqa: E402
-from lcc_synth.controllers import HDVController, StaticGainController  # noqa: E402
+from lcc_synth.controllers.static import HDVController, StaticGainController  # noqa: E402
 from lcc_synth.errors import ConfigError  # noqa: E402
-from lcc_synth.feedback import StaticGains  # noqa: E402
-from lcc_synth.hdv import OVM  # noqa: E402
 from lcc_synth.metrics import MetricsConfig  # noqa: E402
 from lcc_synth.metrics import summary as metrics_summary  # noqa: E402
-from lcc_synth.models import model_from_hdv  # noqa: E402
-from lcc_synth.perturbations import Brake  # noqa: E402
-from lcc_synth.simulation import Scenario, simulate  # noqa: E402
+from lcc_synth.models.feedback import StaticGains  # noqa: E402
+from lcc_synth.models.hdv import OVM  # noqa: E402
+from lcc_synth.models.linear import model_from_hdv  # noqa: E402
+from lcc_synth.simulation.engine import Scenario, simulate  # noqa: E402
+from lcc_synth.simulation.perturbations import Brake  # noqa: E402
 
 M, N = 1, 3  # one HDV ahead, three behind: every kind of vehicle column
 
@@ -527,8 +527,8 @@ def test_synthesize_command_records_gains_and_gamma(tmp_path, capsys):
 def test_region_maps_and_gamma_curves_of_the_analysis_commands(tmp_path):
     """``record_analysis_file`` with real region maps (labels[a, b] at (mu[a], k[b])) and a
     real |Gamma| curve: the image is the labels transposed with k upwards."""
-    regions = pytest.importorskip("lcc_synth.regions")
-    from lcc_synth.transfer import gamma_state_space
+    regions = pytest.importorskip("lcc_synth.analysis.regions")
+    from lcc_synth.analysis.transfer import gamma_state_space
 
     model = model_from_hdv("lcc", 2, 2, OVM(), 15.0, warn=False)
     mu = np.linspace(-2.0, 2.0, 9)
@@ -538,7 +538,7 @@ def test_region_maps_and_gamma_curves_of_the_analysis_commands(tmp_path):
     labels[5:, 4:] = 2
     rm = regions.RegionMap("a", -1, mu, k, labels)
     omega = R.gamma_grid()
-    from lcc_synth.feedback import input_feedback
+    from lcc_synth.models.feedback import input_feedback
 
     K, kh = input_feedback(model, StaticGains({}, "added"))  # the CAV drives like an HDV
     mag = np.abs(gamma_state_space(model, K, kh, omega))
@@ -644,8 +644,8 @@ def test_killed_process_leaves_the_flushed_controllers_readable(tmp_path):
     path = tmp_path / "killed.rrd"
     code = (
         "import os\n"
-        "from lcc_synth.simulation import Scenario, simulate\n"
-        "from lcc_synth.controllers import HDVController\n"
+        "from lcc_synth.simulation.engine import Scenario, simulate\n"
+        "from lcc_synth.controllers.static import HDVController\n"
         "from lcc_synth import recording as R\n"
         "r = simulate(Scenario(m=0, n=2, duration=3.0), HDVController('h'))\n"
         f"cm = R.open_recording({str(path)!r}, 'k')\n"

@@ -5,11 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lcc_synth.errors import ConfigError
-from lcc_synth.feedback import StaticGains, input_feedback
-from lcc_synth.hdv import OVM, LinearCoefficients
-from lcc_synth.models import cf_lcc, general_lcc
-from lcc_synth.regions import (
+from lcc_synth.analysis.regions import (
     STABLE,
     STRING_STABLE,
     UNSTABLE,
@@ -18,8 +14,12 @@ from lcc_synth.regions import (
     hurwitz,
     region_map,
 )
-from lcc_synth.string_stability import string_stability
-from lcc_synth.transfer import closed_form_gains, gamma_polynomials
+from lcc_synth.analysis.string_stability import string_stability
+from lcc_synth.analysis.transfer import closed_form_gains, gamma_polynomials
+from lcc_synth.errors import ConfigError
+from lcc_synth.models.feedback import StaticGains, input_feedback
+from lcc_synth.models.hdv import OVM, LinearCoefficients
+from lcc_synth.models.linear import cf_lcc, general_lcc
 
 PAPER = OVM().linear_coefficients(15.0)
 MODEL = general_lcc(2, 2, PAPER)

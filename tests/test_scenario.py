@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lcc_synth.controllers import (
+from lcc_synth.controllers.static import (
     ControlContext,
     HDVController,
     Observation,
@@ -16,11 +16,11 @@ from lcc_synth.controllers import (
     build_controller,
 )
 from lcc_synth.errors import ConfigError
-from lcc_synth.hdv import OVM
-from lcc_synth.perturbations import Brake, BrakeProfile, Profile, Sine, overrides
+from lcc_synth.models.hdv import OVM
 from lcc_synth.problem import load_problem, system_from
-from lcc_synth.scenario import load_spec
-from lcc_synth.simulation import V2V, Scenario
+from lcc_synth.simulation.engine import V2V, Scenario
+from lcc_synth.simulation.perturbations import Brake, BrakeProfile, Profile, Sine, overrides
+from lcc_synth.simulation.scenario import load_spec
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lcc_synth.errors import ConfigError
-from lcc_synth.feedback import StaticGains, closed_loop, input_feedback
-from lcc_synth.hdv import OVM, LinearCoefficients
-from lcc_synth.models import build_model, fd_lcc, general_lcc
-from lcc_synth.string_stability import hinf_norm_hamiltonian, level_crossings, string_stability
-from lcc_synth.transfer import (
+from lcc_synth.analysis.string_stability import (
+    hinf_norm_hamiltonian,
+    level_crossings,
+    string_stability,
+)
+from lcc_synth.analysis.transfer import (
     closed_form_gains,
     closed_loop_eigenvalues,
     gamma_closed_form,
@@ -18,6 +18,10 @@ from lcc_synth.transfer import (
     gamma_state_space,
     transfer_response,
 )
+from lcc_synth.errors import ConfigError
+from lcc_synth.models.feedback import StaticGains, closed_loop, input_feedback
+from lcc_synth.models.hdv import OVM, LinearCoefficients
+from lcc_synth.models.linear import build_model, fd_lcc, general_lcc
 
 PAPER = OVM().linear_coefficients(15.0)  # alpha=0.6, beta=0.9, v_max=30, s_st=5, s_go=35
 TABLE_I = {

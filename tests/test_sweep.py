@@ -13,10 +13,9 @@ import numpy as np
 import pytest
 
 from lcc_synth.cli.main import main
-from lcc_synth.comparison import build_controllers
 from lcc_synth.errors import ConfigError
-from lcc_synth.simulation import simulate
-from lcc_synth.sweep import (
+from lcc_synth.experiments.comparison import build_controllers
+from lcc_synth.experiments.sweep import (
     SWEEP_METRICS,
     aggregate,
     chunks,
@@ -24,6 +23,7 @@ from lcc_synth.sweep import (
     run_sweep,
     scenario_metrics,
 )
+from lcc_synth.simulation.engine import simulate
 
 SWEEP = """
 name = "small_sweep"
@@ -172,7 +172,7 @@ def test_seed_changes_the_draws(problem_file, serial):
 def client():
     from dask.distributed import Client
 
-    from lcc_synth.sweep import local_cluster
+    from lcc_synth.experiments.sweep import local_cluster
 
     cluster = local_cluster(2)
     cl = Client(cluster)
@@ -264,7 +264,7 @@ def test_cli_bad_counts_exit_2(problem_file, capsys):
 def test_cli_sweep_json_and_files(problem_file, serial, capsys, tmp_path):
     import json
 
-    from lcc_synth.comparison import json_safe
+    from lcc_synth.experiments.comparison import json_safe
 
     code = main([
         "sweep", str(problem_file), "--count", "4", "--batch-size", "3", "--workers", "1",

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import scipy.linalg as sla
 
-from lcc_synth.feedback import StaticGains, closed_loop, input_feedback
-from lcc_synth.hdv import OVM, LinearCoefficients
-from lcc_synth.models import build_model, model_from_hdv
+from lcc_synth.models.feedback import StaticGains, closed_loop, input_feedback
+from lcc_synth.models.hdv import OVM, LinearCoefficients
+from lcc_synth.models.linear import build_model, model_from_hdv
 from lcc_synth.synthesis.h2 import (
     SynthesisError,
     Weights,

@@ -1,15 +1,15 @@
 """String-stability-aware design (bounded-real lemma + constrained polishing), verified by the
-global check of lcc_synth.string_stability (both of its methods)."""
+global check of lcc_synth.analysis.string_stability (both of its methods)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from lcc_synth.feedback import StaticGains
-from lcc_synth.hdv import OVM
-from lcc_synth.models import model_from_hdv
-from lcc_synth.string_stability import string_stability
+from lcc_synth.analysis.string_stability import string_stability
+from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.hdv import OVM
+from lcc_synth.models.linear import model_from_hdv
 from lcc_synth.synthesis.design import design_gain_of
 from lcc_synth.synthesis.h2 import SynthesisError, Weights, h2_norm, make_plant, riccati_gain
 from lcc_synth.synthesis.string_lmi import string_aware_h2, string_lmi

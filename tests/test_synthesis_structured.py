@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from lcc_synth.feedback import StaticGains
-from lcc_synth.hdv import OVM
-from lcc_synth.models import model_from_hdv
+from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.hdv import OVM
+from lcc_synth.models.linear import model_from_hdv
 from lcc_synth.synthesis.design import design_gain_of
 from lcc_synth.synthesis.h2 import SynthesisError, Weights, h2_cost, h2_norm, make_plant
 from lcc_synth.synthesis.sparsity import sparsity_sweep

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.hdv import OVM
-from lcc_synth.models import model_from_hdv
+from lcc_synth.models.hdv import OVM
+from lcc_synth.models.linear import model_from_hdv
 from lcc_synth.problem import Problem
 from lcc_synth.synthesis.config import spec_from_problem
 from lcc_synth.synthesis.h2 import Weights, make_plant, riccati_gain

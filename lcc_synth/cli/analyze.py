@@ -32,16 +32,20 @@ def _fmt(x, spec: str) -> str:
 
 def analyze(problem_path: str) -> tuple[dict, dict]:
     """Everything ``analyze`` reports, as a JSON-ready dict, plus the objects for plotting."""
-    from lcc_synth.controllability import (
+    from lcc_synth.analysis.controllability import (
         controllability_report,
         default_outputs,
         observability_report,
     )
+    from lcc_synth.analysis.string_stability import (
+        analysis_options_from,
+        cases_from,
+        string_stability,
+    )
+    from lcc_synth.analysis.transfer import closed_loop_eigenvalues
     from lcc_synth.errors import ConfigError
-    from lcc_synth.feedback import closed_loop, input_feedback
+    from lcc_synth.models.feedback import closed_loop, input_feedback
     from lcc_synth.problem import load_problem, system_from
-    from lcc_synth.string_stability import analysis_options_from, cases_from, string_stability
-    from lcc_synth.transfer import closed_loop_eigenvalues
 
     prob = load_problem(problem_path)
     src = str(prob.path)
@@ -181,7 +185,7 @@ def run(args: argparse.Namespace) -> int:
     if rrd is not None:
         import numpy as np
 
-        from lcc_synth.transfer import gamma_state_space
+        from lcc_synth.analysis.transfer import gamma_state_space
 
         omega = extra["options"].omega()
         curves = {
@@ -198,8 +202,8 @@ def run(args: argparse.Namespace) -> int:
             )
         import numpy as np
 
+        from lcc_synth.analysis.transfer import gamma_state_space
         from lcc_synth.figures import plot_gamma_curves
-        from lcc_synth.transfer import gamma_state_space
 
         omega = extra["options"].omega()
         curves = {}

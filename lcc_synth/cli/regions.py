@@ -29,10 +29,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import time
 
+    from lcc_synth.analysis.regions import expansion, region_specs_from, run_region_specs
     from lcc_synth.errors import ConfigError
     from lcc_synth.problem import load_problem, system_from
     from lcc_synth.recording import record_analysis_file, recording_path
-    from lcc_synth.regions import expansion, region_specs_from, run_region_specs
 
     prob = load_problem(args.problem)
     rrd = recording_path(args, prob.name)  # a bad --rrd fails before the maps are computed

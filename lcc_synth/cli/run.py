@@ -96,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from lcc_synth.comparison import (
+    from lcc_synth.experiments.comparison import (
         format_table,
         gamma_curves,
         json_safe,

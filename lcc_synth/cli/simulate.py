@@ -35,9 +35,10 @@ MEMORY_BUDGET = 1.5e9
 
 
 def load(args):
-    """The :class:`~lcc_synth.scenario.SimulationSpec` of ``args.problem`` (+ ``--seeds``)."""
+    """The :class:`~lcc_synth.simulation.scenario.SimulationSpec` of ``args.problem``
+    (+ ``--seeds``)."""
     from lcc_synth.errors import ConfigError
-    from lcc_synth.scenario import load_spec
+    from lcc_synth.simulation.scenario import load_spec
 
     if args.seeds is not None and args.seeds < 1:
         raise ConfigError("--seeds", f"must be >= 1, got {args.seeds}")
@@ -70,7 +71,7 @@ def iter_results(spec, budget: float = MEMORY_BUDGET):
     """Yield ``(chunk, controller_name, SimResult)``, one controller run at a time: every
     controller on the same draws, seed chunk after seed chunk (a single chunk unless the study
     exceeds ``budget``)."""
-    from lcc_synth.simulation import simulate
+    from lcc_synth.simulation.engine import simulate
 
     for i, scenario in enumerate(chunks(spec.scenario, budget)):
         draws = scenario.draw()
@@ -85,7 +86,7 @@ def collect(args, on_result=None):
     ``on_result(spec, name, result)``, when given, is called as soon as each controller's result
     exists (the recording), so an interrupted run keeps the controllers finished before.
     """
-    from lcc_synth.simulation import simulate
+    from lcc_synth.simulation.engine import simulate
 
     spec = load(args)
     draws = spec.scenario.draw()

@@ -1,10 +1,10 @@
 """``lcc-synth sweep PROBLEM.toml``: Monte Carlo robustness sweep on Dask.
 
-Runs ``[sweep] count`` random scenarios for every controller (see :mod:`lcc_synth.sweep`),
-prints mean and 5th / 95th percentiles of the metrics and the counts of collisions, emergency
-brakings and MPC fallbacks, and writes under ``results/<problem>-<UTC timestamp>/``:
-``sweep.json`` (the ``--json`` document), ``samples.csv`` (every scenario's metrics) and
-``distributions.png``.
+Runs ``[sweep] count`` random scenarios for every controller (see
+:mod:`lcc_synth.experiments.sweep`), prints mean and 5th / 95th percentiles of the metrics and
+the counts of collisions, emergency brakings and MPC fallbacks, and writes under
+``results/<problem>-<UTC timestamp>/``: ``sweep.json`` (the ``--json`` document),
+``samples.csv`` (every scenario's metrics) and ``distributions.png``.
 
 By default the tasks run on a local Dask cluster (``--workers`` single-threaded processes, no
 dashboard, scratch space in a temporary directory); ``--scheduler ADDRESS`` uses an existing
@@ -60,7 +60,7 @@ def _client(args):
             raise ConfigError(
                 "--scheduler", f"cannot connect to the Dask scheduler {args.scheduler!r}: {err}"
             ) from None
-    from lcc_synth.sweep import local_cluster
+    from lcc_synth.experiments.sweep import local_cluster
 
     cluster = local_cluster(args.workers)
     return Client(cluster), cluster
@@ -70,9 +70,9 @@ def run(args: argparse.Namespace) -> int:
     import csv
     from datetime import UTC, datetime
 
-    from lcc_synth.comparison import json_safe, run_directory
     from lcc_synth.errors import ConfigError
-    from lcc_synth.sweep import SWEEP_METRICS, format_summary, load_sweep, run_sweep
+    from lcc_synth.experiments.comparison import json_safe, run_directory
+    from lcc_synth.experiments.sweep import SWEEP_METRICS, format_summary, load_sweep, run_sweep
     from lcc_synth.synthesis.h2 import SynthesisError
 
     names = None if args.controllers is None else args.controllers.split(",")

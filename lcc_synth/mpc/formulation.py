@@ -1,7 +1,7 @@
 """The MPC's quadratic program, formulated once with CasADi.
 
-Prediction model: the LCC error model of :mod:`lcc_synth.models` discretised exactly (ZOH) at the
-controller's sample time ``Ts``::
+Prediction model: the LCC error model of :mod:`lcc_synth.models.linear` discretised exactly (ZOH) at
+the controller's sample time ``Ts``::
 
     x_{k+1} = Ad x_k + Bd u_k + Hd d_k,          k = 0 .. N-1
 
@@ -54,9 +54,9 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.feedback import StaticGains, cav_feedback
-from lcc_synth.hdv import CarFollowingModel
-from lcc_synth.models import LCCModel, discretize, model_from_hdv
+from lcc_synth.models.feedback import StaticGains, cav_feedback
+from lcc_synth.models.hdv import CarFollowingModel
+from lcc_synth.models.linear import LCCModel, discretize, model_from_hdv
 from lcc_synth.mpc.settings import MPCSettings
 
 __all__ = [

@@ -171,7 +171,7 @@ def record_synthesis(rec: Any, rep: Any, system: Any = None) -> None:
                 static=True,
             )
     if system is not None and rep.kind != "fd_lcc":
-        from lcc_synth.transfer import gamma_state_space
+        from lcc_synth.analysis.transfer import gamma_state_space
 
         model = system.linear_model(warn=False)
         omega = gamma_grid(rep.check.gamma_peak_omega)
@@ -218,8 +218,8 @@ def record_analysis_file(
     gamma : mapping, optional
         ``{case: (omega, |Gamma(j omega)|, report)}`` (see :func:`record_gamma`).
     regions : mapping, optional
-        ``{name: RegionMap}`` of :mod:`lcc_synth.regions` (``mu``, ``k``, ``labels[a, b]`` at
-        ``(mu[a], k[b])``; labels 0 unstable, 1 stable, 2 string stable).
+        ``{name: RegionMap}`` of :mod:`lcc_synth.analysis.regions` (``mu``, ``k``, ``labels[a, b]``
+        at ``(mu[a], k[b])``; labels 0 unstable, 1 stable, 2 string stable).
     region_reports : mapping, optional
         Extra report fields per region map (fractions, fixed gains, expansion...).
     summary : mapping, optional

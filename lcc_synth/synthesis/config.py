@@ -51,7 +51,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.feedback import SEMANTICS, StaticGains
+from lcc_synth.models.feedback import SEMANTICS, StaticGains
 from lcc_synth.problem import (
     Problem,
     System,

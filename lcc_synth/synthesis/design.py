@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from lcc_synth.feedback import input_feedback
+from lcc_synth.models.feedback import input_feedback
 from lcc_synth.synthesis.config import SynthesisSpec
 from lcc_synth.synthesis.h2 import (
     H2Plant,

@@ -14,8 +14,8 @@ from pathlib import Path
 from typing import Any
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.feedback import SEMANTICS, StaticGains
-from lcc_synth.models import KINDS
+from lcc_synth.models.feedback import SEMANTICS, StaticGains
+from lcc_synth.models.linear import KINDS
 from lcc_synth.synthesis.report import SynthesisReport, _jsonable
 
 __all__ = ["gains_document", "write_gains", "read_gains", "REQUIRED_KEYS"]

@@ -2,7 +2,7 @@
 
 The design plant
 ----------------
-For an :class:`~lcc_synth.models.LCCModel` ``dx = A x + B u + H v_h`` and a gain semantics
+For an :class:`~lcc_synth.models.linear.LCCModel` ``dx = A x + B u + H v_h`` and a gain semantics
 (``feedback.py``, eq. 23) the CAV's static gains ``g`` (a row on the model's states) act as
 
     input = (g + K0) x + kh0 v_h,     (K0, kh0) = feedback.input_feedback(model, zero gains)
@@ -50,8 +50,8 @@ import numpy as np
 import scipy.linalg as sla
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.feedback import SEMANTICS, StaticGains, input_feedback
-from lcc_synth.models import LCCModel
+from lcc_synth.models.feedback import SEMANTICS, StaticGains, input_feedback
+from lcc_synth.models.linear import LCCModel
 
 __all__ = [
     "SynthesisError",
@@ -322,9 +322,9 @@ def make_plant(model: LCCModel, semantics: str = "replace", weights: Weights | N
 
 
 def check_stabilisable(plant: H2Plant, tol: float = 1e-9) -> None:
-    """Every uncontrollable mode (Kalman decomposition, :mod:`lcc_synth.controllability`) must
-    have Re < -tol; else :class:`SynthesisError`."""
-    from lcc_synth.controllability import uncontrollable_modes
+    """Every uncontrollable mode (Kalman decomposition,
+    :mod:`lcc_synth.analysis.controllability`) must have Re < -tol; else :class:`SynthesisError`."""
+    from lcc_synth.analysis.controllability import uncontrollable_modes
 
     for lam in uncontrollable_modes(plant.A, plant.B):
         if lam.real >= -tol:

@@ -53,7 +53,7 @@ def evaluate_gain(plant: H2Plant, g: np.ndarray) -> GainCheck:
     mre_model = max_real_eig(model.A + model.B @ K.reshape(1, -1)) if math.isfinite(mre) else mre
     ps = ss = peak = peak_w = None
     if model.kind != "fd_lcc" and math.isfinite(mre):
-        from lcc_synth.string_stability import string_stability
+        from lcc_synth.analysis.string_stability import string_stability
 
         rep = string_stability(model, K, kh)
         ps, ss = bool(rep.plant_stable), bool(rep.string_stable)

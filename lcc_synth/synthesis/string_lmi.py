@@ -15,7 +15,7 @@ with ``h`` the head-velocity input column of the design plant and ``c`` the tail
 Every stabilising gain has ``|Gamma(0)| = 1`` (the tail follows the head's steady velocity), so
 ``gamma = 1`` is the smallest meaningful bound and the LMI is only feasible on its boundary
 at ``w = 0``: the verdict of every result is therefore taken from the global check
-:func:`lcc_synth.string_stability.string_stability` (contract 1), never from the LMI.
+:func:`lcc_synth.analysis.string_stability.string_stability` (contract 1), never from the LMI.
 
 Polishing step: descent on the true H2 cost restricted to the pattern in which a step is
 accepted only when the trial gain is plant- and string-stable by that global check (a
@@ -47,7 +47,7 @@ __all__ = ["StringResult", "string_lmi", "string_aware_h2", "string_check"]
 
 def string_check(plant: H2Plant, g: np.ndarray):
     """Global string-stability report (contract 1) of design gain ``g``."""
-    from lcc_synth.string_stability import string_stability
+    from lcc_synth.analysis.string_stability import string_stability
 
     K, kh = plant.input_feedback(g)
     return string_stability(plant.model, K, kh)

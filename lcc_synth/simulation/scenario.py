@@ -9,10 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from lcc_synth.controllers import Controller, build_controller
+from lcc_synth.controllers.static import Controller, build_controller
 from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import VEHICLE_SETS, MetricsConfig
-from lcc_synth.perturbations import perturbation_from_table, vehicle_column
 from lcc_synth.problem import (
     Problem,
     System,
@@ -26,7 +25,8 @@ from lcc_synth.problem import (
     load_problem,
     system_from,
 )
-from lcc_synth.simulation import V2V, Scenario
+from lcc_synth.simulation.engine import V2V, Scenario
+from lcc_synth.simulation.perturbations import perturbation_from_table, vehicle_column
 
 __all__ = ["SimulationSpec", "scenario_from", "metrics_from", "controllers_from", "load_spec"]
 
@@ -50,14 +50,15 @@ class SimulationSpec:
 
 
 def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None = None):
-    """Build the :class:`~lcc_synth.simulation.Scenario` of a problem's ``[scenario]`` table."""
+    """Build the :class:`~lcc_synth.simulation.engine.Scenario` of a problem's ``[scenario]``
+    table."""
     f = "scenario"
     sc = get_table(data, "scenario", f)
     check_keys(sc, _SCENARIO_KEYS, f)
     hv_t = get_table(sc, "hdv_values", f"{f}.hdv_values")
     hdv_values = None
     if hv_t:
-        from lcc_synth.simulation import MODEL_PARAMS
+        from lcc_synth.simulation.engine import MODEL_PARAMS
 
         allowed = MODEL_PARAMS[system.hdv.name]
         check_keys(hv_t, allowed, f"{f}.hdv_values")

@@ -50,10 +50,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from lcc_synth.errors import ConfigError
-from lcc_synth.feedback import closed_loop
-from lcc_synth.models import LCCModel
-from lcc_synth.transfer import (
+from lcc_synth.analysis.transfer import (
     check_head,
     closed_loop_eigenvalues,
     hessenberg_solver,
@@ -61,6 +58,9 @@ from lcc_synth.transfer import (
     tail_output,
     transfer_response,
 )
+from lcc_synth.errors import ConfigError
+from lcc_synth.models.feedback import closed_loop
+from lcc_synth.models.linear import LCCModel
 
 __all__ = [
     "StringStabilityReport",
@@ -270,7 +270,7 @@ def string_stability(
     model : LCCModel
         Any kind with a head vehicle (not ``fd_lcc``).
     K, kh : array_like, float
-        Feedback on the model's input, as :func:`lcc_synth.feedback.input_feedback` returns.
+        Feedback on the model's input, as :func:`lcc_synth.models.feedback.input_feedback` returns.
     method : {"grid", "hamiltonian"}
         Global search of ``sup |Gamma(jw)|``: dense grid + pole frequencies + golden-section
         refinement, or Boyd-Balakrishnan level sets (see the module docstring). The
@@ -345,8 +345,8 @@ def string_stability(
 
 
 def gains_string_stability(model: LCCModel, gains, method: str = "grid") -> StringStabilityReport:
-    """:func:`string_stability` of a :class:`~lcc_synth.feedback.StaticGains` on ``model``."""
-    from lcc_synth.feedback import input_feedback
+    """:func:`string_stability` of :class:`~lcc_synth.models.feedback.StaticGains` on ``model``."""
+    from lcc_synth.models.feedback import input_feedback
 
     K, kh = input_feedback(model, gains)
     return string_stability(model, K, kh, method=method)
@@ -412,7 +412,7 @@ def cases_from(data: Mapping, model: LCCModel, source: str | None = None) -> dic
     1.0, v_-2 = -1.0, ... }`` (state name -> gain, missing states 0) and an optional ``label``.
     Errors name ``cases.NAME.<field>`` and the file.
     """
-    from lcc_synth.feedback import StaticGains
+    from lcc_synth.models.feedback import StaticGains
     from lcc_synth.problem import check_keys, get_str, get_table
 
     out = {}

@@ -10,7 +10,7 @@ Every scenario ``i`` (``0 <= i < count``) draws, from ``(seed, i)`` only, its he
 parameters (``[scenario.heterogeneity]``), its reaction delays (``[scenario.delay]``), and the
 realisations of the HDV acceleration noise (``hdv_accel_noise``) and of the V2V packet losses
 and measurement noise (``[scenario.v2v]``; latency is a fixed setting of the file). This is the
-simulator's own draw (:attr:`lcc_synth.simulation.Scenario.first_index`), so a scenario's
+simulator's own draw (:attr:`lcc_synth.simulation.engine.Scenario.first_index`), so a scenario's
 result does not depend on how scenarios are grouped into tasks, nor on the worker running it.
 
 Execution
@@ -59,7 +59,7 @@ from lcc_synth.problem import (
     load_problem,
     system_from,
 )
-from lcc_synth.simulation import Scenario
+from lcc_synth.simulation.engine import Scenario
 
 __all__ = [
     "SWEEP_METRICS",
@@ -132,9 +132,9 @@ def load_sweep(
     ConfigError
         A bad table or value, an unknown controller name, counts out of range.
     """
-    from lcc_synth.comparison import SUITE_TYPES, select_names
+    from lcc_synth.experiments.comparison import SUITE_TYPES, select_names
     from lcc_synth.problem import get_str
-    from lcc_synth.scenario import metrics_from, scenario_from
+    from lcc_synth.simulation.scenario import metrics_from, scenario_from
 
     problem = path if isinstance(path, Problem) else load_problem(path)
     src = str(problem.path)
@@ -248,7 +248,7 @@ def _token(*parts: Any) -> str:
 
 def _controllers(tables: Mapping[str, Mapping[str, Any]], system: System, source: str | None):
     """Controllers of ``tables``, built once per process and thread (MPCs hold solver state)."""
-    from lcc_synth.comparison import build_controllers
+    from lcc_synth.experiments.comparison import build_controllers
 
     key = (_token(dict(tables), system, source), threading.get_ident())
     with _CACHE_LOCK:
@@ -277,7 +277,7 @@ def run_chunk(
     Returns ``{"start", "stop", "metrics": {controller: {metric: (stop - start,) array}},
     "fallbacks": {controller: int}, "sim_time": {controller: s}, "wall_time": s}``.
     """
-    from lcc_synth.simulation import simulate
+    from lcc_synth.simulation.engine import simulate
 
     t0 = time.perf_counter()
     ctrls = _controllers(tables, system, source)
@@ -451,7 +451,7 @@ def run_sweep(
     retries : int
         Retries of a failing task (a task lost with its worker is recomputed by Dask).
     """
-    from lcc_synth.comparison import prepare_controllers, progress_bar
+    from lcc_synth.experiments.comparison import prepare_controllers, progress_bar
 
     t_all = time.perf_counter()
     with progress_bar(len(spec.controllers), "controllers (synthesis)", progress) as bar:
@@ -467,7 +467,7 @@ def run_sweep(
     t_design = time.perf_counter() - t_all
     tables = {name: _inline_gains_file(name, t, spec) for name, t in tables.items()}
     # fail early, in the client, on a controller that cannot be built
-    from lcc_synth.comparison import build_controllers
+    from lcc_synth.experiments.comparison import build_controllers
 
     build_controllers(tables, spec.system, spec.source)
 

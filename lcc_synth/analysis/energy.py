@@ -33,7 +33,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.models import LCCModel
+from lcc_synth.models.linear import LCCModel
 
 __all__ = [
     "COND_LIMIT",
@@ -329,7 +329,7 @@ def energy_vs_size(
     kind : {"fd_lcc", "cf_lcc"}
         Model family (the paper uses FD-LCC).
     """
-    from lcc_synth.models import build_model
+    from lcc_synth.models.linear import build_model
 
     if kind not in ("fd_lcc", "cf_lcc"):
         raise ConfigError("kind", f"must be 'fd_lcc' or 'cf_lcc' (controllable), got {kind!r}")

@@ -34,7 +34,7 @@ spacing, velocity and position are exact.
 
 The stepping loop is compiled with numba. Controllers with a fixed linear law (the CAV as an
 HDV, static gains, with the fixed or the estimated equilibrium; see
-:class:`~lcc_synth.controllers.LinearLaw`) are evaluated inside the compiled loop; any other
+:class:`~lcc_synth.controllers.static.LinearLaw`) are evaluated inside the compiled loop; any other
 controller is called from Python once per controller sample and the compiled loop advances the
 scenarios between samples.
 """
@@ -52,10 +52,10 @@ from typing import Any
 import numba
 import numpy as np
 
-from lcc_synth.controllers import ControlContext, Controller, Observation
+from lcc_synth.controllers.static import ControlContext, Controller, Observation
 from lcc_synth.errors import ConfigError
-from lcc_synth.hdv import IDM, OVM
-from lcc_synth.perturbations import Perturbation, overrides
+from lcc_synth.models.hdv import IDM, OVM
+from lcc_synth.simulation.perturbations import Perturbation, overrides
 
 __all__ = [
     "MODEL_PARAMS",
@@ -166,7 +166,7 @@ class Scenario:
     cav_aeb, hdv_aeb : bool
         Emergency braking (eq. 29) for the CAV / for every HDV.
     perturbations : sequence
-        Prescribed motions (:mod:`lcc_synth.perturbations`).
+        Prescribed motions (:mod:`lcc_synth.simulation.perturbations`).
     hdv_values : mapping, optional
         Explicit per-vehicle parameters: name -> array broadcastable to ``(batch, nv)``;
         default the nominal model everywhere.
@@ -556,7 +556,7 @@ def _advance(
     ``mode`` 1 evaluates the linear law (Ks, Kv, Kp, hdv_law) at every ``ratio``-th sample;
     mode 0 applies the held command ``u_hold`` (set by a Python controller). ``est_decay >= 0``
     takes the law's errors from the equilibrium estimate ``v_hat`` (``(batch,)``, updated in
-    place; see :class:`~lcc_synth.controllers.LinearLaw`), ``est_decay < 0`` from ``v_star``.
+    place; see :class:`~lcc_synth.controllers.static.LinearLaw`), ``est_decay < 0`` from ``v_star``.
     """
     nv = p.shape[1]
     abs_min = abs(a_min)

@@ -7,7 +7,7 @@ classified as
 ``1`` stable              plant stable, not head-to-tail string stable;
 ``2`` string stable       plant stable and ``|Gamma(jw)| < 1`` for all ``w > 0``.
 
-Why it is fast: ``Gamma = num/den`` (:func:`lcc_synth.string_stability.gamma_polynomials`) with
+Why it is fast: ``Gamma = num/den`` (:func:`lcc_synth.analysis.transfer.gamma_polynomials`) with
 ``num`` and ``den`` *affine* in ``(mu_i, k_i)``: ``num = N0 + mu N1 + k N2``, ``den = D0 + mu D1
 + k D2`` (``den`` is the closed-loop characteristic polynomial). Hence
 
@@ -15,7 +15,7 @@ Why it is fast: ``Gamma = num/den`` (:func:`lcc_synth.string_stability.gamma_pol
   grid point (exact sign test, no eigenvalues), in chunks of rows to bound memory;
 * low frequencies: ``|Gamma(jw)|^2 = 1 + c w^2 + O(w^4)`` with ``c`` a quadratic in
   ``(mu, k)`` from the three lowest coefficients; string stability needs
-  ``c_rel < -LOW_FREQ_TOL`` (as :func:`~lcc_synth.string_stability.string_stability`);
+  ``c_rel < -LOW_FREQ_TOL`` (as :func:`~lcc_synth.analysis.string_stability.string_stability`);
 * ``w > 0``: for a fixed row ``mu`` and frequency ``w``, ``|num(jw)|^2 - rho |den(jw)|^2`` is a
   *quadratic in k* (``rho = (1 - PEAK_TOL)^2``). Its non-negative set is at most two intervals
   of ``k``, found in closed form; marking them on the ``k`` axis (a difference array and one
@@ -41,11 +41,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from lcc_synth.analysis.string_stability import LOW_FREQ_TOL, PEAK_TOL
+from lcc_synth.analysis.transfer import closed_form_gains, gamma_polynomials
 from lcc_synth.errors import ConfigError
-from lcc_synth.feedback import StaticGains, input_feedback
-from lcc_synth.models import LCCModel
-from lcc_synth.string_stability import LOW_FREQ_TOL, PEAK_TOL
-from lcc_synth.transfer import closed_form_gains, gamma_polynomials
+from lcc_synth.models.feedback import StaticGains, input_feedback
+from lcc_synth.models.linear import LCCModel
 
 __all__ = [
     "UNSTABLE",
@@ -210,7 +210,7 @@ def affine_polynomials(model: LCCModel, vehicle: int, gains=None):
     for the gains ``(mu, k)`` of ``vehicle``, the other gains from ``gains``.
 
     Coefficients are in *ascending* powers, all padded to the degree of ``den``.
-    ``gains`` is a :class:`~lcc_synth.feedback.StaticGains` or input feedback ``(K, kh)``.
+    ``gains`` is a :class:`~lcc_synth.models.feedback.StaticGains` or input feedback ``(K, kh)``.
     """
     if vehicle == 0 or vehicle not in model.vehicles:
         allowed = [i for i in model.vehicles if i != 0]

@@ -59,7 +59,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.models import LCCModel
+from lcc_synth.models.linear import LCCModel
 
 __all__ = [
     "TOLERANCE_FACTOR",

@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from lcc_synth.controllers import CONTROLLER_TYPES, Controller, build_controller
+from lcc_synth.controllers.static import CONTROLLER_TYPES, Controller, build_controller
 from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import MetricsConfig
 from lcc_synth.problem import (
@@ -44,8 +44,8 @@ from lcc_synth.problem import (
     load_problem,
     system_from,
 )
-from lcc_synth.scenario import metrics_from, scenario_from
-from lcc_synth.simulation import Scenario, SimResult
+from lcc_synth.simulation.engine import Scenario, SimResult
+from lcc_synth.simulation.scenario import metrics_from, scenario_from
 
 __all__ = [
     "SUITE_METRICS",
@@ -325,7 +325,7 @@ def prepare_controllers(
     """Controller tables of one layout, ``h2`` entries replaced by their synthesised gains.
 
     Returns ``(tables, designs)``: ``{name: table}`` with only the types of
-    :data:`lcc_synth.controllers.CONTROLLER_TYPES`, and ``{name: SynthesisReport}``.
+    :data:`lcc_synth.controllers.static.CONTROLLER_TYPES`, and ``{name: SynthesisReport}``.
     """
     tables: dict[str, dict[str, Any]] = {}
     designs: dict[str, Any] = {}
@@ -345,7 +345,7 @@ def prepare_controllers(
 def build_controllers(
     tables: Mapping[str, Mapping[str, Any]], system: System, source: str | None = None
 ) -> dict[str, Controller]:
-    """:func:`lcc_synth.controllers.build_controller` for every table."""
+    """:func:`lcc_synth.controllers.static.build_controller` for every table."""
     return {name: build_controller(name, dict(t), system, source) for name, t in tables.items()}
 
 
@@ -442,7 +442,7 @@ def run_suite(
     """
     import time
 
-    from lcc_synth.simulation import simulate
+    from lcc_synth.simulation.engine import simulate
 
     timings: dict[str, float] = {}
     layouts = suite.layouts_used()
@@ -506,10 +506,10 @@ def gamma_curves(
     empty gain added to the HDV law. MPC (not linear) and layouts without a head vehicle
     (``fd_lcc``) give no curve. Returns ``{name: (magnitude, StringStabilityReport)}``.
     """
-    from lcc_synth.controllers import HDVController, StaticGainController
-    from lcc_synth.feedback import StaticGains, input_feedback
-    from lcc_synth.string_stability import string_stability
-    from lcc_synth.transfer import gamma_state_space
+    from lcc_synth.analysis.string_stability import string_stability
+    from lcc_synth.analysis.transfer import gamma_state_space
+    from lcc_synth.controllers.static import HDVController, StaticGainController
+    from lcc_synth.models.feedback import StaticGains, input_feedback
 
     if system.kind == "fd_lcc":
         return {}

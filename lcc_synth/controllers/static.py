@@ -18,7 +18,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from lcc_synth.hdv import CarFollowingModel
+from lcc_synth.models.hdv import CarFollowingModel
 
 __all__ = [
     "ControlContext",
@@ -262,10 +262,10 @@ class StaticGainController(_LinearController):
     Parameters
     ----------
     name : str
-    gains : lcc_synth.feedback.StaticGains
+    gains : lcc_synth.models.feedback.StaticGains
         Gains keyed by state name and their semantics (``added`` keeps the CAV's nonlinear
         HDV law towards the vehicle ahead and adds the gains; ``replace`` uses them alone).
-    model : lcc_synth.models.LCCModel
+    model : lcc_synth.models.linear.LCCModel
         The linear model the gains are written for (checked: every name must be a state).
     sample_time : float, optional
         Controller period (s); default every simulation step.
@@ -405,8 +405,8 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
     from pathlib import Path
 
     from lcc_synth.errors import ConfigError
-    from lcc_synth.feedback import SEMANTICS, StaticGains
-    from lcc_synth.models import KINDS, model_from_hdv
+    from lcc_synth.models.feedback import SEMANTICS, StaticGains
+    from lcc_synth.models.linear import KINDS, model_from_hdv
     from lcc_synth.problem import check_keys, get_number, get_str, get_table
 
     field = f"controllers.{name}"

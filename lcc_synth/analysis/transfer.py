@@ -22,7 +22,7 @@ Closed-loop eigenvalues (:func:`closed_loop_eigenvalues`) are computed per stron
 block of ``A_cl`` (a permutation to block-triangular form, exact): HDVs that the CAV does not
 feed back form their own 2x2 blocks, so their eigenvalues are exact instead of being scattered
 by a long Jordan chain. The string-stability verdict built on these is in
-:mod:`lcc_synth.string_stability`.
+:mod:`lcc_synth.analysis.string_stability`.
 """
 
 from __future__ import annotations
@@ -34,9 +34,9 @@ import scipy.linalg as sla
 from scipy.sparse.csgraph import connected_components
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.feedback import closed_loop, hdv_law
-from lcc_synth.hdv import LinearCoefficients
-from lcc_synth.models import LCCModel
+from lcc_synth.models.feedback import closed_loop, hdv_law
+from lcc_synth.models.hdv import LinearCoefficients
+from lcc_synth.models.linear import LCCModel
 
 __all__ = [
     "phi_gamma",

@@ -26,7 +26,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.hdv import CarFollowingModel, LinearCoefficients, linear_coefficients
+from lcc_synth.models.hdv import CarFollowingModel, LinearCoefficients, linear_coefficients
 
 __all__ = [
     "KINDS",

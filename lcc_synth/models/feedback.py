@@ -13,7 +13,7 @@ Two semantics, both used by the paper:
              (e.g. FD-LCC ``u = -0.5 v0 - 0.2 s1 + 0.05 v1 - 0.1 s2 + 0.05 v2``).
 
 All functions express the CAV's command as ``u_cav = K x + kh v_h`` on an
-:class:`~lcc_synth.models.LCCModel`'s state ``x``; ``kh`` is non-zero only when the HDV law
+:class:`~lcc_synth.models.linear.LCCModel`'s state ``x``; ``kh`` is non-zero only when the HDV law
 needs the head velocity (no HDV ahead). Sign convention: ``u = +K x`` (no minus sign).
 """
 
@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.models import LCCModel
+from lcc_synth.models.linear import LCCModel
 
 __all__ = ["SEMANTICS", "StaticGains", "hdv_law", "cav_feedback", "input_feedback", "closed_loop"]
 

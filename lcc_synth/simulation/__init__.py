@@ -1,0 +1,3 @@
+"""The nonlinear simulator: ``simulate`` (:mod:`.engine`), its compiled loops (:mod:`.kernels`),
+perturbations (:mod:`.perturbations`), the scenario and its problem-file table
+(:mod:`.scenario`) and the recorded result (:mod:`.results`)."""
