@@ -35,7 +35,7 @@ def parse_weights(text: str | None) -> dict[str, float]:
 
 
 def main() -> None:
-    from lcc_synth.controllers.static import build_controller
+    from lcc_synth.controllers.registry import build_controller
     from lcc_synth.metrics import summary
     from lcc_synth.problem import load_problem
     from lcc_synth.simulation.engine import simulate

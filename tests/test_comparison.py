@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from lcc_synth.cli.main import main
-from lcc_synth.controllers.static import build_controller
+from lcc_synth.controllers.registry import build_controller
 from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.comparison import (
     SUITE_METRICS,

@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 
 from lcc_synth.cli.main import main
-from lcc_synth.controllers.static import StaticGainController, build_controller
+from lcc_synth.controllers.registry import build_controller
+from lcc_synth.controllers.static import StaticGainController
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains
 from lcc_synth.models.hdv import IDM, OVM

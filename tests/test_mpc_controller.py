@@ -8,7 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from lcc_synth.controllers.static import ControlContext, Observation, build_controller
+from lcc_synth.controllers.base import ControlContext, Observation
+from lcc_synth.controllers.registry import build_controller
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains, cav_feedback
 from lcc_synth.models.hdv import OVM

@@ -8,13 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lcc_synth.controllers.static import (
-    ControlContext,
-    HDVController,
-    Observation,
-    StaticGainController,
-    build_controller,
-)
+from lcc_synth.controllers.base import ControlContext, Observation
+from lcc_synth.controllers.registry import build_controller
+from lcc_synth.controllers.static import HDVController, StaticGainController
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import OVM
 from lcc_synth.problem import load_problem, system_from

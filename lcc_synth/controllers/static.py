@@ -1,12 +1,7 @@
-"""The controller interface shared by every CAV controller of the framework.
+"""Controllers with a fixed linear law: the CAV driving as an HDV, and static gains (eq. 23).
 
-The simulator calls a controller with what the CAV can observe and applies the returned
-acceleration command (then clips it to the acceleration limits and applies emergency braking).
-All arrays carry a leading batch axis: one row per scenario advanced together.
-
-Vehicle order everywhere: index 0 is the head vehicle, ``1..m`` the HDVs ahead of the CAV,
-``m + 1`` the CAV, ``m + 2 .. m + n + 1`` the HDVs behind (front of the string to the tail).
-The paper's vehicle index ``i`` (-m..n) is array column ``i + m + 1``.
+The simulator evaluates their :class:`LinearLaw` inside its compiled loop (no Python call per
+step); ``__call__`` evaluates the same law for any other caller.
 """
 
 from __future__ import annotations
@@ -14,126 +9,17 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, replace
-from typing import Any, Protocol, runtime_checkable
+from typing import Any
 
 import numpy as np
 
-from lcc_synth.models.hdv import CarFollowingModel
+from lcc_synth.controllers.base import ControlContext, Observation
+from lcc_synth.errors import ConfigError
 
-__all__ = [
-    "ControlContext",
-    "Observation",
-    "Controller",
-    "LinearLaw",
-    "HDVController",
-    "StaticGainController",
-    "CONTROLLER_TYPES",
-    "EQUILIBRIA",
-    "build_controller",
-]
+__all__ = ["LinearLaw", "HDVController", "StaticGainController", "EQUILIBRIA"]
 
-
-@dataclass(frozen=True)
-class ControlContext:
-    """What a controller learns once, when a run starts.
-
-    Attributes
-    ----------
-    m, n : int
-        HDVs ahead of and behind the CAV.
-    batch : int
-        Number of scenarios advanced together.
-    dt : float
-        Simulation step (s).
-    v_star, s_star : numpy.ndarray
-        ``(batch,)`` nominal equilibrium velocity and spacing used to form errors.
-    a_min, a_max : float
-        Acceleration limits (m/s^2) the simulator enforces.
-    hdv : CarFollowingModel
-        The nominal HDV model (the CAV's own "HDV law" for the ``added`` semantics).
-    s_ref : numpy.ndarray, optional
-        ``(batch, n_vehicles)`` spacing reference of each vehicle for its spacing error
-        (e.g. each heterogeneous HDV's own equilibrium spacing at ``v*``); ``None`` means
-        ``s_star`` for every vehicle. See :meth:`spacing_reference`.
-    """
-
-    m: int
-    n: int
-    batch: int
-    dt: float
-    v_star: np.ndarray
-    s_star: np.ndarray
-    a_min: float
-    a_max: float
-    hdv: CarFollowingModel
-    s_ref: np.ndarray | None = None
-
-    def spacing_reference(self) -> np.ndarray:
-        """``(batch, n_vehicles)`` reference of every spacing error (``s_ref`` or ``s_star``)."""
-        if self.s_ref is not None:
-            return self.s_ref
-        return np.repeat(np.asarray(self.s_star, dtype=float)[:, None], self.n_vehicles, axis=1)
-
-    @property
-    def cav(self) -> int:
-        """Array column of the CAV."""
-        return self.m + 1
-
-    @property
-    def n_vehicles(self) -> int:
-        """Vehicles in the string, head included."""
-        return self.m + self.n + 2
-
-
-@dataclass(frozen=True)
-class Observation:
-    """What the CAV knows at time ``t`` (after V2V loss, latency and noise).
-
-    Attributes
-    ----------
-    t : float
-        Simulated time (s).
-    spacing, velocity : numpy.ndarray
-        ``(batch, n_vehicles)``; the CAV's own entries are exact, the others are the last
-        values received. ``spacing[:, 0]`` (head vehicle) is NaN.
-    position : numpy.ndarray
-        ``(batch, n_vehicles)`` positions as received (used by FD-LCC's ``-p_0`` state).
-    """
-
-    t: float
-    spacing: np.ndarray
-    velocity: np.ndarray
-    position: np.ndarray
-
-
-@runtime_checkable
-class Controller(Protocol):
-    """A CAV controller.
-
-    ``sample_time`` is the controller's period (s); ``None`` means every simulation step.
-    Between samples the simulator holds the last command (zero-order hold). A controller never
-    raises inside the loop: it reports trouble through :meth:`stats` (e.g. MPC fallbacks).
-    """
-
-    name: str
-    sample_time: float | None
-
-    def reset(self, ctx: ControlContext) -> None:
-        """Prepare for a run (allocate state for ``ctx.batch`` scenarios)."""
-
-    def __call__(self, obs: Observation) -> np.ndarray:
-        """Commanded CAV acceleration, shape ``(batch,)``."""
-
-    def describe(self) -> dict[str, Any]:
-        """Gains, weights, solver settings: JSON-serialisable, for reports and recordings."""
-
-    def stats(self) -> dict[str, Any]:
-        """Run statistics (fallbacks, solve times...); ``{}`` when there is nothing to say."""
-
-
-# --------------------------------------------------------------------------------------------
-# Controllers with a fixed linear law (simulator helper): the CAV as an HDV, static gains
-# --------------------------------------------------------------------------------------------
+#: Equilibrium options of the static-gain controllers (see :class:`StaticGainController`).
+EQUILIBRIA = ("fixed", "estimated")
 
 
 @dataclass(frozen=True)
@@ -298,8 +184,6 @@ class StaticGainController(_LinearController):
         equilibrium: str = "fixed",
         equilibrium_tau: float | None = None,
     ):
-        from lcc_synth.errors import ConfigError
-
         gains.check(model)
         if equilibrium not in EQUILIBRIA:
             raise ConfigError(
@@ -332,8 +216,6 @@ class StaticGainController(_LinearController):
         self.equilibrium_tau = equilibrium_tau
 
     def _law(self, ctx: ControlContext) -> LinearLaw:
-        from lcc_synth.errors import ConfigError
-
         if (ctx.m, ctx.n) != (self.model.m, self.model.n):
             raise ConfigError(
                 f"controllers.{self.name}",
@@ -363,125 +245,3 @@ class StaticGainController(_LinearController):
         if self.equilibrium == "estimated":
             out["equilibrium_tau"] = self.equilibrium_tau
         return out
-
-
-# --------------------------------------------------------------------------------------------
-# Problem-file factory (contract 4)
-# --------------------------------------------------------------------------------------------
-
-CONTROLLER_TYPES = ("hdv", "static", "gains_file", "mpc")
-
-#: Equilibrium options of the static-gain controllers (see :class:`StaticGainController`).
-EQUILIBRIA = ("fixed", "estimated")
-
-
-_EQ_KEYS = ("equilibrium", "equilibrium_tau")
-
-
-def _sample_time(table, field: str) -> float | None:
-    from lcc_synth.problem import get_number
-
-    if "sample_time" not in table:
-        return None
-    return get_number(table, "sample_time", field, lo=0.0, lo_open=True)
-
-
-def build_controller(name: str, table, system, source: str | None = None) -> Controller:
-    """Build the controller of a ``[controllers.NAME]`` table.
-
-    Parameters
-    ----------
-    name : str
-        The controller's name (the table key).
-    table : mapping
-        ``type = "hdv" | "static" | "gains_file" | "mpc"`` and the type's keys (see
-        ``problems/README.md``). ``gains_file`` paths are relative to ``source``'s folder.
-    system : lcc_synth.problem.System
-        The problem's ``[hdv]`` + ``[system]``.
-    source : str, optional
-        The problem file (for error messages and relative paths).
-    """
-    import json
-    from pathlib import Path
-
-    from lcc_synth.errors import ConfigError
-    from lcc_synth.models.feedback import SEMANTICS, StaticGains
-    from lcc_synth.models.linear import KINDS, model_from_hdv
-    from lcc_synth.problem import check_keys, get_number, get_str, get_table
-
-    field = f"controllers.{name}"
-    try:
-        if not isinstance(table, dict):
-            raise ConfigError(field, f"must be a table, got {table!r}")
-        ctype = get_str(table, "type", field, choices=CONTROLLER_TYPES)
-        if ctype == "mpc":
-            try:
-                from lcc_synth.mpc import mpc_controller_from_table
-            except ImportError as err:
-                raise ConfigError(
-                    f"{field}.type", f"'mpc' controllers need lcc_synth.mpc, which failed: {err}"
-                ) from None
-            return mpc_controller_from_table(name, table, system, source=source)
-        if ctype == "hdv":
-            check_keys(table, ["type", "sample_time"], field)
-            return HDVController(name, _sample_time(table, field))
-        if ctype == "static":
-            check_keys(table, ["type", "kind", "semantics", "gains", "sample_time", *_EQ_KEYS],
-                       field)  # fmt: skip
-            kind = get_str(table, "kind", field, system.kind, choices=KINDS)
-            semantics = get_str(table, "semantics", field, "added", choices=SEMANTICS)
-            raw = get_table(table, "gains", f"{field}.gains", required=True)
-            where = field
-        else:
-            check_keys(table, ["type", "file", "sample_time", *_EQ_KEYS], field)
-            rel = get_str(table, "file", field)
-            path = Path(rel)
-            if not path.is_absolute() and source:
-                path = Path(source).parent / path
-            if not path.is_file():
-                raise ConfigError(f"{field}.file", f"no such gains file: {path}")
-            try:
-                data = json.loads(path.read_text())
-            except json.JSONDecodeError as err:
-                raise ConfigError(f"{field}.file", f"{path} is not valid JSON: {err}") from None
-            for key in ("kind", "m", "n", "semantics", "gains"):
-                if key not in data:
-                    raise ConfigError(f"{field}.file", f"{path} lacks the key {key!r}")
-            kind = data["kind"]
-            if kind not in KINDS:
-                raise ConfigError(f"{field}.file", f"{path}: kind must be one of {KINDS}")
-            if (data["m"], data["n"]) != (system.m, system.n):
-                raise ConfigError(
-                    f"{field}.file",
-                    f"{path} holds gains for m={data['m']}, n={data['n']}; the problem has "
-                    f"m={system.m}, n={system.n}",
-                )
-            semantics = data["semantics"]
-            raw = data["gains"]
-            if not isinstance(raw, dict):
-                raise ConfigError(f"{field}.file", f"{path}: gains must be an object")
-            where = f"{field}.file"
-        sample_time = _sample_time(table, field)
-        equilibrium = get_str(table, "equilibrium", field, "fixed", choices=EQUILIBRIA)
-        tau = None
-        if "equilibrium_tau" in table:
-            if equilibrium != "estimated":
-                raise ConfigError(
-                    f"{field}.equilibrium_tau", 'only applies with equilibrium = "estimated"'
-                )
-            tau = get_number(table, "equilibrium_tau", field, lo=0.0, lo_open=True)
-        if equilibrium == "estimated" and kind == "fd_lcc":
-            raise ConfigError(
-                f"{field}.equilibrium",
-                'must be "fixed" for fd_lcc: FD-LCC has no vehicle ahead of the CAV to '
-                "estimate the equilibrium velocity from",
-            )
-        try:
-            gains = StaticGains(raw, semantics)
-            model = model_from_hdv(kind, system.m, system.n, system.hdv, system.v_star, warn=False)
-            ctrl = StaticGainController(name, gains, model, sample_time, equilibrium, tau)
-        except ConfigError as err:
-            raise ConfigError(f"{where}.{err.field}", f"{err.message} (kind {kind!r})") from None
-        return ctrl
-    except ConfigError as err:
-        raise err.with_source(source) if source and not err.source else err from None

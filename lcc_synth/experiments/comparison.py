@@ -32,7 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from lcc_synth.controllers.static import CONTROLLER_TYPES, Controller, build_controller
+from lcc_synth.controllers.base import Controller
+from lcc_synth.controllers.registry import CONTROLLER_TYPES, build_controller
 from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import MetricsConfig
 from lcc_synth.problem import (
@@ -325,7 +326,7 @@ def prepare_controllers(
     """Controller tables of one layout, ``h2`` entries replaced by their synthesised gains.
 
     Returns ``(tables, designs)``: ``{name: table}`` with only the types of
-    :data:`lcc_synth.controllers.static.CONTROLLER_TYPES`, and ``{name: SynthesisReport}``.
+    :data:`lcc_synth.controllers.registry.CONTROLLER_TYPES`, and ``{name: SynthesisReport}``.
     """
     tables: dict[str, dict[str, Any]] = {}
     designs: dict[str, Any] = {}
@@ -345,7 +346,7 @@ def prepare_controllers(
 def build_controllers(
     tables: Mapping[str, Mapping[str, Any]], system: System, source: str | None = None
 ) -> dict[str, Controller]:
-    """:func:`lcc_synth.controllers.static.build_controller` for every table."""
+    """:func:`lcc_synth.controllers.registry.build_controller` for every table."""
     return {name: build_controller(name, dict(t), system, source) for name, t in tables.items()}
 
 

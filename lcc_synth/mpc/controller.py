@@ -1,4 +1,4 @@
-"""The LCC model predictive controller (a controller of :mod:`lcc_synth.controllers.static`).
+"""The LCC model predictive controller (a controller of :mod:`lcc_synth.controllers.base`).
 
 At every sample (``sample_time``, default 0.1 s; the simulator holds the command in between):
 
@@ -49,7 +49,7 @@ from typing import Any
 
 import numpy as np
 
-from lcc_synth.controllers.static import ControlContext, Observation
+from lcc_synth.controllers.base import ControlContext, Observation
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains, cav_feedback
 from lcc_synth.mpc.formulation import (

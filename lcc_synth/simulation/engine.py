@@ -52,7 +52,7 @@ from typing import Any
 import numba
 import numpy as np
 
-from lcc_synth.controllers.static import ControlContext, Controller, Observation
+from lcc_synth.controllers.base import ControlContext, Controller, Observation
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import IDM, OVM
 from lcc_synth.simulation.perturbations import Perturbation, overrides

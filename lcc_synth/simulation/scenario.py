@@ -9,7 +9,8 @@ from typing import Any
 
 import numpy as np
 
-from lcc_synth.controllers.static import Controller, build_controller
+from lcc_synth.controllers.base import Controller
+from lcc_synth.controllers.registry import build_controller
 from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import VEHICLE_SETS, MetricsConfig
 from lcc_synth.problem import (

@@ -1,0 +1,124 @@
+"""``build_controller``: the controller of a ``[controllers.NAME]`` problem table (contract 4).
+
+``type = "hdv"`` and ``"static"`` build the controllers of :mod:`lcc_synth.controllers.static`,
+``"gains_file"`` a static-gain controller from a gains file written by ``lcc-synth synthesize``,
+``"mpc"`` the controller of :mod:`lcc_synth.mpc` (imported only then).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from lcc_synth.controllers.base import Controller
+from lcc_synth.controllers.static import EQUILIBRIA, HDVController, StaticGainController
+from lcc_synth.errors import ConfigError
+from lcc_synth.models.feedback import SEMANTICS, StaticGains
+from lcc_synth.models.linear import KINDS, model_from_hdv
+from lcc_synth.problem import check_keys, get_number, get_str, get_table
+
+__all__ = ["CONTROLLER_TYPES", "build_controller"]
+
+CONTROLLER_TYPES = ("hdv", "static", "gains_file", "mpc")
+
+
+_EQ_KEYS = ("equilibrium", "equilibrium_tau")
+
+
+def _sample_time(table, field: str) -> float | None:
+    if "sample_time" not in table:
+        return None
+    return get_number(table, "sample_time", field, lo=0.0, lo_open=True)
+
+
+def build_controller(name: str, table, system, source: str | None = None) -> Controller:
+    """Build the controller of a ``[controllers.NAME]`` table.
+
+    Parameters
+    ----------
+    name : str
+        The controller's name (the table key).
+    table : mapping
+        ``type = "hdv" | "static" | "gains_file" | "mpc"`` and the type's keys (see
+        ``problems/README.md``). ``gains_file`` paths are relative to ``source``'s folder.
+    system : lcc_synth.problem.System
+        The problem's ``[hdv]`` + ``[system]``.
+    source : str, optional
+        The problem file (for error messages and relative paths).
+    """
+    field = f"controllers.{name}"
+    try:
+        if not isinstance(table, dict):
+            raise ConfigError(field, f"must be a table, got {table!r}")
+        ctype = get_str(table, "type", field, choices=CONTROLLER_TYPES)
+        if ctype == "mpc":
+            try:
+                from lcc_synth.mpc import mpc_controller_from_table
+            except ImportError as err:
+                raise ConfigError(
+                    f"{field}.type", f"'mpc' controllers need lcc_synth.mpc, which failed: {err}"
+                ) from None
+            return mpc_controller_from_table(name, table, system, source=source)
+        if ctype == "hdv":
+            check_keys(table, ["type", "sample_time"], field)
+            return HDVController(name, _sample_time(table, field))
+        if ctype == "static":
+            check_keys(table, ["type", "kind", "semantics", "gains", "sample_time", *_EQ_KEYS],
+                       field)  # fmt: skip
+            kind = get_str(table, "kind", field, system.kind, choices=KINDS)
+            semantics = get_str(table, "semantics", field, "added", choices=SEMANTICS)
+            raw = get_table(table, "gains", f"{field}.gains", required=True)
+            where = field
+        else:
+            check_keys(table, ["type", "file", "sample_time", *_EQ_KEYS], field)
+            rel = get_str(table, "file", field)
+            path = Path(rel)
+            if not path.is_absolute() and source:
+                path = Path(source).parent / path
+            if not path.is_file():
+                raise ConfigError(f"{field}.file", f"no such gains file: {path}")
+            try:
+                data = json.loads(path.read_text())
+            except json.JSONDecodeError as err:
+                raise ConfigError(f"{field}.file", f"{path} is not valid JSON: {err}") from None
+            for key in ("kind", "m", "n", "semantics", "gains"):
+                if key not in data:
+                    raise ConfigError(f"{field}.file", f"{path} lacks the key {key!r}")
+            kind = data["kind"]
+            if kind not in KINDS:
+                raise ConfigError(f"{field}.file", f"{path}: kind must be one of {KINDS}")
+            if (data["m"], data["n"]) != (system.m, system.n):
+                raise ConfigError(
+                    f"{field}.file",
+                    f"{path} holds gains for m={data['m']}, n={data['n']}; the problem has "
+                    f"m={system.m}, n={system.n}",
+                )
+            semantics = data["semantics"]
+            raw = data["gains"]
+            if not isinstance(raw, dict):
+                raise ConfigError(f"{field}.file", f"{path}: gains must be an object")
+            where = f"{field}.file"
+        sample_time = _sample_time(table, field)
+        equilibrium = get_str(table, "equilibrium", field, "fixed", choices=EQUILIBRIA)
+        tau = None
+        if "equilibrium_tau" in table:
+            if equilibrium != "estimated":
+                raise ConfigError(
+                    f"{field}.equilibrium_tau", 'only applies with equilibrium = "estimated"'
+                )
+            tau = get_number(table, "equilibrium_tau", field, lo=0.0, lo_open=True)
+        if equilibrium == "estimated" and kind == "fd_lcc":
+            raise ConfigError(
+                f"{field}.equilibrium",
+                'must be "fixed" for fd_lcc: FD-LCC has no vehicle ahead of the CAV to '
+                "estimate the equilibrium velocity from",
+            )
+        try:
+            gains = StaticGains(raw, semantics)
+            model = model_from_hdv(kind, system.m, system.n, system.hdv, system.v_star, warn=False)
+            ctrl = StaticGainController(name, gains, model, sample_time, equilibrium, tau)
+        except ConfigError as err:
+            raise ConfigError(f"{where}.{err.field}", f"{err.message} (kind {kind!r})") from None
+        return ctrl
+    except ConfigError as err:
+        raise err.with_source(source) if source and not err.source else err from None
