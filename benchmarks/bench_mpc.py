@@ -42,13 +42,13 @@ def main() -> None:
 
     import casadi as ca
 
+    from lcc_synth.experiments.spec import load_spec
     from lcc_synth.mpc import mpc_controller_from_table
     from lcc_synth.mpc import solver as mpc_solver
     from lcc_synth.mpc.formulation import Formulation
     from lcc_synth.mpc.solver import OSQPSolver, solve_rebuild
     from lcc_synth.problem import load_problem
     from lcc_synth.simulation.engine import simulate
-    from lcc_synth.simulation.scenario import load_spec
 
     spec = load_spec(args.problem)
     table = load_problem(args.problem).data["controllers"]["mpc"]

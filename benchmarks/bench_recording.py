@@ -29,9 +29,9 @@ def main() -> None:
     ap.add_argument("--every", type=int, nargs="*", default=[1, 2, 5, 10])
     args = ap.parse_args()
 
+    from lcc_synth.experiments.spec import load_spec
     from lcc_synth.metrics import summary
     from lcc_synth.simulation.engine import simulate_many
-    from lcc_synth.simulation.scenario import load_spec
 
     spec = load_spec(args.problem)
     simulate_many(spec.scenario, spec.controllers)  # warm-up (numba)

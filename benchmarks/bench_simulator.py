@@ -15,9 +15,9 @@ from pathlib import Path
 import numba
 
 from lcc_synth.controllers.static import HDVController
+from lcc_synth.experiments.spec import load_spec
 from lcc_synth.metrics import summary
 from lcc_synth.simulation.engine import simulate
-from lcc_synth.simulation.scenario import load_spec
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -13,10 +13,10 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from lcc_synth.experiments.spec import load_spec
 from lcc_synth.figures import plot_case_grid
 from lcc_synth.metrics import max_abs_velocity_error
 from lcc_synth.simulation.engine import simulate_many
-from lcc_synth.simulation.scenario import load_spec
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 

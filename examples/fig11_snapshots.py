@@ -13,9 +13,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lcc_synth.experiments.spec import load_spec
 from lcc_synth.figures import plot_snapshots
 from lcc_synth.simulation.engine import simulate_many
-from lcc_synth.simulation.scenario import load_spec
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 TIMES = (20.5, 22.0, 25.0, 28.0, 32.0)

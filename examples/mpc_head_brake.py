@@ -15,10 +15,10 @@ import argparse
 from pathlib import Path
 
 from lcc_synth.cli.simulate import report
+from lcc_synth.experiments.spec import load_spec
 from lcc_synth.figures import plot_mpc_predictions, plot_profiles
 from lcc_synth.mpc.report import safety_summary
 from lcc_synth.simulation.engine import simulate_many
-from lcc_synth.simulation.scenario import load_spec
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 

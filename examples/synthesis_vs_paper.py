@@ -36,10 +36,10 @@ def parse_weights(text: str | None) -> dict[str, float]:
 
 def main() -> None:
     from lcc_synth.controllers.registry import build_controller
+    from lcc_synth.experiments.spec import load_spec
     from lcc_synth.metrics import summary
     from lcc_synth.problem import load_problem
     from lcc_synth.simulation.engine import simulate
-    from lcc_synth.simulation.scenario import load_spec
     from lcc_synth.synthesis.config import spec_from_problem
     from lcc_synth.synthesis.design import synthesize
     from lcc_synth.synthesis.gains_file import write_gains

@@ -14,9 +14,9 @@ import argparse
 from pathlib import Path
 
 from lcc_synth.cli.simulate import report
+from lcc_synth.experiments.spec import load_spec
 from lcc_synth.figures import plot_metric_bars
 from lcc_synth.simulation.engine import simulate_many
-from lcc_synth.simulation.scenario import load_spec
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 PAPER = {"all_hdv": (0.89, 392.86), "fd_lcc": (0.58, 321.94), "cf_lcc": (0.81, 340.56)}

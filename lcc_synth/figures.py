@@ -129,7 +129,7 @@ def plot_profiles(results, path: str | Path, title: str | None = None, run: int 
 
     Parameters
     ----------
-    results : mapping of str to lcc_synth.simulation.engine.SimResult
+    results : mapping of str to lcc_synth.simulation.results.SimResult
         ``{controller: result}`` of one scenario (same layout for all).
     path : str or Path
         Output PNG.
@@ -260,7 +260,7 @@ def plot_case_grid(
 
     Parameters
     ----------
-    results : mapping of str to lcc_synth.simulation.engine.SimResult
+    results : mapping of str to lcc_synth.simulation.results.SimResult
     path : str or Path
     quantity : {"velocity", "spacing"}
     xlim : (float, float)
@@ -317,7 +317,7 @@ def plot_snapshots(
 
     Parameters
     ----------
-    baseline, lcc : lcc_synth.simulation.engine.SimResult
+    baseline, lcc : lcc_synth.simulation.results.SimResult
         Two runs of the same scenario.
     times : sequence of float
         Moments to draw (s); the nearest recorded sample is used.
@@ -467,7 +467,7 @@ def plot_mpc_predictions(
 
     Parameters
     ----------
-    result : lcc_synth.simulation.engine.SimResult
+    result : lcc_synth.simulation.results.SimResult
         The MPC's run.
     history : dict
         ``MPCController.history()`` of that run.

@@ -1,6 +1,6 @@
 """Performance and safety metrics of simulation results (Section V-B and beyond).
 
-Every function takes a :class:`~lcc_synth.simulation.engine.SimResult` and returns one value per
+Every function takes a :class:`~lcc_synth.simulation.results.SimResult` and returns one value per
 scenario of the batch (``(batch,)``) or per scenario and vehicle (``(batch, n_vehicles)``,
 columns head..tail).
 
@@ -15,18 +15,20 @@ Vehicle sets: ``"cav_and_behind"`` (the paper's "sum over i = 0..10": CAV and th
 from __future__ import annotations
 
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from lcc_synth.errors import ConfigError
+from lcc_synth.problem import System, check_keys, get_number_list, get_str, get_table
 from lcc_synth.simulation.perturbations import vehicle_column
 
 __all__ = [
     "VEHICLE_SETS",
     "MetricsConfig",
+    "metrics_from",
     "vehicle_columns",
     "window_mask",
     "bowyer_fuel_rate",
@@ -263,3 +265,24 @@ def summary(result, config: MetricsConfig | None = None) -> dict[str, Any]:
     Per-vehicle lists are ordered head..tail (head spacing is NaN).
     """
     return aggregate(per_scenario(result, config))
+
+
+def metrics_from(data: Mapping[str, Any], system: System, controllers=()) -> MetricsConfig:
+    """The ``[metrics]`` table."""
+    f = "metrics"
+    mt = get_table(data, "metrics", f)
+    check_keys(mt, ["window", "vehicles", "baseline"], f)
+    window = tuple(get_number_list(mt, "window", f, [20.0, 40.0], length=2))
+    vehicles = mt.get("vehicles", "cav_and_behind")
+    if isinstance(vehicles, list):
+        for v in vehicles:
+            vehicle_column(v, system.m, system.n, f"{f}.vehicles")
+        vehicles = tuple(vehicles)
+    elif vehicles not in VEHICLE_SETS:
+        raise ConfigError(
+            f"{f}.vehicles", f"must be one of {list(VEHICLE_SETS)} or a list of vehicle indices"
+        )
+    baseline = get_str(mt, "baseline", f, None)
+    if baseline is not None and controllers and baseline not in controllers:
+        raise ConfigError(f"{f}.baseline", f"must name a controller, one of {list(controllers)}")
+    return MetricsConfig(window, vehicles, baseline)

@@ -21,8 +21,9 @@ from lcc_synth import recording as R  # noqa: E402
 from lcc_synth.cli import review  # noqa: E402
 from lcc_synth.cli.main import main  # noqa: E402
 from lcc_synth.controllers.static import HDVController  # noqa: E402
-from lcc_synth.simulation.engine import Scenario, simulate  # noqa: E402
+from lcc_synth.simulation.engine import simulate  # noqa: E402
 from lcc_synth.simulation.perturbations import Brake  # noqa: E402
+from lcc_synth.simulation.scenario import Scenario  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -21,13 +21,14 @@ from lcc_synth.cli.main import main
 from lcc_synth.controllers.registry import build_controller
 from lcc_synth.controllers.static import StaticGainController
 from lcc_synth.errors import ConfigError
+from lcc_synth.experiments.spec import load_spec
 from lcc_synth.models.feedback import StaticGains
 from lcc_synth.models.hdv import IDM, OVM
 from lcc_synth.models.linear import model_from_hdv
 from lcc_synth.problem import System, load_problem
-from lcc_synth.simulation.engine import Scenario, simulate
+from lcc_synth.simulation.engine import simulate
 from lcc_synth.simulation.perturbations import Profile
-from lcc_synth.simulation.scenario import load_spec
+from lcc_synth.simulation.scenario import Scenario
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 PAPER_CF = {"s_0": 0.1, "v_0": -0.5, "s_1": -0.2, "v_1": 0.05, "s_2": -0.1, "v_2": 0.05}

@@ -22,7 +22,7 @@ from lcc_synth.metrics import (
     vehicle_columns,
     window_mask,
 )
-from lcc_synth.simulation.engine import SimResult
+from lcc_synth.simulation.results import SimResult
 
 
 def make_result(v, a=None, s=None, dt=0.5, t0=0.0, m=0, n=2, u=None, aeb=None, v_star=15.0):

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from lcc_synth.experiments.spec import load_spec
 from lcc_synth.metrics import summary
 from lcc_synth.mpc.report import bound_margin, safety_summary
 from lcc_synth.simulation.engine import simulate
-from lcc_synth.simulation.scenario import load_spec
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 

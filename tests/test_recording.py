@@ -22,8 +22,9 @@ from lcc_synth.metrics import summary as metrics_summary  # noqa: E402
 from lcc_synth.models.feedback import StaticGains  # noqa: E402
 from lcc_synth.models.hdv import OVM  # noqa: E402
 from lcc_synth.models.linear import model_from_hdv  # noqa: E402
-from lcc_synth.simulation.engine import Scenario, simulate  # noqa: E402
+from lcc_synth.simulation.engine import simulate  # noqa: E402
 from lcc_synth.simulation.perturbations import Brake  # noqa: E402
+from lcc_synth.simulation.scenario import Scenario  # noqa: E402
 
 M, N = 1, 3  # one HDV ahead, three behind: every kind of vehicle column
 

@@ -12,11 +12,11 @@ from lcc_synth.controllers.base import ControlContext, Observation
 from lcc_synth.controllers.registry import build_controller
 from lcc_synth.controllers.static import HDVController, StaticGainController
 from lcc_synth.errors import ConfigError
+from lcc_synth.experiments.spec import load_spec
 from lcc_synth.models.hdv import OVM
 from lcc_synth.problem import load_problem, system_from
-from lcc_synth.simulation.engine import V2V, Scenario
 from lcc_synth.simulation.perturbations import Brake, BrakeProfile, Profile, Sine, overrides
-from lcc_synth.simulation.scenario import load_spec
+from lcc_synth.simulation.scenario import V2V, Scenario
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 

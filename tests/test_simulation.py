@@ -11,13 +11,15 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from lcc_synth.controllers.static import HDVController, StaticGainController
+from lcc_synth.experiments.spec import load_spec
 from lcc_synth.metrics import aave, fuel, max_abs_velocity_error
 from lcc_synth.models.feedback import StaticGains, cav_feedback, closed_loop
 from lcc_synth.models.hdv import IDM, OVM
 from lcc_synth.models.linear import model_from_hdv
-from lcc_synth.simulation.engine import V2V, Scenario, _hdv_accel, simulate, simulate_many
+from lcc_synth.simulation.engine import simulate, simulate_many
+from lcc_synth.simulation.kernels import _hdv_accel
 from lcc_synth.simulation.perturbations import Brake, BrakeProfile, Profile, Sine
-from lcc_synth.simulation.scenario import load_spec
+from lcc_synth.simulation.scenario import V2V, Scenario
 
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 

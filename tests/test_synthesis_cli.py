@@ -75,9 +75,9 @@ def test_gains_file_runs_in_simulator_and_beats_paper_on_table2(fd_result):
         main(["synthesize", "--no-record", str(PROBLEMS / "synth_fd_lcc_pattern.toml"),
               "--out", str(fd_result)])
     from lcc_synth.controllers.registry import build_controller
+    from lcc_synth.experiments.spec import load_spec
     from lcc_synth.metrics import summary
     from lcc_synth.simulation.engine import simulate
-    from lcc_synth.simulation.scenario import load_spec
 
     sim = load_spec(PROBLEMS / "paper_table2.toml")
     draws = sim.scenario.draw()

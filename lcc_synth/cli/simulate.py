@@ -35,10 +35,10 @@ MEMORY_BUDGET = 1.5e9
 
 
 def load(args):
-    """The :class:`~lcc_synth.simulation.scenario.SimulationSpec` of ``args.problem``
+    """The :class:`~lcc_synth.experiments.spec.SimulationSpec` of ``args.problem``
     (+ ``--seeds``)."""
     from lcc_synth.errors import ConfigError
-    from lcc_synth.simulation.scenario import load_spec
+    from lcc_synth.experiments.spec import load_spec
 
     if args.seeds is not None and args.seeds < 1:
         raise ConfigError("--seeds", f"must be >= 1, got {args.seeds}")

@@ -35,7 +35,7 @@ import numpy as np
 from lcc_synth.controllers.base import Controller
 from lcc_synth.controllers.registry import CONTROLLER_TYPES, build_controller
 from lcc_synth.errors import ConfigError
-from lcc_synth.metrics import MetricsConfig
+from lcc_synth.metrics import MetricsConfig, metrics_from
 from lcc_synth.problem import (
     Problem,
     System,
@@ -45,8 +45,8 @@ from lcc_synth.problem import (
     load_problem,
     system_from,
 )
-from lcc_synth.simulation.engine import Scenario, SimResult
-from lcc_synth.simulation.scenario import metrics_from, scenario_from
+from lcc_synth.simulation.results import SimResult
+from lcc_synth.simulation.scenario import Scenario, scenario_from
 
 __all__ = [
     "SUITE_METRICS",

@@ -10,7 +10,7 @@ Every scenario ``i`` (``0 <= i < count``) draws, from ``(seed, i)`` only, its he
 parameters (``[scenario.heterogeneity]``), its reaction delays (``[scenario.delay]``), and the
 realisations of the HDV acceleration noise (``hdv_accel_noise``) and of the V2V packet losses
 and measurement noise (``[scenario.v2v]``; latency is a fixed setting of the file). This is the
-simulator's own draw (:attr:`lcc_synth.simulation.engine.Scenario.first_index`), so a scenario's
+simulator's own draw (:attr:`lcc_synth.simulation.scenario.Scenario.first_index`), so a scenario's
 result does not depend on how scenarios are grouped into tasks, nor on the worker running it.
 
 Execution
@@ -59,7 +59,7 @@ from lcc_synth.problem import (
     load_problem,
     system_from,
 )
-from lcc_synth.simulation.engine import Scenario
+from lcc_synth.simulation.scenario import Scenario
 
 __all__ = [
     "SWEEP_METRICS",
@@ -133,8 +133,9 @@ def load_sweep(
         A bad table or value, an unknown controller name, counts out of range.
     """
     from lcc_synth.experiments.comparison import SUITE_TYPES, select_names
+    from lcc_synth.metrics import metrics_from
     from lcc_synth.problem import get_str
-    from lcc_synth.simulation.scenario import metrics_from, scenario_from
+    from lcc_synth.simulation.scenario import scenario_from
 
     problem = path if isinstance(path, Problem) else load_problem(path)
     src = str(problem.path)

@@ -73,7 +73,7 @@ def record_simulation(
     ----------
     rec : rerun.RecordingStream
         From :func:`open_recording`.
-    result : lcc_synth.simulation.engine.SimResult
+    result : lcc_synth.simulation.results.SimResult
         Arrays ``(batch, T, n_vehicles)`` etc. (see the simulator's contract).
     scenario : str
         Entity prefix (the problem name).

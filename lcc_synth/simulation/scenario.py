@@ -1,20 +1,23 @@
-"""Problem file -> scenario, controllers and metric settings (format: ``problems/README.md``)."""
+"""What is simulated: the :class:`Scenario` of a batch of runs (string, limits, perturbations,
+heterogeneity, delays, V2V), its random :class:`Draws`, and its problem-file table.
+
+Vehicle columns as in :mod:`lcc_synth.simulation.engine`: 0 the head vehicle, ``1..m`` the HDVs
+ahead, ``m + 1`` the CAV, ``m + 2 .. m + n + 1`` the HDVs behind.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from dataclasses import dataclass, replace
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from lcc_synth.controllers.base import Controller
-from lcc_synth.controllers.registry import build_controller
 from lcc_synth.errors import ConfigError
-from lcc_synth.metrics import VEHICLE_SETS, MetricsConfig
+from lcc_synth.models.hdv import IDM, OVM
 from lcc_synth.problem import (
-    Problem,
     System,
     check_keys,
     get_bool,
@@ -23,13 +26,315 @@ from lcc_synth.problem import (
     get_number_list,
     get_str,
     get_table,
-    load_problem,
-    system_from,
 )
-from lcc_synth.simulation.engine import V2V, Scenario
-from lcc_synth.simulation.perturbations import perturbation_from_table, vehicle_column
+from lcc_synth.simulation.perturbations import Perturbation, perturbation_from_table
 
-__all__ = ["SimulationSpec", "scenario_from", "metrics_from", "controllers_from", "load_spec"]
+__all__ = ["MODEL_PARAMS", "V2V", "Scenario", "Draws", "scenario_from"]
+
+#: Parameter order of each HDV model inside the compiled loop.
+MODEL_PARAMS = {
+    "ovm": ("alpha", "beta", "s_st", "s_go", "v_max"),
+    "idm": ("v0", "T", "s0", "a", "b", "delta"),
+}
+_MODEL_CLASS = {"ovm": OVM, "idm": IDM}
+
+
+def _num(name: str, value, lo=None, hi=None, lo_open=False) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(name, f"must be a number, got {value!r}") from None
+    ok = math.isfinite(x)
+    if ok and lo is not None:
+        ok = x > lo if lo_open else x >= lo
+    if ok and hi is not None:
+        ok = x <= hi
+    if not ok:
+        rng = []
+        if lo is not None:
+            rng.append(f"{'>' if lo_open else '>='} {lo}")
+        if hi is not None:
+            rng.append(f"<= {hi}")
+        raise ConfigError(name, f"must be {' and '.join(rng) or 'finite'}, got {value!r}")
+    return x
+
+
+@dataclass(frozen=True)
+class V2V:
+    """What the CAV receives from the other vehicles.
+
+    Parameters
+    ----------
+    loss_rate : float or sequence of float
+        Packet-loss probability in [0, 1], one for all links or one per vehicle column
+        (head..tail; the CAV's entry is ignored).
+    latency : float
+        Age (s) of every received value, >= 0; rounded to simulation steps.
+    spacing_noise, velocity_noise, position_noise : float
+        Standard deviations of the measurement noise on received values, >= 0.
+    """
+
+    loss_rate: float | Sequence[float] = 0.0
+    latency: float = 0.0
+    spacing_noise: float = 0.0
+    velocity_noise: float = 0.0
+    position_noise: float = 0.0
+
+    def __post_init__(self) -> None:
+        rates = np.atleast_1d(np.asarray(self.loss_rate, dtype=float))
+        if rates.ndim != 1 or not np.all(np.isfinite(rates)) or np.any((rates < 0) | (rates > 1)):
+            raise ConfigError(
+                "scenario.v2v.loss_rate", f"must be in [0, 1], got {self.loss_rate!r}"
+            )
+        _num("scenario.v2v.latency", self.latency, lo=0.0)
+        for key in ("spacing_noise", "velocity_noise", "position_noise"):
+            _num(f"scenario.v2v.{key}", getattr(self, key), lo=0.0)
+
+    def rates(self, nv: int) -> np.ndarray:
+        """Per-column loss rates ``(nv,)``."""
+        rates = np.atleast_1d(np.asarray(self.loss_rate, dtype=float))
+        if rates.size == 1:
+            return np.full(nv, float(rates[0]))
+        if rates.size != nv:
+            raise ConfigError(
+                "scenario.v2v.loss_rate",
+                f"needs 1 or {nv} entries (one per vehicle, head..tail), got {rates.size}",
+            )
+        return rates.copy()
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A mixed-traffic scenario (or a batch of ``batch`` scenarios differing in random draws).
+
+    Parameters
+    ----------
+    m, n : int
+        HDVs ahead of and behind the CAV.
+    hdv : OVM or IDM
+        Nominal HDV model (also the CAV's own HDV law).
+    v_star : float
+        Equilibrium velocity; the initial state is the equilibrium.
+    dt, duration, t_start : float
+        Step, length (``round(duration / dt)`` samples) and time of the first sample.
+    batch : int
+        Number of scenarios advanced together.
+    a_min, a_max : float
+        Acceleration limits of every vehicle.
+    cav_aeb, hdv_aeb : bool
+        Emergency braking (eq. 29) for the CAV / for every HDV.
+    perturbations : sequence
+        Prescribed motions (:mod:`lcc_synth.simulation.perturbations`).
+    hdv_values : mapping, optional
+        Explicit per-vehicle parameters: name -> array broadcastable to ``(batch, nv)``;
+        default the nominal model everywhere.
+    heterogeneity : mapping
+        Parameter -> half width ``w``: every HDV of every scenario adds ``U[-w, w]``.
+    delay : float or array
+        Base reaction delay (s) of the HDVs, broadcastable to ``(batch, nv)``.
+    delay_spread : float
+        Every HDV adds ``U[-delay_spread, delay_spread]`` to its delay.
+    delay_model : {"full", "perception"}
+        ``full``: the whole state the HDV reacts to (spacing, relative speed, own speed) is
+        ``delay`` old; ``perception``: spacing and relative speed are ``delay`` old, the own
+        speed is current.
+    hdv_accel_noise : float
+        Standard deviation of white acceleration noise on every HDV (m/s^2).
+    v2v : V2V
+        Communication model of what the CAV receives.
+    seed : int
+        Base seed; scenario ``b`` of the batch draws from ``[seed, first_index + b]``
+        (independent of the batch size).
+    first_index : int
+        Index of the batch's first scenario in a larger study (Monte Carlo sweeps run it in
+        chunks): scenario ``b`` is study scenario ``first_index + b``, and every random draw
+        (parameters, delays, acceleration noise, V2V loss and noise) depends only on
+        ``(seed, first_index + b)``.
+    record_every : int
+        Keep every k-th sample in the result.
+    spacing_reference : {"nominal", "own_equilibrium"}
+        Reference of the spacing errors the controllers see: the nominal ``s*`` for every
+        vehicle, or each HDV's own equilibrium spacing at ``v*`` (the heterogeneous
+        linearisation, eq. 8 around each vehicle's equilibrium). Same thing when homogeneous.
+    """
+
+    m: int
+    n: int
+    hdv: OVM | IDM = field(default_factory=OVM)
+    v_star: float = 15.0
+    dt: float = 0.01
+    duration: float = 100.0
+    t_start: float = 0.0
+    batch: int = 1
+    a_min: float = -5.0
+    a_max: float = 2.0
+    cav_aeb: bool = True
+    hdv_aeb: bool = False
+    perturbations: tuple[Perturbation, ...] = ()
+    hdv_values: Mapping[str, Any] | None = None
+    heterogeneity: Mapping[str, float] = field(default_factory=dict)
+    delay: Any = 0.0
+    delay_spread: float = 0.0
+    delay_model: str = "full"
+    hdv_accel_noise: float = 0.0
+    v2v: V2V = field(default_factory=V2V)
+    seed: int = 0
+    first_index: int = 0
+    record_every: int = 1
+    spacing_reference: str = "nominal"
+    name: str = "scenario"
+
+    def __post_init__(self) -> None:
+        for key, lo in (
+            ("m", 0), ("n", 0), ("batch", 1), ("record_every", 1), ("seed", 0), ("first_index", 0)
+        ):
+            val = getattr(self, key)
+            if isinstance(val, bool) or not isinstance(val, int | np.integer) or val < lo:
+                raise ConfigError(f"scenario.{key}", f"must be an integer >= {lo}, got {val!r}")
+        if self.delay_model not in ("full", "perception"):
+            raise ConfigError(
+                "scenario.delay.model",
+                f'must be "full" or "perception", got {self.delay_model!r}',
+            )
+        if self.spacing_reference not in ("nominal", "own_equilibrium"):
+            raise ConfigError(
+                "scenario.spacing_reference",
+                f'must be "nominal" or "own_equilibrium", got {self.spacing_reference!r}',
+            )
+        _num("scenario.dt", self.dt, lo=0.0, lo_open=True)
+        _num("scenario.duration", self.duration, lo=0.0, lo_open=True)
+        _num("scenario.t_start", self.t_start)
+        if self.steps < 1:
+            raise ConfigError("scenario.duration", f"must be at least dt = {self.dt}")
+        _num("scenario.a_min", self.a_min, hi=0.0)
+        if not self.a_min < 0:
+            raise ConfigError("scenario.a_min", f"must be < 0, got {self.a_min}")
+        _num("scenario.a_max", self.a_max, lo=0.0, lo_open=True)
+        _num("scenario.hdv_accel_noise", self.hdv_accel_noise, lo=0.0)
+        _num("scenario.delay_spread", self.delay_spread, lo=0.0)
+        delay = np.asarray(self.delay, dtype=float)
+        if not np.all(np.isfinite(delay)) or np.any(delay < 0):
+            raise ConfigError("scenario.delay", f"must be >= 0 s, got {self.delay!r}")
+        if np.any(delay - self.delay_spread < 0):
+            raise ConfigError(
+                "scenario.delay.spread",
+                f"must be <= the mean delay (delays cannot be negative), got {self.delay_spread}",
+            )
+        try:
+            self.hdv.equilibrium_spacing(self.v_star)
+        except ConfigError as err:
+            raise ConfigError("system.v_star", err.message) from None
+        allowed = MODEL_PARAMS[self.hdv.name]
+        for key, w in self.heterogeneity.items():
+            if key not in allowed:
+                raise ConfigError(
+                    f"scenario.heterogeneity.{key}",
+                    f"not a parameter of the {self.hdv.name} model; allowed: {list(allowed)}",
+                )
+            _num(f"scenario.heterogeneity.{key}", w, lo=0.0)
+        for key in self.hdv_values or {}:
+            if key not in allowed:
+                raise ConfigError(
+                    f"scenario.hdv_values.{key}",
+                    f"not a parameter of the {self.hdv.name} model; allowed: {list(allowed)}",
+                )
+
+    @property
+    def steps(self) -> int:
+        """Number of samples."""
+        return int(round(self.duration / self.dt))
+
+    @property
+    def n_vehicles(self) -> int:
+        return self.m + self.n + 2
+
+    @property
+    def cav(self) -> int:
+        return self.m + 1
+
+    @property
+    def s_star(self) -> float:
+        """Nominal equilibrium spacing."""
+        return float(self.hdv.equilibrium_spacing(self.v_star))
+
+    def times(self) -> np.ndarray:
+        """Sample times ``t_start + k dt``."""
+        return self.t_start + self.dt * np.arange(self.steps)
+
+    def is_hdv(self) -> np.ndarray:
+        """``(nv,)`` mask of the HDV columns (not head, not CAV)."""
+        mask = np.ones(self.n_vehicles, dtype=bool)
+        mask[0] = False
+        mask[self.cav] = False
+        return mask
+
+    def draw(self) -> Draws:
+        """Per-scenario HDV parameters, delays and initial state (deterministic in ``seed``)."""
+        B, nv = self.batch, self.n_vehicles
+        names = MODEL_PARAMS[self.hdv.name]
+        hdv_mask = self.is_hdv()
+        values = {}
+        for key in names:
+            base = getattr(self.hdv, key)
+            if self.hdv_values and key in self.hdv_values:
+                try:
+                    base = np.broadcast_to(
+                        np.asarray(self.hdv_values[key], dtype=float), (B, nv)
+                    )
+                except ValueError:
+                    raise ConfigError(
+                        f"scenario.hdv_values.{key}", f"must broadcast to (batch, nv) = {(B, nv)}"
+                    ) from None
+            values[key] = np.array(np.broadcast_to(base, (B, nv)), dtype=float)
+        delays = np.array(np.broadcast_to(np.asarray(self.delay, float), (B, nv)), dtype=float)
+        rngs = [np.random.default_rng([self.seed, self.first_index + b]) for b in range(B)]
+        for key in names:
+            w = float(self.heterogeneity.get(key, 0.0))
+            if w > 0:
+                draws = np.stack([r.uniform(-w, w, nv) for r in rngs])
+                values[key] = np.where(hdv_mask, values[key] + draws, values[key])
+        if self.delay_spread > 0:
+            draws = np.stack([r.uniform(-self.delay_spread, self.delay_spread, nv) for r in rngs])
+            delays = delays + draws
+        delays = np.where(hdv_mask, np.maximum(delays, 0.0), 0.0)
+        # the head and the CAV follow no HDV law: nominal values there
+        for key in names:
+            values[key][:, ~hdv_mask] = getattr(self.hdv, key)
+        try:
+            model = _MODEL_CLASS[self.hdv.name](**values)
+            s_eq = np.broadcast_to(model.equilibrium_spacing(self.v_star), (B, nv)).copy()
+        except ConfigError as err:
+            raise ConfigError(
+                f"scenario.heterogeneity.{err.field}", f"a drawn HDV is invalid: {err.message}"
+            ) from None
+        s_eq[:, 0] = np.nan
+        s_eq[:, self.cav] = self.s_star
+        return Draws(values, delays, s_eq)
+
+
+@dataclass(frozen=True)
+class Draws:
+    """The random (or explicit) per-vehicle quantities of a batch.
+
+    Attributes
+    ----------
+    hdv_values : dict of str to numpy.ndarray
+        Each model parameter, ``(batch, nv)``.
+    delay : numpy.ndarray
+        Reaction delay (s) before rounding to steps, ``(batch, nv)`` (0 for head and CAV).
+    initial_spacing : numpy.ndarray
+        ``(batch, nv)`` initial spacing (each HDV's own equilibrium at ``v*``, the CAV at the
+        nominal ``s*``; NaN for the head).
+    """
+
+    hdv_values: dict[str, np.ndarray]
+    delay: np.ndarray
+    initial_spacing: np.ndarray
+
+
+# --------------------------------------------------------------------------------------------
+# The [scenario] table
+# --------------------------------------------------------------------------------------------
 
 _SCENARIO_KEYS = [
     "dt", "duration", "t_start", "a_min", "a_max", "cav_aeb", "hdv_aeb", "seed", "batch",
@@ -38,29 +343,14 @@ _SCENARIO_KEYS = [
 ]  # fmt: skip
 
 
-@dataclass(frozen=True)
-class SimulationSpec:
-    """Everything ``lcc-synth simulate`` needs from a problem file."""
-
-    name: str
-    system: System
-    scenario: Scenario
-    controllers: dict[str, Controller]
-    metrics: MetricsConfig
-    source: str
-
-
 def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None = None):
-    """Build the :class:`~lcc_synth.simulation.engine.Scenario` of a problem's ``[scenario]``
-    table."""
+    """Build the :class:`Scenario` of a problem's ``[scenario]`` table."""
     f = "scenario"
     sc = get_table(data, "scenario", f)
     check_keys(sc, _SCENARIO_KEYS, f)
     hv_t = get_table(sc, "hdv_values", f"{f}.hdv_values")
     hdv_values = None
     if hv_t:
-        from lcc_synth.simulation.engine import MODEL_PARAMS
-
         allowed = MODEL_PARAMS[system.hdv.name]
         check_keys(hv_t, allowed, f"{f}.hdv_values")
         hdv_values = {}
@@ -131,50 +421,3 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
             sc, "spacing_reference", f, "nominal", choices=["nominal", "own_equilibrium"]
         ),
     )
-
-
-def metrics_from(data: Mapping[str, Any], system: System, controllers=()) -> MetricsConfig:
-    """The ``[metrics]`` table."""
-    f = "metrics"
-    mt = get_table(data, "metrics", f)
-    check_keys(mt, ["window", "vehicles", "baseline"], f)
-    window = tuple(get_number_list(mt, "window", f, [20.0, 40.0], length=2))
-    vehicles = mt.get("vehicles", "cav_and_behind")
-    if isinstance(vehicles, list):
-        for v in vehicles:
-            vehicle_column(v, system.m, system.n, f"{f}.vehicles")
-        vehicles = tuple(vehicles)
-    elif vehicles not in VEHICLE_SETS:
-        raise ConfigError(
-            f"{f}.vehicles", f"must be one of {list(VEHICLE_SETS)} or a list of vehicle indices"
-        )
-    baseline = get_str(mt, "baseline", f, None)
-    if baseline is not None and controllers and baseline not in controllers:
-        raise ConfigError(f"{f}.baseline", f"must name a controller, one of {list(controllers)}")
-    return MetricsConfig(window, vehicles, baseline)
-
-
-def controllers_from(data: Mapping[str, Any], system: System, source: str | None = None):
-    """Every ``[controllers.NAME]`` table, built in file order."""
-    tables = get_table(data, "controllers", "controllers", required=True)
-    if not tables:
-        raise ConfigError("controllers", "needs at least one [controllers.NAME] table")
-    return {name: build_controller(name, t, system, source) for name, t in tables.items()}
-
-
-def load_spec(path: str | Path | Problem, seeds: int | None = None) -> SimulationSpec:
-    """Read a problem file for simulation; ``seeds`` overrides ``[scenario].batch``."""
-    problem = path if isinstance(path, Problem) else load_problem(path)
-    source = str(problem.path)
-    try:
-        system = system_from(problem.data, source)
-        scenario = scenario_from(problem.data, system, problem.path.parent)
-        if seeds is not None:
-            if seeds < 1:
-                raise ConfigError("--seeds", f"must be >= 1, got {seeds}")
-            scenario = replace(scenario, batch=int(seeds))
-        controllers = controllers_from(problem.data, system, source)
-        metrics = metrics_from(problem.data, system, controllers)
-        return SimulationSpec(problem.name, system, scenario, controllers, metrics, source)
-    except ConfigError as err:
-        raise err.with_source(source) if not err.source else err from None

@@ -1,0 +1,56 @@
+"""The problem file of ``lcc-synth simulate``: one scenario, its controllers and metrics
+(format: ``problems/README.md``)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from lcc_synth.controllers.base import Controller
+from lcc_synth.controllers.registry import build_controller
+from lcc_synth.errors import ConfigError
+from lcc_synth.metrics import MetricsConfig, metrics_from
+from lcc_synth.problem import Problem, System, get_table, load_problem, system_from
+from lcc_synth.simulation.scenario import Scenario, scenario_from
+
+__all__ = ["SimulationSpec", "controllers_from", "load_spec"]
+
+
+@dataclass(frozen=True)
+class SimulationSpec:
+    """Everything ``lcc-synth simulate`` needs from a problem file."""
+
+    name: str
+    system: System
+    scenario: Scenario
+    controllers: dict[str, Controller]
+    metrics: MetricsConfig
+    source: str
+
+
+def controllers_from(data: Mapping[str, Any], system: System, source: str | None = None):
+    """Every ``[controllers.NAME]`` table, built in file order."""
+    tables = get_table(data, "controllers", "controllers", required=True)
+    if not tables:
+        raise ConfigError("controllers", "needs at least one [controllers.NAME] table")
+    return {name: build_controller(name, t, system, source) for name, t in tables.items()}
+
+
+def load_spec(path: str | Path | Problem, seeds: int | None = None) -> SimulationSpec:
+    """Read a problem file for simulation; ``seeds`` overrides ``[scenario].batch``."""
+    problem = path if isinstance(path, Problem) else load_problem(path)
+    source = str(problem.path)
+    try:
+        system = system_from(problem.data, source)
+        scenario = scenario_from(problem.data, system, problem.path.parent)
+        if seeds is not None:
+            if seeds < 1:
+                raise ConfigError("--seeds", f"must be >= 1, got {seeds}")
+            scenario = replace(scenario, batch=int(seeds))
+        controllers = controllers_from(problem.data, system, source)
+        metrics = metrics_from(problem.data, system, controllers)
+        return SimulationSpec(problem.name, system, scenario, controllers, metrics, source)
+    except ConfigError as err:
+        raise err.with_source(source) if not err.source else err from None

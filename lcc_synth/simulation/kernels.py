@@ -1,0 +1,261 @@
+"""The simulator's compiled loops (numba): HDV laws, V2V observation, the stepping kernel.
+
+Random draws inside the loop are counter based (:func:`_u01`): the same value for
+``(seed, scenario, vehicle, step, channel)`` on any thread and in any batch. The driver is
+:func:`lcc_synth.simulation.engine.simulate`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+_NAN = np.nan
+
+
+@numba.njit(cache=True, inline="always")
+def _mix(x):
+    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
+
+
+@numba.njit(cache=True, inline="always")
+def _u01(seed, b, j, k, ch):
+    """Counter-based uniform in (0, 1): the same draw for (seed, b, j, k, ch) on any thread."""
+    x = _mix(np.uint64(seed) + np.uint64(0x9E3779B97F4A7C15))
+    x = _mix(x ^ np.uint64(b))
+    x = _mix(x ^ (np.uint64(j) + np.uint64(0x632BE59BD9B4E019)))
+    x = _mix(x ^ np.uint64(k))
+    x = _mix(x ^ np.uint64(ch))
+    return (float(x >> np.uint64(11)) + 0.5) * (1.0 / 9007199254740992.0)
+
+
+@numba.njit(cache=True, inline="always")
+def _normal(seed, b, j, k, ch):
+    u1 = _u01(seed, b, j, k, ch)
+    u2 = _u01(seed, b, j, k, ch + 1)
+    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
+
+
+@numba.njit(cache=True, inline="always")
+def _hdv_accel(code, pr, s, ds, v):
+    """OVM (code 0) or IDM (code 1) acceleration; mirrors hdv.ovm_accel / hdv.idm_accel."""
+    return _hdv_accel6(code, pr[0], pr[1], pr[2], pr[3], pr[4], pr[5], s, ds, v)
+
+
+@numba.njit(cache=True, inline="always")
+def _hdv_accel6(code, p0, p1, p2, p3, p4, p5, s, ds, v):
+    """:func:`_hdv_accel` with the six parameters as scalars (no array view in the loop)."""
+    if code == 0:
+        sc = min(max(s, p2), p3)
+        vd = 0.5 * p4 * (1.0 - math.cos(math.pi * (sc - p2) / (p3 - p2)))
+        return p0 * (vd - v) + p1 * ds
+    v0, T, s0, a, b, delta = p0, p1, p2, p3, p4, p5
+    vp = max(v, 0.0)
+    s_des = s0 + max(vp * T - vp * ds / (2.0 * math.sqrt(a * b)), 0.0)
+    return a * (1.0 - (vp / v0) ** delta - (s_des / max(s, 1e-3)) ** 2)
+
+
+@numba.njit(cache=True, inline="always")
+def _eq_spacing(code, pr, v):
+    """Equilibrium spacing at ``v``; mirrors OVM / IDM ``equilibrium_spacing``."""
+    if code == 0:
+        return pr[2] + (pr[3] - pr[2]) / math.pi * math.acos(1.0 - 2.0 * v / pr[4])
+    return (pr[2] + v * pr[1]) / math.sqrt(1.0 - (v / pr[0]) ** pr[5])
+
+
+@numba.njit(cache=True)
+def _observe(b, k, p, v, hp, hv, L, lat, loss, noise, seed, sid0, cav, obs_s, obs_v, obs_p):
+    """Update the CAV's received values of scenario ``b`` at sample ``k`` (V2V model)."""
+    nv = p.shape[1]
+    for j in range(nv):
+        if j == cav:
+            obs_p[b, j] = p[b, j]
+            obs_v[b, j] = v[b, j]
+            obs_s[b, j] = p[b, j - 1] - p[b, j]
+            continue
+        if loss[j] > 0.0 and _u01(seed, sid0 + b, j, k, 2) < loss[j]:
+            continue  # packet lost: hold the last value
+        if lat == 0:
+            pj = p[b, j]
+            vj = v[b, j]
+            sj = p[b, j - 1] - p[b, j] if j > 0 else _NAN
+        else:
+            slot = (k - lat + L) % L
+            pj = hp[slot, b, j]
+            vj = hv[slot, b, j]
+            sj = hp[slot, b, j - 1] - hp[slot, b, j] if j > 0 else _NAN
+        if noise[0] > 0.0 and j > 0:
+            sj += noise[0] * _normal(seed, sid0 + b, j, k, 3)
+        if noise[1] > 0.0:
+            vj += noise[1] * _normal(seed, sid0 + b, j, k, 5)
+        if noise[2] > 0.0:
+            pj += noise[2] * _normal(seed, sid0 + b, j, k, 7)
+        obs_s[b, j] = sj
+        obs_v[b, j] = vj
+        obs_p[b, j] = pj
+
+
+@numba.njit(cache=True, nogil=True)
+def _advance(
+    b0, b1, k0, k1, p, v, hp, hv, L, delay_steps, delay_own, code, params, nom_code,
+    nom_params, dt, t_start, a_min, a_max, cav, cav_aeb, hdv_aeb, noise_std, seed, sid0,
+    acc_ovr, spd_ovr, mode, ratio, u_hold, Ks, Kv, Kp, hdv_law, v_star, s_ref, p_ref,
+    est_decay, v_lo, v_hi, v_hat,
+    loss, lat, obs_noise, obs_s, obs_v, obs_p, alive, collided, ctime,
+    stride, out_p, out_v, out_a, out_s, out_u, out_aeb,
+):  # fmt: skip
+    """Advance scenarios ``b0 .. b1 - 1`` from sample ``k0`` to ``k1`` (exclusive).
+
+    Releases the GIL: disjoint scenario ranges run on several threads at once.
+
+    ``mode`` 1 evaluates the linear law (Ks, Kv, Kp, hdv_law) at every ``ratio``-th sample;
+    mode 0 applies the held command ``u_hold`` (set by a Python controller). ``est_decay >= 0``
+    takes the law's errors from the equilibrium estimate ``v_hat`` (``(batch,)``, updated in
+    place; see :class:`~lcc_synth.controllers.static.LinearLaw`), ``est_decay < 0`` from ``v_star``.
+    """
+    nv = p.shape[1]
+    abs_min = abs(a_min)
+    acc = np.empty(nv)
+    for b in range(b0, b1):
+        for k in range(k0, k1):
+            rec = k % stride == 0
+            r = k // stride
+            if not alive[b]:
+                if rec:
+                    for j in range(nv):
+                        out_p[b, r, j] = _NAN
+                        out_v[b, r, j] = _NAN
+                        out_a[b, r, j] = _NAN
+                        out_s[b, r, j] = _NAN
+                    out_u[b, r] = _NAN
+                continue
+            t = t_start + k * dt
+            if L > 1:
+                slot = k % L
+                for j in range(nv):
+                    hp[slot, b, j] = p[b, j]
+                    hv[slot, b, j] = v[b, j]
+            hit = False
+            for j in range(1, nv):
+                if p[b, j - 1] - p[b, j] <= 0.0:
+                    collided[b, j] = True
+                    ctime[b, j] = t
+                    hit = True
+            if rec:
+                out_s[b, r, 0] = _NAN
+                for j in range(nv):
+                    out_p[b, r, j] = p[b, j]
+                    out_v[b, r, j] = v[b, j]
+                    if j > 0:
+                        out_s[b, r, j] = p[b, j - 1] - p[b, j]
+            if hit:
+                alive[b] = False
+                if rec:
+                    for j in range(nv):
+                        out_a[b, r, j] = _NAN
+                    out_u[b, r] = _NAN
+                continue
+            # ---- CAV command (sampled, zero-order hold) ----
+            if mode == 1 and k % ratio == 0:
+                _observe(b, k, p, v, hp, hv, L, lat, loss, obs_noise, seed, sid0, cav,
+                         obs_s, obs_v, obs_p)  # fmt: skip
+                u = 0.0
+                if hdv_law:
+                    u = _hdv_accel(
+                        nom_code, nom_params, obs_s[b, cav],
+                        obs_v[b, cav - 1] - obs_v[b, cav], obs_v[b, cav],
+                    )  # fmt: skip
+                ve = v_star[b]
+                sh = 0.0
+                if est_decay >= 0.0:
+                    ve = min(max(v_hat[b], v_lo), v_hi)
+                    sh = _eq_spacing(nom_code, nom_params, ve) - _eq_spacing(
+                        nom_code, nom_params, v_star[b]
+                    )
+                    y = obs_v[b, cav - 1]
+                    v_hat[b] = y + (v_hat[b] - y) * est_decay
+                for j in range(1, nv):
+                    if Ks[j] != 0.0:
+                        u += Ks[j] * (obs_s[b, j] - (s_ref[b, j] + sh))
+                for j in range(nv):
+                    if Kv[j] != 0.0:
+                        u += Kv[j] * (obs_v[b, j] - ve)
+                if Kp != 0.0:
+                    u -= Kp * (obs_p[b, cav] - p_ref[b] - v_star[b] * (t - t_start))
+                u_hold[b] = u
+            aeb = False
+            # ---- accelerations ----
+            for j in range(nv):
+                if j == 0:
+                    a = 0.0
+                elif j == cav:
+                    a = min(max(u_hold[b], a_min), a_max)
+                    if cav_aeb:
+                        s0 = p[b, j - 1] - p[b, j]
+                        if (v[b, j] ** 2 - v[b, j - 1] ** 2) / (2.0 * s0) >= abs_min:
+                            a = a_min
+                            aeb = True
+                else:
+                    d = delay_steps[b, j]
+                    if d == 0:
+                        s = p[b, j - 1] - p[b, j]
+                        ds = v[b, j - 1] - v[b, j]
+                        vv = v[b, j]
+                    else:
+                        sl = (k - d + L) % L
+                        s = hp[sl, b, j - 1] - hp[sl, b, j]
+                        ds = hv[sl, b, j - 1] - hv[sl, b, j]
+                        vv = hv[sl, b, j] if delay_own else v[b, j]
+                    a = _hdv_accel6(
+                        code, params[b, j, 0], params[b, j, 1], params[b, j, 2],
+                        params[b, j, 3], params[b, j, 4], params[b, j, 5], s, ds, vv,
+                    )  # fmt: skip
+                    if noise_std > 0.0:
+                        a += noise_std * _normal(seed, sid0 + b, j, k, 0)
+                    a = min(max(a, a_min), a_max)
+                    if hdv_aeb:
+                        s = p[b, j - 1] - p[b, j]
+                        if (v[b, j] ** 2 - v[b, j - 1] ** 2) / (2.0 * s) >= abs_min:
+                            a = a_min
+                ov = acc_ovr[k, j]
+                if ov == ov:
+                    a = ov
+                    if j == cav:
+                        aeb = False
+                sv = spd_ovr[k, j]
+                if sv == sv:
+                    a = min(max((sv - v[b, j]) / dt, a_min), a_max)
+                    if j == cav:
+                        aeb = False
+                if v[b, j] + dt * a < 0.0:
+                    a = -v[b, j] / dt
+                acc[j] = a
+            if rec:
+                for j in range(nv):
+                    out_a[b, r, j] = acc[j]
+                out_u[b, r] = u_hold[b]
+                out_aeb[b, r] = aeb
+            for j in range(nv):
+                p[b, j] += dt * v[b, j]
+                v[b, j] += dt * acc[j]
+
+
+@numba.njit(cache=True)
+def _observe_all(
+    k, p, v, hp, hv, L, lat, loss, noise, seed, sid0, cav, obs_s, obs_v, obs_p, alive
+):
+    B = p.shape[0]
+    nv = p.shape[1]
+    if L > 1:
+        slot = k % L
+        for b in range(B):
+            for j in range(nv):
+                hp[slot, b, j] = p[b, j]
+                hv[slot, b, j] = v[b, j]
+    for b in range(B):
+        if alive[b]:
+            _observe(b, k, p, v, hp, hv, L, lat, loss, noise, seed, sid0, cav, obs_s, obs_v, obs_p)

@@ -1,0 +1,82 @@
+"""The result of a simulation: trajectories, CAV commands, collisions, what was simulated."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from lcc_synth.simulation.scenario import Draws, Scenario
+
+__all__ = ["SimResult"]
+
+
+@dataclass
+class SimResult:
+    """Trajectories of a batch of runs with one controller.
+
+    Attributes
+    ----------
+    t : numpy.ndarray
+        ``(T,)`` recorded sample times.
+    position, velocity, acceleration, spacing : numpy.ndarray
+        ``(batch, T, n_vehicles)``, columns head, HDVs ahead, CAV, HDVs behind. ``acceleration``
+        is the applied one (after limits, emergency braking, perturbations); ``spacing[..., 0]``
+        is NaN. After a collision every later sample of that scenario is NaN.
+    u_cmd : numpy.ndarray
+        ``(batch, T)`` CAV command before limits and emergency braking (held between samples).
+    aeb_active : numpy.ndarray
+        ``(batch, T)`` bool, the CAV's emergency braking overrode the command.
+    collided, collision_time : numpy.ndarray
+        ``(batch, n_vehicles)``: vehicle reached spacing <= 0, and when (NaN if never).
+    m, n, cav : int
+        Layout and the CAV's column.
+    v_star, s_star : numpy.ndarray
+        ``(batch,)`` nominal equilibrium.
+    controller, controller_info, controller_stats
+        Name, ``describe()`` and ``stats()`` of the controller.
+    dt, sim_dt : float
+        Spacing of the recorded samples and simulation step.
+    scenario, draws
+        What was simulated (per-vehicle parameters, delays, initial spacings).
+    wall_time : float
+        Seconds spent in :func:`simulate`.
+    """
+
+    t: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    spacing: np.ndarray
+    u_cmd: np.ndarray
+    aeb_active: np.ndarray
+    collided: np.ndarray
+    collision_time: np.ndarray
+    m: int
+    n: int
+    cav: int
+    v_star: np.ndarray
+    s_star: np.ndarray
+    controller: str
+    controller_info: dict[str, Any]
+    controller_stats: dict[str, Any]
+    dt: float
+    sim_dt: float
+    scenario: Scenario | None = None
+    draws: Draws | None = None
+    wall_time: float = 0.0
+
+    @property
+    def batch(self) -> int:
+        return self.position.shape[0]
+
+    @property
+    def n_vehicles(self) -> int:
+        return self.position.shape[2]
+
+    def vehicle_labels(self) -> list[str]:
+        """``head, -m, ..., -1, CAV, 1, ..., n``."""
+        return ["head", *[str(i) for i in range(-self.m, 0)], "CAV"] + [
+            str(i) for i in range(1, self.n + 1)
+        ]
