@@ -12,7 +12,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from lcc_synth.experiments.comparison import format_table, load_suite, run_suite
+from lcc_synth.experiments.comparison import load_suite, run_suite
+from lcc_synth.experiments.tables import format_table
 from lcc_synth.figures import plot_profiles
 
 PROBLEM = Path(__file__).resolve().parents[1] / "problems" / "showcase.toml"

@@ -14,13 +14,11 @@ import pytest
 from lcc_synth.cli.main import main
 from lcc_synth.controllers.registry import build_controller
 from lcc_synth.errors import ConfigError
-from lcc_synth.experiments.comparison import (
+from lcc_synth.experiments.comparison import controller_table, load_suite, run_suite
+from lcc_synth.experiments.tables import (
     SUITE_METRICS,
-    controller_table,
     format_table,
-    load_suite,
     markdown_table,
-    run_suite,
     write_csv,
     write_json,
 )

@@ -264,7 +264,7 @@ def test_cli_bad_counts_exit_2(problem_file, capsys):
 def test_cli_sweep_json_and_files(problem_file, serial, capsys, tmp_path):
     import json
 
-    from lcc_synth.experiments.comparison import json_safe
+    from lcc_synth.experiments.tables import json_safe
 
     code = main([
         "sweep", str(problem_file), "--count", "4", "--batch-size", "3", "--workers", "1",

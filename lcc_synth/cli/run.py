@@ -96,13 +96,11 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from lcc_synth.experiments.comparison import (
+    from lcc_synth.experiments.comparison import gamma_curves, load_suite, run_suite
+    from lcc_synth.experiments.tables import (
         format_table,
-        gamma_curves,
         json_safe,
-        load_suite,
         run_directory,
-        run_suite,
         write_csv,
         write_json,
         write_markdown,

@@ -71,8 +71,8 @@ def run(args: argparse.Namespace) -> int:
     from datetime import UTC, datetime
 
     from lcc_synth.errors import ConfigError
-    from lcc_synth.experiments.comparison import json_safe, run_directory
     from lcc_synth.experiments.sweep import SWEEP_METRICS, format_summary, load_sweep, run_sweep
+    from lcc_synth.experiments.tables import json_safe, run_directory
     from lcc_synth.synthesis.h2 import SynthesisError
 
     names = None if args.controllers is None else args.controllers.split(",")
