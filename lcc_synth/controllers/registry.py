@@ -53,7 +53,7 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
         ctype = get_str(table, "type", field, choices=CONTROLLER_TYPES)
         if ctype == "mpc":
             try:
-                from lcc_synth.mpc import mpc_controller_from_table
+                from lcc_synth.mpc.build import mpc_controller_from_table
             except ImportError as err:
                 raise ConfigError(
                     f"{field}.type", f"'mpc' controllers need lcc_synth.mpc, which failed: {err}"

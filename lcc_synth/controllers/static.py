@@ -15,6 +15,7 @@ import numpy as np
 
 from lcc_synth.controllers.base import ControlContext, Observation
 from lcc_synth.errors import ConfigError
+from lcc_synth.models.hdv import free_speed
 
 __all__ = ["LinearLaw", "HDVController", "StaticGainController", "EQUILIBRIA"]
 
@@ -226,7 +227,7 @@ class StaticGainController(_LinearController):
         if self.equilibrium == "fixed":
             return law
         ts = ctx.dt if self.sample_time is None else float(self.sample_time)
-        v_lim = float(getattr(ctx.hdv, "v_max", None) or ctx.hdv.v0)
+        v_lim = free_speed(ctx.hdv)
         return replace(
             law,
             equilibrium_decay=math.exp(-ts / self.equilibrium_tau),

@@ -33,6 +33,8 @@ __all__ = [
     "idm_accel",
     "linear_coefficients",
     "model_from_dict",
+    "MODELS",
+    "free_speed",
 ]
 
 
@@ -287,7 +289,17 @@ def linear_coefficients(model: CarFollowingModel, v_star: float, warn: bool = Tr
 # Construction from problem files
 # --------------------------------------------------------------------------------------------
 
-_MODELS = {"ovm": OVM, "idm": IDM}
+#: The car-following models by their problem-file name.
+MODELS = {"ovm": OVM, "idm": IDM}
+
+
+def free_speed(model) -> float:
+    """The model's free-flow (maximum) speed: ``v_max`` of the OVM, ``v0`` of the IDM (40 m/s
+    for a model with neither)."""
+    for attr in ("v_max", "v0"):
+        if hasattr(model, attr):
+            return float(getattr(model, attr))
+    return 40.0
 
 
 def model_from_dict(data: dict, field: str = "hdv") -> OVM | IDM:
@@ -297,9 +309,9 @@ def model_from_dict(data: dict, field: str = "hdv") -> OVM | IDM:
     """
     data = dict(data)
     kind = str(data.pop("model", "ovm")).lower()
-    if kind not in _MODELS:
-        raise ConfigError(f"{field}.model", f"must be one of {sorted(_MODELS)}, got {kind!r}")
-    cls = _MODELS[kind]
+    if kind not in MODELS:
+        raise ConfigError(f"{field}.model", f"must be one of {sorted(MODELS)}, got {kind!r}")
+    cls = MODELS[kind]
     allowed = {f.name for f in fields(cls)} - {"name"}
     kwargs = {}
     for key, value in data.items():

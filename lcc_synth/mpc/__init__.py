@@ -4,15 +4,13 @@
 - :mod:`lcc_synth.mpc.formulation`: the condensed QP built once with CasADi.
 - :mod:`lcc_synth.mpc.solver`: OSQP workspace (set up once), exact reference, naive rebuild.
 - :mod:`lcc_synth.mpc.controller`: the controller of the common interface, fallback chain.
+- :mod:`lcc_synth.mpc.build`: the controller of a ``[controllers.NAME]`` table.
+- :mod:`lcc_synth.mpc.report`: its step record and statistics, the safety summary of runs.
 """
 
-from lcc_synth.mpc.controller import (
-    STATUS_CODES,
-    MPCController,
-    mpc_controller_from_table,
-    paper_fallback_gains,
-)
-from lcc_synth.mpc.settings import MPCSettings, settings_from_table
+from lcc_synth.mpc.build import mpc_controller_from_table
+from lcc_synth.mpc.controller import STATUS_CODES, MPCController
+from lcc_synth.mpc.settings import MPCSettings, paper_fallback_gains, settings_from_table
 
 __all__ = [
     "MPCController",

@@ -40,11 +40,9 @@ CAV's linear HDV law plus the MPC's added input) for CF-LCC.
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -52,6 +50,7 @@ import numpy as np
 from lcc_synth.controllers.base import ControlContext, Observation
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains, cav_feedback
+from lcc_synth.models.hdv import free_speed
 from lcc_synth.mpc.formulation import (
     Family,
     Formulation,
@@ -59,33 +58,14 @@ from lcc_synth.mpc.formulation import (
     linearize,
     state_weights,
 )
-from lcc_synth.mpc.settings import MPCSettings, settings_from_table
+from lcc_synth.mpc.report import new_step_record, step_statistics
+from lcc_synth.mpc.settings import MPCSettings, paper_fallback_gains
 from lcc_synth.mpc.solver import POLISH_NAMES, OSQPSolver
 
-__all__ = ["MPCController", "mpc_controller_from_table", "paper_fallback_gains", "STATUS_CODES"]
+__all__ = ["MPCController", "STATUS_CODES"]
 
 #: Per-step outcome codes stored in ``history()["status"]``.
 STATUS_CODES = {0: "qp", 1: "shifted_plan", 2: "static_gain", 3: "hold"}
-
-_PAPER_TAIL = {"v_0": -0.5, "s_1": -0.2, "v_1": 0.05, "s_2": -0.1, "v_2": 0.05}
-
-
-def paper_fallback_gains(kind: str, n: int) -> StaticGains:
-    """The default fallback: the paper's Section V-B gains (FD-LCC; CF-LCC adds ``0.1 s_0``),
-    restricted to the vehicles the model has, or the CAV's HDV law for LCC / CCC."""
-    if kind in ("fd_lcc", "cf_lcc"):
-        g = {k: v for k, v in _PAPER_TAIL.items() if int(k.split("_")[1]) <= n}
-        if kind == "cf_lcc":
-            g["s_0"] = 0.1
-        return StaticGains(g, "replace")
-    return StaticGains({}, "added")
-
-
-def _v_limit(hdv) -> float:
-    for attr in ("v_max", "v0"):
-        if hasattr(hdv, attr):
-            return float(getattr(hdv, attr))
-    return 40.0
 
 
 @dataclass
@@ -158,7 +138,7 @@ class MPCController:
             raise ConfigError("n_model", "must be >= 1 for LCC with m = 0")
         self.n_model = n_model
         self.record = record
-        self._v_hi = _v_limit(system.hdv)
+        self._v_hi = free_speed(system.hdv)
         v0 = self._clip_v(system.v_star)
         try:
             self._lin0 = linearize(self.kind, self.m, n_model, system.hdv, v0, settings)
@@ -184,7 +164,7 @@ class MPCController:
         self._cache: dict[float, tuple[Linearization, Any, np.ndarray, float]] = {}
         self._members: list[_Member] = []
         self._ctx: ControlContext | None = None
-        self._reset_stats()
+        self._st = new_step_record()
 
     def __getstate__(self) -> dict[str, Any]:
         """Picklable without the run state (OSQP workspaces); call :meth:`reset` after."""
@@ -231,29 +211,6 @@ class MPCController:
             self._cache[key] = hit
         return hit
 
-    def _reset_stats(self) -> None:
-        self._st = {
-            "steps": 0,
-            "solves": 0,
-            "qp_failures": {},
-            "polish": {},
-            "fallback_shifted": 0,
-            "fallback_static": 0,
-            "fallback_hold": 0,
-            "errors": 0,
-            "error_messages": [],
-            "relinearizations": 0,
-            "relinearize_failures": 0,
-            "slack_steps": 0,
-            "max_slack": 0.0,
-            "violation_steps": 0,
-            "max_violation": 0.0,
-            "step_time": [],
-            "osqp_time": [],
-            "relin_time": [],
-            "iterations": [],
-        }
-
     # ---------------------------------------------------------------- protocol
 
     def reset(self, ctx: ControlContext) -> None:
@@ -267,7 +224,7 @@ class MPCController:
         self._ctx = ctx
         self._a_min = max(self.settings.constraints.a_min, ctx.a_min)
         self._a_max = min(self.settings.constraints.a_max, ctx.a_max)
-        self._reset_stats()
+        self._st = new_step_record()
         self._t = []
         N = self.settings.horizon
         F = len(self._families)
@@ -613,107 +570,10 @@ class MPCController:
         ``s_min + t_gap v_0`` at every sample; ``slack_steps`` / ``max_slack_m`` are the
         predicted violations the QP accepted.
         """
-        st = self._st
-
-        def dist(values):
-            a = np.asarray(values, float) * 1e3
-            if a.size == 0:
-                return {"median": None, "p99": None, "max": None, "mean": None, "count": 0}
-            return {
-                "median": float(np.median(a)),
-                "p99": float(np.percentile(a, 99)),
-                "max": float(a.max()),
-                "mean": float(a.mean()),
-                "count": int(a.size),
-            }
-
-        it = np.asarray(st["iterations"], float)
-        fallbacks = st["fallback_shifted"] + st["fallback_static"] + st["fallback_hold"]
-        return {
-            "steps": st["steps"],
-            "solves": st["solves"],
-            "step_time_ms": dist(st["step_time"]),
-            "osqp_time_ms": dist(st["osqp_time"]),
-            "relinearize_time_ms": dist(st["relin_time"]),
-            "iterations": {
-                "median": float(np.median(it)) if it.size else None,
-                "max": int(it.max()) if it.size else None,
-            },
-            "qp_failures": dict(st["qp_failures"]),
-            "polish": dict(st["polish"]),
-            "fallbacks": fallbacks,
-            "fallback_shifted": st["fallback_shifted"],
-            "fallback_static": st["fallback_static"],
-            "fallback_hold": st["fallback_hold"],
-            "errors": st["errors"],
-            "error_messages": list(st["error_messages"]),
-            "relinearizations": st["relinearizations"],
-            "relinearize_failures": st["relinearize_failures"],
-            "slack_steps": st["slack_steps"],
-            "max_slack_m": st["max_slack"],
-            "violation_steps": st["violation_steps"],
-            "max_violation_m": st["max_violation"],
-        }
+        return step_statistics(self._st)
 
 
 _HIST_KEYS = ("u", "u_model", "status", "osqp_time", "iterations", "slack", "v_eq", "v_lin",
               "x0", "d", "plan", "lin")
 
 
-def _load_gains_file(path: Path, system, field_name: str) -> StaticGains:
-    """Read a gains file (contract 3 of the brief) as the fallback gain."""
-    if not path.is_file():
-        raise ConfigError(field_name, f"no such gains file: {path}")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as err:
-        raise ConfigError(field_name, f"{path} is not valid JSON: {err}") from None
-    for key in ("kind", "m", "n", "semantics", "gains"):
-        if key not in data:
-            raise ConfigError(field_name, f"{path} lacks the key {key!r}")
-    if data["kind"] != system.kind or data["m"] != system.m:
-        raise ConfigError(
-            field_name,
-            f"{path} holds gains for kind={data['kind']!r}, m={data['m']}; the MPC controls "
-            f"kind={system.kind!r}, m={system.m}",
-        )
-    if not isinstance(data["gains"], dict):
-        raise ConfigError(field_name, f"{path}: gains must be an object")
-    try:
-        return StaticGains(data["gains"], data["semantics"])
-    except ConfigError as err:
-        raise ConfigError(f"{field_name}.{err.field}", err.message) from None
-
-
-def mpc_controller_from_table(name: str, table, system, source: str | None = None):
-    """Build an :class:`MPCController` from a ``[controllers.NAME]`` table (``type = "mpc"``).
-
-    Parameters
-    ----------
-    name : str
-        Controller name (table key).
-    table : mapping
-        The table; see :mod:`lcc_synth.mpc.settings` for the keys.
-    system : lcc_synth.problem.System
-    source : str, optional
-        The problem file: errors name it and ``fallback_gains_file`` is relative to its folder.
-    """
-    field_name = f"controllers.{name}"
-    try:
-        settings = settings_from_table(table, field_name)
-        fallback = None
-        fb_source = "paper"
-        if settings.fallback_gains_file:
-            path = Path(settings.fallback_gains_file)
-            if not path.is_absolute() and source:
-                path = Path(source).parent / path
-            fallback = _load_gains_file(path, system, f"{field_name}.fallback_gains_file")
-            fb_source = str(path)
-        try:
-            return MPCController(name, settings, system, fallback, fb_source)
-        except ConfigError as err:
-            if err.field.startswith(field_name):
-                raise
-            raise ConfigError(f"{field_name}.{err.field}", err.message) from None
-    except ConfigError as err:
-        raise err.with_source(source) if source and not err.source else err from None

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["bound_margin", "safety_summary"]
+__all__ = ["bound_margin", "safety_summary", "new_step_record", "step_statistics"]
 
 
 def bound_margin(result, s_min: float = 5.0, t_gap: float = 0.8) -> np.ndarray:
@@ -57,3 +57,74 @@ def safety_summary(result, s_min: float = 5.0, t_gap: float = 0.8) -> dict[str, 
             }
         )
     return out
+
+
+def new_step_record() -> dict[str, Any]:
+    """An empty step record of the MPC: counters and per-step times, filled in by the controller
+    during a run and summarised by :func:`step_statistics`."""
+    return {
+        "steps": 0,
+        "solves": 0,
+        "qp_failures": {},
+        "polish": {},
+        "fallback_shifted": 0,
+        "fallback_static": 0,
+        "fallback_hold": 0,
+        "errors": 0,
+        "error_messages": [],
+        "relinearizations": 0,
+        "relinearize_failures": 0,
+        "slack_steps": 0,
+        "max_slack": 0.0,
+        "violation_steps": 0,
+        "max_violation": 0.0,
+        "step_time": [],
+        "osqp_time": [],
+        "relin_time": [],
+        "iterations": [],
+    }
+
+
+def step_statistics(st: dict[str, Any]) -> dict[str, Any]:
+    """:meth:`MPCController.stats <lcc_synth.mpc.controller.MPCController.stats>` of the
+    controller's step record ``st`` (times in s, turned into ms distributions)."""
+
+    def dist(values):
+        a = np.asarray(values, float) * 1e3
+        if a.size == 0:
+            return {"median": None, "p99": None, "max": None, "mean": None, "count": 0}
+        return {
+            "median": float(np.median(a)),
+            "p99": float(np.percentile(a, 99)),
+            "max": float(a.max()),
+            "mean": float(a.mean()),
+            "count": int(a.size),
+        }
+
+    it = np.asarray(st["iterations"], float)
+    fallbacks = st["fallback_shifted"] + st["fallback_static"] + st["fallback_hold"]
+    return {
+        "steps": st["steps"],
+        "solves": st["solves"],
+        "step_time_ms": dist(st["step_time"]),
+        "osqp_time_ms": dist(st["osqp_time"]),
+        "relinearize_time_ms": dist(st["relin_time"]),
+        "iterations": {
+            "median": float(np.median(it)) if it.size else None,
+            "max": int(it.max()) if it.size else None,
+        },
+        "qp_failures": dict(st["qp_failures"]),
+        "polish": dict(st["polish"]),
+        "fallbacks": fallbacks,
+        "fallback_shifted": st["fallback_shifted"],
+        "fallback_static": st["fallback_static"],
+        "fallback_hold": st["fallback_hold"],
+        "errors": st["errors"],
+        "error_messages": list(st["error_messages"]),
+        "relinearizations": st["relinearizations"],
+        "relinearize_failures": st["relinearize_failures"],
+        "slack_steps": st["slack_steps"],
+        "max_slack_m": st["max_slack"],
+        "violation_steps": st["violation_steps"],
+        "max_violation_m": st["max_violation"],
+    }

@@ -58,6 +58,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from lcc_synth.errors import ConfigError
+from lcc_synth.models.feedback import StaticGains
 from lcc_synth.problem import (
     check_keys,
     get_bool,
@@ -68,6 +69,7 @@ from lcc_synth.problem import (
 )
 
 __all__ = [
+    "paper_fallback_gains",
     "Weights",
     "Constraints",
     "Prediction",
@@ -360,3 +362,17 @@ def settings_from_table(table: Mapping[str, Any], field_name: str) -> MPCSetting
         if err.field.startswith(f):
             raise
         raise ConfigError(f"{f}.{err.field}", err.message) from None
+
+
+_PAPER_TAIL = {"v_0": -0.5, "s_1": -0.2, "v_1": 0.05, "s_2": -0.1, "v_2": 0.05}
+
+
+def paper_fallback_gains(kind: str, n: int) -> StaticGains:
+    """The default fallback: the paper's Section V-B gains (FD-LCC; CF-LCC adds ``0.1 s_0``),
+    restricted to the vehicles the model has, or the CAV's HDV law for LCC / CCC."""
+    if kind in ("fd_lcc", "cf_lcc"):
+        g = {k: v for k, v in _PAPER_TAIL.items() if int(k.split("_")[1]) <= n}
+        if kind == "cf_lcc":
+            g["s_0"] = 0.1
+        return StaticGains(g, "replace")
+    return StaticGains({}, "added")

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.hdv import IDM, OVM
+from lcc_synth.models.hdv import IDM, MODELS, OVM
 from lcc_synth.problem import (
     System,
     check_keys,
@@ -36,7 +36,6 @@ MODEL_PARAMS = {
     "ovm": ("alpha", "beta", "s_st", "s_go", "v_max"),
     "idm": ("v0", "T", "s0", "a", "b", "delta"),
 }
-_MODEL_CLASS = {"ovm": OVM, "idm": IDM}
 
 
 def _num(name: str, value, lo=None, hi=None, lo_open=False) -> float:
@@ -301,7 +300,7 @@ class Scenario:
         for key in names:
             values[key][:, ~hdv_mask] = getattr(self.hdv, key)
         try:
-            model = _MODEL_CLASS[self.hdv.name](**values)
+            model = MODELS[self.hdv.name](**values)
             s_eq = np.broadcast_to(model.equilibrium_spacing(self.v_star), (B, nv)).copy()
         except ConfigError as err:
             raise ConfigError(

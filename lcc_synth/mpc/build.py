@@ -1,0 +1,73 @@
+"""The MPC of a ``[controllers.NAME]`` problem table (``type = "mpc"``): its settings
+(:mod:`lcc_synth.mpc.settings`) and its fallback gain, from a gains file or the paper's."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from lcc_synth.errors import ConfigError
+from lcc_synth.models.feedback import StaticGains
+from lcc_synth.mpc.controller import MPCController
+from lcc_synth.mpc.settings import settings_from_table
+
+__all__ = ["mpc_controller_from_table"]
+
+
+def _load_gains_file(path: Path, system, field_name: str) -> StaticGains:
+    """Read a gains file (contract 3 of the brief) as the fallback gain."""
+    if not path.is_file():
+        raise ConfigError(field_name, f"no such gains file: {path}")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as err:
+        raise ConfigError(field_name, f"{path} is not valid JSON: {err}") from None
+    for key in ("kind", "m", "n", "semantics", "gains"):
+        if key not in data:
+            raise ConfigError(field_name, f"{path} lacks the key {key!r}")
+    if data["kind"] != system.kind or data["m"] != system.m:
+        raise ConfigError(
+            field_name,
+            f"{path} holds gains for kind={data['kind']!r}, m={data['m']}; the MPC controls "
+            f"kind={system.kind!r}, m={system.m}",
+        )
+    if not isinstance(data["gains"], dict):
+        raise ConfigError(field_name, f"{path}: gains must be an object")
+    try:
+        return StaticGains(data["gains"], data["semantics"])
+    except ConfigError as err:
+        raise ConfigError(f"{field_name}.{err.field}", err.message) from None
+
+
+def mpc_controller_from_table(name: str, table, system, source: str | None = None):
+    """Build an :class:`MPCController` from a ``[controllers.NAME]`` table (``type = "mpc"``).
+
+    Parameters
+    ----------
+    name : str
+        Controller name (table key).
+    table : mapping
+        The table; see :mod:`lcc_synth.mpc.settings` for the keys.
+    system : lcc_synth.problem.System
+    source : str, optional
+        The problem file: errors name it and ``fallback_gains_file`` is relative to its folder.
+    """
+    field_name = f"controllers.{name}"
+    try:
+        settings = settings_from_table(table, field_name)
+        fallback = None
+        fb_source = "paper"
+        if settings.fallback_gains_file:
+            path = Path(settings.fallback_gains_file)
+            if not path.is_absolute() and source:
+                path = Path(source).parent / path
+            fallback = _load_gains_file(path, system, f"{field_name}.fallback_gains_file")
+            fb_source = str(path)
+        try:
+            return MPCController(name, settings, system, fallback, fb_source)
+        except ConfigError as err:
+            if err.field.startswith(field_name):
+                raise
+            raise ConfigError(f"{field_name}.{err.field}", err.message) from None
+    except ConfigError as err:
+        raise err.with_source(source) if source and not err.source else err from None
