@@ -1,0 +1,120 @@
+"""The package layout: no import cycle inside ``lcc_synth``, no module over 600 lines, few plain
+modules at the top.
+
+Imports are read with :mod:`ast`, function-level (lazy) imports included: a cycle closed by a
+lazy import is still a cycle. Importing ``a.b.c`` also runs the ``__init__`` of ``a.b``, so an
+import reaches the parent packages of its target too (those the importer is not inside).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parent.parent / "lcc_synth"
+MAX_LINES = 600
+MAX_TOP_MODULES = 8
+
+
+def _modules() -> dict[str, Path]:
+    mods = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts.pop()
+        mods[".".join(parts)] = path
+    return mods
+
+
+def _owner(name: str, mods: dict[str, Path]) -> str | None:
+    """The module of the package that ``name`` (a module or a name inside one) lives in."""
+    while name and name not in mods:
+        name = name.rpartition(".")[0]
+    return name or None
+
+
+def _parents(name: str) -> list[str]:
+    parts = name.split(".")
+    return [".".join(parts[:i]) for i in range(1, len(parts))]
+
+
+def import_graph() -> dict[str, set[str]]:
+    """``{module: modules of lcc_synth it imports}``, lazy imports and parent packages included."""
+    mods = _modules()
+    graph: dict[str, set[str]] = {}
+    for mod, path in mods.items():
+        is_pkg = path.name == "__init__.py"
+        targets: set[str] = set()
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                targets.update(a.name for a in node.names)
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    here = mod.split(".") if is_pkg else mod.split(".")[:-1]
+                    here = here[: len(here) - node.level + 1]
+                    base = ".".join([*here, base] if base else here)
+                targets.update(f"{base}.{a.name}" for a in node.names)
+        deps = set()
+        for target in targets:
+            owner = _owner(target, mods)
+            if owner is None:
+                continue
+            deps.add(owner)
+            deps.update(p for p in _parents(owner) if p not in (mod, *_parents(mod)))
+        deps.discard(mod)
+        graph[mod] = deps
+    return graph
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """One import cycle as ``[a, b, ..., a]``, or ``None``."""
+    state: dict[str, int] = {}  # 1 on the path, 2 done
+    path: list[str] = []
+
+    def visit(node: str) -> list[str] | None:
+        state[node] = 1
+        path.append(node)
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                return path[path.index(nxt):] + [nxt]
+            if nxt not in state and (found := visit(nxt)):
+                return found
+        path.pop()
+        state[node] = 2
+        return None
+
+    for start in sorted(graph):
+        if start not in state and (found := visit(start)):
+            return found
+    return None
+
+
+def test_no_import_cycle():
+    cycle = find_cycle(import_graph())
+    assert cycle is None, "import cycle inside lcc_synth: " + " -> ".join(cycle)
+
+
+def test_find_cycle_sees_a_cycle():
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert find_cycle({"a": {"b"}, "b": set()}) is None
+
+
+def test_lazy_imports_and_parent_packages_are_edges():
+    graph = import_graph()
+    # controllers.registry imports the MPC inside build_controller only
+    assert "lcc_synth.mpc.build" in graph["lcc_synth.controllers.registry"]
+    assert "lcc_synth.mpc" in graph["lcc_synth.controllers.registry"]
+
+
+@pytest.mark.parametrize("path", sorted(_modules().values()), ids=lambda p: str(p.name))
+def test_module_size(path):
+    lines = len(path.read_text().splitlines())
+    assert lines <= MAX_LINES, f"{path.relative_to(PACKAGE.parent)} has {lines} lines"
+
+
+def test_few_plain_modules_at_the_top():
+    top = sorted(p.name for p in PACKAGE.glob("*.py") if p.name != "__init__.py")
+    assert len(top) <= MAX_TOP_MODULES, top
