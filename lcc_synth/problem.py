@@ -41,6 +41,7 @@ __all__ = [
     "Problem",
     "load_problem",
     "check_keys",
+    "check_range",
     "get_number",
     "get_int",
     "get_bool",
@@ -100,6 +101,17 @@ def check_keys(table: Mapping[str, Any], allowed: Iterable[str], field: str) -> 
             raise ConfigError(where, f"unknown key; allowed keys: {sorted(allowed)}")
 
 
+def _lookup(table: Mapping[str, Any], key: str, field: str, default: Any, requirement: str):
+    """``(dotted name, value, present)``: ``table[key]``, or ``default`` when absent (a required
+    key, ``default is _MISSING``, raises naming the field and ``requirement``)."""
+    name = f"{field}.{key}" if field else key
+    if key in table:
+        return name, table[key], True
+    if default is _MISSING:
+        raise ConfigError(name, f"is required{requirement}")
+    return name, default, False
+
+
 def _fmt_range(lo, hi, lo_open, hi_open) -> str:
     parts = []
     if lo is not None:
@@ -120,22 +132,35 @@ def get_number(
     hi_open: bool = False,
 ) -> float:
     """A finite number ``table[key]`` within the bounds; ``default`` when absent."""
-    name = f"{field}.{key}" if field else key
-    if key not in table:
-        if default is _MISSING:
-            raise ConfigError(name, f"is required ({_fmt_range(lo, hi, lo_open, hi_open)})")
-        return default
-    value = table[key]
+    name, value, present = _lookup(
+        table, key, field, default, f" ({_fmt_range(lo, hi, lo_open, hi_open)})"
+    )
+    if not present:
+        return value
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise ConfigError(name, f"must be a number, got {value!r}")
-    value = float(value)
+    return check_range(name, float(value), lo, hi, lo_open, hi_open)
+
+
+def check_range(
+    name: str,
+    value: float,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    shown: Any = _MISSING,
+) -> float:
+    """``value`` when finite and within the bounds, else a :class:`ConfigError` for ``name``
+    (``shown``, default ``value``, is what the message says was given)."""
     ok = math.isfinite(value)
     if ok and lo is not None:
         ok = value > lo if lo_open else value >= lo
     if ok and hi is not None:
         ok = value < hi if hi_open else value <= hi
     if not ok:
-        raise ConfigError(name, f"must be {_fmt_range(lo, hi, lo_open, hi_open)}, got {value!r}")
+        shown = value if shown is _MISSING else shown
+        raise ConfigError(name, f"must be {_fmt_range(lo, hi, lo_open, hi_open)}, got {shown!r}")
     return value
 
 
@@ -148,12 +173,11 @@ def get_int(
     hi: int | None = None,
 ) -> int:
     """An integer ``table[key]`` in ``[lo, hi]``; ``default`` when absent."""
-    name = f"{field}.{key}" if field else key
-    if key not in table:
-        if default is _MISSING:
-            raise ConfigError(name, f"is required (an integer {_fmt_range(lo, hi, 0, 0)})")
-        return default
-    value = table[key]
+    name, value, present = _lookup(
+        table, key, field, default, f" (an integer {_fmt_range(lo, hi, 0, 0)})"
+    )
+    if not present:
+        return value
     if isinstance(value, bool) or not isinstance(value, int):
         raise ConfigError(name, f"must be an integer, got {value!r}")
     if (lo is not None and value < lo) or (hi is not None and value > hi):
@@ -163,12 +187,9 @@ def get_int(
 
 def get_bool(table: Mapping[str, Any], key: str, field: str, default: Any = _MISSING) -> bool:
     """A boolean ``table[key]``; ``default`` when absent."""
-    name = f"{field}.{key}" if field else key
-    if key not in table:
-        if default is _MISSING:
-            raise ConfigError(name, "is required (true or false)")
-        return default
-    value = table[key]
+    name, value, present = _lookup(table, key, field, default, " (true or false)")
+    if not present:
+        return value
     if not isinstance(value, bool):
         raise ConfigError(name, f"must be true or false, got {value!r}")
     return value
@@ -182,13 +203,10 @@ def get_str(
     choices: Iterable[str] | None = None,
 ) -> str:
     """A string ``table[key]``, one of ``choices`` when given; ``default`` when absent."""
-    name = f"{field}.{key}" if field else key
-    if key not in table:
-        if default is _MISSING:
-            extra = f" (one of {sorted(choices)})" if choices is not None else ""
-            raise ConfigError(name, f"is required{extra}")
-        return default
-    value = table[key]
+    extra = f" (one of {sorted(choices)})" if choices is not None else ""
+    name, value, present = _lookup(table, key, field, default, extra)
+    if not present:
+        return value
     if not isinstance(value, str):
         raise ConfigError(name, f"must be a string, got {value!r}")
     if choices is not None and value not in set(choices):
@@ -220,12 +238,9 @@ def get_number_list(
     hi: float | None = None,
 ) -> list[float]:
     """A list of finite numbers (optionally of fixed ``length`` and within bounds)."""
-    name = f"{field}.{key}" if field else key
-    if key not in table:
-        if default is _MISSING:
-            raise ConfigError(name, "is required (a list of numbers)")
-        return default
-    value = table[key]
+    name, value, present = _lookup(table, key, field, default, " (a list of numbers)")
+    if not present:
+        return value
     if not isinstance(value, list):
         raise ConfigError(name, f"must be a list of numbers, got {value!r}")
     if length is not None and len(value) != length:

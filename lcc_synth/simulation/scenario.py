@@ -7,7 +7,6 @@ ahead, ``m + 1`` the CAV, ``m + 2 .. m + n + 1`` the HDVs behind.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,6 +19,7 @@ from lcc_synth.models.hdv import IDM, MODELS, OVM
 from lcc_synth.problem import (
     System,
     check_keys,
+    check_range,
     get_bool,
     get_int,
     get_number,
@@ -43,19 +43,7 @@ def _num(name: str, value, lo=None, hi=None, lo_open=False) -> float:
         x = float(value)
     except (TypeError, ValueError):
         raise ConfigError(name, f"must be a number, got {value!r}") from None
-    ok = math.isfinite(x)
-    if ok and lo is not None:
-        ok = x > lo if lo_open else x >= lo
-    if ok and hi is not None:
-        ok = x <= hi
-    if not ok:
-        rng = []
-        if lo is not None:
-            rng.append(f"{'>' if lo_open else '>='} {lo}")
-        if hi is not None:
-            rng.append(f"<= {hi}")
-        raise ConfigError(name, f"must be {' and '.join(rng) or 'finite'}, got {value!r}")
-    return x
+    return check_range(name, x, lo, hi, lo_open, shown=value)
 
 
 @dataclass(frozen=True)
