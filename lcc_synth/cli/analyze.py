@@ -14,16 +14,15 @@ import json
 import math
 import sys
 
+from lcc_synth.cli.arguments import add_problem_arguments, add_recording
+
 HELP = "controllability/observability and head-to-tail string stability of the gain cases"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("problem", help="problem file with [system] and optional [cases.NAME]")
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    add_problem_arguments(parser, "problem file with [system] and optional [cases.NAME]")
     parser.add_argument("--png", metavar="PATH", help="write |Gamma(jw)| of every case (Fig. 9)")
-    from lcc_synth.recording import add_recording_arguments
-
-    add_recording_arguments(parser)
+    add_recording(parser)
 
 
 def _fmt(x, spec: str) -> str:

@@ -11,19 +11,18 @@ import argparse
 import json
 import sys
 
+from lcc_synth.cli.arguments import add_problem_arguments, add_recording
+
 HELP = "string-stable regions of one vehicle's feedback gains (Figs. 7-8)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("problem", help="problem file with [system] and [maps.NAME] tables")
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    add_problem_arguments(parser, "problem file with [system] and [maps.NAME] tables")
     parser.add_argument("--png", metavar="PATH", help="write the maps as one PNG (Figs. 7-8)")
     parser.add_argument(
         "--step", type=float, metavar="STEP", help="override the grid step of every map"
     )
-    from lcc_synth.recording import add_recording_arguments
-
-    add_recording_arguments(parser)
+    add_recording(parser)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -16,6 +16,8 @@ import json
 import sys
 from pathlib import Path
 
+from lcc_synth.cli.arguments import add_output_arguments, add_problem_arguments, add_recording
+
 HELP = "run the showcase comparison: baseline, paper gains, H2 gain and MPC on a scenario suite"
 
 #: Frequencies (rad/s) of the |Gamma(j omega)| figures and recordings.
@@ -23,30 +25,16 @@ _OMEGA = (-3.0, 1.5, 500)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from lcc_synth.recording import add_recording_arguments
-
-    parser.add_argument(
-        "problem",
-        nargs="?",
-        default=None,
-        help="suite problem file (default: problems/showcase.toml of the repository)",
+    add_problem_arguments(
+        parser,
+        "suite problem file (default: problems/showcase.toml of the repository)",
+        optional=True,
     )
-    parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     parser.add_argument(
         "--scenarios", metavar="A,B", help="comma-separated scenario names to run (default all)"
     )
-    parser.add_argument(
-        "--controllers", metavar="A,B", help="comma-separated controller names (default all)"
-    )
-    parser.add_argument(
-        "--out", metavar="DIR", default="results",
-        help="results root; the run writes DIR/<problem>-<UTC timestamp>/ (default results)",
-    )
-    parser.add_argument("--no-figures", action="store_true", help="do not write PNG figures")
-    parser.add_argument(
-        "--no-progress", action="store_true", help="no progress bars on stderr"
-    )
-    add_recording_arguments(parser)
+    add_output_arguments(parser, "the run", "PNG figures")
+    add_recording(parser)
 
 
 def default_problem() -> Path:

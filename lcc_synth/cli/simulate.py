@@ -12,12 +12,13 @@ import math
 import sys
 from typing import Any
 
+from lcc_synth.cli.arguments import add_problem_arguments, add_recording
+
 HELP = "Simulate every controller of a problem file and report AAVE, fuel and safety metrics."
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("problem", help="problem file (TOML) with [scenario] and [controllers.*]")
-    parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    add_problem_arguments(parser, "problem file (TOML) with [scenario] and [controllers.*]")
     parser.add_argument(
         "--seeds",
         type=int,
@@ -25,9 +26,7 @@ def add_arguments(parser) -> None:
         metavar="N",
         help="run N random draws (scenario batch) per controller; overrides [scenario].batch",
     )
-    from lcc_synth.recording import add_recording_arguments
-
-    add_recording_arguments(parser)
+    add_recording(parser)
 
 
 #: Largest recorded batch kept in memory at once (bytes); larger seed studies run in chunks.

@@ -17,19 +17,18 @@ import argparse
 import json
 import sys
 
+from lcc_synth.cli.arguments import add_output_arguments, add_problem_arguments
+
 HELP = "Monte Carlo robustness sweep of every controller on a Dask cluster"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("problem", help="sweep problem file (TOML) with a [sweep] table")
+    add_problem_arguments(parser, "sweep problem file (TOML) with a [sweep] table")
     parser.add_argument("--count", type=int, metavar="N", help="scenarios (overrides [sweep])")
     parser.add_argument(
         "--batch-size", type=int, metavar="B", help="scenarios per Dask task (overrides [sweep])"
     )
     parser.add_argument("--seed", type=int, metavar="S", help="base seed (overrides [scenario])")
-    parser.add_argument(
-        "--controllers", metavar="A,B", help="comma-separated controller names (default all)"
-    )
     parser.add_argument(
         "--scheduler", metavar="ADDRESS",
         help="address of an existing Dask scheduler (e.g. tcp://10.0.0.5:8786); default: a "
@@ -39,13 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--workers", type=int, default=2, metavar="N",
         help="worker processes of the local cluster (default 2)",
     )
-    parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
-    parser.add_argument(
-        "--out", metavar="DIR", default="results",
-        help="results root; the sweep writes DIR/<problem>-<UTC timestamp>/ (default results)",
-    )
-    parser.add_argument("--no-figures", action="store_true", help="do not write the PNG")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars on stderr")
+    add_output_arguments(parser, "the sweep", "the PNG")
 
 
 def _client(args):

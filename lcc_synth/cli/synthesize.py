@@ -6,19 +6,20 @@ import argparse
 import json
 import sys
 
+from lcc_synth.cli.arguments import add_problem_arguments, add_recording
+
 HELP = "synthesise H2 structured / sparse / string-stable static gains for the CAV"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("problem", help="problem file with a [synthesis] table")
+    add_problem_arguments(
+        parser, "problem file with a [synthesis] table", "print the report as one JSON object"
+    )
     parser.add_argument("--out", metavar="GAINS.json", help="write the gains file (contract 3)")
-    parser.add_argument("--json", action="store_true", help="print the report as one JSON object")
     parser.add_argument(
         "--figure", metavar="PNG", help="design = 'sparsity': write the Pareto-front PNG"
     )
-    from lcc_synth.recording import add_recording_arguments
-
-    add_recording_arguments(parser)
+    add_recording(parser)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -1,0 +1,41 @@
+"""The command-line arguments that several ``lcc-synth`` commands share, set up one way."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def add_problem_arguments(
+    parser: argparse.ArgumentParser,
+    problem_help: str,
+    json_help: str = "print one JSON object on stdout",
+    optional: bool = False,
+) -> None:
+    """The problem file (positional, ``None`` when ``optional`` and not given) and ``--json``."""
+    if optional:
+        parser.add_argument("problem", nargs="?", default=None, help=problem_help)
+    else:
+        parser.add_argument("problem", help=problem_help)
+    parser.add_argument("--json", action="store_true", help=json_help)
+
+
+def add_recording(parser: argparse.ArgumentParser) -> None:
+    """``--rrd``, ``--no-record`` and ``--record-every`` (imported only when a command is set
+    up, so that ``lcc-synth --help`` stays fast)."""
+    from lcc_synth.recording import add_recording_arguments
+
+    add_recording_arguments(parser)
+
+
+def add_output_arguments(parser: argparse.ArgumentParser, what: str, figures: str) -> None:
+    """``--controllers``, ``--out DIR``, ``--no-figures`` and ``--no-progress`` of the commands
+    that run many simulations (``what`` writes ``DIR/<problem>-<UTC timestamp>/``)."""
+    parser.add_argument(
+        "--controllers", metavar="A,B", help="comma-separated controller names (default all)"
+    )
+    parser.add_argument(
+        "--out", metavar="DIR", default="results",
+        help=f"results root; {what} writes DIR/<problem>-<UTC timestamp>/ (default results)",
+    )  # fmt: skip
+    parser.add_argument("--no-figures", action="store_true", help=f"do not write {figures}")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars on stderr")
