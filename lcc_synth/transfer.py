@@ -239,11 +239,18 @@ def gamma_polynomials(
 
 
 def hessenberg_solver(A: np.ndarray, b: np.ndarray, c: np.ndarray, chunk: int = 512):
-    """A function ``s -> c (s I - A)^-1 b`` (see :func:`transfer_response`), reduction done once."""
+    """A function ``s -> c (s I - A)^-1 b`` (see :func:`transfer_response`), reduction done once.
+
+    ``b`` may hold several right-hand sides as columns ``(nx, k)`` with ``k > 1``; the
+    function then returns an array of shape ``s.shape + (k,)`` (one elimination per ``s``
+    serves all columns). A vector or an ``(nx, 1)`` column gives ``s.shape``.
+    """
     A = np.asarray(A, dtype=float)
-    b = np.asarray(b, dtype=float).reshape(-1)
+    b = np.asarray(b, dtype=float)
+    single = b.ndim == 1 or b.shape[-1] == 1
+    b = b.reshape(A.shape[0], -1)
     c = np.asarray(c, dtype=float).reshape(-1)
-    nx = A.shape[0]
+    nx, nb = b.shape
     Hs, Q = sla.hessenberg(A, calc_q=True)
     bh = Q.T @ b
     ch = c @ Q
@@ -251,24 +258,23 @@ def hessenberg_solver(A: np.ndarray, b: np.ndarray, c: np.ndarray, chunk: int = 
 
     def solve(s):
         s = np.asarray(s, dtype=complex)
-        out = np.empty(s.shape, dtype=complex)
+        out = np.empty(s.shape + (nb,), dtype=complex)
         flat = s.reshape(-1)
-        res = out.reshape(-1)
+        res = out.reshape(-1, nb)
         for start in range(0, flat.size, chunk):
             z = flat[start : start + chunk]
             N = z.size
             M = np.broadcast_to(-Hs, (N, nx, nx)).astype(complex)
             M[:, diag, diag] += z[:, None]
+            r = np.broadcast_to(bh, (N, nx, nb)).astype(complex)
             if N < _SMALL_BATCH:  # a few frequencies: one batched LAPACK LU (partial pivoting)
-                r = np.broadcast_to(bh, (N, nx)).astype(complex)[..., None]
                 with np.errstate(divide="ignore", invalid="ignore"):
                     try:
-                        y = np.linalg.solve(M, r)[..., 0]
+                        y = np.linalg.solve(M, r)
                     except np.linalg.LinAlgError:
-                        y = np.full((N, nx), np.inf + 0j)
-                res[start : start + N] = y @ ch
+                        y = np.full((N, nx, nb), np.inf + 0j)
+                res[start : start + N] = np.einsum("j,ijk->ik", ch, y)
                 continue
-            r = np.broadcast_to(bh, (N, nx)).astype(complex)
             for j in range(nx - 1):
                 swap = np.abs(M[:, j + 1, j]) > np.abs(M[:, j, j])
                 if swap.any():
@@ -283,14 +289,14 @@ def hessenberg_solver(A: np.ndarray, b: np.ndarray, c: np.ndarray, chunk: int = 
                 with np.errstate(divide="ignore", invalid="ignore"):
                     lam = np.where(piv != 0, M[:, j + 1, j] / piv, 0.0)
                 M[:, j + 1, j + 1 :] -= lam[:, None] * M[:, j, j + 1 :]
-                r[:, j + 1] -= lam * r[:, j]
-            y = np.empty((N, nx), dtype=complex)
+                r[:, j + 1] -= lam[:, None] * r[:, j]
+            y = np.empty((N, nx, nb), dtype=complex)
             with np.errstate(divide="ignore", invalid="ignore"):
                 for j in range(nx - 1, -1, -1):
-                    acc = r[:, j] - np.einsum("ij,ij->i", M[:, j, j + 1 :], y[:, j + 1 :])
-                    y[:, j] = acc / M[:, j, j]
-            res[start : start + N] = y @ ch
-        return out
+                    acc = r[:, j] - np.einsum("ij,ijk->ik", M[:, j, j + 1 :], y[:, j + 1 :])
+                    y[:, j] = acc / M[:, j, j][:, None]
+            res[start : start + N] = np.einsum("j,ijk->ik", ch, y)
+        return out[..., 0] if single else out
 
     return solve
 

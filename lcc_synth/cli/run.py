@@ -115,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
         recording_decimation,
         recording_path,
     )
+    from lcc_synth.string_stability import verdict_text
     from lcc_synth.synthesis.h2 import SynthesisError
 
     problem = Path(args.problem) if args.problem else default_problem()
@@ -251,7 +252,7 @@ def run(args: argparse.Namespace) -> int:
                     )
         for lname, per in curves.items():
             for cname, (_, rep) in per.items():
-                verdict = "string stable" if rep.string_stable else "NOT string stable"
+                verdict = verdict_text(rep.verdict)
                 print(f"|Γ| {lname}/{cname}: peak {rep.gamma_peak:.4f} -> {verdict}")
     print(f"results: {out_dir}", file=log)
     if rrd is not None:
