@@ -15,10 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
+from lcc_synth.cases import analysis_options_from, cases_from
 from lcc_synth.feedback import input_feedback
 from lcc_synth.figures import plot_gamma_curves
 from lcc_synth.problem import load_problem, system_from
-from lcc_synth.string_stability import analysis_options_from, cases_from, string_stability
+from lcc_synth.string_stability import string_stability
 from lcc_synth.transfer import gamma_state_space
 
 DEFAULT = Path(__file__).resolve().parents[1] / "problems" / "paper_fig9_cases.toml"

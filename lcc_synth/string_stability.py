@@ -47,11 +47,11 @@ Two independent searches of ``max q`` (``method``), the same band for both:
 * ``"grid"``: ``w = 0`` exactly (``q(0) = c / S(0)`` from three solves with ``A_cl``) plus a dense
   logarithmic grid (``GRID_PER_DECADE`` points per decade over ``[min(1e-3, 0.01 min|lambda|),
   max(100, 100 max|lambda|)]``) with the imaginary parts and moduli of all closed-loop poles
-  added (a lightly damped pole makes a narrow peak there); points closer than ``GRID_MERGE_RTOL``
-  (1e-7) relative are merged, so repeated poles that differ by an ulp do not make zero-width
-  brackets. Every local maximum is refined by a vectorised golden-section search on ``log w``
-  whose bracket runs between the neighbours that are *strictly* lower (so it contains the
-  maximiser even on a flat stretch).
+  added (a lightly damped pole makes a narrow peak there); points closer than
+  ``transfer.MERGE_RTOL`` (1e-7) relative are merged, so repeated poles that differ by an ulp
+  do not make zero-width brackets. Every local maximum is refined by a vectorised
+  golden-section search on ``log w`` whose bracket runs between the neighbours that are
+  *strictly* lower (so it contains the maximiser even on a flat stretch).
 * ``"hamiltonian"``: the level set ``|Gamma(jw)| = g0`` is the set of imaginary eigenvalues
   ``jw`` of the Hamiltonian ``[[A, h h^T / g0], [-c^T c / g0, -A^T]]`` (Boyd & Balakrishnan).
   Its double eigenvalue at 0 is deflated exactly: the Jordan chain ``v0 = [-A^-1 h; -A^-T
@@ -73,7 +73,6 @@ The loop need not come from an LCC model: :func:`loop_string_stability` takes an
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -85,39 +84,33 @@ from lcc_synth.models import LCCModel
 from lcc_synth.transfer import (
     check_head,
     closed_loop_eigenvalues,
+    golden_max,
+    hamiltonian_matrix,
     hessenberg_solver,
+    hinf_norm_hamiltonian,
+    merge_frequencies,
     tail_output,
-    transfer_response,
 )
 
 __all__ = [
     "StringStabilityReport",
     "VERDICTS",
     "GRID_PER_DECADE",
-    "GRID_MERGE_RTOL",
     "BAND_FACTOR",
     "string_band",
     "decision_function",
-    "hinf_norm_hamiltonian",
-    "level_crossings",
     "deflated_hamiltonian_eigenvalues",
     "loop_string_stability",
     "string_stability",
     "gains_string_stability",
     "verdict_text",
-    "AnalysisOptions",
-    "analysis_options_from",
-    "GainCase",
-    "cases_from",
 ]
 
 VERDICTS = ("string_stable", "string_unstable", "plant_unstable", "boundary")
 GRID_PER_DECADE = 120
-GRID_MERGE_RTOL = 1e-7
 BAND_FACTOR = 1e4
 LOW_FREQ_TOL = 1e-9  # legacy, used by regions until its own band lands
 PEAK_TOL = 1e-9  # legacy, used by regions until its own band lands
-_GOLDEN_ITERS = 45
 _EPS = float(np.finfo(float).eps)
 
 
@@ -268,15 +261,6 @@ def decision_function(A: np.ndarray, h: np.ndarray, c: np.ndarray):
 # --------------------------------------------------------------------------------------------
 
 
-def _merge(w: np.ndarray) -> np.ndarray:
-    """Sorted ``w`` with points closer than ``GRID_MERGE_RTOL`` (relative) merged."""
-    w = np.sort(w)
-    if w.size < 2:
-        return w
-    keep = np.concatenate([[True], np.diff(w) > GRID_MERGE_RTOL * w[1:]])
-    return w[keep]
-
-
 def _frequency_grid(eigs: np.ndarray) -> np.ndarray:
     mags = np.abs(eigs)
     mags = mags[mags > 1e-12]
@@ -286,32 +270,7 @@ def _frequency_grid(eigs: np.ndarray) -> np.ndarray:
     grid = np.logspace(np.log10(lo), np.log10(hi), count)
     poles = np.concatenate([np.abs(eigs.imag), mags])
     poles = poles[(poles > lo) & (poles < hi)]
-    return _merge(np.concatenate([grid, poles]))
-
-
-def _golden_max(f, lo: np.ndarray, hi: np.ndarray):
-    """Vectorised golden-section maximisation on ``log w`` brackets ``[lo, hi]``."""
-    a, b = np.log(lo), np.log(hi)
-    r = (np.sqrt(5.0) - 1.0) / 2.0
-    x1 = b - r * (b - a)
-    x2 = a + r * (b - a)
-    f1, f2 = f(np.exp(x1)), f(np.exp(x2))
-    for _ in range(_GOLDEN_ITERS):
-        left = f1 >= f2  # maximum in [a, x2]
-        a_new = np.where(left, a, x1)
-        b_new = np.where(left, x2, b)
-        # the kept interior point becomes the new x2 (left) or x1 (right)
-        keep_x = np.where(left, x1, x2)
-        keep_f = np.where(left, f1, f2)
-        new_x = np.where(left, b_new - r * (b_new - a_new), a_new + r * (b_new - a_new))
-        new_f = f(np.exp(new_x))
-        x1 = np.where(left, new_x, keep_x)
-        f1 = np.where(left, new_f, keep_f)
-        x2 = np.where(left, keep_x, new_x)
-        f2 = np.where(left, keep_f, new_f)
-        a, b = a_new, b_new
-    xb = np.where(f1 >= f2, x1, x2)
-    return np.exp(xb), np.maximum(f1, f2)
+    return merge_frequencies(np.concatenate([grid, poles]))
 
 
 def _local_maxima(f, w: np.ndarray, g: np.ndarray, lowest: float | None):
@@ -342,7 +301,7 @@ def _local_maxima(f, w: np.ndarray, g: np.ndarray, lowest: float | None):
         right = w[k] if k < n else w[-1] * 1e3
         lo_b.append(left)
         hi_b.append(right)
-    om, val = _golden_max(f, np.array(lo_b), np.array(hi_b))
+    om, val = golden_max(f, np.array(lo_b), np.array(hi_b))
     grid_better = g[idx] > val
     om = np.where(grid_better, w[idx], om)
     val = np.where(grid_better, g[idx], val)
@@ -366,7 +325,7 @@ def _grid_search(dec: _Decision, eigs: np.ndarray):
         lambda x: dec.evaluate(x)[1], w, mag, lowest=None
     )
     if dec.q0 >= 0 and mag.size > 1 and mag[0] > mag[1]:  # rising at 0: peak below the grid
-        w2, v2 = _golden_max(lambda x: dec.evaluate(x)[1], np.array([w[0] * 1e-3]), w[1:2])
+        w2, v2 = golden_max(lambda x: dec.evaluate(x)[1], np.array([w[0] * 1e-3]), w[1:2])
         pw, pv = np.concatenate([w2, pw]), np.concatenate([v2, pv])
     return float(cand_q[j]), float(cand_w[j]), pw, pv
 
@@ -374,66 +333,6 @@ def _grid_search(dec: _Decision, eigs: np.ndarray):
 # --------------------------------------------------------------------------------------------
 # Hamiltonian level-set method (Boyd & Balakrishnan 1990), the independent search
 # --------------------------------------------------------------------------------------------
-
-
-def _hamiltonian(A: np.ndarray, b: np.ndarray, c: np.ndarray, level: float) -> np.ndarray:
-    b = b.reshape(-1, 1)
-    c = c.reshape(1, -1)
-    return np.block([[A, b @ b.T / level], [-c.T @ c / level, -A.T]])
-
-
-def level_crossings(
-    A: np.ndarray, b: np.ndarray, c: np.ndarray, level: float, rtol: float | None = None
-) -> np.ndarray:
-    """Frequencies ``w >= 0`` with ``|c (jw I - A)^-1 b| = level``: the imaginary-axis
-    eigenvalues ``jw`` of the Hamiltonian ``[[A, b b^T/level], [-c^T c/level, -A^T]]``.
-
-    An eigenvalue counts as imaginary when ``|Re| <= rtol * ||H||`` (default ``rtol`` =
-    ``sqrt(eps)``: a simple eigenvalue on the axis moves off it by about ``eps ||H||`` times
-    its condition number). Not for the level ``|Gamma(0)|`` itself, whose double root at 0 is
-    rounding-decided: :func:`loop_string_stability` deflates it.
-    """
-    A = np.asarray(A, float)
-    b = np.asarray(b, float).reshape(-1)
-    c = np.asarray(c, float).reshape(-1)
-    Hm = _hamiltonian(A, b, c, level)
-    ev = np.linalg.eigvals(Hm)
-    tol = (np.sqrt(_EPS) if rtol is None else rtol) * np.linalg.norm(Hm, 1)
-    on_axis = np.abs(ev.real) <= tol
-    return _merge(np.abs(ev[on_axis].imag))
-
-
-def hinf_norm_hamiltonian(
-    A: np.ndarray, b: np.ndarray, c: np.ndarray, tol: float = 1e-10, max_iter: int = 100
-) -> tuple[float, float]:
-    """``(sup_w |G(jw)|, argmax)`` of a stable SISO ``G = c (sI - A)^-1 b`` by the
-    quadratically convergent level-set iteration of Boyd & Balakrishnan (each new lower bound
-    refined by golden section between the crossings, so the value is exact to ``tol``)."""
-    A = np.asarray(A, float)
-    b = np.asarray(b, float).reshape(-1)
-    c = np.asarray(c, float).reshape(-1)
-    eigs = np.linalg.eigvals(A)
-    cand = np.concatenate([[0.0], np.abs(eigs.imag), np.abs(eigs)])
-    vals = np.abs(transfer_response(A, b, c, 1j * cand))
-    i = int(np.argmax(vals))
-    lb, w_best = float(vals[i]), float(cand[i])
-    solver = hessenberg_solver(A, b, c)
-
-    def mag(w):
-        return np.abs(solver(1j * np.asarray(w, float)))
-
-    for _ in range(max_iter):
-        level = (1.0 + 2.0 * tol) * lb
-        ws = level_crossings(A, b, c, level)
-        ws = ws[ws > 0]
-        if ws.size < 2:
-            return lb, w_best
-        om, mv = _golden_max(mag, ws[:-1], ws[1:])
-        j = int(np.argmax(mv))
-        if mv[j] <= lb:
-            return lb, w_best
-        lb, w_best = float(mv[j]), float(om[j])
-    return lb, w_best
 
 
 def deflated_hamiltonian_eigenvalues(
@@ -456,7 +355,7 @@ def _deflated_eigs(A, h, c, dec: _Decision) -> np.ndarray:
     v1 = np.concatenate([-dec.b2, (m2 / g0) * At_c + At2_c])
     V = np.column_stack([v0 / np.linalg.norm(v0), v1 / np.linalg.norm(v1)])
     Z = np.linalg.qr(V, mode="complete")[0][:, 2:]
-    Hm = _hamiltonian(A, h, c, g0)
+    Hm = hamiltonian_matrix(A, h, c, g0)
     return np.linalg.eigvals(Z.T @ Hm @ Z)
 
 
@@ -464,12 +363,12 @@ def _hamiltonian_search(A, h, c, dec: _Decision):
     """``(max q, its w)`` from the candidate frequencies of the deflated Hamiltonian."""
     ev = _deflated_eigs(A, h, c, dec)
     near = np.abs(ev.real) <= np.abs(ev.imag)
-    cand = _merge(np.abs(ev[near].imag))
+    cand = merge_frequencies(np.abs(ev[near].imag))
     cand = cand[cand > 0]
     if cand.size == 0:
         return dec.q0, 0.0
     mids = np.sqrt(cand[:-1] * cand[1:])
-    pts = _merge(np.concatenate([cand, mids, [cand[0] * 0.5, cand[-1] * 2.0]]))
+    pts = merge_frequencies(np.concatenate([cand, mids, [cand[0] * 0.5, cand[-1] * 2.0]]))
     wq = np.concatenate([[0.0], pts])
     gq = np.concatenate([[dec.q0], dec.evaluate(pts)[0]])
     om, val = _local_maxima(lambda x: dec.evaluate(x)[0], wq, gq, lowest=pts[0] * 1e-3)
@@ -632,88 +531,3 @@ def gains_string_stability(model: LCCModel, gains, method: str = "grid") -> Stri
 
     K, kh = input_feedback(model, gains)
     return string_stability(model, K, kh, method=method)
-
-
-# --------------------------------------------------------------------------------------------
-# Problem files: [cases.NAME] and [analysis]
-# --------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class AnalysisOptions:
-    """The ``[analysis]`` table: observability outputs, peak-search method, plot grid."""
-
-    outputs: tuple[str, ...] | None = None
-    method: str = "grid"
-    omega_min: float = 1e-3
-    omega_max: float = 10.0
-    points: int = 400
-
-    def omega(self) -> np.ndarray:
-        """Logarithmic frequency grid for plotted responses (Fig. 9)."""
-        return np.logspace(np.log10(self.omega_min), np.log10(self.omega_max), self.points)
-
-
-def analysis_options_from(data: Mapping, source: str | None = None) -> AnalysisOptions:
-    """Parse the optional ``[analysis]`` table (see :func:`cases_from`)."""
-    from lcc_synth.problem import check_keys, get_int, get_number, get_str, get_table
-
-    try:
-        t = get_table(data, "analysis", "analysis")
-        check_keys(t, ["outputs", "method", "omega_min", "omega_max", "points"], "analysis")
-        outputs = None
-        if "outputs" in t:
-            raw = t["outputs"]
-            if not isinstance(raw, list) or not raw or not all(isinstance(x, str) for x in raw):
-                raise ConfigError(
-                    "analysis.outputs", f"must be a non-empty list of state names, got {raw!r}"
-                )
-            outputs = tuple(raw)
-        method = get_str(t, "method", "analysis", "grid", choices=["grid", "hamiltonian"])
-        lo = get_number(t, "omega_min", "analysis", 1e-3, lo=0.0, lo_open=True)
-        hi = get_number(t, "omega_max", "analysis", 10.0, lo=lo, lo_open=True)
-        points = get_int(t, "points", "analysis", 400, lo=2, hi=100_000)
-        return AnalysisOptions(outputs, method, lo, hi, points)
-    except ConfigError as err:
-        raise err.with_source(source) if source and not err.source else err from None
-
-
-@dataclass(frozen=True)
-class GainCase:
-    """One ``[cases.NAME]`` table: a named static gain (eq. 23) to analyse."""
-
-    name: str
-    gains: object  # StaticGains
-    label: str
-
-
-def cases_from(data: Mapping, model: LCCModel, source: str | None = None) -> dict[str, GainCase]:
-    """Parse ``[cases.NAME]`` tables into :class:`GainCase` (in file order).
-
-    Each table: ``semantics = "added" | "replace"`` (default ``"added"``), ``gains = { s_-2 =
-    1.0, v_-2 = -1.0, ... }`` (state name -> gain, missing states 0) and an optional ``label``.
-    Errors name ``cases.NAME.<field>`` and the file.
-    """
-    from lcc_synth.feedback import StaticGains
-    from lcc_synth.problem import check_keys, get_str, get_table
-
-    out = {}
-    try:
-        cases = get_table(data, "cases", "cases")
-        for name, table in cases.items():
-            field = f"cases.{name}"
-            if not isinstance(table, dict):
-                raise ConfigError(field, f"must be a table, got {table!r}")
-            check_keys(table, ["semantics", "gains", "label"], field)
-            semantics = get_str(table, "semantics", field, "added", choices=["added", "replace"])
-            raw = get_table(table, "gains", f"{field}.gains")
-            label = get_str(table, "label", field, name)
-            try:
-                gains = StaticGains(raw, semantics)
-                gains.check(model)
-            except ConfigError as err:
-                raise ConfigError(f"{field}.{err.field}", err.message) from None
-            out[name] = GainCase(name, gains, label)
-    except ConfigError as err:
-        raise err.with_source(source) if source and not err.source else err from None
-    return out

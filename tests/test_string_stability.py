@@ -9,13 +9,15 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.feedback import StaticGains, closed_loop, input_feedback
 from lcc_synth.hdv import OVM, LinearCoefficients
 from lcc_synth.models import build_model, fd_lcc, general_lcc
-from lcc_synth.string_stability import hinf_norm_hamiltonian, level_crossings, string_stability
+from lcc_synth.string_stability import string_stability
 from lcc_synth.transfer import (
     closed_form_gains,
     closed_loop_eigenvalues,
     gamma_closed_form,
     gamma_polynomials,
     gamma_state_space,
+    hinf_norm_hamiltonian,
+    level_crossings,
     transfer_response,
 )
 

@@ -32,6 +32,7 @@ def _fmt(x, spec: str) -> str:
 
 def analyze(problem_path: str) -> tuple[dict, dict]:
     """Everything ``analyze`` reports, as a JSON-ready dict, plus the objects for plotting."""
+    from lcc_synth.cases import analysis_options_from, cases_from
     from lcc_synth.controllability import (
         controllability_report,
         default_outputs,
@@ -40,7 +41,7 @@ def analyze(problem_path: str) -> tuple[dict, dict]:
     from lcc_synth.errors import ConfigError
     from lcc_synth.feedback import closed_loop, input_feedback
     from lcc_synth.problem import load_problem, system_from
-    from lcc_synth.string_stability import analysis_options_from, cases_from, string_stability
+    from lcc_synth.string_stability import string_stability
     from lcc_synth.transfer import closed_loop_eigenvalues
 
     prob = load_problem(problem_path)
