@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lcc_synth.analysis.string_stability import analysis_options_from, cases_from, string_stability
+from lcc_synth.analysis.cases import analysis_options_from, cases_from
+from lcc_synth.analysis.string_stability import string_stability
 from lcc_synth.analysis.transfer import gamma_state_space
 from lcc_synth.figures import plot_gamma_curves
 from lcc_synth.models.feedback import input_feedback

@@ -192,11 +192,13 @@ def plot_gamma_curves(curves, omega, path: str | Path, title: str | None = None)
     path : str or Path
         Output PNG.
     """
+    from lcc_synth.analysis.string_stability import verdict_text
+
     plt = _pyplot()
     path = Path(path)
     fig, ax = plt.subplots(figsize=(6.5, 4), constrained_layout=True)
     for label, (mag, rep) in curves.items():
-        verdict = "string stable" if rep.string_stable else "not string stable"
+        verdict = verdict_text(rep.verdict)
         ax.semilogx(omega, mag, label=f"{label}: peak {rep.gamma_peak:.3f} ({verdict})")
     ax.axhline(1.0, color="k", lw=0.8, ls="--")
     ax.set_xlabel("ω (rad/s)")

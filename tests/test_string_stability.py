@@ -5,17 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lcc_synth.analysis.string_stability import (
-    hinf_norm_hamiltonian,
-    level_crossings,
-    string_stability,
-)
+from lcc_synth.analysis.string_stability import string_stability
 from lcc_synth.analysis.transfer import (
     closed_form_gains,
     closed_loop_eigenvalues,
     gamma_closed_form,
     gamma_polynomials,
     gamma_state_space,
+    hinf_norm_hamiltonian,
+    level_crossings,
     transfer_response,
 )
 from lcc_synth.errors import ConfigError

@@ -1,62 +1,94 @@
-"""Head-to-tail transfer function and string stability, Section IV and Appendix A.
+"""Head-to-tail string stability (Section IV, Definition 1, eq. 25), decided without rounding.
 
-Head-to-tail transfer function (eq. 24): ``Gamma(s) = V_t(s) / V_h(s)``, the velocity error of the
-tail vehicle over the velocity error of the head vehicle, for the CAV law (eq. 23)
+The paper's condition is ``|Gamma(jw)| < 1`` for all ``w > 0``, where ``Gamma(s) = c (sI -
+A_cl)^-1 h`` is the head-to-tail transfer function (:mod:`lcc_synth.analysis.transfer`). Every
+stabilising gain has ``Gamma(0) = g0 = 1``, so the question is asked at the level of the
+supremum itself: ``|Gamma|^2 - g0^2`` has an exact double zero at ``w = 0``, and a test that
+evaluates it there (a level crossing of the Hamiltonian at ``|Gamma(0)|``, a grid point against
+``1 - 1e-9``) decides on rounding noise. This module removes that double zero structurally.
 
-    u = a1 s_0 - a2 v_0 + a3 v_-1 + sum_i (mu_i s_i + k_i v_i).
+Decision function
+-----------------
+With the Taylor remainders (exact identities, each a transfer function of the same loop)
 
-Two independent computations:
+    Gamma1(s) = (Gamma(s) - g0) / s       = c (sI - A)^-1 A^-1 h,
+    Gamma2(s) = (Gamma1(s) - Gamma1(0)) / s = c (sI - A)^-1 A^-2 h,
 
-* :func:`gamma_closed_form` evaluates the paper's formula ``Gamma = G (phi/gamma)^(n+m)`` with
-  ``phi = a3 s + a1``, ``gamma = s^2 + a2 s + a1`` and ``H_i = mu_i (gamma/phi - 1) + k_i s``,
-  generalised to per-vehicle (heterogeneous) coefficients by replacing every power of
-  ``phi/gamma`` with the product of the vehicles' own ratios (Appendix A, same derivation).
-  :func:`gamma_polynomials` gives the same function as an exact ratio of polynomials
-  ``num/den``; ``den`` is the closed-loop characteristic polynomial.
-* :func:`gamma_state_space` evaluates ``c (jw I - A_cl)^-1 h_cl`` of the closed loop
-  (``feedback.closed_loop``) by a vectorised Hessenberg solve (orthogonal reduction once, then an
-  O(nx^2) elimination with pivoting per frequency), never by an eigen-decomposition: identical
-  vehicle blocks make ``A`` nearly defective.
+one has, for every ``w``, ``|Gamma(jw)|^2 - g0^2 = w^2 Q(w)`` with
 
-String-stability verdict (eq. 25): ``|Gamma(jw)| < 1`` for all ``w > 0``. Every stabilising gain
-gives ``|Gamma(0)| = 1``, so the question is decided by
+    Q(w) = |Gamma1(jw)|^2 - 2 g0 Re Gamma2(jw),      Q(0) = c,
 
-1. the low-frequency expansion ``|Gamma(jw)|^2 = Gamma(0)^2 + c w^2 + O(w^4)``: ``c > 0`` means
-   ``|Gamma| > 1`` just above ``w = 0``. ``c = g1^2 - g0 g2`` with ``g_k`` the Taylor
-   coefficients of ``Gamma`` at 0 (computed from ``A_cl^-1`` solves). The verdict requires
-   ``c_rel = c / (g1^2 + |g0 g2|) < -LOW_FREQ_TOL`` (1e-9): a point whose curvature is zero to
-   round-off is on the boundary and counted as *not* string stable (conservative);
-2. the global supremum over ``w > 0``: every local maximum must stay below ``1 - PEAK_TOL``
-   (1e-9). The search is global: a dense logarithmic grid (``GRID_PER_DECADE`` points per decade
-   over ``[min(1e-3, 0.01 min|lambda|), max(100, 100 max|lambda|)]``) to which the imaginary
-   parts and moduli of all closed-loop poles are added (a lightly damped pole makes a narrow
-   peak exactly there), then every local maximum of the grid is refined by a vectorised
-   golden-section search (bracket = its two grid neighbours, 45 iterations, relative frequency
-   resolution ~1e-9, so the peak value is exact to round-off). A second, independent method is
-   the Hamiltonian level-set algorithm of Boyd & Balakrishnan (:func:`hinf_norm_hamiltonian`,
-   :func:`level_crossings`), selectable with ``method="hamiltonian"``; the tests check that
-   both agree.
+``c`` the low-frequency curvature of ``|Gamma|^2 = g0^2 + c w^2 + O(w^4)``. String stability is
+exactly ``Q(w) < 0`` for all ``w >= 0``: no zero to remove, no limit to take. The verdict uses the
+relative form ``q(w) = Q / S``, ``S = |Gamma1|^2 + 2 |g0 Re Gamma2|`` (the sum of the absolute
+values of its two terms, so ``|q| <= 1``; ``q -> -1/3`` as ``w -> inf``). ``q`` is a function of
+the transfer function only: it does not change under a change of state coordinates, of units
+(``Gamma1`` scales with time, ``Gamma2`` with time squared), or of the realisation.
 
-Plant (asymptotic) stability uses the closed-loop eigenvalues computed per strongly connected
-block of ``A_cl`` (a permutation to block-triangular form, exact): HDVs that the CAV does not
-feed back form their own 2x2 blocks, so their eigenvalues are exact instead of being scattered
-by a long Jordan chain.
+Verdict and tolerance band
+--------------------------
+``margin = -max_{w >= 0} q(w)``. With the band
+
+    tau = BAND_FACTOR * eps * max(1, max|lambda| / min|lambda|)       (BAND_FACTOR = 1e4)
+
+over the closed-loop eigenvalues (a coordinate-free spread of the loop's time scales; on the
+paper's models tau = 2e-11 to 3e-10), the report says ``"string_stable"`` when ``margin > tau``,
+``"string_unstable"`` when ``margin < -tau`` and ``"boundary"`` in between: a case too close to
+call is never settled by a coin flip. ``"plant_unstable"`` is a loop with an eigenvalue of real
+part above ``tau * max|lambda|`` (below it in magnitude: ``"boundary"`` too).
+``string_stable`` (bool) is true only for the first verdict. The band covers the rounding error
+of ``q`` with a wide margin: against an exact rational / 50-digit reference
+(``tests/exact_reference.py``) the computed ``q`` at ``w = 0`` and at the maximiser differs by
+at most a small fraction of ``tau`` over the benchmark's gains
+(``python benchmarks/bench_string_exactness.py`` prints the figure).
+
+Two independent searches of ``max q`` (``method``), the same band for both:
+
+* ``"grid"``: ``w = 0`` exactly (``q(0) = c / S(0)`` from three solves with ``A_cl``) plus a dense
+  logarithmic grid (``GRID_PER_DECADE`` points per decade over ``[min(1e-3, 0.01 min|lambda|),
+  max(100, 100 max|lambda|)]``) with the imaginary parts and moduli of all closed-loop poles
+  added (a lightly damped pole makes a narrow peak there); points closer than
+  ``transfer.MERGE_RTOL`` (1e-7) relative are merged, so repeated poles that differ by an ulp
+  do not make zero-width brackets. Every local maximum is refined by a vectorised
+  golden-section search on ``log w`` whose bracket runs between the neighbours that are
+  *strictly* lower (so it contains the maximiser even on a flat stretch).
+* ``"hamiltonian"``: the level set ``|Gamma(jw)| = g0`` is the set of imaginary eigenvalues
+  ``jw`` of the Hamiltonian ``[[A, h h^T / g0], [-c^T c / g0, -A^T]]`` (Boyd & Balakrishnan).
+  Its double eigenvalue at 0 is deflated exactly: the Jordan chain ``v0 = [-A^-1 h; -A^-T
+  c^T]``, ``v1 = [-A^-2 h; (c A^-2 h / g0) A^-T c^T + A^-2T c^T]`` (``H v0 = 0``, ``H v1 =
+  v0``) spans an invariant subspace, and the eigenvalues of the Hamiltonian restricted to its
+  orthogonal complement are the remaining ones. Their imaginary parts (every eigenvalue within
+  45 degrees of the axis: an eigenvalue near ``jw*`` is also what a near-tangency ``q(w*) ~ 0``
+  leaves) are the candidate frequencies; ``q`` is evaluated there, at the midpoints between them
+  and refined between neighbours.
+
+Outside the band the two methods give the same verdict. ``gamma_peak`` (``sup_{w > 0}
+|Gamma(jw)|``, the limit ``g0`` at ``w -> 0`` for a string-stable gain) is found by the same grid
+for ``"grid"`` and by the Boyd-Balakrishnan level-set iteration (:func:`hinf_norm_hamiltonian`)
+for ``"hamiltonian"``; they agree to 1e-9 relative. The loop is first balanced by an exact diagonal
+similarity (``scipy.linalg.matrix_balance``, powers of 2), so states in badly chosen units
+(``T = diag(10^±3)``, ``cond(A) ~ 1e11``) give the same peak to 1e-12 instead of 3e-9.
+
+The loop need not come from an LCC model: :func:`loop_string_stability` takes any stable SISO
+``(A_cl, h, c)``, e.g. a loop with an estimator or sampling in it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 
 import numpy as np
+import scipy.linalg as sla
 
 from lcc_synth.analysis.transfer import (
     check_head,
     closed_loop_eigenvalues,
+    golden_max,
+    hamiltonian_matrix,
     hessenberg_solver,
-    low_frequency_curvature,
+    hinf_norm_hamiltonian,
+    merge_frequencies,
     tail_output,
-    transfer_response,
 )
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import closed_loop
@@ -64,23 +96,24 @@ from lcc_synth.models.linear import LCCModel
 
 __all__ = [
     "StringStabilityReport",
+    "VERDICTS",
     "GRID_PER_DECADE",
-    "LOW_FREQ_TOL",
-    "PEAK_TOL",
-    "hinf_norm_hamiltonian",
-    "level_crossings",
+    "BAND_FACTOR",
+    "string_band",
+    "decision_function",
+    "deflated_hamiltonian_eigenvalues",
+    "loop_string_stability",
     "string_stability",
     "gains_string_stability",
-    "AnalysisOptions",
-    "analysis_options_from",
-    "GainCase",
-    "cases_from",
+    "verdict_text",
 ]
 
+VERDICTS = ("string_stable", "string_unstable", "plant_unstable", "boundary")
 GRID_PER_DECADE = 120
-LOW_FREQ_TOL = 1e-9
-PEAK_TOL = 1e-9
-_GOLDEN_ITERS = 45
+BAND_FACTOR = 1e4
+LOW_FREQ_TOL = 1e-9  # legacy, used by regions until its own band lands
+PEAK_TOL = 1e-9  # legacy, used by regions until its own band lands
+_EPS = float(np.finfo(float).eps)
 
 
 # --------------------------------------------------------------------------------------------
@@ -90,14 +123,25 @@ _GOLDEN_ITERS = 45
 
 @dataclass(frozen=True)
 class StringStabilityReport:
-    """Closed-loop plant stability and head-to-tail string stability of one gain.
+    """Closed-loop plant stability and head-to-tail string stability of one loop.
 
     Attributes
     ----------
     plant_stable : bool
-        All closed-loop eigenvalues have negative real part.
+        All closed-loop eigenvalues have real part below ``-band * max|lambda|``.
     string_stable : bool
-        ``plant_stable`` and ``|Gamma(jw)| < 1`` for every ``w > 0`` (see module docstring).
+        ``verdict == "string_stable"``: ``|Gamma(jw)| < 1`` for every ``w > 0`` with a margin
+        outside the band.
+    verdict : str
+        ``"string_stable"``, ``"string_unstable"``, ``"plant_unstable"`` or ``"boundary"``
+        (too close to call at this precision; see the module docstring).
+    margin : float
+        ``-max_{w >= 0} q(w)`` (relative, in ``[-1, 1]``): positive for string stable. NaN for an
+        unstable plant.
+    margin_omega : float
+        Where ``q`` is largest (rad/s; 0 when it is the low-frequency curvature).
+    band : float
+        The tolerance ``tau`` the verdict used.
     gamma_peak : float
         ``sup_{w > 0} |Gamma(jw)|`` (for an unstable plant: the formal frequency response).
     gamma_peak_omega : float
@@ -125,6 +169,15 @@ class StringStabilityReport:
     interior_peak: float
     interior_peak_omega: float
     method: str
+    verdict: str = "string_unstable"
+    margin: float = float("nan")
+    margin_omega: float = float("nan")
+    band: float = float("nan")
+
+    @property
+    def boundary(self) -> bool:
+        """True when the verdict is too close to call (inside the band)."""
+        return self.verdict == "boundary"
 
     def as_dict(self) -> dict:
         """JSON-ready dict (non-finite floats become ``None``)."""
@@ -135,9 +188,78 @@ class StringStabilityReport:
         return out
 
 
+# --------------------------------------------------------------------------------------------
+# The decision function q(w) and the band
+# --------------------------------------------------------------------------------------------
+
+
+def string_band(eigs: np.ndarray) -> float:
+    """The relative tolerance ``tau = BAND_FACTOR * eps * max(1, max|lambda| / min|lambda|)``.
+
+    Coordinate- and unit-free: eigenvalues do not change under similarity transforms, and a
+    change of time unit scales all of them alike. Infinite when an eigenvalue is 0.
+    """
+    mags = np.abs(np.asarray(eigs, dtype=complex))
+    if mags.size == 0:
+        return BAND_FACTOR * _EPS
+    lo = float(mags.min())
+    if lo == 0.0:
+        return float("inf")
+    return BAND_FACTOR * _EPS * max(1.0, float(mags.max()) / lo)
+
+
+@dataclass(frozen=True)
+class _Decision:
+    """``q(w)`` of one loop plus what the searches reuse."""
+
+    g0: float
+    curvature: float
+    q0: float
+    evaluate: object  # w -> (q, |Gamma|)
+    lu: tuple
+    b1: np.ndarray
+    b2: np.ndarray
+
+
+def _decision(A: np.ndarray, h: np.ndarray, c: np.ndarray) -> _Decision:
+    lu = sla.lu_factor(A)
+    b1 = sla.lu_solve(lu, h)
+    b2 = sla.lu_solve(lu, b1)
+    b3 = sla.lu_solve(lu, b2)
+    g0 = -float(c @ b1)
+    G1_0 = -float(c @ b2)
+    G2_0 = -float(c @ b3)
+    curv = G1_0 * G1_0 - 2.0 * g0 * G2_0
+    S0 = G1_0 * G1_0 + 2.0 * abs(g0 * G2_0)
+    q0 = curv / S0 if S0 > 0 else 0.0
+    solver = hessenberg_solver(A, np.column_stack([h, b1, b2]), c)
+
+    def evaluate(w):
+        w = np.asarray(w, dtype=float)
+        y = solver(1j * w)
+        G, G1, G2 = y[..., 0], y[..., 1], y[..., 2]
+        a = G1.real * G1.real + G1.imag * G1.imag
+        b = 2.0 * g0 * G2.real
+        S = a + np.abs(b)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            q = np.where(S > 0, (a - b) / S, 0.0)
+        q = np.where(w == 0.0, q0, q)
+        return np.where(np.isfinite(q), q, np.inf), np.abs(G)
+
+    return _Decision(g0, curv, q0, evaluate, lu, b1, b2)
+
+
+def decision_function(A: np.ndarray, h: np.ndarray, c: np.ndarray):
+    """``(q, g0, c)``: the relative decision function ``q(w)`` (a callable on frequencies,
+    ``q(0)`` exact), ``Gamma(0)`` and the low-frequency curvature of the stable loop
+    ``Gamma = c (sI - A)^-1 h`` (see the module docstring)."""
+    A = np.asarray(A, dtype=float)
+    d = _decision(A, np.asarray(h, float).reshape(-1), np.asarray(c, float).reshape(-1))
+    return (lambda w: d.evaluate(w)[0]), d.g0, d.curvature
+
 
 # --------------------------------------------------------------------------------------------
-# Global peak search: dense grid + pole frequencies + golden-section refinement
+# Grid search: dense grid + pole frequencies + golden-section refinement
 # --------------------------------------------------------------------------------------------
 
 
@@ -150,114 +272,228 @@ def _frequency_grid(eigs: np.ndarray) -> np.ndarray:
     grid = np.logspace(np.log10(lo), np.log10(hi), count)
     poles = np.concatenate([np.abs(eigs.imag), mags])
     poles = poles[(poles > lo) & (poles < hi)]
-    return np.unique(np.concatenate([grid, poles]))
+    return merge_frequencies(np.concatenate([grid, poles]))
 
 
-def _golden_max(f, lo: np.ndarray, hi: np.ndarray):
-    """Vectorised golden-section maximisation on ``log w`` brackets ``[lo, hi]``."""
-    a, b = np.log(lo), np.log(hi)
-    r = (np.sqrt(5.0) - 1.0) / 2.0
-    x1 = b - r * (b - a)
-    x2 = a + r * (b - a)
-    f1, f2 = f(np.exp(x1)), f(np.exp(x2))
-    for _ in range(_GOLDEN_ITERS):
-        left = f1 >= f2  # maximum in [a, x2]
-        a_new = np.where(left, a, x1)
-        b_new = np.where(left, x2, b)
-        # the kept interior point becomes the new x2 (left) or x1 (right)
-        keep_x = np.where(left, x1, x2)
-        keep_f = np.where(left, f1, f2)
-        new_x = np.where(left, b_new - r * (b_new - a_new), a_new + r * (b_new - a_new))
-        new_f = f(np.exp(new_x))
-        x1 = np.where(left, new_x, keep_x)
-        f1 = np.where(left, new_f, keep_f)
-        x2 = np.where(left, keep_x, new_x)
-        f2 = np.where(left, keep_f, new_f)
-        a, b = a_new, b_new
-    xb = np.where(f1 >= f2, x1, x2)
-    return np.exp(xb), np.maximum(f1, f2)
-
-
-def _interior_peaks(mag_fn, eigs: np.ndarray, rising_at_zero: bool):
-    """All local maxima of ``|Gamma(jw)|`` for ``w > 0``: ``(omegas, values)``.
-
-    ``rising_at_zero`` (low-frequency curvature >= 0): a maximum below the lowest grid
-    frequency is searched too; otherwise a decrease at the low end is the ``w -> 0`` limit."""
-    w = _frequency_grid(eigs)
-    g = mag_fn(w)
-    g = np.where(np.isfinite(g), g, np.inf)
-    inner = np.nonzero((g[1:-1] >= g[:-2]) & (g[1:-1] >= g[2:]))[0] + 1
-    lo = list(w[inner - 1])
-    hi = list(w[inner + 1])
-    if rising_at_zero and g[0] > g[1]:  # the maximum lies below the lowest grid frequency
-        lo.insert(0, w[0] * 1e-3)
-        hi.insert(0, w[1])
-    if g[-1] > g[-2]:
-        lo.append(w[-2])
-        hi.append(w[-1] * 1e3)
-    if not lo:
+def _local_maxima(f, w: np.ndarray, g: np.ndarray, lowest: float | None):
+    """Refined local maxima of ``f`` sampled as ``g`` on the sorted grid ``w`` (``w[0]`` may be
+    0, an endpoint never refined). Brackets run between the nearest neighbours that are strictly
+    lower, so a flat stretch cannot hide the maximiser outside its bracket; a maximum at the
+    upper end is searched up to ``1e3 w[-1]``; ``lowest`` is the left end used when the left
+    neighbour is ``w = 0``. Returns ``(omegas, values)``, the better of grid and refined."""
+    n = w.size
+    if n < 2:
         return np.empty(0), np.empty(0)
-    om, val = _golden_max(mag_fn, np.array(lo), np.array(hi))
-    # a bracket whose grid value beats the refined one (non-unimodal bracket): keep the grid
-    grid_best = np.array([g[i] for i in inner]) if len(inner) else np.empty(0)
-    if grid_best.size:
-        off = 1 if (rising_at_zero and g[0] > g[1]) else 0
-        sl = slice(off, off + len(inner))
-        better = grid_best > val[sl]
-        val[sl] = np.where(better, grid_best, val[sl])
-        om[sl] = np.where(better, w[inner], om[sl])
+    peak = np.zeros(n, dtype=bool)
+    peak[1:-1] = (g[1:-1] >= g[:-2]) & (g[1:-1] >= g[2:])
+    peak[-1] = g[-1] > g[-2]
+    peak[1:] &= ~(peak[:-1] & (g[1:] == g[:-1]))  # one index per plateau
+    idx = np.nonzero(peak)[0]
+    if not idx.size:
+        return np.empty(0), np.empty(0)
+    lo_b, hi_b = [], []
+    for i in idx:
+        j = i - 1
+        while j > 0 and g[j] >= g[i]:
+            j -= 1
+        k = i + 1
+        while k < n and g[k] >= g[i]:
+            k += 1
+        left = w[j] if w[j] > 0 else (lowest if lowest else w[i] * 1e-6)
+        right = w[k] if k < n else w[-1] * 1e3
+        lo_b.append(left)
+        hi_b.append(right)
+    om, val = golden_max(f, np.array(lo_b), np.array(hi_b))
+    grid_better = g[idx] > val
+    om = np.where(grid_better, w[idx], om)
+    val = np.where(grid_better, g[idx], val)
     return om, val
 
 
+def _grid_search(dec: _Decision, eigs: np.ndarray):
+    """``(max q, its w, [(omega, |Gamma|) of the interior peaks])`` by the grid method."""
+    w = _frequency_grid(eigs)
+    q, mag = dec.evaluate(w)
+    # decision function: w = 0 is part of the domain
+    wq = np.concatenate([[0.0], w])
+    gq = np.concatenate([[dec.q0], q])
+    om, val = _local_maxima(lambda x: dec.evaluate(x)[0], wq, gq, lowest=w[0] * 1e-3)
+    cand_w = np.concatenate([[0.0], om])
+    cand_q = np.concatenate([[dec.q0], val])
+    j = int(np.argmax(cand_q))
+    # |Gamma|: interior local maxima (the limit at 0 is g0)
+    mag = np.where(np.isfinite(mag), mag, np.inf)
+    pw, pv = _local_maxima(
+        lambda x: dec.evaluate(x)[1], w, mag, lowest=None
+    )
+    if dec.q0 >= 0 and mag.size > 1 and mag[0] > mag[1]:  # rising at 0: peak below the grid
+        w2, v2 = golden_max(lambda x: dec.evaluate(x)[1], np.array([w[0] * 1e-3]), w[1:2])
+        pw, pv = np.concatenate([w2, pw]), np.concatenate([v2, pv])
+    return float(cand_q[j]), float(cand_w[j]), pw, pv
+
+
 # --------------------------------------------------------------------------------------------
-# Hamiltonian level-set method (Boyd & Balakrishnan 1990), the independent check
+# Hamiltonian level-set method (Boyd & Balakrishnan 1990), the independent search
 # --------------------------------------------------------------------------------------------
 
 
-def level_crossings(
-    A: np.ndarray, b: np.ndarray, c: np.ndarray, level: float, rtol: float = 1e-7
+def deflated_hamiltonian_eigenvalues(
+    A: np.ndarray, h: np.ndarray, c: np.ndarray
 ) -> np.ndarray:
-    """Frequencies ``w >= 0`` with ``|c (jw I - A)^-1 b| = level``: the imaginary-axis
-    eigenvalues ``jw`` of the Hamiltonian ``[[A, b b^T/level], [-c^T c/level, -A^T]]``.
-
-    An eigenvalue counts as imaginary when ``|Re| <= rtol * max(1, |lambda|)``.
-    """
+    """Eigenvalues of the Hamiltonian at the level ``g0 = Gamma(0)``, without the exact double
+    eigenvalue at 0 (deflated through its Jordan chain, see the module docstring)."""
     A = np.asarray(A, float)
-    b = np.asarray(b, float).reshape(-1, 1)
-    c = np.asarray(c, float).reshape(1, -1)
-    Hm = np.block([[A, b @ b.T / level], [-c.T @ c / level, -A.T]])
-    ev = np.linalg.eigvals(Hm)
-    on_axis = np.abs(ev.real) <= rtol * np.maximum(1.0, np.abs(ev))
-    return np.sort(np.unique(np.round(np.abs(ev[on_axis].imag), 12)))
+    h = np.asarray(h, float).reshape(-1)
+    c = np.asarray(c, float).reshape(-1)
+    return _deflated_eigs(A, h, c, _decision(A, h, c))
 
 
-def hinf_norm_hamiltonian(
-    A: np.ndarray, b: np.ndarray, c: np.ndarray, tol: float = 1e-9, max_iter: int = 100
-) -> tuple[float, float]:
-    """``(sup_w |G(jw)|, argmax)`` of a stable SISO ``G = c (sI - A)^-1 b`` by the
-    quadratically convergent level-set iteration of Boyd & Balakrishnan."""
-    eigs = np.linalg.eigvals(A)
-    cand = np.concatenate([[0.0], np.abs(eigs.imag), np.abs(eigs)])
-    vals = np.abs(transfer_response(A, b, c, 1j * cand))
-    i = int(np.argmax(vals))
-    lb, w_best = float(vals[i]), float(cand[i])
-    for _ in range(max_iter):
-        level = (1.0 + 2.0 * tol) * lb
-        ws = level_crossings(A, b, c, level)
-        if ws.size < 2:
-            return lb, w_best
-        mids = 0.5 * (ws[:-1] + ws[1:])
-        mv = np.abs(transfer_response(A, b, c, 1j * mids))
-        j = int(np.argmax(mv))
-        if mv[j] <= lb:
-            return lb, w_best
-        lb, w_best = float(mv[j]), float(mids[j])
-    return lb, w_best
+def _deflated_eigs(A, h, c, dec: _Decision) -> np.ndarray:
+    g0 = dec.g0
+    At_c = sla.lu_solve(dec.lu, c, trans=1)
+    At2_c = sla.lu_solve(dec.lu, At_c, trans=1)
+    m2 = float(c @ dec.b2)
+    v0 = np.concatenate([-dec.b1, -At_c])
+    v1 = np.concatenate([-dec.b2, (m2 / g0) * At_c + At2_c])
+    V = np.column_stack([v0 / np.linalg.norm(v0), v1 / np.linalg.norm(v1)])
+    Z = np.linalg.qr(V, mode="complete")[0][:, 2:]
+    Hm = hamiltonian_matrix(A, h, c, g0)
+    return np.linalg.eigvals(Z.T @ Hm @ Z)
+
+
+def _hamiltonian_search(A, h, c, dec: _Decision):
+    """``(max q, its w)`` from the candidate frequencies of the deflated Hamiltonian."""
+    ev = _deflated_eigs(A, h, c, dec)
+    near = np.abs(ev.real) <= np.abs(ev.imag)
+    cand = merge_frequencies(np.abs(ev[near].imag))
+    cand = cand[cand > 0]
+    if cand.size == 0:
+        return dec.q0, 0.0
+    mids = np.sqrt(cand[:-1] * cand[1:])
+    pts = merge_frequencies(np.concatenate([cand, mids, [cand[0] * 0.5, cand[-1] * 2.0]]))
+    wq = np.concatenate([[0.0], pts])
+    gq = np.concatenate([[dec.q0], dec.evaluate(pts)[0]])
+    om, val = _local_maxima(lambda x: dec.evaluate(x)[0], wq, gq, lowest=pts[0] * 1e-3)
+    all_w = np.concatenate([[0.0], om])
+    all_q = np.concatenate([[dec.q0], val])
+    j = int(np.argmax(all_q))
+    return float(all_q[j]), float(all_w[j])
 
 
 # --------------------------------------------------------------------------------------------
 # Verdict
 # --------------------------------------------------------------------------------------------
+
+
+def loop_string_stability(
+    A: np.ndarray, h: np.ndarray, c: np.ndarray, method: str = "grid"
+) -> StringStabilityReport:
+    """Plant and string stability of the SISO loop ``Gamma(s) = c (sI - A)^-1 h``.
+
+    Parameters
+    ----------
+    A : array_like, (nx, nx)
+        Closed-loop state matrix (any realisation: the verdict does not depend on it).
+    h, c : array_like, (nx,)
+        Input column of the head velocity error and the tail velocity output row.
+    method : {"grid", "hamiltonian"}
+        How ``max q`` and ``sup |Gamma|`` are searched (module docstring); the band and the
+        decision function are the same for both.
+    """
+    if method not in ("grid", "hamiltonian"):
+        raise ConfigError("method", f"must be 'grid' or 'hamiltonian', got {method!r}")
+    A = np.asarray(A, dtype=float)
+    h = np.asarray(h, dtype=float).reshape(-1)
+    c = np.asarray(c, dtype=float).reshape(-1)
+    if A.ndim != 2 or A.shape[0] != A.shape[1] or h.size != A.shape[0] or c.size != A.shape[0]:
+        raise ConfigError(
+            "loop", f"needs A (nx, nx), h (nx,), c (nx,); got {A.shape}, {h.shape}, {c.shape}"
+        )
+    # exact diagonal balancing (powers of 2): a change of units of the states costs no accuracy
+    A, (scale, _) = sla.matrix_balance(A, permute=False, separate=True)
+    h, c = h / scale, c * scale
+    eigs = closed_loop_eigenvalues(A)
+    max_re = float(eigs.real.max())
+    band = string_band(eigs)
+    scale = float(np.abs(eigs).max()) if eigs.size else 1.0
+    plant_boundary = bool(abs(max_re) <= band * scale) if np.isfinite(band) else True
+    plant_stable = bool(max_re < 0.0 and not plant_boundary)
+    nan = float("nan")
+
+    dec = None
+    if np.isfinite(band):
+        with np.errstate(all="ignore"):
+            try:
+                dec = _decision(A, h, c)
+            except (np.linalg.LinAlgError, ValueError):
+                dec = None
+        if dec is not None and not (np.isfinite(dec.g0) and np.isfinite(dec.curvature)):
+            dec = None
+
+    if dec is None:  # an eigenvalue at 0: no DC gain, the formal response on the grid only
+        solver = hessenberg_solver(A, h, c)
+        w = _frequency_grid(eigs)
+        mag = np.abs(solver(1j * w))
+        mag = np.where(np.isfinite(mag), mag, np.inf)
+        pw, pv = _local_maxima(lambda x: np.abs(solver(1j * x)), w, mag, lowest=None)
+        j = int(np.argmax(pv)) if pv.size else -1
+        peak = float(pv[j]) if j >= 0 else float(mag[0])
+        peak_w = float(pw[j]) if j >= 0 else float(w[0])
+        return StringStabilityReport(
+            plant_stable=plant_stable, string_stable=False, gamma_peak=peak,
+            gamma_peak_omega=peak_w, max_real_eig=max_re, gamma_dc=nan,
+            low_freq_curvature=nan, interior_peak=peak if j >= 0 else nan,
+            interior_peak_omega=peak_w if j >= 0 else nan, method=method,
+            verdict="boundary" if plant_boundary else "plant_unstable", band=band,
+        )
+
+    dc = abs(dec.g0)
+    qmax, qmax_w, pw, pv = _grid_search(dec, eigs) if (
+        method == "grid" or not plant_stable
+    ) else (None, None, None, None)
+    if method == "hamiltonian" and plant_stable:
+        qmax, qmax_w = _hamiltonian_search(A, h, c, dec)
+        peak, peak_w = hinf_norm_hamiltonian(A, h, c)
+        interior = peak if peak_w > 0 and peak > dc else nan
+        interior_w = peak_w if np.isfinite(interior) else nan
+    else:
+        if pv.size:
+            j = int(np.argmax(pv))
+            interior, interior_w = float(pv[j]), float(pw[j])
+        else:
+            interior, interior_w = nan, nan
+    if np.isfinite(interior) and interior > dc:
+        gamma_peak, gamma_peak_w = interior, interior_w
+    else:
+        gamma_peak, gamma_peak_w = dc, 0.0
+
+    margin = -qmax
+    if plant_boundary:
+        verdict = "boundary"
+    elif not plant_stable:
+        verdict = "plant_unstable"
+    elif margin > band:
+        verdict = "string_stable"
+    elif margin < -band:
+        verdict = "string_unstable"
+    else:
+        verdict = "boundary"
+    return StringStabilityReport(
+        plant_stable=plant_stable,
+        string_stable=verdict == "string_stable",
+        gamma_peak=float(gamma_peak),
+        gamma_peak_omega=float(gamma_peak_w),
+        max_real_eig=max_re,
+        gamma_dc=float(dc),
+        low_freq_curvature=float(dec.curvature),
+        interior_peak=float(interior),
+        interior_peak_omega=float(interior_w),
+        method=method,
+        verdict=verdict,
+        margin=float(margin) if plant_stable or plant_boundary else nan,
+        margin_omega=float(qmax_w) if plant_stable or plant_boundary else nan,
+        band=float(band),
+    )
 
 
 def string_stability(
@@ -272,76 +508,26 @@ def string_stability(
     K, kh : array_like, float
         Feedback on the model's input, as :func:`lcc_synth.models.feedback.input_feedback` returns.
     method : {"grid", "hamiltonian"}
-        Global search of ``sup |Gamma(jw)|``: dense grid + pole frequencies + golden-section
-        refinement, or Boyd-Balakrishnan level sets (see the module docstring). The
-        Hamiltonian method reports ``interior_peak`` only when it is the global supremum, and
-        an unstable plant's formal response is always searched on the grid.
+        See :func:`loop_string_stability`.
     """
     check_head(model)
     if method not in ("grid", "hamiltonian"):
         raise ConfigError("method", f"must be 'grid' or 'hamiltonian', got {method!r}")
     Acl, Hcl = closed_loop(model, K, kh)
-    c = tail_output(model)
-    h = Hcl.reshape(-1)
-    eigs = closed_loop_eigenvalues(Acl)
-    max_re = float(eigs.real.max())
-    plant_stable = bool(max_re < 0.0)
-    singular = np.any(np.abs(eigs) < 1e-12)
-    g0, curv, crel = float("nan"), float("nan"), float("nan")
-    if not singular:
-        with np.errstate(all="ignore"):
-            try:
-                g0, curv, crel = low_frequency_curvature(Acl, h, c)
-            except (np.linalg.LinAlgError, ValueError):
-                pass
-        if not (np.isfinite(g0) and np.isfinite(curv)):
-            g0, curv, crel = float("nan"), float("nan"), float("nan")
+    return loop_string_stability(Acl, Hcl.reshape(-1), tail_output(model), method=method)
 
-    solver = hessenberg_solver(Acl, h, c)
 
-    def mag(w):
-        return np.abs(solver(1j * np.asarray(w, float)))
+_VERDICT_TEXT = {
+    "string_stable": "string stable",
+    "string_unstable": "NOT string stable",
+    "plant_unstable": "plant unstable",
+    "boundary": "boundary (too close to call)",
+}
 
-    if method == "hamiltonian" and plant_stable:
-        peak, peak_w = hinf_norm_hamiltonian(Acl, h, c)
-        crossings = level_crossings(Acl, h, c, abs(g0))
-        crossings = crossings[crossings > 1e-6 * max(1.0, np.abs(eigs).max())]
-        dc = abs(g0)
-        interior = peak if peak_w > 0 and peak > dc else float("nan")
-        interior_w = peak_w if np.isfinite(interior) else float("nan")
-        string_stable = bool(crel < -LOW_FREQ_TOL and crossings.size == 0)
-        gamma_peak = max(peak, dc)
-        gamma_peak_w = peak_w if peak > dc * (1 + PEAK_TOL) else 0.0
-    else:
-        om, val = _interior_peaks(mag, eigs, rising_at_zero=not crel < 0)
-        dc = abs(g0) if np.isfinite(g0) else float(mag(np.array([1e-9]))[0])
-        if val.size:
-            j = int(np.argmax(val))
-            interior, interior_w = float(val[j]), float(om[j])
-        else:
-            interior, interior_w = float("nan"), float("nan")
-        string_stable = bool(
-            plant_stable
-            and crel < -LOW_FREQ_TOL
-            and (not val.size or interior < 1.0 - PEAK_TOL)
-        )
-        if np.isfinite(interior) and interior > dc:
-            gamma_peak, gamma_peak_w = interior, interior_w
-        else:
-            gamma_peak, gamma_peak_w = dc, 0.0
-    string_stable = bool(string_stable and plant_stable)
-    return StringStabilityReport(
-        plant_stable=plant_stable,
-        string_stable=string_stable,
-        gamma_peak=float(gamma_peak),
-        gamma_peak_omega=float(gamma_peak_w),
-        max_real_eig=max_re,
-        gamma_dc=float(dc),
-        low_freq_curvature=float(curv),
-        interior_peak=float(interior),
-        interior_peak_omega=float(interior_w),
-        method=method,
-    )
+
+def verdict_text(verdict: str | None) -> str:
+    """Words for a :attr:`StringStabilityReport.verdict` (``"n/a"`` for ``None``)."""
+    return _VERDICT_TEXT.get(verdict, "n/a") if verdict is not None else "n/a"
 
 
 def gains_string_stability(model: LCCModel, gains, method: str = "grid") -> StringStabilityReport:
@@ -350,88 +536,3 @@ def gains_string_stability(model: LCCModel, gains, method: str = "grid") -> Stri
 
     K, kh = input_feedback(model, gains)
     return string_stability(model, K, kh, method=method)
-
-
-# --------------------------------------------------------------------------------------------
-# Problem files: [cases.NAME] and [analysis]
-# --------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class AnalysisOptions:
-    """The ``[analysis]`` table: observability outputs, peak-search method, plot grid."""
-
-    outputs: tuple[str, ...] | None = None
-    method: str = "grid"
-    omega_min: float = 1e-3
-    omega_max: float = 10.0
-    points: int = 400
-
-    def omega(self) -> np.ndarray:
-        """Logarithmic frequency grid for plotted responses (Fig. 9)."""
-        return np.logspace(np.log10(self.omega_min), np.log10(self.omega_max), self.points)
-
-
-def analysis_options_from(data: Mapping, source: str | None = None) -> AnalysisOptions:
-    """Parse the optional ``[analysis]`` table (see :func:`cases_from`)."""
-    from lcc_synth.problem import check_keys, get_int, get_number, get_str, get_table
-
-    try:
-        t = get_table(data, "analysis", "analysis")
-        check_keys(t, ["outputs", "method", "omega_min", "omega_max", "points"], "analysis")
-        outputs = None
-        if "outputs" in t:
-            raw = t["outputs"]
-            if not isinstance(raw, list) or not raw or not all(isinstance(x, str) for x in raw):
-                raise ConfigError(
-                    "analysis.outputs", f"must be a non-empty list of state names, got {raw!r}"
-                )
-            outputs = tuple(raw)
-        method = get_str(t, "method", "analysis", "grid", choices=["grid", "hamiltonian"])
-        lo = get_number(t, "omega_min", "analysis", 1e-3, lo=0.0, lo_open=True)
-        hi = get_number(t, "omega_max", "analysis", 10.0, lo=lo, lo_open=True)
-        points = get_int(t, "points", "analysis", 400, lo=2, hi=100_000)
-        return AnalysisOptions(outputs, method, lo, hi, points)
-    except ConfigError as err:
-        raise err.with_source(source) if source and not err.source else err from None
-
-
-@dataclass(frozen=True)
-class GainCase:
-    """One ``[cases.NAME]`` table: a named static gain (eq. 23) to analyse."""
-
-    name: str
-    gains: object  # StaticGains
-    label: str
-
-
-def cases_from(data: Mapping, model: LCCModel, source: str | None = None) -> dict[str, GainCase]:
-    """Parse ``[cases.NAME]`` tables into :class:`GainCase` (in file order).
-
-    Each table: ``semantics = "added" | "replace"`` (default ``"added"``), ``gains = { s_-2 =
-    1.0, v_-2 = -1.0, ... }`` (state name -> gain, missing states 0) and an optional ``label``.
-    Errors name ``cases.NAME.<field>`` and the file.
-    """
-    from lcc_synth.models.feedback import StaticGains
-    from lcc_synth.problem import check_keys, get_str, get_table
-
-    out = {}
-    try:
-        cases = get_table(data, "cases", "cases")
-        for name, table in cases.items():
-            field = f"cases.{name}"
-            if not isinstance(table, dict):
-                raise ConfigError(field, f"must be a table, got {table!r}")
-            check_keys(table, ["semantics", "gains", "label"], field)
-            semantics = get_str(table, "semantics", field, "added", choices=["added", "replace"])
-            raw = get_table(table, "gains", f"{field}.gains")
-            label = get_str(table, "label", field, name)
-            try:
-                gains = StaticGains(raw, semantics)
-                gains.check(model)
-            except ConfigError as err:
-                raise ConfigError(f"{field}.{err.field}", err.message) from None
-            out[name] = GainCase(name, gains, label)
-    except ConfigError as err:
-        raise err.with_source(source) if source and not err.source else err from None
-    return out

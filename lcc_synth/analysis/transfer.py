@@ -50,9 +50,18 @@ __all__ = [
     "check_head",
     "closed_loop_eigenvalues",
     "low_frequency_curvature",
+    "MERGE_RTOL",
+    "merge_frequencies",
+    "golden_max",
+    "hamiltonian_matrix",
+    "level_crossings",
+    "hinf_norm_hamiltonian",
 ]
 
 _SMALL_BATCH = 16
+_GOLDEN_ITERS = 45
+_EPS = float(np.finfo(float).eps)
+MERGE_RTOL = 1e-7
 
 CoefSpec = LinearCoefficients | Mapping[int, LinearCoefficients]
 
@@ -239,11 +248,18 @@ def gamma_polynomials(
 
 
 def hessenberg_solver(A: np.ndarray, b: np.ndarray, c: np.ndarray, chunk: int = 512):
-    """A function ``s -> c (s I - A)^-1 b`` (see :func:`transfer_response`), reduction done once."""
+    """A function ``s -> c (s I - A)^-1 b`` (see :func:`transfer_response`), reduction done once.
+
+    ``b`` may hold several right-hand sides as columns ``(nx, k)`` with ``k > 1``; the
+    function then returns an array of shape ``s.shape + (k,)`` (one elimination per ``s``
+    serves all columns). A vector or an ``(nx, 1)`` column gives ``s.shape``.
+    """
     A = np.asarray(A, dtype=float)
-    b = np.asarray(b, dtype=float).reshape(-1)
+    b = np.asarray(b, dtype=float)
+    single = b.ndim == 1 or b.shape[-1] == 1
+    b = b.reshape(A.shape[0], -1)
     c = np.asarray(c, dtype=float).reshape(-1)
-    nx = A.shape[0]
+    nx, nb = b.shape
     Hs, Q = sla.hessenberg(A, calc_q=True)
     bh = Q.T @ b
     ch = c @ Q
@@ -251,24 +267,23 @@ def hessenberg_solver(A: np.ndarray, b: np.ndarray, c: np.ndarray, chunk: int = 
 
     def solve(s):
         s = np.asarray(s, dtype=complex)
-        out = np.empty(s.shape, dtype=complex)
+        out = np.empty(s.shape + (nb,), dtype=complex)
         flat = s.reshape(-1)
-        res = out.reshape(-1)
+        res = out.reshape(-1, nb)
         for start in range(0, flat.size, chunk):
             z = flat[start : start + chunk]
             N = z.size
             M = np.broadcast_to(-Hs, (N, nx, nx)).astype(complex)
             M[:, diag, diag] += z[:, None]
+            r = np.broadcast_to(bh, (N, nx, nb)).astype(complex)
             if N < _SMALL_BATCH:  # a few frequencies: one batched LAPACK LU (partial pivoting)
-                r = np.broadcast_to(bh, (N, nx)).astype(complex)[..., None]
                 with np.errstate(divide="ignore", invalid="ignore"):
                     try:
-                        y = np.linalg.solve(M, r)[..., 0]
+                        y = np.linalg.solve(M, r)
                     except np.linalg.LinAlgError:
-                        y = np.full((N, nx), np.inf + 0j)
-                res[start : start + N] = y @ ch
+                        y = np.full((N, nx, nb), np.inf + 0j)
+                res[start : start + N] = np.einsum("j,ijk->ik", ch, y)
                 continue
-            r = np.broadcast_to(bh, (N, nx)).astype(complex)
             for j in range(nx - 1):
                 swap = np.abs(M[:, j + 1, j]) > np.abs(M[:, j, j])
                 if swap.any():
@@ -283,14 +298,14 @@ def hessenberg_solver(A: np.ndarray, b: np.ndarray, c: np.ndarray, chunk: int = 
                 with np.errstate(divide="ignore", invalid="ignore"):
                     lam = np.where(piv != 0, M[:, j + 1, j] / piv, 0.0)
                 M[:, j + 1, j + 1 :] -= lam[:, None] * M[:, j, j + 1 :]
-                r[:, j + 1] -= lam * r[:, j]
-            y = np.empty((N, nx), dtype=complex)
+                r[:, j + 1] -= lam[:, None] * r[:, j]
+            y = np.empty((N, nx, nb), dtype=complex)
             with np.errstate(divide="ignore", invalid="ignore"):
                 for j in range(nx - 1, -1, -1):
-                    acc = r[:, j] - np.einsum("ij,ij->i", M[:, j, j + 1 :], y[:, j + 1 :])
-                    y[:, j] = acc / M[:, j, j]
-            res[start : start + N] = y @ ch
-        return out
+                    acc = r[:, j] - np.einsum("ij,ijk->ik", M[:, j, j + 1 :], y[:, j + 1 :])
+                    y[:, j] = acc / M[:, j, j][:, None]
+            res[start : start + N] = np.einsum("j,ijk->ik", ch, y)
+        return out[..., 0] if single else out
 
     return solve
 
@@ -356,3 +371,104 @@ def low_frequency_curvature(Acl: np.ndarray, h: np.ndarray, c: np.ndarray):
     curv = g1 * g1 - g0 * g2
     scale = g1 * g1 + abs(g0 * g2)
     return g0, curv, (curv / scale if scale > 0 else 0.0)
+
+
+# --------------------------------------------------------------------------------------------
+# Frequency-response tools: golden-section peak refinement, Hamiltonian level sets, H-infinity
+# --------------------------------------------------------------------------------------------
+
+
+def merge_frequencies(w: np.ndarray, rtol: float = MERGE_RTOL) -> np.ndarray:
+    """Sorted ``w`` with points closer than ``rtol`` (relative) merged."""
+    w = np.sort(w)
+    if w.size < 2:
+        return w
+    keep = np.concatenate([[True], np.diff(w) > rtol * w[1:]])
+    return w[keep]
+
+
+def golden_max(f, lo: np.ndarray, hi: np.ndarray):
+    """Vectorised golden-section maximisation on ``log w`` brackets ``[lo, hi]``."""
+    a, b = np.log(lo), np.log(hi)
+    r = (np.sqrt(5.0) - 1.0) / 2.0
+    x1 = b - r * (b - a)
+    x2 = a + r * (b - a)
+    f1, f2 = f(np.exp(x1)), f(np.exp(x2))
+    for _ in range(_GOLDEN_ITERS):
+        left = f1 >= f2  # maximum in [a, x2]
+        a_new = np.where(left, a, x1)
+        b_new = np.where(left, x2, b)
+        # the kept interior point becomes the new x2 (left) or x1 (right)
+        keep_x = np.where(left, x1, x2)
+        keep_f = np.where(left, f1, f2)
+        new_x = np.where(left, b_new - r * (b_new - a_new), a_new + r * (b_new - a_new))
+        new_f = f(np.exp(new_x))
+        x1 = np.where(left, new_x, keep_x)
+        f1 = np.where(left, new_f, keep_f)
+        x2 = np.where(left, keep_x, new_x)
+        f2 = np.where(left, keep_f, new_f)
+        a, b = a_new, b_new
+    xb = np.where(f1 >= f2, x1, x2)
+    return np.exp(xb), np.maximum(f1, f2)
+
+
+def hamiltonian_matrix(A: np.ndarray, b: np.ndarray, c: np.ndarray, level: float) -> np.ndarray:
+    b = b.reshape(-1, 1)
+    c = c.reshape(1, -1)
+    return np.block([[A, b @ b.T / level], [-c.T @ c / level, -A.T]])
+
+
+def level_crossings(
+    A: np.ndarray, b: np.ndarray, c: np.ndarray, level: float, rtol: float | None = None
+) -> np.ndarray:
+    """Frequencies ``w >= 0`` with ``|c (jw I - A)^-1 b| = level``: the imaginary-axis
+    eigenvalues ``jw`` of the Hamiltonian ``[[A, b b^T/level], [-c^T c/level, -A^T]]``.
+
+    An eigenvalue counts as imaginary when ``|Re| <= rtol * ||H||`` (default ``rtol`` =
+    ``sqrt(eps)``: a simple eigenvalue on the axis moves off it by about ``eps ||H||`` times
+    its condition number). Not for the level ``|Gamma(0)|`` itself, whose double root at 0 is
+    rounding-decided: :func:`loop_string_stability` deflates it.
+    """
+    A = np.asarray(A, float)
+    b = np.asarray(b, float).reshape(-1)
+    c = np.asarray(c, float).reshape(-1)
+    Hm = hamiltonian_matrix(A, b, c, level)
+    ev = np.linalg.eigvals(Hm)
+    tol = (np.sqrt(_EPS) if rtol is None else rtol) * np.linalg.norm(Hm, 1)
+    on_axis = np.abs(ev.real) <= tol
+    return merge_frequencies(np.abs(ev[on_axis].imag))
+
+
+def hinf_norm_hamiltonian(
+    A: np.ndarray, b: np.ndarray, c: np.ndarray, tol: float = 1e-10, max_iter: int = 100
+) -> tuple[float, float]:
+    """``(sup_w |G(jw)|, argmax)`` of a stable SISO ``G = c (sI - A)^-1 b`` by the
+    quadratically convergent level-set iteration of Boyd & Balakrishnan (each new lower bound
+    refined by golden section between the crossings, so the value is exact to ``tol``)."""
+    A = np.asarray(A, float)
+    b = np.asarray(b, float).reshape(-1)
+    c = np.asarray(c, float).reshape(-1)
+    eigs = np.linalg.eigvals(A)
+    cand = np.concatenate([[0.0], np.abs(eigs.imag), np.abs(eigs)])
+    vals = np.abs(transfer_response(A, b, c, 1j * cand))
+    i = int(np.argmax(vals))
+    lb, w_best = float(vals[i]), float(cand[i])
+    solver = hessenberg_solver(A, b, c)
+
+    def mag(w):
+        return np.abs(solver(1j * np.asarray(w, float)))
+
+    for _ in range(max_iter):
+        level = (1.0 + 2.0 * tol) * lb
+        ws = level_crossings(A, b, c, level)
+        ws = ws[ws > 0]
+        if ws.size < 2:
+            return lb, w_best
+        om, mv = golden_max(mag, ws[:-1], ws[1:])
+        j = int(np.argmax(mv))
+        if mv[j] <= lb:
+            return lb, w_best
+        lb, w_best = float(mv[j]), float(om[j])
+    return lb, w_best
+
+

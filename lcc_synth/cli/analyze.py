@@ -31,16 +31,13 @@ def _fmt(x, spec: str) -> str:
 
 def analyze(problem_path: str) -> tuple[dict, dict]:
     """Everything ``analyze`` reports, as a JSON-ready dict, plus the objects for plotting."""
+    from lcc_synth.analysis.cases import analysis_options_from, cases_from
     from lcc_synth.analysis.controllability import (
         controllability_report,
         default_outputs,
         observability_report,
     )
-    from lcc_synth.analysis.string_stability import (
-        analysis_options_from,
-        cases_from,
-        string_stability,
-    )
+    from lcc_synth.analysis.string_stability import string_stability
     from lcc_synth.analysis.transfer import closed_loop_eigenvalues
     from lcc_synth.errors import ConfigError
     from lcc_synth.models.feedback import closed_loop, input_feedback
@@ -95,7 +92,7 @@ def analyze(problem_path: str) -> tuple[dict, dict]:
             Acl, _ = closed_loop(model, K, kh)
             max_re = float(closed_loop_eigenvalues(Acl).real.max())
             entry.update(
-                plant_stable=bool(max_re < 0), string_stable=None, gamma_peak=None,
+                plant_stable=bool(max_re < 0), string_stable=None, verdict=None, gamma_peak=None,
                 gamma_peak_omega=None, max_real_eig=max_re,
                 note="fd_lcc has no head vehicle: head-to-tail string stability is undefined",
             )
@@ -106,6 +103,14 @@ def analyze(problem_path: str) -> tuple[dict, dict]:
         doc["cases"][name] = entry
     extra = {"model": model, "options": opts, "reports": reports}
     return doc, extra
+
+
+_STRING_WORDS = {
+    "string_stable": "stable",
+    "string_unstable": "unstable",
+    "plant_unstable": "unstable",
+    "boundary": "BOUNDARY",
+}
 
 
 def _print_human(doc: dict) -> None:
@@ -151,26 +156,26 @@ def _print_human(doc: dict) -> None:
     print()
     header = (
         f"{'case':<12} {'label':<12} {'plant':<9} {'string':<10} {'peak |G|':>10} "
-        f"{'at w rad/s':>11} {'c (s^2)':>10} {'max Re lam':>11}"
+        f"{'at w rad/s':>11} {'c (s^2)':>10} {'margin':>10} {'max Re lam':>11}"
     )
     print(header)
     print("-" * len(header))
     for name, e in doc["cases"].items():
         plant = "stable" if e["plant_stable"] else "UNSTABLE"
-        if e["string_stable"] is None:
-            string = "n/a"
-        else:
-            string = "stable" if e["string_stable"] else "unstable"
+        string = _STRING_WORDS.get(e.get("verdict"), "n/a")
         print(
             f"{name:<12} {e['label'][:12]:<12} {plant:<9} {string:<10} "
             f"{_fmt(e.get('gamma_peak'), '10.6f'):>10} "
             f"{_fmt(e.get('gamma_peak_omega'), '11.4f'):>11} "
             f"{_fmt(e.get('low_freq_curvature'), '+10.4g'):>10} "
+            f"{_fmt(e.get('margin'), '+10.3g'):>10} "
             f"{_fmt(e.get('max_real_eig'), '11.4f'):>11}"
         )
     print(
         "peak |G| = sup over w > 0 of |Gamma(jw)| (at w = 0: the limit |Gamma(0)| = 1); "
-        "c: |Gamma(jw)|^2 = 1 + c w^2 + ..."
+        "c: |Gamma(jw)|^2 = 1 + c w^2 + ...;\nmargin: -max over w >= 0 of q(w), "
+        "q = (|Gamma(jw)|^2 - 1) / w^2 relative to its terms (> band: stable, < -band: "
+        "unstable, else BOUNDARY: too close to call)"
     )
 
 

@@ -84,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
+    from lcc_synth.analysis.string_stability import verdict_text
     from lcc_synth.experiments.comparison import gamma_curves, load_suite, run_suite
     from lcc_synth.experiments.tables import (
         format_table,
@@ -237,7 +238,7 @@ def run(args: argparse.Namespace) -> int:
                     )
         for lname, per in curves.items():
             for cname, (_, rep) in per.items():
-                verdict = "string stable" if rep.string_stable else "NOT string stable"
+                verdict = verdict_text(rep.verdict)
                 print(f"|Γ| {lname}/{cname}: peak {rep.gamma_peak:.4f} -> {verdict}")
     print(f"results: {out_dir}", file=log)
     if rrd is not None:

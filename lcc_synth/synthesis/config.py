@@ -38,6 +38,8 @@
     [synthesis.string]        # design = "string_stable"
     gamma = 1.0               # H-infinity bound on head -> tail, >= 1
     polish_steps = 200        # string-stable-feasible polishing iterations, >= 0
+    margin = 1e-4             # relative string-stability margin every polishing step keeps,
+                              # [0, 0.1] (string_stability's margin; the verdict's band ~1e-11)
 
     [synthesis.baseline]      # optional: compare with hand-picked gains (e.g. the paper's)
     name = "paper"
@@ -89,6 +91,7 @@ class SynthesisSpec:
     sparsity: dict[str, Any] = field(default_factory=dict)
     string_gamma: float = 1.0
     polish_steps: int = 200
+    string_margin: float = 1e-4
     baseline: tuple[str, StaticGains] | None = None
     source: str | None = None
 
@@ -184,9 +187,10 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec:
             raise ConfigError("synthesis.sparsity.gammas", "must not be empty")
 
         st = get_table(t, "string", "synthesis.string")
-        check_keys(st, ["gamma", "polish_steps"], "synthesis.string")
+        check_keys(st, ["gamma", "polish_steps", "margin"], "synthesis.string")
         string_gamma = get_number(st, "gamma", "synthesis.string", 1.0, lo=1.0, hi=100.0)
         polish_steps = get_int(st, "polish_steps", "synthesis.string", 200, lo=0, hi=100000)
+        string_margin = get_number(st, "margin", "synthesis.string", 1e-4, lo=0.0, hi=0.1)
         if design == "string_stable" and system.kind == "fd_lcc":
             raise ConfigError(
                 "synthesis.design", "string_stable needs a head vehicle; fd_lcc has none"
@@ -225,6 +229,7 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec:
             sparsity=sparsity,
             string_gamma=string_gamma,
             polish_steps=polish_steps,
+            string_margin=string_margin,
             baseline=baseline,
             source=src,
         )

@@ -178,7 +178,9 @@ def synthesize(spec: SynthesisSpec) -> SynthesisReport:
             f"unstructured optimum ({chosen.count} heard besides the CAV)"
         )
     elif spec.design == "string_stable":
-        res = string_aware_h2(plant, vehicles, spec.string_gamma, spec.polish_steps)
+        res = string_aware_h2(
+            plant, vehicles, spec.string_gamma, spec.polish_steps, spec.string_margin
+        )
         g, mask = res.g, res.mask
         bound, restr = res.h2_lmi_bound, res.h2_restriction
         solver = {

@@ -41,6 +41,8 @@ def gains_document(rep: SynthesisReport) -> dict[str, Any]:
         "gamma_peak": c.gamma_peak,
         "gamma_peak_omega": c.gamma_peak_omega,
         "string_stable": c.string_stable,
+        "string_verdict": c.string_verdict,
+        "string_margin": c.string_margin,
         "plant_stable": bool(c.max_real_eig < 0) if c.plant_stable is None else c.plant_stable,
         "design": rep.design,
         "problem": rep.problem,

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from lcc_synth.analysis.string_stability import verdict_text
 from lcc_synth.synthesis.h2 import (
     STABILITY_TOL,
     H2Plant,
@@ -38,6 +39,8 @@ class GainCheck:
     string_stable: bool | None
     gamma_peak: float | None
     gamma_peak_omega: float | None
+    string_verdict: str | None = None  # StringStabilityReport.verdict
+    string_margin: float | None = None  # StringStabilityReport.margin (relative)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -51,14 +54,16 @@ def evaluate_gain(plant: H2Plant, g: np.ndarray) -> GainCheck:
     model = plant.model
     K, kh = plant.input_feedback(g)
     mre_model = max_real_eig(model.A + model.B @ K.reshape(1, -1)) if math.isfinite(mre) else mre
-    ps = ss = peak = peak_w = None
+    ps = ss = peak = peak_w = verdict = margin = None
     if model.kind != "fd_lcc" and math.isfinite(mre):
         from lcc_synth.analysis.string_stability import string_stability
 
         rep = string_stability(model, K, kh)
         ps, ss = bool(rep.plant_stable), bool(rep.string_stable)
         peak, peak_w = float(rep.gamma_peak), float(rep.gamma_peak_omega)
-    return GainCheck(h2, mre, mre_model, ps, ss, peak, peak_w)
+        verdict = rep.verdict
+        margin = float(rep.margin) if math.isfinite(rep.margin) else None
+    return GainCheck(h2, mre, mre_model, ps, ss, peak, peak_w, verdict, margin)
 
 
 def check_gain(plant: H2Plant, g: np.ndarray, what: str, details: dict | None = None) -> GainCheck:
@@ -169,7 +174,8 @@ def format_report(rep: SynthesisReport) -> str:
         lines.append(
             f"peak |Gamma|           : {_fmt(c.gamma_peak, '.9f')} at w = "
             f"{_fmt(c.gamma_peak_omega, '.4g')} rad/s -> "
-            + ("string stable" if c.string_stable else "NOT string stable")
+            + verdict_text(c.string_verdict)
+            + (f" (margin {c.string_margin:.3g})" if c.string_margin is not None else "")
         )
     else:
         lines.append("string stability       : n/a (no head vehicle)")
@@ -186,7 +192,7 @@ def format_report(rep: SynthesisReport) -> str:
             f"{_fmt(b['max_real_eig'], '.4g')}"
             + (
                 f", peak |Gamma| {_fmt(b['gamma_peak'], '.6f')}, "
-                + ("string stable" if b["string_stable"] else "not string stable")
+                + verdict_text(b.get("string_verdict"))
                 if b.get("string_stable") is not None
                 else ""
             )

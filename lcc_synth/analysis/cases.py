@@ -1,0 +1,99 @@
+"""Problem-file tables of the ``analyze`` command: ``[analysis]`` options and ``[cases.NAME]``.
+
+``[cases.NAME]`` names a static gain of eq. (23) to analyse (Table I's cases A-D in
+``problems/paper_fig9_cases.toml``); ``[analysis]`` chooses the observability outputs, the
+peak-search method of :func:`lcc_synth.analysis.string_stability.string_stability` and the plotted
+frequency grid (Fig. 9). Errors name ``cases.NAME.<field>`` / ``analysis.<key>`` and the file.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from lcc_synth.errors import ConfigError
+from lcc_synth.models.linear import LCCModel
+
+__all__ = ["AnalysisOptions", "analysis_options_from", "GainCase", "cases_from"]
+
+
+@dataclass(frozen=True)
+class AnalysisOptions:
+    """The ``[analysis]`` table: observability outputs, peak-search method, plot grid."""
+
+    outputs: tuple[str, ...] | None = None
+    method: str = "grid"
+    omega_min: float = 1e-3
+    omega_max: float = 10.0
+    points: int = 400
+
+    def omega(self) -> np.ndarray:
+        """Logarithmic frequency grid for plotted responses (Fig. 9)."""
+        return np.logspace(np.log10(self.omega_min), np.log10(self.omega_max), self.points)
+
+
+def analysis_options_from(data: Mapping, source: str | None = None) -> AnalysisOptions:
+    """Parse the optional ``[analysis]`` table (see :func:`cases_from`)."""
+    from lcc_synth.problem import check_keys, get_int, get_number, get_str, get_table
+
+    try:
+        t = get_table(data, "analysis", "analysis")
+        check_keys(t, ["outputs", "method", "omega_min", "omega_max", "points"], "analysis")
+        outputs = None
+        if "outputs" in t:
+            raw = t["outputs"]
+            if not isinstance(raw, list) or not raw or not all(isinstance(x, str) for x in raw):
+                raise ConfigError(
+                    "analysis.outputs", f"must be a non-empty list of state names, got {raw!r}"
+                )
+            outputs = tuple(raw)
+        method = get_str(t, "method", "analysis", "grid", choices=["grid", "hamiltonian"])
+        lo = get_number(t, "omega_min", "analysis", 1e-3, lo=0.0, lo_open=True)
+        hi = get_number(t, "omega_max", "analysis", 10.0, lo=lo, lo_open=True)
+        points = get_int(t, "points", "analysis", 400, lo=2, hi=100_000)
+        return AnalysisOptions(outputs, method, lo, hi, points)
+    except ConfigError as err:
+        raise err.with_source(source) if source and not err.source else err from None
+
+
+@dataclass(frozen=True)
+class GainCase:
+    """One ``[cases.NAME]`` table: a named static gain (eq. 23) to analyse."""
+
+    name: str
+    gains: object  # StaticGains
+    label: str
+
+
+def cases_from(data: Mapping, model: LCCModel, source: str | None = None) -> dict[str, GainCase]:
+    """Parse ``[cases.NAME]`` tables into :class:`GainCase` (in file order).
+
+    Each table: ``semantics = "added" | "replace"`` (default ``"added"``), ``gains = { s_-2 =
+    1.0, v_-2 = -1.0, ... }`` (state name -> gain, missing states 0) and an optional ``label``.
+    Errors name ``cases.NAME.<field>`` and the file.
+    """
+    from lcc_synth.models.feedback import StaticGains
+    from lcc_synth.problem import check_keys, get_str, get_table
+
+    out = {}
+    try:
+        cases = get_table(data, "cases", "cases")
+        for name, table in cases.items():
+            field = f"cases.{name}"
+            if not isinstance(table, dict):
+                raise ConfigError(field, f"must be a table, got {table!r}")
+            check_keys(table, ["semantics", "gains", "label"], field)
+            semantics = get_str(table, "semantics", field, "added", choices=["added", "replace"])
+            raw = get_table(table, "gains", f"{field}.gains")
+            label = get_str(table, "label", field, name)
+            try:
+                gains = StaticGains(raw, semantics)
+                gains.check(model)
+            except ConfigError as err:
+                raise ConfigError(f"{field}.{err.field}", err.message) from None
+            out[name] = GainCase(name, gains, label)
+    except ConfigError as err:
+        raise err.with_source(source) if source and not err.source else err from None
+    return out
