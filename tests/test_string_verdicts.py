@@ -236,3 +236,59 @@ def test_exactly_dc_double_root_case_of_the_issue_is_decided():
             assert rep.margin > 100 * rep.band
             if margin:
                 assert rep.margin >= DESIGN_MARGIN
+
+
+def _near_boundary_loops():
+    """Gains at relative distances 1e-8 ... 1e-14 from c = 0 along seeded lines."""
+    rng = np.random.default_rng(99)
+    model = general_lcc(2, 2, PAPER)
+    out = []
+    for i in range(8):
+        a = {k: v * (1 + 0.2 * rng.normal()) for k, v in CASE_D.items()}
+        b = {k: 0.0 for k in CASE_D}
+        t = _bisect_curvature(model, a, b)
+        if t is None:
+            continue
+        for d in (1e-8, 1e-10, 1e-12, 1e-14):
+            for sgn in (-1, 1):
+                s = t * (1 + sgn * d)
+                g = {k: (1 - s) * a[k] + s * b[k] for k in a}
+                out.append((f"near-{i}-{sgn * d:g}", _loop(model, StaticGains(g))))
+    return out
+
+
+def test_exact_reference_confirms_every_decided_verdict():
+    """An exact rational reference (integer characteristic polynomials, Sturm count; see
+    tests/exact_reference.py) decides the same float data: every decided verdict of both
+    methods is right, also for transformed loops and for gains 1e-8 ... 1e-14 from the
+    boundary, where the band must turn a coin flip into "boundary"."""
+    from exact_reference import exact_string_verdict
+
+    rng = np.random.default_rng(5)
+    loops = list(LOOPS) + _near_boundary_loops()
+    for name, (A, h, c) in list(LOOPS[::10]):
+        for tname, T, Ti in _transforms(A.shape[0], rng):
+            loops.append((f"{name}/{tname}", (T @ A @ Ti, T @ h, c @ Ti)))
+    counts = {"decided": 0, "boundary": 0}
+    for name, (A, h, c) in loops:
+        ex = exact_string_verdict(A, h, c, peak=False, q=False)
+        for method in ("grid", "hamiltonian"):
+            rep = loop_string_stability(A, h, c, method=method)
+            if rep.verdict == "boundary":
+                counts["boundary"] += 1
+                assert abs(rep.margin) <= 10 * rep.band or not ex.plant_stable, name
+                continue
+            counts["decided"] += 1
+            assert rep.plant_stable == ex.plant_stable, (name, method)
+            assert rep.string_stable == ex.string_stable, (name, method, rep.margin)
+    # 1e-8 from the boundary is far outside the band (~4e-12): decided; 1e-14 is inside
+    assert counts["decided"] > 0.9 * 2 * len(loops)
+    near = dict(_near_boundary_loops())
+    for name, loop in near.items():
+        rep = loop_string_stability(*loop)
+        d = abs(float(name.split("-", 2)[2]))
+        if d == 1e-8:
+            assert rep.verdict in DECIDED, name
+        if d == 1e-14:  # |margin| ~ 7e-15, below the band: too close to call, by both methods
+            assert rep.verdict == "boundary", (name, rep.margin, rep.band)
+            assert loop_string_stability(*loop, method="hamiltonian").verdict == "boundary"
