@@ -79,15 +79,25 @@ __all__ = [
     "default_outputs",
 ]
 
-TOLERANCE_FACTOR = 100.0
+EPS = float(np.finfo(float).eps)
+PROBE_FACTOR = 8.0
+PROBES = 3
+KEEP_RATIO = 30.0
+DROP_RATIO = 0.1
+TOLERANCE_FACTOR = PROBE_FACTOR  # backward-compatible name: probe size in units of nx * eps
 MEMBERSHIP_TOL = 1e-8
+_PROBE_SEED = 0x1CC5
 
 
 def default_tolerance(A: np.ndarray, B: np.ndarray) -> float:
-    """Rank tolerance ``TOLERANCE_FACTOR * nx * eps * max(||A||_F, ||B||_F, 1)``."""
-    nx = A.shape[0]
-    scale = max(np.linalg.norm(A, "fro"), np.linalg.norm(B, "fro"), 1.0)
-    return float(TOLERANCE_FACTOR * nx * np.finfo(float).eps * scale)
+    """Size of the probe perturbation of ``A``: ``PROBE_FACTOR * nx * eps * ||A||_F``.
+
+    No absolute floor: it scales with the data. The staircase compares every coupling with
+    how much probes of this size move it (see the module docstring), not with this number
+    itself; pass an explicit ``tol`` to :func:`kalman_decomposition` for a fixed threshold.
+    """
+    A, B = _check_pair(A, B)
+    return float(PROBE_FACTOR * A.shape[0] * EPS * np.linalg.norm(A, "fro"))
 
 
 def _check_pair(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -110,6 +120,7 @@ def structural_split(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarr
     Edge ``j -> i`` when ``A[i, j] != 0``; the search starts at the rows where ``B`` is non-zero.
     The unreachable states ``U`` satisfy ``A[U, R] == 0`` and ``B[U] == 0`` exactly, so they span
     an uncontrollable subspace found without any rounding (e.g. the HDVs ahead, Theorem 2).
+    The split does not change under permutations and diagonal scalings of the states.
 
     Returns
     -------
@@ -128,6 +139,79 @@ def structural_split(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return np.flatnonzero(seen), np.flatnonzero(~seen)
 
 
+def balance_pair(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """State scaling ``d`` (powers of 2) that balances the pair ``(A, B)`` in the log sense.
+
+    ``x = log2 d`` minimises ``sum (log2|a_ij| - x_i + x_j)^2`` over the non-zero off-diagonal
+    entries of ``A`` plus ``sum (log2|b_ij| - x_i + y_j)^2`` over those of ``B`` (``y``: free
+    input scalings), i.e. it makes every entry of ``diag(d)^-1 A diag(d)`` as close to the
+    others in magnitude as the pattern allows (least squares on the graph of ``A``; minimum
+    norm solution). Scaling the states by any ``D`` shifts ``x`` by ``log2 D`` exactly (up to a
+    constant per connected component, which changes nothing), and a permutation permutes it,
+    so the balanced pair does not depend on the units of the states (up to the rounding of
+    ``x`` to integers, a factor of at most 2 per state). Unlike LAPACK ``gebal`` it also
+    scales states whose column or row is zero (``-p_0`` of FD-LCC). Entries below
+    ``nx * eps * ||A||_F`` (``||B||_F`` for ``B``) are ignored: round-off debris of an
+    earlier transformation would otherwise dominate the logarithms.
+    """
+    A, B = _check_pair(A, B)
+    nx, nu = B.shape
+    # Entries at rounding level (debris of earlier transformations) would pull the logs to
+    # -100 and ruin the scaling: below nx eps ||.||_F they count as zero here.
+    debris = nx * EPS
+    ia, ja = np.nonzero(np.abs(A) > debris * np.linalg.norm(A, "fro"))
+    off = ia != ja
+    ia, ja = ia[off], ja[off]
+    ib, jb = np.nonzero(np.abs(B) > debris * np.linalg.norm(B, "fro"))
+    if nx == 0 or ia.size + ib.size == 0:
+        return np.ones(nx)
+    # Normal equations: the weighted graph Laplacian L x = g (incidence matrix never formed).
+    tail = np.concatenate([ia, ib])
+    head = np.concatenate([ja, nx + jb])
+    logs = np.concatenate([np.log2(np.abs(A[ia, ja])), np.log2(np.abs(B[ib, jb]))])
+    L = np.zeros((nx + nu, nx + nu))
+    np.add.at(L, (tail, tail), 1.0)
+    np.add.at(L, (head, head), 1.0)
+    np.add.at(L, (tail, head), -1.0)
+    np.add.at(L, (head, tail), -1.0)
+    g = np.zeros(nx + nu)
+    np.add.at(g, tail, logs)
+    np.add.at(g, head, -logs)
+    x = (np.linalg.pinv(L, hermitian=True) @ g)[:nx]
+    return np.exp2(np.round(x))
+
+
+@dataclass(frozen=True)
+class StaircaseStep:
+    """One rank decision of the staircase.
+
+    Attributes
+    ----------
+    singular_values : ndarray
+        Singular values of the coupling block (the input ``B`` at the first step, a block of
+        the transformed ``A`` after), largest first.
+    noise : ndarray
+        For each, the largest change caused by the probe perturbations (see the module
+        docstring); ``nan`` with a fixed tolerance.
+    kept, upper : int
+        Directions kept for sure / kept when the undecided ones are counted in.
+    """
+
+    singular_values: np.ndarray
+    noise: np.ndarray
+    kept: int
+    upper: int
+
+    @property
+    def ratios(self) -> np.ndarray:
+        """``singular_values / noise`` (``inf`` for an exact non-zero, 0 for an exact zero)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            q = self.singular_values / self.noise
+        q[(self.noise == 0) & (self.singular_values > 0)] = np.inf
+        q[self.singular_values == 0] = 0.0
+        return q
+
+
 @dataclass(frozen=True)
 class Staircase:
     """Result of :func:`kalman_decomposition`.
@@ -139,18 +223,28 @@ class Staircase:
         leading ``n_c x n_c`` block, ``T.T @ B`` is zero below row ``n_c``; the first ``n_c``
         columns of ``T`` are an orthonormal basis of the controllable subspace.
     n_c : int
-        Dimension of the controllable subspace.
+        Dimension of the controllable subspace. When some decision is undecided this is the
+        lower value (the undecided directions counted as zero); ``n_c_upper`` is the other one.
     steps : list of int
         Block sizes of the staircase (they sum to ``n_c``).
     min_accepted : float
         Smallest coupling singular value counted as non-zero (``inf`` if none).
     max_rejected : float
-        Largest coupling singular value counted as zero (0 if none). The ratio
-        ``min_accepted / max_rejected`` is the gap behind the rank decision.
+        Largest coupling singular value counted as zero (0 if none), in balanced coordinates.
     n_structural : int
         Number of states removed exactly by :func:`structural_split`.
     tol : float
-        The rank tolerance used.
+        Size of the probe perturbation of the balanced ``A`` (or the fixed tolerance passed).
+    n_c_upper : int
+        Dimension when the undecided directions are counted as controllable (``== n_c`` when
+        every decision was clear).
+    undecided : bool
+        Some coupling was neither clearly above nor clearly at the rounding level.
+    min_kept_ratio, max_dropped_ratio : float
+        Smallest ``coupling / noise`` kept, largest dropped (``inf`` / 0 when none); kept needs
+        ``>= KEEP_RATIO``, dropped ``<= DROP_RATIO``.
+    step_log : list of StaircaseStep
+        Every decision, for diagnostics.
     """
 
     T: np.ndarray
@@ -160,6 +254,19 @@ class Staircase:
     max_rejected: float
     n_structural: int
     tol: float
+    n_c_upper: int = -1
+    undecided: bool = False
+    min_kept_ratio: float = np.inf
+    max_dropped_ratio: float = 0.0
+    step_log: list[StaircaseStep] = field(default_factory=list, repr=False)
+
+    @property
+    def decision_margin(self) -> float:
+        """``min(min_kept_ratio / KEEP_RATIO, DROP_RATIO / max_dropped_ratio)``: at least 1 when
+        every decision is clear, below 1 when undecided (``inf`` when nothing was decided)."""
+        up = self.min_kept_ratio / KEEP_RATIO
+        down = DROP_RATIO / self.max_dropped_ratio if self.max_dropped_ratio > 0 else np.inf
+        return float(min(up, down))
 
 
 def _reflectors(Y: np.ndarray) -> list[tuple[int, np.ndarray]]:
@@ -172,41 +279,125 @@ def _reflectors(Y: np.ndarray) -> list[tuple[int, np.ndarray]]:
         alpha = -np.copysign(np.linalg.norm(x), x[0])
         v = x.copy()
         v[0] -= alpha
-        v /= np.linalg.norm(v)
+        nv = np.linalg.norm(v)
+        if nv == 0.0:  # already the coordinate direction
+            continue
+        v /= nv
         Y[j:, :] -= 2.0 * np.outer(v, v @ Y[j:, :])
         out.append((j, v))
     return out
 
 
-def _staircase(A: np.ndarray, B: np.ndarray, tol: float):
+class _Run:
+    """One staircase in progress: the transformed ``A``, the current coupling, optionally ``T``."""
+
+    def __init__(self, A: np.ndarray, B: np.ndarray, track: bool):
+        self.Ak = A.copy()
+        self.coupling = B.copy()
+        self.T = np.eye(A.shape[0]) if track else None
+
+    def advance(self, U: np.ndarray, n_c: int, r: int) -> None:
+        """Rotate the trailing coordinates so that ``U[:, :r]`` come first (Householder)."""
+        for j, v in _reflectors(U[:, :r]):
+            k = n_c + j
+            self.Ak[k:, :] -= 2.0 * np.outer(v, v @ self.Ak[k:, :])
+            self.Ak[:, k:] -= 2.0 * np.outer(self.Ak[:, k:] @ v, v)
+            if self.T is not None:
+                self.T[:, k:] -= 2.0 * np.outer(self.T[:, k:] @ v, v)
+        self.coupling = self.Ak[n_c + r :, n_c : n_c + r]
+
+
+def _probes(A: np.ndarray, B: np.ndarray, eta: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``PROBES`` deterministic random perturbations of relative Frobenius size ``eta``."""
+    rng = np.random.default_rng(_PROBE_SEED)
+    na, nb = np.linalg.norm(A, "fro"), np.linalg.norm(B, "fro")
+    out = []
+    for _ in range(PROBES):
+        EA = rng.standard_normal(A.shape)
+        EB = rng.standard_normal(B.shape)
+        EA *= eta * na / max(np.linalg.norm(EA, "fro"), np.finfo(float).tiny)
+        EB *= eta * nb / max(np.linalg.norm(EB, "fro"), np.finfo(float).tiny)
+        out.append((A + EA, B + EB))
+    return out
+
+
+def _decide(sv: np.ndarray, noise: np.ndarray, scale: float) -> tuple[int, int]:
+    """``(kept, upper)``: leading values kept for sure, and ``sv.size`` minus the trailing
+    values dropped for sure (so ``kept < upper`` means some are undecided)."""
+    q = StaircaseStep(sv, noise, 0, 0).ratios
+    keep = q >= KEEP_RATIO
+    drop = q <= DROP_RATIO
+    low = int(np.argmin(keep)) if not keep.all() else sv.size
+    high = sv.size - (int(np.argmin(drop[::-1])) if not drop.all() else sv.size)
+    return low, max(low, high)
+
+
+def _staircase(A: np.ndarray, B: np.ndarray, tol: float | None, upper: bool):
+    """Staircase of ``(A, B)``.
+
+    ``tol=None, upper=False``: probe-based decisions; it stops at the first undecided step (the
+    lower bound of the rank). ``upper=True``: every coupling above the rounding level
+    ``eta * scale`` is kept (an upper bound: the couplings dropped are a perturbation of that
+    size). A float ``tol``: fixed threshold. Returns the fields of :class:`Staircase` except
+    the structural ones.
+    """
     nx = A.shape[0]
-    T = np.eye(nx)
-    Ak = A.copy()  # transformed A; rows/columns from n_c on are still to be processed
-    coupling = B.copy()  # what drives the not-yet-reached part of the state
+    eta = PROBE_FACTOR * max(nx, 1) * EPS
+    scale_a, scale_b = np.linalg.norm(A, "fro"), np.linalg.norm(B, "fro")
+    probing = tol is None and not upper
+    runs = [_Run(A, B, True)]
+    if probing:
+        runs += [_Run(Ap, Bp, True) for Ap, Bp in _probes(A, B, eta)]
+    norm_a = np.linalg.norm(A, 2) if A.size else 0.0
     n_c = 0
     steps: list[int] = []
+    log: list[StaircaseStep] = []
     min_acc, max_rej = np.inf, 0.0
-    while n_c < nx and coupling.shape[1] > 0:
-        U, sv, _ = np.linalg.svd(coupling, full_matrices=False)
-        r = int(np.sum(sv > tol))
+    min_q, max_q = np.inf, 0.0
+    undecided = False
+    while n_c < nx and runs[0].coupling.shape[1] > 0:
+        svds = [np.linalg.svd(run.coupling, full_matrices=False) for run in runs]
+        sv = svds[0][1]
+        scale = scale_b if n_c == 0 else scale_a
+        noise = np.full(sv.shape, np.nan)
+        if probing:
+            # How far the probes moved the coupling values, and the basis built so far (a basis
+            # tilted by an angle theta can create a coupling of ||A|| theta out of nothing).
+            Q = runs[0].T[:, :n_c]
+            noise = np.zeros(sv.shape)
+            for run, s in zip(runs[1:], svds[1:], strict=True):
+                Qp = run.T[:, :n_c]
+                tilt = np.linalg.norm(Qp - Q @ (Q.T @ Qp), 2) if n_c else 0.0
+                noise = np.maximum(noise, np.maximum(np.abs(s[1] - sv), norm_a * tilt))
+            low, high = _decide(sv, noise, scale)
+        else:
+            cut = eta * scale if tol is None else tol
+            low = high = int(np.sum(sv > cut))
+        rec = StaircaseStep(sv, noise, low, high)
+        log.append(rec)
+        r = low
+        if probing:
+            q = rec.ratios
+            if low:
+                min_q = min(min_q, float(q[:low].min()))
+            if high < sv.size:
+                max_q = max(max_q, float(q[high:].max()))
+            if high > low:  # undecided: the margin is below 1 and the lower path stops here
+                undecided = True
+                min_q = min(min_q, float(q[low:high].min()))
         if r:
             min_acc = min(min_acc, float(sv[r - 1]))
         if r < sv.size:
             max_rej = max(max_rej, float(sv[r]))
         if r == 0:
             break
-        # Rotate the trailing coordinates (Householder reflections, O(nx^2) each) so that the
-        # newly reached directions U[:, :r] come first.
-        for j, v in _reflectors(U[:, :r]):
-            k = n_c + j
-            Ak[k:, :] -= 2.0 * np.outer(v, v @ Ak[k:, :])
-            Ak[:, k:] -= 2.0 * np.outer(Ak[:, k:] @ v, v)
-            T[:, k:] -= 2.0 * np.outer(T[:, k:] @ v, v)
+        for run, (U, _, _) in zip(runs, svds, strict=True):
+            run.advance(U, n_c, r)
         steps.append(r)
-        new = slice(n_c, n_c + r)
         n_c += r
-        coupling = Ak[n_c:, new]
-    return T, n_c, steps, min_acc, max_rej
+        if undecided:
+            break
+    return runs[0].T, n_c, steps, min_acc, max_rej, undecided, min_q, max_q, log
 
 
 def kalman_decomposition(
@@ -219,13 +410,12 @@ def kalman_decomposition(
     A : (nx, nx) array
     B : (nx, nu) array
     tol : float, optional
-        Coupling singular values at or below ``tol`` count as zero; default
-        :func:`default_tolerance`.
+        Fixed absolute threshold: coupling singular values (of the balanced pair) at or below
+        it count as zero, with no ``undecided`` verdict. Default (recommended): probe-based
+        decisions relative to the data, see the module docstring.
     structural : bool
         First remove the states unreachable in the graph of ``A`` (exact, see
-        :func:`structural_split`) and run the staircase on the rest. Without it the round-off
-        of the orthogonal steps is amplified along long chains of similar vehicles (general LCC
-        with m = 5, n = 15: a coupling that is exactly zero came out at 1e-10).
+        :func:`structural_split`) and run the staircase on the rest.
 
     Returns
     -------
@@ -233,16 +423,42 @@ def kalman_decomposition(
     """
     A, B = _check_pair(A, B)
     nx = A.shape[0]
-    tol = default_tolerance(A, B) if tol is None else float(tol)
     if structural:
         reach, unreach = structural_split(A, B)
     else:
         reach, unreach = np.arange(nx), np.arange(0)
-    Tr, n_c, steps, min_acc, max_rej = _staircase(A[np.ix_(reach, reach)], B[reach], tol)
+    Ar, Br = A[np.ix_(reach, reach)], B[reach]
+    d = balance_pair(Ar, Br)
+    Ab, Bb = Ar * (d[None, :] / d[:, None]), Br / d[:, None]
+    tol = None if tol is None else float(tol)
+    Tb, n_c, steps, min_acc, max_rej, undecided, min_q, max_q, log = _staircase(
+        Ab, Bb, tol, upper=False
+    )
+    n_up = n_c
+    if undecided:
+        n_up = max(n_c, _staircase(Ab, Bb, tol, upper=True)[1])
+    # Back to the original coordinates: diag(d) Tb = Q R, R upper triangular, keeps the nested
+    # subspaces of the leading columns and makes the transformation orthogonal again.
+    Tr, R = np.linalg.qr(d[:, None] * Tb)
+    Tr = Tr * np.where(np.diag(R) < 0, -1.0, 1.0)
     T = np.zeros((nx, nx))
     T[np.ix_(reach, np.arange(reach.size))] = Tr
     T[unreach, reach.size + np.arange(unreach.size)] = 1.0
-    return Staircase(T, n_c, steps, min_acc, max_rej, int(unreach.size), tol)
+    probe = default_tolerance(Ab, Bb) if tol is None else tol
+    return Staircase(
+        T,
+        n_c,
+        steps,
+        min_acc,
+        max_rej,
+        int(unreach.size),
+        probe,
+        n_c_upper=n_up,
+        undecided=bool(undecided),
+        min_kept_ratio=min_q,
+        max_dropped_ratio=max_q,
+        step_log=log,
+    )
 
 
 def uncontrollable_modes(
@@ -301,10 +517,16 @@ class SubspaceReport:
     tolerance : float
         Rank tolerance of the staircase algorithm.
     min_accepted, max_rejected : float
-        Smallest coupling kept / largest coupling dropped by the staircase (the gap behind
-        the rank decision; see :class:`Staircase`).
+        Smallest coupling kept / largest coupling dropped by the staircase (balanced
+        coordinates; see :class:`Staircase`).
     membership_tol : float
         Projection tolerance of the vehicle classification.
+    rank_upper : int
+        Largest rank consistent with the data; ``rank_upper > rank`` means the rank is
+        ``undecided`` (``rank`` is then the lower bound and ``basis`` spans only the directions
+        reached for sure).
+    margin : float
+        :attr:`Staircase.decision_margin` (>= 1 when every decision was clear).
     """
 
     kind: str
@@ -320,15 +542,26 @@ class SubspaceReport:
     min_accepted: float
     max_rejected: float
     membership_tol: float
+    rank_upper: int
+    margin: float
+
+    @property
+    def undecided(self) -> bool:
+        """The data do not fix the rank: some coupling is neither clearly above its noise nor
+        clearly at it (see the module docstring)."""
+        return self.rank_upper > self.rank
 
     @property
     def decision_margin(self) -> float:
-        """How far the rank decision is from the tolerance: ``min(min_accepted / tolerance,
-        tolerance / max_rejected)`` (``inf`` when there was nothing to decide). Below ~10 the
-        verdict is numerically fragile (the system is within round-off of a different rank)."""
-        up = self.min_accepted / self.tolerance
-        down = self.tolerance / self.max_rejected if self.max_rejected > 0 else np.inf
-        return float(min(up, down))
+        """``min(smallest kept coupling/noise / KEEP_RATIO, DROP_RATIO / largest dropped
+        coupling/noise)``: >= 1 when every decision was clear, < 1 when one was not (``inf``
+        when there was nothing to decide)."""
+        return float(self.margin)
+
+    def _verdict(self, yes: str, no: str) -> str:
+        if self.rank == self.n_states:
+            return yes
+        return no if self.rank_upper < self.n_states else "undecided"
 
     def _summary(self) -> dict:
         return {
@@ -340,6 +573,8 @@ class SubspaceReport:
             "vehicles_in_subspace": [int(v) for v in self.vehicles_in_subspace],
             "vehicles_outside": [int(v) for v in self.vehicles_outside],
             "vehicles_partial": [int(v) for v in self.vehicles_partial],
+            "rank_upper": int(self.rank_upper),
+            "undecided": bool(self.undecided),
             "tolerance": float(self.tolerance),
             "min_accepted_coupling": _finite_or_none(self.min_accepted),
             "max_rejected_coupling": float(self.max_rejected),
@@ -356,16 +591,24 @@ class SubspaceReport:
 
 @dataclass(frozen=True)
 class ControllabilityReport(SubspaceReport):
-    """Controllable subspace of ``(A, B)``; ``controllable`` iff ``rank == n_states``.
+    """Controllable subspace of ``(A, B)``; ``controllable`` iff ``rank == n_states`` for sure.
 
-    ``uncontrollable_eigenvalues`` are the eigenvalues of the uncontrollable block ``A_u`` of the
-    Kalman decomposition (no input can move them); ``stabilizable`` iff all have a negative real
-    part. Repeated eigenvalues of ``A_u`` come out scattered by round-off (see the module
+    ``verdict`` is ``"controllable"``, ``"uncontrollable"`` or ``"undecided"`` (the data are
+    within round-off of both; ``controllable`` is then False). ``uncontrollable_eigenvalues``
+    are the eigenvalues of the uncontrollable block ``A_u`` of the Kalman decomposition (no
+    input can move them); ``stabilizable`` iff all have a negative real part. When undecided,
+    ``A_u`` also holds the undecided directions, so ``stabilizable`` errs on the safe side.
+    Repeated eigenvalues of ``A_u`` come out scattered by round-off (see the module
     docstring), their real parts stay reliable to that scatter.
     """
 
     controllable: bool = False
     uncontrollable_eigenvalues: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
+
+    @property
+    def verdict(self) -> str:
+        """``"controllable"``, ``"uncontrollable"`` or ``"undecided"``."""
+        return self._verdict("controllable", "uncontrollable")
 
     @property
     def stabilizable(self) -> bool:
@@ -382,6 +625,7 @@ class ControllabilityReport(SubspaceReport):
         """JSON-serialisable summary (no basis)."""
         return {
             "controllable": bool(self.controllable),
+            "verdict": self.verdict,
             "stabilizable": self.stabilizable,
             "uncontrollable_max_real": self.uncontrollable_max_real,
             **self._summary(),
@@ -390,15 +634,22 @@ class ControllabilityReport(SubspaceReport):
 
 @dataclass(frozen=True)
 class ObservabilityReport(SubspaceReport):
-    """Observable subspace of ``(A, C)`` for the named state outputs."""
+    """Observable subspace of ``(A, C)`` for the named state outputs; ``verdict`` is
+    ``"observable"``, ``"unobservable"`` or ``"undecided"``."""
 
     outputs: list[str] = field(default_factory=list)
     observable: bool = False
+
+    @property
+    def verdict(self) -> str:
+        """``"observable"``, ``"unobservable"`` or ``"undecided"``."""
+        return self._verdict("observable", "unobservable")
 
     def as_dict(self) -> dict:
         """JSON-serialisable summary (no basis)."""
         return {
             "observable": bool(self.observable),
+            "verdict": self.verdict,
             "outputs": list(self.outputs),
             **self._summary(),
         }
@@ -475,6 +726,8 @@ def _subspace_fields(model: LCCModel, dec: Staircase, membership_tol: float) -> 
         min_accepted=dec.min_accepted,
         max_rejected=dec.max_rejected,
         membership_tol=membership_tol,
+        rank_upper=int(dec.n_c_upper),
+        margin=dec.decision_margin,
     )
 
 
