@@ -15,7 +15,8 @@ import time
 
 import numpy as np
 
-from lcc_synth.analysis.regions import grid_axis, region_frequency_grid, region_map
+from lcc_synth.analysis.region_specs import grid_axis
+from lcc_synth.analysis.regions import region_frequency_grid, region_map
 from lcc_synth.analysis.string_stability import string_stability
 from lcc_synth.models.feedback import StaticGains, input_feedback
 from lcc_synth.models.hdv import OVM

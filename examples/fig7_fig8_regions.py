@@ -14,7 +14,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from lcc_synth.analysis.regions import expansion, region_specs_from, run_region_specs
+from lcc_synth.analysis.region_specs import expansion, region_specs_from, run_region_specs
 from lcc_synth.figures import plot_region_maps
 from lcc_synth.problem import load_problem, system_from
 

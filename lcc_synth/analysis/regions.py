@@ -4,33 +4,86 @@ Over a grid of ``(mu_i, k_i)`` for one vehicle ``i``, all other gains fixed, eve
 classified as
 
 ``0`` unstable            the closed loop has an eigenvalue with ``Re >= 0``;
-``1`` stable              plant stable, not head-to-tail string stable;
-``2`` string stable       plant stable and ``|Gamma(jw)| < 1`` for all ``w > 0``.
+``1`` stable              plant stable, not head-to-tail string stable (or undecided, below);
+``2`` string stable       plant stable and ``|Gamma(jw)| < Gamma(0) = 1`` for all ``w > 0``.
 
-Why it is fast: ``Gamma = num/den`` (:func:`lcc_synth.analysis.transfer.gamma_polynomials`) with
-``num`` and ``den`` *affine* in ``(mu_i, k_i)``: ``num = N0 + mu N1 + k N2``, ``den = D0 + mu D1
-+ k D2`` (``den`` is the closed-loop characteristic polynomial). Hence
+Decision function
+-----------------
+``Gamma = num/den`` (:func:`lcc_synth.analysis.transfer.gamma_polynomials`, ``den`` the closed-loop
+characteristic polynomial) with ``num`` and ``den`` *affine* in ``(mu_i, k_i)``: ``num = N0 +
+mu N1 + k N2``, ``den = D0 + mu D1 + k D2`` (:func:`affine_polynomials`). Every ``h_i(0) = 0``,
+so ``num(0) = den(0)`` and neither depends on the map's gains (``N1, N2, D1, D2`` vanish at
+``s = 0`` exactly; ``g0 = num(0)/den(0)`` is 1 up to an ulp). With ``x = w^2`` and
+``p(jw) = p(0) + x e_p(x) + j w o_p(x)``,
 
-* plant stability: a vectorised Routh-Hurwitz test on the coefficients of ``den`` for every
-  grid point (exact sign test, no eigenvalues), in chunks of rows to bound memory;
-* low frequencies: ``|Gamma(jw)|^2 = 1 + c w^2 + O(w^4)`` with ``c`` a quadratic in
-  ``(mu, k)`` from the three lowest coefficients; string stability needs
-  ``c_rel < -LOW_FREQ_TOL`` (as :func:`~lcc_synth.analysis.string_stability.string_stability`);
-* ``w > 0``: for a fixed row ``mu`` and frequency ``w``, ``|num(jw)|^2 - rho |den(jw)|^2`` is a
-  *quadratic in k* (``rho = (1 - PEAK_TOL)^2``). Its non-negative set is at most two intervals
-  of ``k``, found in closed form; marking them on the ``k`` axis (a difference array and one
-  cumulative sum) flags every grid point with ``|Gamma(jw)| >= 1 - PEAK_TOL`` at that ``w``. The
-  work is ``O(n_mu * n_omega)`` closed-form roots plus ``O(n_mu * n_k)``, instead of
-  ``O(n_mu * n_k * n_omega)`` evaluations, so the frequency grid can be dense.
+    Ptilde(x) = (|num(jw)|^2 - g0^2 |den(jw)|^2) / x,
+    (|p(jw)|^2 - p(0)^2) / x = 2 p(0) e_p + x e_p^2 + o_p^2,
 
-Frequency grid (:func:`region_frequency_grid`): logarithmic, ``DEFAULT_PER_DECADE`` = 200
-points per decade on ``[1e-3, 1e2]`` rad/s plus ``DEFAULT_DENSE_PER_DECADE`` = 3000 per decade on
-``[0.03, 10]`` rad/s, where the resonance peaks of the paper's maps lie (sampled peaks at 0.12-1.9
-rad/s; closed-loop poles up to ~5 rad/s). Relative spacing in the dense band: 0.08 %. The grid is
-exact in the direction "unstable": a flagged point has a witness frequency. A point whose
-exceedance band is narrower than the grid spacing (only possible next to the plant-stability
-boundary, for a pole with damping ratio below ~1e-3) could be reported string stable; the tests
-compare the map with the exact per-point global check on random samples of grid points.
+i.e. the ``x^0`` coefficient (the exact double zero of ``|Gamma|^2 - g0^2`` at ``w = 0``) is
+removed structurally, never by subtracting two nearly equal floats. ``Ptilde(0)`` is the
+curvature numerator (``|Gamma|^2 = g0^2 + c w^2 + O(w^4)``, ``c = Ptilde(0) / den(0)^2``) and at
+``w > 0`` ``Ptilde`` has the sign of ``|Gamma(jw)|^2 - g0^2``. String stable means plant stable
+and ``Ptilde(x) < 0`` for every ``x >= 0``: the definition of
+:mod:`lcc_synth.analysis.string_stability` (``Q = Ptilde / |den|^2``). ``x = 0`` is checked exactly,
+so the low end of the frequency grid does not matter: lowering ``omega_min`` from 1e-3 to
+1e-4 moved 5-30 labels per 121 x 121 paper map before (each to the wrong side: ``|Gamma|``
+was compared with ``1 - 1e-9`` at the lowest grid frequency), 0 now.
+
+Why it is fast: for a fixed row ``mu`` and frequency ``x``, ``Ptilde`` is a *quadratic in k*,
+``A + B k + C k^2`` with ``A = a0 + mu a1 + mu^2 a2``, ``B = b0 + mu b1``, ``C = c0`` (vectors
+over ``x``, computed once per map). Its non-negative set is at most two intervals of ``k``,
+found in closed form; marking them on the ``k`` axis (``searchsorted``, a difference array and
+one cumulative sum) flags every grid point at that ``x``. The work is ``O(n_mu * n_omega)``
+closed-form roots plus ``O(n_mu * n_k)``, instead of ``O(n_mu * n_k * n_omega)``
+evaluations, so the frequency grid can be dense. Plant stability: a vectorised Routh-Hurwitz
+test on the coefficients of ``den`` (exact sign test, no eigenvalues).
+
+Tolerance band
+--------------
+``S = SA + SB |k| + SC k^2`` is the sum of the absolute values of the terms of the evaluation
+(the same formulas on ``|coefficients|``, ``|mu|``, ``|k|``; ``x >= 0``), the scale of its
+rounding error. The decision uses the quadratic upper bound
+``S <= (SA + SB/2) + (SC + SB/2) k^2`` (so the band edges stay quadratics in ``k``) and
+
+    tau = BAND_SAFETY * (2 deg + 16) * eps      (:func:`region_band`, BAND_SAFETY = 16),
+
+``deg`` the degree of ``den`` (``2 (m + n + 1)``): ``(2 deg + 16) eps`` bounds the roundings on
+the longest path (products of the quadratic factors, the affine slopes, Horner in ``x`` of
+degree ``deg/2``, the bilinear form, the ``mu``/``k`` combination), and the safety factor
+covers what a count of roundings does not. For the paper's ``m = n = 2``: ``tau = 576 eps =
+1.3e-13``. Measured against an exact rational reference (``tests/test_regions.py``: 1,536
+evaluations on the paper's maps plus heterogeneous, CF-LCC and string-aware-design cases, at
+``x = 0`` and random grid frequencies) the error of ``Ptilde`` is at most ``2.8 eps * S``,
+i.e. 1/13 of the bound and 1/200 of ``tau``. A point with ``Ptilde > tau * S`` at some grid
+frequency is not string stable (label 1); with ``Ptilde < -tau * S`` at every frequency it
+is string stable (2); otherwise it is on the boundary: :attr:`RegionMap.boundary` is set and
+the label is the conservative 1, so figures and fractions stay comparable. On the paper's
+maps (Figs. 7-8, 1001 x 1001) no grid point is inside the band.
+
+Frequency grid (:func:`region_frequency_grid`): ``x = 0`` plus a logarithmic grid,
+``DEFAULT_PER_DECADE`` = 200 points per decade on ``[1e-3, 1e2]`` rad/s plus
+``DEFAULT_DENSE_PER_DECADE`` = 3000 per decade on ``[0.03, 10]`` rad/s, where the resonance
+peaks of the paper's maps lie (sampled peaks at 0.12-1.9 rad/s; closed-loop poles up to ~5
+rad/s). Relative spacing in the dense band: 0.08 %. The grid is exact in the direction
+"unstable": a flagged point has a witness frequency with ``Ptilde > tau * S``. A point whose
+exceedance band is narrower than the grid spacing (only possible next to the
+plant-stability boundary, for a pole with damping ratio below ~1e-3) could be reported string
+stable. Below ``omega_min``, ``Ptilde`` is linear in ``x`` to ``O(x^2)``, so its sign there is
+that of the end points ``x = 0`` and ``x = omega_min^2``, both checked. The tests compare the
+map with the per-point verdict (:func:`~lcc_synth.analysis.string_stability.string_stability`) on
+random and label-boundary grid points: on the eight full paper maps, 3,200 of 3,200 agree
+(150 random and 250 boundary-adjacent points per map, none in either band).
+
+Cost (``python benchmarks/bench_regions.py``): 0.6-1.2 s per 1,002,001-point map with 8,570
+frequencies (best of 3, on a shared 2-core machine; the previous single-threshold version
+took 0.8-1.9 s in the same runs). Two interval markings per frequency (the band's edges)
+instead of one, but the chunks are now 20,000 points, so the working arrays stay in cache.
+
+Changes against the previous version on the full paper maps: 118 of 8 x 1,002,001 labels,
+all from "stable" to "string stable" (Fig. 7(a): 24, i.e. 4.94 % -> 4.95 % string stable;
+the other fractions move in the third decimal or less); every one of them is string stable by
+the per-point verdict (curvature about -1e-3, margin ~4e-5): the old test at the lowest grid
+frequency, ``|Gamma|^2 >= (1 - 1e-9)^2``, flagged every gain with ``|c| < ~2e-9 / omega_min^2``.
 """
 
 from __future__ import annotations
@@ -41,7 +94,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lcc_synth.analysis.string_stability import LOW_FREQ_TOL, PEAK_TOL
 from lcc_synth.analysis.transfer import closed_form_gains, gamma_polynomials
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains, input_feedback
@@ -53,22 +105,21 @@ __all__ = [
     "STRING_STABLE",
     "DEFAULT_PER_DECADE",
     "DEFAULT_DENSE_PER_DECADE",
+    "BAND_SAFETY",
     "RegionMap",
+    "region_band",
     "region_frequency_grid",
     "affine_polynomials",
     "hurwitz",
     "region_map",
-    "grid_axis",
     "region_fractions",
-    "RegionSpec",
-    "region_specs_from",
-    "run_region_specs",
-    "expansion",
 ]
 
 UNSTABLE, STABLE, STRING_STABLE = 0, 1, 2
 DEFAULT_PER_DECADE = 200
 DEFAULT_DENSE_PER_DECADE = 3000
+BAND_SAFETY = 16
+_AFFINE_STEP = 1024.0
 _LABEL_NAMES = {UNSTABLE: "unstable", STABLE: "stable", STRING_STABLE: "string_stable"}
 
 
@@ -90,9 +141,15 @@ class RegionMap:
     fixed : dict
         The other gains (state name -> value, "added" semantics).
     n_omega : int
-        Size of the frequency grid used.
+        Size of the frequency grid used (``w > 0``; ``w = 0`` is checked in addition).
     seconds : float
         Wall time of the computation.
+    boundary : numpy.ndarray
+        ``(n_mu, n_k)`` bool: plant-stable points whose string-stability decision lies inside
+        the rounding band (``|Ptilde| <= band * S`` at the deciding frequency, no frequency
+        with ``Ptilde > band * S``). They carry the conservative label :data:`STABLE`.
+    band : float
+        The relative tolerance ``tau`` used (:func:`region_band`).
     """
 
     name: str
@@ -103,6 +160,12 @@ class RegionMap:
     fixed: dict = field(default_factory=dict)
     n_omega: int = 0
     seconds: float = 0.0
+    boundary: np.ndarray | None = None
+    band: float = 0.0
+
+    def __post_init__(self):
+        if self.boundary is None:
+            object.__setattr__(self, "boundary", np.zeros(self.labels.shape, dtype=bool))
 
     @property
     def points(self) -> int:
@@ -142,33 +205,17 @@ class RegionMap:
             ),
             "unstable_fraction": float(np.count_nonzero(self.labels == UNSTABLE))
             / self.labels.size,
+            "boundary_points": int(np.count_nonzero(self.boundary)),
+            "boundary_fraction": float(np.count_nonzero(self.boundary)) / self.labels.size,
+            "band": self.band,
             "n_omega": self.n_omega,
             "seconds": self.seconds,
             "labels_legend": {str(k): v for k, v in _LABEL_NAMES.items()},
         }
         if include_labels:
             out["labels"] = self.labels.tolist()
+            out["boundary"] = np.argwhere(self.boundary).tolist()
         return out
-
-
-def grid_axis(
-    lo: float, hi: float, step: float, field_name: str = "grid", step_field: str | None = None
-) -> np.ndarray:
-    """Inclusive grid ``lo, lo + step, ..., hi`` (``hi`` kept when it is on the lattice).
-
-    Errors name ``field_name`` (the range) or ``step_field`` (default ``field_name.step``).
-    """
-    step_field = step_field or f"{field_name}.step"
-    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-        raise ConfigError(field_name, f"must be [low, high] with low < high, got {[lo, hi]}")
-    if not (np.isfinite(step) and step > 0):
-        raise ConfigError(step_field, f"must be > 0, got {step}")
-    count = int(np.floor((hi - lo) / step + 1e-9)) + 1
-    if count > 20001:
-        raise ConfigError(
-            step_field, f"gives {count} points on {field_name} = [{lo}, {hi}]; at most 20001"
-        )
-    return lo + step * np.arange(count)
 
 
 def region_frequency_grid(
@@ -229,8 +276,11 @@ def affine_polynomials(model: LCCModel, vehicle: int, gains=None):
             out.append(asc)
         return out
 
-    (n0, d0), (n1, d1), (n2, d2) = polys(0.0, 0.0), polys(1.0, 0.0), polys(0.0, 1.0)
-    return n0, n1 - n0, n2 - n0, d0, d1 - d0, d2 - d0
+    # affine: the slopes from a power-of-two step t (exact division), so the rounding of the
+    # base polynomial leaks into a slope only as eps |N0| / t
+    t = _AFFINE_STEP
+    (n0, d0), (n1, d1), (n2, d2) = polys(0.0, 0.0), polys(t, 0.0), polys(0.0, t)
+    return n0, (n1 - n0) / t, (n2 - n0) / t, d0, (d1 - d0) / t, (d2 - d0) / t
 
 
 def hurwitz(coef_desc: np.ndarray) -> np.ndarray:
@@ -259,75 +309,170 @@ def hurwitz(coef_desc: np.ndarray) -> np.ndarray:
     return ok & np.isfinite(r0[..., 0])
 
 
-def _polyval_asc(c: np.ndarray, s: np.ndarray) -> np.ndarray:
-    out = np.zeros_like(s, dtype=complex)
+def _x_parts(p: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Split a real polynomial ``p`` (ascending powers of ``s``) along the imaginary axis:
+    ``p(jw) = p0 + x e(x) + j w o(x)`` with ``x = w^2``; returns ``(p0, e, o)``, ``e`` and
+    ``o`` in ascending powers of ``x``. Exact (signs and a reshuffle of the coefficients)."""
+    p = np.asarray(p, dtype=float)
+    even = p[0::2] * (-1.0) ** np.arange(p[0::2].size)
+    odd = p[1::2] * (-1.0) ** np.arange(p[1::2].size)
+    return float(p[0]), even[1:], odd
+
+
+def _horner(c: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``sum_i c[i] x^i`` by Horner's rule (``c`` ascending)."""
+    out = np.zeros_like(x)
     for coef in c[::-1]:
-        out = out * s + coef
+        out = out * x + coef
     return out
 
 
-def _curvature_term(p0, p1, p2, mr, k):
-    """``q1^2 - 2 q0 q2`` for ``q = p0 + mu p1 + k p2`` on the ``(mr, k)`` grid."""
+def _spectra(p: np.ndarray, x: np.ndarray, absolute: bool = False):
+    """``(p0, e(x), o(x))`` of :func:`_x_parts` on ``x >= 0``; with ``absolute`` every
+    coefficient in absolute value (the sums of the absolute values of the terms)."""
+    p0, e, o = _x_parts(p)
+    if absolute:
+        return abs(p0), _horner(np.abs(e), x), _horner(np.abs(o), x)
+    return p0, _horner(e, x), _horner(o, x)
 
-    def c(j):
-        return p0[j] + mr[:, None] * p1[j] + k[None, :] * p2[j]
 
-    return c(1) ** 2 - 2.0 * c(0) * c(2)
+def _beta(p, q, x):
+    """``(Re(p(jw) conj q(jw)) - p(0) q(0)) / w^2 = p0 e_q + q0 e_p + x e_p e_q + o_p o_q``
+    for spectra ``p, q`` of :func:`_spectra`: the bilinear form behind ``(|p(jw)|^2 -
+    p(0)^2) / w^2`` with the ``x^0`` term removed structurally (valid at ``x = 0``). On
+    absolute spectra it is the sum of the absolute values of the terms."""
+    (p0, pe, po), (q0, qe, qo) = p, q
+    return p0 * qe + q0 * pe + x * pe * qe + po * qo
 
 
-def _mark_intervals(k: np.ndarray, A, B, C) -> np.ndarray:
-    """For each row (axis 0) and frequency (axis 1), the ``k`` grid points where
-    ``A + B k + C k^2 >= 0``; returns ``(rows, n_k)`` bool 'flagged at some frequency'."""
-    rows, nw = A.shape
-    nk = k.size
-    disc = B * B - 4.0 * A * C
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        sq = np.sqrt(np.maximum(disc, 0.0))
-        q = -0.5 * (B + np.where(B >= 0, sq, -sq))
-        r_a = q / C
-        r_b = A / q
-    lo_root = np.fmin(r_a, r_b)
-    hi_root = np.fmax(r_a, r_b)
+@dataclass(frozen=True)
+class _MapQuadratics:
+    """The decision function of one map on the frequency grid ``x = w^2`` (``x[0] = 0``),
+    as polynomials in the row gain ``mu`` and the column gain ``k``:
+
+        Ptilde(x) = (|num(jw)|^2 - g0^2 |den(jw)|^2) / x = A + B k + C k^2,
+        A = a0 + mu a1 + mu^2 a2,   B = b0 + mu b1,   C = c0,
+
+    ``g0 = num(0) / den(0)`` (both independent of ``(mu, k)``: ``h_i(0) = 0``), the ``x^0``
+    coefficient ``num(0)^2 - g0^2 den(0)^2 = 0`` removed structurally. ``Ptilde(0)`` is the
+    curvature numerator (``c = Ptilde(0) / den(0)^2``) and at ``w > 0`` ``Ptilde`` has the
+    sign of ``|Gamma(jw)|^2 - g0^2``. ``sa*, sb*, sc0``: the same with every term in absolute
+    value (``|mu|`` for ``mu``), so ``S = SA + SB |k| + SC k^2`` bounds the rounding of the
+    evaluation."""
+
+    a: tuple
+    b: tuple
+    c0: np.ndarray
+    sa: tuple
+    sb: tuple
+    sc0: np.ndarray
+
+    def rows(self, mr: np.ndarray):
+        """``(A, B, C, SA, SB, SC)`` on rows ``mu = mr`` (axis 0) and ``x`` (axis 1)."""
+        m = mr[:, None]
+        am = np.abs(m)
+        a0, a1, a2 = self.a
+        s0, s1, s2 = self.sa
+        A = a0 + m * (a1 + m * a2)
+        B = self.b[0] + m * self.b[1]
+        SA = s0 + am * (s1 + am * s2)
+        SB = self.sb[0] + am * self.sb[1]
+        shape = A.shape
+        return (
+            A, B, np.broadcast_to(self.c0, shape), SA, SB, np.broadcast_to(self.sc0, shape)
+        )
+
+
+def _map_quadratics(polys, x: np.ndarray) -> _MapQuadratics:
+    n0, n1, n2, d0, d1, d2 = polys
+    if n1[0] != 0.0 or n2[0] != 0.0 or d1[0] != 0.0 or d2[0] != 0.0:
+        raise ValueError("num(0) and den(0) must not depend on the map's gains (h_i(0) = 0)")
+    g2 = (n0[0] / d0[0]) ** 2 if d0[0] != 0.0 else 1.0  # den(0) = 0: unstable anyway
+    N0, N1, N2, D0, D1, D2 = (_spectra(p, x) for p in polys)
+    aN0, aN1, aN2, aD0, aD1, aD2 = (_spectra(p, x, absolute=True) for p in polys)
+
+    def diff(p, q, P, Q):
+        return _beta(p, q, x) - g2 * _beta(P, Q, x)
+
+    def total(p, q, P, Q):
+        return _beta(p, q, x) + g2 * _beta(P, Q, x)
+
+    return _MapQuadratics(
+        a=(diff(N0, N0, D0, D0), 2.0 * diff(N0, N1, D0, D1), diff(N1, N1, D1, D1)),
+        b=(2.0 * diff(N0, N2, D0, D2), 2.0 * diff(N1, N2, D1, D2)),
+        c0=diff(N2, N2, D2, D2),
+        sa=(total(aN0, aN0, aD0, aD0), 2.0 * total(aN0, aN1, aD0, aD1),
+            total(aN1, aN1, aD1, aD1)),
+        sb=(2.0 * total(aN0, aN2, aD0, aD2), 2.0 * total(aN1, aN2, aD1, aD2)),
+        sc0=total(aN2, aN2, aD2, aD2),
+    )
+
+
+def _row_quadratics(polys, mr: np.ndarray, x: np.ndarray):
+    """``(A, B, C, SA, SB, SC)`` of :class:`_MapQuadratics` on rows ``mr`` and ``x``."""
+    return _map_quadratics(polys, np.asarray(x, dtype=float)).rows(
+        np.asarray(mr, dtype=float).reshape(-1)
+    )
+
+
+def _intervals(k: np.ndarray, A, B, C, nonfinite_all: bool = False):
+    """Index ranges ``[start, stop)`` of the sorted ``k`` grid where ``A + B k + C k^2 >= 0``,
+    at most two per entry: ``(s1, e1, s2, e2)`` (``e <= s``: empty). Closed-form roots; the
+    rare entries with ``C == 0`` (a line) are patched separately. An entry with a non-finite
+    coefficient (overflow) gives everything with ``nonfinite_all``, else nothing."""
+    n = k.size
     inf = np.inf
-    # up to two intervals [l1, h1], [l2, h2] per (row, w); NaN bounds mean "empty"
-    quad = C != 0
-    up = quad & (C > 0)
-    down = quad & (C < 0)
-    has_roots = disc >= 0
-    l1 = np.full(A.shape, np.nan)
-    h1 = np.full(A.shape, np.nan)
-    l2 = np.full(A.shape, np.nan)
-    h2 = np.full(A.shape, np.nan)
-    # C > 0: outside the roots (everything when no real root)
-    m = up & has_roots
-    l1[m], h1[m], l2[m], h2[m] = -inf, lo_root[m], hi_root[m], inf
-    m = up & ~has_roots
-    l1[m], h1[m] = -inf, inf
-    # C < 0: between the roots
-    m = down & has_roots
-    l1[m], h1[m] = lo_root[m], hi_root[m]
-    # C == 0: linear B k + A >= 0
-    lin = ~quad
-    with np.errstate(divide="ignore", invalid="ignore"):
-        root = -A / B
-    m = lin & (B > 0)
-    l1[m], h1[m] = root[m], inf
-    m = lin & (B < 0)
-    l1[m], h1[m] = -inf, root[m]
-    m = lin & (B == 0) & (A >= 0)
-    l1[m], h1[m] = -inf, inf
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        disc = B * B - 4.0 * A * C
+        has = disc >= 0.0
+        q = -0.5 * (B + np.copysign(np.sqrt(np.where(has, disc, 0.0)), B))
+        lo = np.fmin(q / C, A / q)
+        hi = np.fmax(q / C, A / q)
+    up = C > 0.0
+    # C > 0: (-inf, r1] and [r2, inf) (everything without real roots); C < 0: [r1, r2]
+    r1 = np.where(has, lo, inf)
+    r2 = np.where(has, hi, np.where(up, inf, -inf))
+    s1 = np.where(up, 0, np.searchsorted(k, np.where(up, -inf, r1), side="left"))
+    e1 = np.searchsorted(k, np.where(up, r1, r2), side="right")
+    s2 = np.where(up, np.searchsorted(k, np.where(up, r2, inf), side="left"), n)
+    e2 = np.full(s2.shape, n)
+    line = C == 0.0
+    if np.any(line):  # B k + A >= 0
+        a, b = A[line], B[line]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            root = -a / b
+        always = (b == 0.0) & (a >= 0.0)
+        l_ = np.where(b > 0.0, root, np.where((b < 0.0) | always, -inf, inf))
+        h_ = np.where(b < 0.0, root, np.where((b > 0.0) | always, inf, -inf))
+        s1[line] = np.searchsorted(k, l_, side="left")
+        e1[line] = np.searchsorted(k, h_, side="right")
+        s2[line] = n
+    bad = ~np.isfinite(disc)
+    if np.any(bad):
+        s1[bad], e1[bad], s2[bad] = 0, (n if nonfinite_all else 0), n
+    return s1, e1, s2, e2
 
-    diff = np.zeros(rows * (nk + 1))
+
+def _mark(nk: int, rows: int, ranges, where=None) -> np.ndarray:
+    """``(rows, nk)`` bool: grid points inside any of the index ranges (axis 0 of the range
+    arrays: rows); ``where`` restricts to a subset of entries."""
     row_off = (np.arange(rows) * (nk + 1))[:, None]
-    for lo, hi in ((l1, h1), (l2, h2)):
-        valid = ~np.isnan(lo) & ~np.isnan(hi)
-        start = np.searchsorted(k, np.where(valid, lo, inf), side="left")
-        stop = np.searchsorted(k, np.where(valid, hi, -inf), side="right")
-        good = valid & (stop > start)
-        diff += np.bincount((row_off + start)[good], minlength=diff.size)
-        diff -= np.bincount((row_off + stop)[good], minlength=diff.size)
-    counts = np.cumsum(diff.reshape(rows, nk + 1), axis=1)[:, :nk]
-    return counts > 0.5
+    diff = np.zeros(rows * (nk + 1))
+    for start, stop in ranges:
+        good = stop > start
+        if where is not None:
+            good &= where
+        s = np.broadcast_to(row_off, good.shape)[good]
+        diff += np.bincount(s + start[good], minlength=diff.size)
+        diff -= np.bincount(s + stop[good], minlength=diff.size)
+    return np.cumsum(diff.reshape(rows, nk + 1), axis=1)[:, :nk] > 0.5
+
+
+def region_band(degree: int) -> float:
+    """The relative tolerance ``tau`` of the map's decision for a closed loop whose
+    characteristic polynomial has degree ``degree`` (see the module docstring):
+    ``tau = BAND_SAFETY * (2 degree + 16) * eps``."""
+    return float(BAND_SAFETY * (2 * int(degree) + 16) * np.finfo(float).eps)
 
 
 def region_map(
@@ -338,7 +483,7 @@ def region_map(
     gains=None,
     omega: np.ndarray | None = None,
     name: str = "",
-    chunk_points: int = 250_000,
+    chunk_points: int = 20_000,
 ) -> RegionMap:
     """Classify every ``(mu[a], k[b])`` for ``vehicle`` (see the module docstring).
 
@@ -353,10 +498,12 @@ def region_map(
     gains : StaticGains or (K, kh), optional
         The other gains (those of ``vehicle`` are replaced by the grid values).
     omega : array_like, optional
-        Frequency grid; default :func:`region_frequency_grid`.
+        Frequency grid (``w > 0``); default :func:`region_frequency_grid`. ``w = 0`` (the
+        curvature) is always checked in addition, exactly.
     chunk_points : int
-        Grid points processed at once (bounds memory: about 100 bytes per point plus
-        ``48 * rows * n_omega`` bytes).
+        Grid points processed at once: ``chunk_points // n_k`` rows (at least one) at a time.
+        Memory is about ``300 * rows * n_omega`` bytes; the default keeps the working arrays
+        in cache (1.3 MB each on the paper's grid), which is faster than larger chunks.
     """
     t0 = time.perf_counter()
     mu = np.asarray(mu, dtype=float).reshape(-1)
@@ -368,17 +515,17 @@ def region_map(
     w = region_frequency_grid() if omega is None else np.asarray(omega, dtype=float)
     if w.size == 0 or np.any(w <= 0) or not np.all(np.isfinite(w)):
         raise ConfigError("omega", "frequency grid must be finite, positive and non-empty")
-    n0, n1, n2, d0, d1, d2 = affine_polynomials(model, vehicle, gains)
-    rho = (1.0 - PEAK_TOL) ** 2
-    s = 1j * w
-    vN0, vN1, vN2 = (_polyval_asc(p, s) for p in (n0, n1, n2))
-    vD0, vD1, vD2 = (_polyval_asc(p, s) for p in (d0, d1, d2))
-    C_row = np.abs(vN2) ** 2 - rho * np.abs(vD2) ** 2  # independent of mu
+    polys = affine_polynomials(model, vehicle, gains)
+    d0, d1, d2 = polys[3:]
+    tau = region_band(d0.size - 1)
+    x = np.concatenate([[0.0], w * w])  # x = w^2; x = 0 is the curvature, exactly
+    quad = _map_quadratics(polys, x)
 
     den_fixed = not (np.any(d1) or np.any(d2))
     stable_const = bool(hurwitz(d0[::-1])) if den_fixed else None
 
     labels = np.empty((mu.size, k.size), dtype=np.int8)
+    boundary = np.zeros((mu.size, k.size), dtype=bool)
     rows_per_chunk = max(1, min(mu.size, chunk_points // k.size))
     for r0 in range(0, mu.size, rows_per_chunk):
         mr = mu[r0 : r0 + rows_per_chunk]
@@ -392,23 +539,25 @@ def region_map(
                 + k[None, :, None] * d2[None, None, :]
             )
             stable = hurwitz(den[..., ::-1])
-        # low-frequency curvature: |p(jw)|^2 = p0^2 + (p1^2 - 2 p0 p2) w^2 + ...
-        a_num = _curvature_term(n0, n1, n2, mr, k)
-        a_den = _curvature_term(d0, d1, d2, mr, k)
-        scale = np.abs(a_num) + np.abs(a_den)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            crel = np.where(scale > 0, (a_num - a_den) / scale, 0.0)
-        low_ok = crel < -LOW_FREQ_TOL
-        # w > 0: |num|^2 - rho |den|^2 = A + B k + C k^2 for each (row, w)
-        Nm = vN0[None, :] + mr[:, None] * vN1[None, :]
-        Dm = vD0[None, :] + mr[:, None] * vD1[None, :]
-        A = np.abs(Nm) ** 2 - rho * np.abs(Dm) ** 2
-        B = 2.0 * ((Nm * np.conj(vN2)).real - rho * (Dm * np.conj(vD2)).real)
-        C = np.broadcast_to(C_row, A.shape)
-        violated = _mark_intervals(k, A, B, C)
+        # Ptilde = A + B k + C k^2 on (row, x); band tau * ((SA + SB/2) + (SC + SB/2) k^2)
+        A, B, C, SA, SB, SC = quad.rows(mr)
+        band_a = tau * (SA + 0.5 * SB)
+        band_c = tau * (SC + 0.5 * SB)
+        hard = _intervals(k, A - band_a, B, C - band_c)  # Ptilde > +band
+        # Ptilde >= -band (contains hard; an overflow is undecided, i.e. boundary)
+        soft = _intervals(k, A + band_a, B, C + band_c, nonfinite_all=True)
+        violated = _mark(k.size, mr.size, ((hard[0], hard[1]), (hard[2], hard[3])))
+        # undecided = violated | (soft ranges where they differ from the hard ones)
+        differs = np.zeros(A.shape, dtype=bool)
+        for h, s in zip(hard, soft, strict=True):
+            differs |= h != s
+        undecided = violated | _mark(
+            k.size, mr.size, ((soft[0], soft[1]), (soft[2], soft[3])), where=differs
+        )
         lab = np.where(stable, STABLE, UNSTABLE).astype(np.int8)
-        lab[stable & low_ok & ~violated] = STRING_STABLE
+        lab[stable & ~undecided] = STRING_STABLE
         labels[r0 : r0 + mr.size] = lab
+        boundary[r0 : r0 + mr.size] = stable & undecided & ~violated
     fixed = {}
     if isinstance(gains, StaticGains):
         fixed = {
@@ -425,6 +574,8 @@ def region_map(
         fixed=fixed,
         n_omega=int(w.size),
         seconds=time.perf_counter() - t0,
+        boundary=boundary,
+        band=tau,
     )
 
 
@@ -433,160 +584,4 @@ def region_fractions(maps: Mapping[str, RegionMap]) -> dict[str, dict[str, float
     return {
         n: {"plant_stable": m.plant_stable_fraction, "string_stable": m.string_stable_fraction}
         for n, m in maps.items()
-    }
-
-
-# --------------------------------------------------------------------------------------------
-# Problem files: [regions] and [maps.NAME]
-# --------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class RegionSpec:
-    """One ``[maps.NAME]`` table: which vehicle's gains vary, the fixed gains, the grid."""
-
-    name: str
-    vehicle: int
-    mu: np.ndarray
-    k: np.ndarray
-    gains: StaticGains
-    baseline: str | None = None
-    title: str = ""
-
-
-_REGION_KEYS = [
-    "mu", "k", "step", "omega_min", "omega_max", "per_decade", "dense_min", "dense_max",
-    "dense_per_decade",
-]
-
-
-def region_specs_from(
-    data: Mapping, model: LCCModel, source: str | None = None, step: float | None = None
-) -> tuple[dict[str, RegionSpec], np.ndarray]:
-    """Parse ``[regions]`` (grid and frequency defaults) and ``[maps.NAME]`` tables.
-
-    ``step`` (e.g. from the command line) overrides every grid step. Returns the specs in file
-    order and the frequency grid. Errors name the dotted field and the file.
-    """
-    from lcc_synth.problem import (
-        check_keys,
-        get_int,
-        get_number,
-        get_number_list,
-        get_str,
-        get_table,
-    )
-
-    try:
-        if model.kind == "fd_lcc":
-            raise ConfigError(
-                "system.kind", "region maps need a head vehicle (lcc, cf_lcc or ccc), not fd_lcc"
-            )
-        opts = get_table(data, "regions", "regions")
-        check_keys(opts, _REGION_KEYS, "regions")
-        d_step = get_number(opts, "step", "regions", 0.02, lo=0.0, lo_open=True)
-        d_mu = get_number_list(opts, "mu", "regions", [-10.0, 10.0], length=2)
-        d_k = get_number_list(opts, "k", "regions", [-10.0, 10.0], length=2)
-        step_field = "--step" if step is not None else "regions.step"
-        d_step_used = step if step is not None else d_step
-        mu_default = grid_axis(*d_mu, d_step_used, "regions.mu", step_field)
-        k_default = grid_axis(*d_k, d_step_used, "regions.k", step_field)
-        w_lo = get_number(opts, "omega_min", "regions", 1e-3, lo=0.0, lo_open=True)
-        w_hi = get_number(opts, "omega_max", "regions", 1e2, lo=w_lo, lo_open=True)
-        per_dec = get_int(opts, "per_decade", "regions", DEFAULT_PER_DECADE, lo=10, hi=100_000)
-        dn_lo = get_number(opts, "dense_min", "regions", 0.03, lo=0.0, lo_open=True)
-        dn_hi = get_number(opts, "dense_max", "regions", 10.0, lo=dn_lo, lo_open=True)
-        dn_per = get_int(
-            opts, "dense_per_decade", "regions", DEFAULT_DENSE_PER_DECADE, lo=0, hi=100_000
-        )
-        omega = region_frequency_grid(w_lo, w_hi, per_dec, (dn_lo, dn_hi), dn_per)
-
-        maps = get_table(data, "maps", "maps", required=True)
-        if not maps:
-            raise ConfigError("maps", "needs at least one [maps.NAME] table")
-        allowed_vehicles = [i for i in model.vehicles if i != 0]
-        specs: dict[str, RegionSpec] = {}
-        for name, t in maps.items():
-            field = f"maps.{name}"
-            if not isinstance(t, dict):
-                raise ConfigError(field, f"must be a table, got {t!r}")
-            check_keys(
-                t, ["vehicle", "gains", "semantics", "baseline", "title", "mu", "k", "step"], field
-            )
-            vehicle = get_int(t, "vehicle", field)
-            if vehicle not in allowed_vehicles:
-                raise ConfigError(
-                    f"{field}.vehicle",
-                    f"must be one of {allowed_vehicles} (an HDV of this m={model.m}, "
-                    f"n={model.n} system), got {vehicle}",
-                )
-            semantics = get_str(t, "semantics", field, "added", choices=["added", "replace"])
-            raw = get_table(t, "gains", f"{field}.gains")
-            try:
-                gains = StaticGains(raw, semantics)
-                gains.check(model)
-            except ConfigError as err:
-                raise ConfigError(f"{field}.{err.field}", err.message) from None
-            for own in (f"s_{vehicle}", f"v_{vehicle}"):
-                if own in gains.gains:
-                    raise ConfigError(
-                        f"{field}.gains.{own}", "is the map's own axis; remove it from gains"
-                    )
-            if any(key in t for key in ("mu", "k", "step")):
-                st = step if step is not None else get_number(
-                    t, "step", field, d_step, lo=0.0, lo_open=True
-                )
-                sf = step_field if step is not None else f"{field}.step"
-                lo_hi = get_number_list(t, "mu", field, d_mu, length=2)
-                mu = grid_axis(*lo_hi, st, f"{field}.mu", sf)
-                lo_hi = get_number_list(t, "k", field, d_k, length=2)
-                k = grid_axis(*lo_hi, st, f"{field}.k", sf)
-            else:
-                mu, k = mu_default, k_default
-            baseline = get_str(t, "baseline", field, None) if "baseline" in t else None
-            title = get_str(t, "title", field, name)
-            specs[name] = RegionSpec(name, vehicle, mu, k, gains, baseline, title)
-        for name, spec in specs.items():
-            if spec.baseline is None:
-                continue
-            base = specs.get(spec.baseline)
-            if base is None:
-                raise ConfigError(
-                    f"maps.{name}.baseline", f"names no map; maps: {sorted(specs)}"
-                )
-            if (
-                base.vehicle != spec.vehicle
-                or base.mu.shape != spec.mu.shape
-                or base.k.shape != spec.k.shape
-                or not np.allclose(base.mu, spec.mu)
-                or not np.allclose(base.k, spec.k)
-            ):
-                raise ConfigError(
-                    f"maps.{name}.baseline",
-                    f"map {spec.baseline!r} must have the same vehicle and grid",
-                )
-        return specs, omega
-    except ConfigError as err:
-        raise err.with_source(source) if source and not err.source else err from None
-
-
-def run_region_specs(
-    model: LCCModel, specs: Mapping[str, RegionSpec], omega: np.ndarray | None = None
-) -> dict[str, RegionMap]:
-    """Compute every map of :func:`region_specs_from`."""
-    return {
-        name: region_map(model, s.vehicle, s.mu, s.k, gains=s.gains, omega=omega, name=name)
-        for name, s in specs.items()
-    }
-
-
-def expansion(rm: RegionMap, baseline: RegionMap) -> dict[str, float | bool]:
-    """How ``rm`` changes the string-stable set of ``baseline`` (same grid): fraction gained,
-    fraction lost and whether the baseline region is kept entirely (Fig. 7(c)-(f))."""
-    a = baseline.labels == STRING_STABLE
-    b = rm.labels == STRING_STABLE
-    return {
-        "gained_fraction": float(np.count_nonzero(b & ~a)) / a.size,
-        "lost_fraction": float(np.count_nonzero(a & ~b)) / a.size,
-        "contains_baseline": bool(not np.any(a & ~b)),
     }

@@ -111,8 +111,6 @@ __all__ = [
 VERDICTS = ("string_stable", "string_unstable", "plant_unstable", "boundary")
 GRID_PER_DECADE = 120
 BAND_FACTOR = 1e4
-LOW_FREQ_TOL = 1e-9  # legacy, used by regions until its own band lands
-PEAK_TOL = 1e-9  # legacy, used by regions until its own band lands
 _EPS = float(np.finfo(float).eps)
 
 

@@ -28,7 +28,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import time
 
-    from lcc_synth.analysis.regions import expansion, region_specs_from, run_region_specs
+    from lcc_synth.analysis.region_specs import expansion, region_specs_from, run_region_specs
     from lcc_synth.errors import ConfigError
     from lcc_synth.problem import load_problem, system_from
     from lcc_synth.recording import record_analysis_file, recording_path

@@ -324,7 +324,7 @@ def make_plant(model: LCCModel, semantics: str = "replace", weights: Weights | N
 def check_stabilisable(plant: H2Plant, tol: float = 1e-9) -> None:
     """Every uncontrollable mode (Kalman decomposition,
     :mod:`lcc_synth.analysis.controllability`) must have Re < -tol; else :class:`SynthesisError`."""
-    from lcc_synth.analysis.controllability import uncontrollable_modes
+    from lcc_synth.analysis.staircase import uncontrollable_modes
 
     for lam in uncontrollable_modes(plant.A, plant.B):
         if lam.real >= -tol:

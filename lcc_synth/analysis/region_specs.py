@@ -1,0 +1,199 @@
+"""Problem-file tables of the ``regions`` command: ``[regions]`` and ``[maps.NAME]`` (Figs. 7-8).
+
+``[maps.NAME]`` names the vehicle whose gains ``(mu_i, k_i)`` vary, the fixed gains of the
+others, the grid and an optional baseline map (the expansion of Fig. 7(c)-(f) over Fig. 7(a)(b));
+``[regions]`` holds the shared grid and frequency options. The maps themselves are computed by
+:func:`lcc_synth.analysis.regions.region_map`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from lcc_synth.analysis.regions import (
+    DEFAULT_DENSE_PER_DECADE,
+    DEFAULT_PER_DECADE,
+    STRING_STABLE,
+    RegionMap,
+    region_frequency_grid,
+    region_map,
+)
+from lcc_synth.errors import ConfigError
+from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.linear import LCCModel
+
+__all__ = ["grid_axis", "RegionSpec", "region_specs_from", "run_region_specs", "expansion"]
+
+
+def grid_axis(
+    lo: float, hi: float, step: float, field_name: str = "grid", step_field: str | None = None
+) -> np.ndarray:
+    """Inclusive grid ``lo, lo + step, ..., hi`` (``hi`` kept when it is on the lattice).
+
+    Errors name ``field_name`` (the range) or ``step_field`` (default ``field_name.step``).
+    """
+    step_field = step_field or f"{field_name}.step"
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+        raise ConfigError(field_name, f"must be [low, high] with low < high, got {[lo, hi]}")
+    if not (np.isfinite(step) and step > 0):
+        raise ConfigError(step_field, f"must be > 0, got {step}")
+    count = int(np.floor((hi - lo) / step + 1e-9)) + 1
+    if count > 20001:
+        raise ConfigError(
+            step_field, f"gives {count} points on {field_name} = [{lo}, {hi}]; at most 20001"
+        )
+    return lo + step * np.arange(count)
+
+
+@dataclass(frozen=True)
+class RegionSpec:
+    """One ``[maps.NAME]`` table: which vehicle's gains vary, the fixed gains, the grid."""
+
+    name: str
+    vehicle: int
+    mu: np.ndarray
+    k: np.ndarray
+    gains: StaticGains
+    baseline: str | None = None
+    title: str = ""
+
+
+_REGION_KEYS = [
+    "mu", "k", "step", "omega_min", "omega_max", "per_decade", "dense_min", "dense_max",
+    "dense_per_decade",
+]
+
+
+def region_specs_from(
+    data: Mapping, model: LCCModel, source: str | None = None, step: float | None = None
+) -> tuple[dict[str, RegionSpec], np.ndarray]:
+    """Parse ``[regions]`` (grid and frequency defaults) and ``[maps.NAME]`` tables.
+
+    ``step`` (e.g. from the command line) overrides every grid step. Returns the specs in file
+    order and the frequency grid. Errors name the dotted field and the file.
+    """
+    from lcc_synth.problem import (
+        check_keys,
+        get_int,
+        get_number,
+        get_number_list,
+        get_str,
+        get_table,
+    )
+
+    try:
+        if model.kind == "fd_lcc":
+            raise ConfigError(
+                "system.kind", "region maps need a head vehicle (lcc, cf_lcc or ccc), not fd_lcc"
+            )
+        opts = get_table(data, "regions", "regions")
+        check_keys(opts, _REGION_KEYS, "regions")
+        d_step = get_number(opts, "step", "regions", 0.02, lo=0.0, lo_open=True)
+        d_mu = get_number_list(opts, "mu", "regions", [-10.0, 10.0], length=2)
+        d_k = get_number_list(opts, "k", "regions", [-10.0, 10.0], length=2)
+        step_field = "--step" if step is not None else "regions.step"
+        d_step_used = step if step is not None else d_step
+        mu_default = grid_axis(*d_mu, d_step_used, "regions.mu", step_field)
+        k_default = grid_axis(*d_k, d_step_used, "regions.k", step_field)
+        w_lo = get_number(opts, "omega_min", "regions", 1e-3, lo=0.0, lo_open=True)
+        w_hi = get_number(opts, "omega_max", "regions", 1e2, lo=w_lo, lo_open=True)
+        per_dec = get_int(opts, "per_decade", "regions", DEFAULT_PER_DECADE, lo=10, hi=100_000)
+        dn_lo = get_number(opts, "dense_min", "regions", 0.03, lo=0.0, lo_open=True)
+        dn_hi = get_number(opts, "dense_max", "regions", 10.0, lo=dn_lo, lo_open=True)
+        dn_per = get_int(
+            opts, "dense_per_decade", "regions", DEFAULT_DENSE_PER_DECADE, lo=0, hi=100_000
+        )
+        omega = region_frequency_grid(w_lo, w_hi, per_dec, (dn_lo, dn_hi), dn_per)
+
+        maps = get_table(data, "maps", "maps", required=True)
+        if not maps:
+            raise ConfigError("maps", "needs at least one [maps.NAME] table")
+        allowed_vehicles = [i for i in model.vehicles if i != 0]
+        specs: dict[str, RegionSpec] = {}
+        for name, t in maps.items():
+            field = f"maps.{name}"
+            if not isinstance(t, dict):
+                raise ConfigError(field, f"must be a table, got {t!r}")
+            check_keys(
+                t, ["vehicle", "gains", "semantics", "baseline", "title", "mu", "k", "step"], field
+            )
+            vehicle = get_int(t, "vehicle", field)
+            if vehicle not in allowed_vehicles:
+                raise ConfigError(
+                    f"{field}.vehicle",
+                    f"must be one of {allowed_vehicles} (an HDV of this m={model.m}, "
+                    f"n={model.n} system), got {vehicle}",
+                )
+            semantics = get_str(t, "semantics", field, "added", choices=["added", "replace"])
+            raw = get_table(t, "gains", f"{field}.gains")
+            try:
+                gains = StaticGains(raw, semantics)
+                gains.check(model)
+            except ConfigError as err:
+                raise ConfigError(f"{field}.{err.field}", err.message) from None
+            for own in (f"s_{vehicle}", f"v_{vehicle}"):
+                if own in gains.gains:
+                    raise ConfigError(
+                        f"{field}.gains.{own}", "is the map's own axis; remove it from gains"
+                    )
+            if any(key in t for key in ("mu", "k", "step")):
+                st = step if step is not None else get_number(
+                    t, "step", field, d_step, lo=0.0, lo_open=True
+                )
+                sf = step_field if step is not None else f"{field}.step"
+                lo_hi = get_number_list(t, "mu", field, d_mu, length=2)
+                mu = grid_axis(*lo_hi, st, f"{field}.mu", sf)
+                lo_hi = get_number_list(t, "k", field, d_k, length=2)
+                k = grid_axis(*lo_hi, st, f"{field}.k", sf)
+            else:
+                mu, k = mu_default, k_default
+            baseline = get_str(t, "baseline", field, None) if "baseline" in t else None
+            title = get_str(t, "title", field, name)
+            specs[name] = RegionSpec(name, vehicle, mu, k, gains, baseline, title)
+        for name, spec in specs.items():
+            if spec.baseline is None:
+                continue
+            base = specs.get(spec.baseline)
+            if base is None:
+                raise ConfigError(
+                    f"maps.{name}.baseline", f"names no map; maps: {sorted(specs)}"
+                )
+            if (
+                base.vehicle != spec.vehicle
+                or base.mu.shape != spec.mu.shape
+                or base.k.shape != spec.k.shape
+                or not np.allclose(base.mu, spec.mu)
+                or not np.allclose(base.k, spec.k)
+            ):
+                raise ConfigError(
+                    f"maps.{name}.baseline",
+                    f"map {spec.baseline!r} must have the same vehicle and grid",
+                )
+        return specs, omega
+    except ConfigError as err:
+        raise err.with_source(source) if source and not err.source else err from None
+
+
+def run_region_specs(
+    model: LCCModel, specs: Mapping[str, RegionSpec], omega: np.ndarray | None = None
+) -> dict[str, RegionMap]:
+    """Compute every map of :func:`region_specs_from`."""
+    return {
+        name: region_map(model, s.vehicle, s.mu, s.k, gains=s.gains, omega=omega, name=name)
+        for name, s in specs.items()
+    }
+
+
+def expansion(rm: RegionMap, baseline: RegionMap) -> dict[str, float | bool]:
+    """How ``rm`` changes the string-stable set of ``baseline`` (same grid): fraction gained,
+    fraction lost and whether the baseline region is kept entirely (Fig. 7(c)-(f))."""
+    a = baseline.labels == STRING_STABLE
+    b = rm.labels == STRING_STABLE
+    return {
+        "gained_fraction": float(np.count_nonzero(b & ~a)) / a.size,
+        "lost_fraction": float(np.count_nonzero(a & ~b)) / a.size,
+        "contains_baseline": bool(not np.any(a & ~b)),
+    }
