@@ -30,6 +30,7 @@ Usage:
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import os
 import pickle
@@ -38,6 +39,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import scipy.linalg as sla
 
 import lcc_synth.analysis.string_stability as ss
 from lcc_synth.analysis.transfer import closed_loop_eigenvalues, tail_output
@@ -88,6 +90,8 @@ def random_gains(rng, model, scale=2.0) -> StaticGains:
 
 NEW_API = hasattr(ss, "loop_string_stability")
 CODE_TAG = "new" if NEW_API else "old"
+# the verdict balances the loop first (exact powers of 2): calibrate q the same way
+BALANCED = NEW_API and "matrix_balance" in inspect.getsource(ss.loop_string_stability)
 PAPER = OVM().linear_coefficients(15.0)
 HDV = OVM(alpha=0.6, beta=0.9, s_st=5.0, s_go=35.0, v_max=30.0)
 TRANSFORMS = ("perm", "perm", "diag", "diag", "similar", "similar", "orth", "orth", "gain", "gain")
@@ -407,10 +411,11 @@ def _q_float(A, h, c, omegas):
     """The decision function in floating point: the library's when it has one, else the same
     formula (three LU solves, then dense solves at the few frequencies)."""
     if hasattr(ss, "decision_function"):
+        if BALANCED:  # as loop_string_stability does before deciding
+            A, (s, _) = sla.matrix_balance(A, permute=False, separate=True)
+            h, c = h / s, c * s
         q, _, _ = ss.decision_function(A, h, c)
         return np.asarray(q(np.asarray(omegas, float)), float)
-    import scipy.linalg as sla
-
     lu = sla.lu_factor(A)
     b1 = sla.lu_solve(lu, h)
     b2 = sla.lu_solve(lu, b1)
@@ -498,10 +503,7 @@ def summarise(rows, label, band_factor):
         print(*a, flush=True)
 
     n = len(rows)
-    line(
-        f"\n=== {label}: {n} gains, code '{CODE_TAG}', "
-        f"OPENBLAS_CORETYPE={os.environ.get('OPENBLAS_CORETYPE', '(default)')} ==="
-    )
+    line(f"\n=== {label}: {n} gains, code '{CODE_TAG}' (q calibrated balanced: {BALANCED}) ===")
     ex_counts = {k: sum(r["exact"] == k for r in rows) for k in "SUP"}
     line(
         f"exact: string stable {ex_counts['S']}, string unstable {ex_counts['U']}, "
