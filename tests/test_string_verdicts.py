@@ -72,18 +72,26 @@ def _sample_loops() -> list[tuple[str, tuple]]:
             plant = make_plant(mdl, "added", Weights(head=1.0, accel=w))
             g, _ = riccati_gain(plant)
             out.append((f"riccati-{i}-{j}", _loop(mdl, plant.input_feedback(g))))
-    # both sides of the low-frequency boundary c = 0: bisection along a line of gains
-    for i in range(30):
+    # both sides of the low-frequency boundary c = 0
+    out += _boundary_line_loops(rng, model, "lowfreq", 30, (1e-2, 1e-4, 1e-6))
+    return out
+
+
+def _boundary_line_loops(rng, model, label, lines, offsets):
+    """Gains at relative distances ``offsets`` on both sides of c = 0, found by bisection
+    along seeded lines from a perturbed case D to the HDV law."""
+    out = []
+    for i in range(lines):
         a = {k: v * (1 + 0.2 * rng.normal()) for k, v in CASE_D.items()}
         b = {k: 0.0 for k in CASE_D}
         t = _bisect_curvature(model, a, b)
         if t is None:
             continue
-        for d in (1e-2, 1e-4, 1e-6):
+        for d in offsets:
             for sgn in (-1, 1):
                 s = t * (1 + sgn * d)
                 g = {k: (1 - s) * a[k] + s * b[k] for k in a}
-                out.append((f"lowfreq-{i}-{sgn * d:g}", _loop(model, StaticGains(g))))
+                out.append((f"{label}-{i}-{sgn * d:g}", _loop(model, StaticGains(g))))
     return out
 
 
@@ -241,20 +249,9 @@ def test_exactly_dc_double_root_case_of_the_issue_is_decided():
 def _near_boundary_loops():
     """Gains at relative distances 1e-8 ... 1e-14 from c = 0 along seeded lines."""
     rng = np.random.default_rng(99)
-    model = general_lcc(2, 2, PAPER)
-    out = []
-    for i in range(8):
-        a = {k: v * (1 + 0.2 * rng.normal()) for k, v in CASE_D.items()}
-        b = {k: 0.0 for k in CASE_D}
-        t = _bisect_curvature(model, a, b)
-        if t is None:
-            continue
-        for d in (1e-8, 1e-10, 1e-12, 1e-14):
-            for sgn in (-1, 1):
-                s = t * (1 + sgn * d)
-                g = {k: (1 - s) * a[k] + s * b[k] for k in a}
-                out.append((f"near-{i}-{sgn * d:g}", _loop(model, StaticGains(g))))
-    return out
+    return _boundary_line_loops(
+        rng, general_lcc(2, 2, PAPER), "near", 8, (1e-8, 1e-10, 1e-12, 1e-14)
+    )
 
 
 def test_exact_reference_confirms_every_decided_verdict():
