@@ -98,6 +98,12 @@ def run(args: argparse.Namespace) -> int:
             f"{vs:<22} {e['seconds']:>6.2f}"
         )
     print("fractions of the grid; 'vs baseline': string-stable area gained / lost")
+    close = {n: e["boundary_points"] for n, e in doc["maps"].items() if e["boundary_points"]}
+    if close:
+        print(
+            "too close to call (inside the rounding band, labelled 'stable'): "
+            + ", ".join(f"{n} {k} points" for n, k in close.items())
+        )
     print(f"total {total:.2f} s for {sum(m.points for m in maps.values())} points")
     for w in written:
         print(f"wrote {w}")
