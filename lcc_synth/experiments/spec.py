@@ -50,7 +50,7 @@ def load_spec(path: str | Path | Problem, seeds: int | None = None) -> Simulatio
                 raise ConfigError("--seeds", f"must be >= 1, got {seeds}")
             scenario = replace(scenario, batch=int(seeds))
         controllers = controllers_from(problem.data, system, source)
-        metrics = metrics_from(problem.data, system, controllers)
+        metrics = metrics_from(problem.data, system, controllers, scenario)
         return SimulationSpec(problem.name, system, scenario, controllers, metrics, source)
     except ConfigError as err:
         raise err.with_source(source) if not err.source else err from None
