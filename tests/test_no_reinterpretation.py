@@ -4,8 +4,10 @@ turned into something else."""
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from lcc_synth.cli.main import main
@@ -136,3 +138,75 @@ def test_sizes_a_kind_fixes_may_be_left_out(tmp_path, capsys):
     path = _edited(tmp_path, "showcase.toml", "m = 2\nn = 2\n", "m = 2\n")
     with pytest.raises(ConfigError, match=r"layouts\.sec5a\.n: is required"):
         load_suite(path)
+
+
+# -------------------------------------------------------------------------- time step
+
+
+def test_euler_figures():
+    from lcc_synth.simulation.timestep import damping_error, euler_check, mode_error
+
+    # a real mode -1/tau: stable iff dt < 2 tau; the errors vanish with dt, as |lambda| dt / 2
+    tau = 0.5
+    assert euler_check(np.array([[-1 / tau]]), 0.999).stable
+    assert not euler_check(np.array([[-1 / tau]]), 1.0).stable
+    lam = complex(-0.6, 1.7)
+    assert mode_error(lam, 1e-4) == pytest.approx(abs(lam) * 1e-4 / 2, rel=1e-3)
+    dt_e = 2 * abs(lam.real) / abs(lam) ** 2
+    assert damping_error(lam, dt_e * (1 - 1e-9)) == pytest.approx(1.0, abs=1e-6)
+    check = euler_check(np.diag([0.0, -1.0]), 0.01)  # the integrator lambda = 0 is not judged
+    assert check.stable and check.mode == -1.0
+
+
+def test_error_threshold_is_where_the_euler_loop_stops_settling():
+    from lcc_synth.simulation.timestep import check_time_step, loop_matrix
+
+    spec = load_spec(PROBLEMS / "paper_table2.toml")
+    c = check_time_step(spec.scenario, {"fd": spec.controllers["fd_lcc"]})[0]
+    A, _ = loop_matrix(spec.controllers["fd_lcc"], spec.scenario)
+    nonzero = [x for x in np.linalg.eigvals(A) if abs(x) > 1e-9]  # the -p_0 integrator aside
+    for dt, settles in ((c.dt_stable * 0.999, True), (c.dt_stable * 1.001, False)):
+        rho = max(abs(1 + x * dt) for x in nonzero)  # eigenvalues of I + A dt
+        assert (rho < 1) == settles
+
+
+def test_coarse_dt_warns_and_meaningless_dt_is_an_error(tmp_path, capsys):
+    from lcc_synth.simulation.timestep import TimeStepWarning
+
+    # was: dt = 1.0 accepted silently, minimum spacing 5.9 m instead of 17.1 m
+    path = _edited(tmp_path, "paper_table2.toml", "dt = 0.01", "dt = 1.0")
+    with pytest.warns(TimeStepWarning, match=r"scenario\.dt = 1 s is coarse for the closed loop "
+                      r"of controller 'fd_lcc': explicit Euler misstates its mode .* by 81 %"):
+        load_spec(path)
+    with pytest.warns(TimeStepWarning, match="use dt <= 0.091 s"):
+        load_spec(_edited(tmp_path, "paper_table2.toml", "dt = 0.01", "dt = 0.1"))
+    path = _edited(tmp_path, "paper_table2.toml", "dt = 0.01", "dt = 1.25")
+    err = _cli_error(capsys, ["simulate", str(path), "--no-record"])
+    assert "scenario.dt: must be < 1.23 s, got 1.25: explicit Euler is unstable" in err
+
+
+def test_shipped_problems_are_within_the_step_thresholds():
+    from lcc_synth.simulation.timestep import TimeStepWarning, check_time_step
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", TimeStepWarning)
+        for name in ("paper_table2", "paper_sec5a", "paper_appendix_c", "mpc_head_brake",
+                     "mpc_head_brake_hetero", "mpc_table2_cf", "mpc_table2_fd"):
+            spec = load_spec(PROBLEMS / f"{name}.toml")
+            assert max(c.excess for c in check_time_step(spec.scenario, spec.controllers)) < 0.25
+
+
+def test_suite_and_sweep_check_the_step_before_running(tmp_path):
+    from test_failed_runs import SUITE, SWEEP
+
+    from lcc_synth.experiments.comparison import run_suite
+    from lcc_synth.experiments.sweep import run_sweep
+
+    path = tmp_path / "suite.toml"
+    path.write_text(SUITE.replace("duration = 60.0", "duration = 60.0\ndt = 1.2"))
+    with pytest.raises(ConfigError, match=r"scenarios\.brake\.dt: must be < 1.09 s, got 1.2"):
+        run_suite(load_suite(path), progress=False)
+    path = tmp_path / "sweep.toml"
+    path.write_text(SWEEP.replace("duration = 60.0", "duration = 60.0\ndt = 1.2"))
+    with pytest.raises(ConfigError, match=r"sweep\.toml: scenario\.dt: must be < 1.09 s, got 1.2"):
+        run_sweep(load_sweep(path), client=None, progress=False)

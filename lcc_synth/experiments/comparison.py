@@ -444,6 +444,13 @@ def run_suite(
                     ) from None
                 bar.update(1)
     timings["controllers"] = time.perf_counter() - t0
+    from lcc_synth.simulation.timestep import check_time_step
+
+    for sname, ss in suite.scenarios.items():  # a step too coarse for a loop: before any run
+        try:
+            check_time_step(ss.scenario, built[ss.layout], f"scenarios.{sname}.dt")
+        except ConfigError as err:
+            raise err.with_source(suite.source) if suite.source else err from None
 
     table: dict[str, dict[str, dict[str, Any]]] = {}
     results: dict[str, dict[str, SimResult]] = {}
