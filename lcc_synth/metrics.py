@@ -6,7 +6,13 @@ columns head..tail).
 
 Window: AAVE and fuel use the samples whose time lies in the CLOSED interval ``window``
 (default 20-40 s: 2001 samples at dt = 0.01), integrated by the rectangle rule (sum x dt), as
-the paper's reference computation does.
+the paper's reference computation does. The window must lie in the simulated time
+``[t_start, t_start + duration]`` (:func:`check_window`): AAVE divides by the window's length,
+so a window past the end would divide by time that was never simulated.
+
+Failed runs: a scenario with a collision has NaN AAVE and fuel (its run stopped at the
+collision; whatever it burnt until then is no efficiency to compare), whenever the collision
+happened.
 
 Vehicle sets: ``"cav_and_behind"`` (the paper's "sum over i = 0..10": CAV and the HDVs behind),
 ``"all"`` (head included), ``"hdvs"`` (every HDV), or explicit paper indices / ``"head"``.
@@ -31,6 +37,7 @@ __all__ = [
     "metrics_from",
     "vehicle_columns",
     "window_mask",
+    "check_window",
     "bowyer_fuel_rate",
     "aave",
     "fuel",
@@ -88,9 +95,28 @@ def vehicle_columns(result, vehicles: str | Sequence[int | str] = "cav_and_behin
     return np.array(cols)
 
 
+def check_window(
+    window: tuple[float, float], start: float, end: float, dt: float, field: str = "metrics.window"
+) -> None:
+    """Raise :class:`ConfigError` unless ``start <= window[0]`` and ``window[1] <= end``
+    (tolerance 1e-6 dt): ``[start, end]`` is the simulated time, ``t_start`` to
+    ``t_start + steps dt`` (the last sample stands for the step that ends there)."""
+    eps = 1e-6 * dt
+    t0, t1 = window
+    if t0 < start - eps or t1 > end + eps:
+        raise ConfigError(
+            field,
+            f"[{t0:g}, {t1:g}] leaves the simulated time [{start:g}, {end:g}] s (t_start to "
+            f"t_start + duration): AAVE would divide by time that was never simulated; "
+            f"choose {start:g} <= t0 < t1 <= {end:g} or a longer duration",
+        )
+
+
 def window_mask(result, window: tuple[float, float] = (20.0, 40.0)) -> np.ndarray:
-    """Samples with ``window[0] <= t <= window[1]`` (tolerance 1e-6 dt for round-off)."""
+    """Samples with ``window[0] <= t <= window[1]`` (tolerance 1e-6 dt for round-off); a
+    window outside the recorded run is a :class:`ConfigError` (:func:`check_window`)."""
     eps = 1e-6 * result.sim_dt
+    check_window(window, result.t[0], result.t[-1] + result.dt, result.sim_dt)
     mask = (result.t >= window[0] - eps) & (result.t <= window[1] + eps)
     if not mask.any():
         raise ConfigError(
@@ -122,18 +148,23 @@ def _slice(result, arr, window, vehicles):
 def aave(result, window=(20.0, 40.0), vehicles="cav_and_behind") -> np.ndarray:
     """Average absolute velocity error (m/s): ``sum_i int |v_i - v*| dt / (t1 - t0) / count``.
 
-    NaN for a scenario that collided before or inside the window.
+    NaN for a scenario with a collision (see the module docstring).
     """
     v, _, cols = _slice(result, result.velocity, window, vehicles)
     err = np.abs(v - result.v_star[:, None, None])
-    return err.sum(axis=(1, 2)) * result.dt / (window[1] - window[0]) / len(cols)
+    out = err.sum(axis=(1, 2)) * result.dt / (window[1] - window[0]) / len(cols)
+    return np.where(result.collided.any(axis=1), np.nan, out)
 
 
 def fuel(result, window=(20.0, 40.0), vehicles="cav_and_behind") -> np.ndarray:
-    """Total fuel (mL) of the vehicle set over the window (Bowyer model, rectangle rule)."""
+    """Total fuel (mL) of the vehicle set over the window (Bowyer model, rectangle rule).
+
+    NaN for a scenario with a collision (see the module docstring).
+    """
     v, mask, cols = _slice(result, result.velocity, window, vehicles)
     a = result.acceleration[:, mask][:, :, cols]
-    return bowyer_fuel_rate(v, a).sum(axis=(1, 2)) * result.dt
+    out = bowyer_fuel_rate(v, a).sum(axis=(1, 2)) * result.dt
+    return np.where(result.collided.any(axis=1), np.nan, out)
 
 
 def min_spacing(result) -> np.ndarray:
@@ -267,12 +298,18 @@ def summary(result, config: MetricsConfig | None = None) -> dict[str, Any]:
     return aggregate(per_scenario(result, config))
 
 
-def metrics_from(data: Mapping[str, Any], system: System, controllers=()) -> MetricsConfig:
-    """The ``[metrics]`` table."""
+def metrics_from(
+    data: Mapping[str, Any], system: System, controllers=(), scenario=None
+) -> MetricsConfig:
+    """The ``[metrics]`` table; with ``scenario`` (a
+    :class:`~lcc_synth.simulation.scenario.Scenario`) the window must lie in its simulated time."""
     f = "metrics"
     mt = get_table(data, "metrics", f)
     check_keys(mt, ["window", "vehicles", "baseline"], f)
     window = tuple(get_number_list(mt, "window", f, [20.0, 40.0], length=2))
+    if scenario is not None and window[1] > window[0]:  # t1 <= t0: MetricsConfig says so
+        t_end = scenario.t_start + scenario.steps * scenario.dt
+        check_window(window, scenario.t_start, t_end, scenario.dt, f"{f}.window")
     vehicles = mt.get("vehicles", "cav_and_behind")
     if isinstance(vehicles, list):
         for v in vehicles:

@@ -17,8 +17,8 @@ A problem file has a few common tables, and each command reads its own:
 
     [system]
     kind = "fd_lcc"                # "lcc" | "cf_lcc" | "fd_lcc" | "ccc"
-    m = 0                          # HDVs ahead of the CAV
-    n = 10                         # HDVs behind the CAV
+    m = 0                          # HDVs ahead of the CAV (required for lcc and ccc)
+    n = 10                         # HDVs behind the CAV (required for lcc, cf_lcc, fd_lcc)
     v_star = 15.0                  # equilibrium velocity (m/s)
 
 Errors are :class:`~lcc_synth.errors.ConfigError` naming the file and the dotted field.
@@ -49,6 +49,7 @@ __all__ = [
     "get_table",
     "get_number_list",
     "System",
+    "REQUIRED_SIZES",
     "system_from",
 ]
 
@@ -274,13 +275,28 @@ class System:
         return model_from_hdv(self.kind, self.m, self.n, self.hdv, self.v_star, warn=warn)
 
 
+#: The sizes each kind of system must state: a size the kind fixes (m = 0 for CF-/FD-LCC, n = 0
+#: for CCC) may be left out, a size it leaves free may not (it never silently becomes 0).
+REQUIRED_SIZES = {"lcc": ("m", "n"), "cf_lcc": ("n",), "fd_lcc": ("n",), "ccc": ("m",)}
+_SIZE_MEANING = {"m": "HDVs ahead of the CAV", "n": "HDVs behind the CAV"}
+_SIZE_MAX = {"m": 50, "n": 200}
+
+
 def system_from(data: Mapping[str, Any], source: str | None = None) -> System:
-    """Parse ``[hdv]`` and ``[system]`` of a problem file into a :class:`System`."""
+    """Parse ``[hdv]`` and ``[system]`` of a problem file into a :class:`System`
+    (the sizes of :data:`REQUIRED_SIZES` must be given)."""
     try:
         hdv = model_from_dict(get_table(data, "hdv", "hdv"), "hdv")
         sys_t = get_table(data, "system", "system", required=True)
         check_keys(sys_t, ["kind", "m", "n", "v_star"], "system")
         kind = get_str(sys_t, "kind", "system", "lcc", choices=KINDS)
+        for key in REQUIRED_SIZES[kind]:
+            if key not in sys_t:
+                raise ConfigError(
+                    f"system.{key}",
+                    f"is required for kind = {kind!r}{'' if 'kind' in sys_t else ' (the default)'}"
+                    f": the number of {_SIZE_MEANING[key]}, an integer in [0, {_SIZE_MAX[key]}]",
+                )
         m = get_int(sys_t, "m", "system", 0, lo=0, hi=50)
         n = get_int(sys_t, "n", "system", 0, lo=0, hi=200)
         v_star = get_number(sys_t, "v_star", "system", 15.0, lo=0.0, lo_open=True)

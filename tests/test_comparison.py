@@ -203,7 +203,7 @@ def test_suite_table_equals_direct_simulation(suite_run, problem_file):
                 "aeb_activations": int(aeb_activations(res)[0]),
                 "collisions": int(collisions(res)[0]),
             }
-            assert set(row) == set(SUITE_METRICS)
+            assert set(row) == {*SUITE_METRICS, "collided"}
             for key, value in expect.items():
                 assert row[key] == pytest.approx(value, rel=1e-12, abs=0), (sname, cname, key)
 
@@ -321,7 +321,7 @@ def test_cli_run_json_files_and_recording(problem_file, capsys, tmp_path):
     assert list(doc) == ["results"]
     assert set(doc["results"]) == {"brake", "sine"}
     assert set(doc["results"]["sine"]) == {"all_hdv", "paper"}
-    assert set(doc["results"]["sine"]["paper"]) == set(SUITE_METRICS)
+    assert set(doc["results"]["sine"]["paper"]) == {*SUITE_METRICS, "collided"}
     (run_dir,) = (tmp_path / "res").iterdir()
     assert run_dir.name.startswith("short_suite-")
     names = {p.name for p in run_dir.iterdir()}

@@ -223,9 +223,13 @@ def run(args: argparse.Namespace) -> int:
 
     if args.json:
         print(json.dumps(json_safe({"results": result.table})))
+        for line in _collision_lines(result):
+            print(line, file=log)
     else:
         print(_title(suite))
         print(format_table(result.table))
+        for line in _collision_lines(result):
+            print(line)
         for sname, per in result.results.items():
             for cname, res in per.items():
                 st = res.controller_stats
@@ -249,6 +253,19 @@ def run(args: argparse.Namespace) -> int:
         file=log,
     )
     return 0
+
+
+def _collision_lines(result) -> list[str]:
+    """``collided: SCENARIO/CONTROLLER: who hit whom, when`` for every run with a collision."""
+    lines = []
+    for sname, per in result.table.items():
+        for cname, row in per.items():
+            if row.get("collided"):
+                what = "; ".join(result.results[sname][cname].collision_report())
+                lines.append(f"collided: {sname}/{cname}: {what}")
+    if lines:
+        lines.append("(a collided run has NaN AAVE and fuel and is ranked last in its scenario)")
+    return lines
 
 
 def _ms(value) -> str:

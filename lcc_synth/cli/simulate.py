@@ -29,6 +29,9 @@ def add_arguments(parser) -> None:
     add_recording(parser)
 
 
+#: Collided draws listed by name per controller (the rest are counted).
+_MAX_LISTED = 5
+
 #: Largest recorded batch kept in memory at once (bytes); larger seed studies run in chunks.
 MEMORY_BUDGET = 1.5e9
 
@@ -106,9 +109,13 @@ def _pct(base, x):
 
 def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str, Any]:
     """Report from the :func:`lcc_synth.metrics.per_scenario` arrays of every controller;
-    ``info[name] = (controller_info, controller_stats, wall_time_s)``."""
+    ``info[name] = (controller_info, controller_stats, wall_time_s)``.
+
+    ``collided`` marks a controller with a collision in some draw (its AAVE and fuel there are
+    NaN: the means are over the other draws); those controllers come last."""
     import numpy as np
 
+    from lcc_synth.experiments.tables import collided
     from lcc_synth.metrics import aggregate
 
     cfg = spec.metrics
@@ -116,6 +123,7 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
     for name, arrays in per.items():
         entry = aggregate(arrays)
         entry["controller"], entry["controller_stats"], entry["wall_time_s"] = info[name]
+        entry["collided"] = entry["scenarios_with_collision"] > 0
         out[name] = entry
     if cfg.baseline is not None:
         a0, f0 = per[cfg.baseline]["aave"], per[cfg.baseline]["fuel_ml"]
@@ -134,7 +142,7 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
                 "fuel_pct_std": float(np.std(rf[ok])) if ok.any() else nan,
                 "scenarios": int(ok.sum()),
             }
-    return out
+    return dict(sorted(out.items(), key=lambda item: collided(item[1])))
 
 
 def report(spec, results) -> dict[str, Any]:
@@ -165,8 +173,9 @@ def _fmt(mean: float, std: float, batch: int, digits: int) -> str:
     return f"{mean:.{digits}f}"
 
 
-def print_table(spec, rep: dict[str, Any], file=None) -> None:
-    """Human-readable table of :func:`report`."""
+def print_table(spec, rep: dict[str, Any], file=None, collisions=None) -> None:
+    """Human-readable table of :func:`report`; ``collisions`` (``{name: [line, ...]}``, e.g.
+    :meth:`~lcc_synth.simulation.results.SimResult.collision_report`) says which runs collided."""
     file = file or sys.stdout
     sc = spec.scenario
     cfg = spec.metrics
@@ -184,8 +193,10 @@ def print_table(spec, rep: dict[str, Any], file=None) -> None:
     rows = []
     for name, e in rep.items():
         b = e["batch"]
+        k = e["scenarios_with_collision"]
+        mark = "" if not k else " (collided)" if b == 1 else f" (collided {k}/{b})"
         row = [
-            name,
+            name + mark,
             _fmt(e["aave"], e["aave_std"], b, 4),
             _fmt(e["fuel_ml"], e["fuel_ml_std"], b, 2),
         ]
@@ -211,9 +222,28 @@ def print_table(spec, rep: dict[str, Any], file=None) -> None:
     print("  ".join(c.ljust(w) for c, w in zip(cols, widths, strict=True)), file=file)
     for r in rows:
         print("  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)), file=file)
+    for line in collision_lines(rep, collisions):
+        print(line, file=file)
     for name, e in rep.items():
         if e["controller_stats"]:
             print(f"{name} stats: {json.dumps(_clean(e['controller_stats']))}", file=file)
+
+
+def collision_lines(rep: dict[str, Any], collisions=None) -> list[str]:
+    """``collided: NAME: ...`` lines for the controllers of :func:`report` that collided
+    (``collisions``: ``{name: [line, ...]}`` of the draws that did, as in :func:`print_table`)."""
+    out = []
+    for name, e in rep.items():
+        b, k = e["batch"], e["scenarios_with_collision"]
+        if not k:
+            continue
+        lines = (collisions or {}).get(name, [])
+        more = f" (+{k - len(lines)} more)" if lines and len(lines) < k else ""
+        what = "; ".join(lines) + more if lines else f"{k} of {b} draws"
+        out.append(f"collided: {name}: {what}")
+        means = "NaN" if k == b else f"the means over the {b - k} draws without a collision"
+        out.append(f"  AAVE and fuel are {means}; the row is ranked last")
+    return out
 
 
 def run(args) -> int:
@@ -226,11 +256,13 @@ def run(args) -> int:
         recorder = SimulationRecorder(args, stack)
         spec = load(args)
         parts: dict[str, list] = {name: [] for name in spec.controllers}
+        crashes: dict[str, list[str]] = {name: [] for name in spec.controllers}
         info: dict[str, tuple] = {}
         for chunk, name, result in iter_results(spec):
             if chunk == 0:  # a study too large for memory records its first seed chunk
                 recorder(spec, name, result)
             parts[name].append(per_scenario(result, spec.metrics))
+            crashes[name] += result.collision_report()[: _MAX_LISTED - len(crashes[name])]
             wall = info[name][2] + result.wall_time if name in info else result.wall_time
             info[name] = (result.controller_info, result.controller_stats, wall)
             del result
@@ -240,6 +272,8 @@ def run(args) -> int:
         print(f"recording: {recorder.path} (lcc-synth review {recorder.path})", file=sys.stderr)
     if args.json:
         print(json.dumps({"results": _clean(rep)}))
+        for line in collision_lines(rep, crashes):
+            print(line, file=sys.stderr)
     else:
-        print_table(spec, rep)
+        print_table(spec, rep, collisions=crashes)
     return 0

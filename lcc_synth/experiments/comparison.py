@@ -34,7 +34,7 @@ import numpy as np
 from lcc_synth.controllers.base import Controller
 from lcc_synth.controllers.registry import CONTROLLER_TYPES, build_controller
 from lcc_synth.errors import ConfigError
-from lcc_synth.experiments.tables import SUITE_METRICS
+from lcc_synth.experiments.tables import SUITE_METRICS, rank_failed_last
 from lcc_synth.metrics import MetricsConfig, metrics_from
 from lcc_synth.problem import (
     Problem,
@@ -175,7 +175,7 @@ def load_suite(
             mt = dict(get_table(data, "metrics", "metrics"))
             mt.update(get_table(table, "metrics", f"{f}.metrics"))
             try:
-                mcfg = metrics_from({"metrics": mt}, system)
+                mcfg = metrics_from({"metrics": mt}, system, scenario=sc)
             except ConfigError as err:
                 fld = err.field.replace("metrics", f"{f}.metrics", 1)
                 raise ConfigError(fld, err.message) from None
@@ -336,12 +336,16 @@ def build_controllers(
 # --------------------------------------------------------------------------------------------
 
 
-def metrics_row(result: SimResult, config: MetricsConfig) -> dict[str, float | int]:
-    """The :data:`SUITE_METRICS` of one result (batch means / worst cases, as ``summary``)."""
+def metrics_row(result: SimResult, config: MetricsConfig) -> dict[str, Any]:
+    """The :data:`SUITE_METRICS` of one result (batch means / worst cases, as ``summary``)
+    and ``collided``: a scenario of the run had a collision (its AAVE and fuel are NaN, the
+    tables rank it last)."""
     from lcc_synth.metrics import summary
 
     s = summary(result, config)
-    return {key: s[key] for key in SUITE_METRICS}
+    row: dict[str, Any] = {key: s[key] for key in SUITE_METRICS}
+    row["collided"] = s["scenarios_with_collision"] > 0
+    return row
 
 
 def progress_bar(total: int, desc: str, enabled: bool = True):
@@ -366,7 +370,8 @@ class SuiteRun:
     Attributes
     ----------
     table : dict
-        ``{scenario: {controller: {metric: value}}}`` (:data:`SUITE_METRICS`).
+        ``{scenario: {controller: {metric: value}}}`` (:data:`SUITE_METRICS` and
+        ``collided``; within a scenario the collided runs come last).
     results : dict
         ``{scenario: {controller: SimResult}}``.
     tables : dict
@@ -439,6 +444,13 @@ def run_suite(
                     ) from None
                 bar.update(1)
     timings["controllers"] = time.perf_counter() - t0
+    from lcc_synth.simulation.timestep import check_time_step
+
+    for sname, ss in suite.scenarios.items():  # a step too coarse for a loop: before any run
+        try:
+            check_time_step(ss.scenario, built[ss.layout], f"scenarios.{sname}.dt")
+        except ConfigError as err:
+            raise err.with_source(suite.source) if suite.source else err from None
 
     table: dict[str, dict[str, dict[str, Any]]] = {}
     results: dict[str, dict[str, SimResult]] = {}
@@ -459,6 +471,7 @@ def run_suite(
                     on_result(sname, cname, res, row, ctrl)
                 bar.update(1)
     timings["simulations"] = time.perf_counter() - t0
+    table = rank_failed_last(table)  # failed runs rank last in every form of the table
     return SuiteRun(suite, table, results, tables, designs, built, timings)
 
 

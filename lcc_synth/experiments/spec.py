@@ -14,6 +14,7 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import MetricsConfig, metrics_from
 from lcc_synth.problem import Problem, System, get_table, load_problem, system_from
 from lcc_synth.simulation.scenario import Scenario, scenario_from
+from lcc_synth.simulation.timestep import check_time_step
 
 __all__ = ["SimulationSpec", "controllers_from", "load_spec"]
 
@@ -50,7 +51,8 @@ def load_spec(path: str | Path | Problem, seeds: int | None = None) -> Simulatio
                 raise ConfigError("--seeds", f"must be >= 1, got {seeds}")
             scenario = replace(scenario, batch=int(seeds))
         controllers = controllers_from(problem.data, system, source)
-        metrics = metrics_from(problem.data, system, controllers)
+        check_time_step(scenario, controllers)
+        metrics = metrics_from(problem.data, system, controllers, scenario)
         return SimulationSpec(problem.name, system, scenario, controllers, metrics, source)
     except ConfigError as err:
         raise err.with_source(source) if not err.source else err from None

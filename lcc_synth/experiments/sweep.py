@@ -2,7 +2,9 @@
 
 A sweep runs ``count`` random scenarios for every controller of a problem file and reports,
 per controller, the mean and the 5th / 95th percentiles of the metrics and the counts of
-collisions, emergency brakings and MPC fallbacks.
+collisions, emergency brakings and MPC fallbacks. A run with a collision has no AAVE or fuel
+(:mod:`lcc_synth.metrics`): their distributions are over the runs without one, and the
+summary says how many runs each controller lost that way.
 
 What is random
 --------------
@@ -88,6 +90,9 @@ SWEEP_METRICS: dict[str, str] = {
 }
 #: Per-scenario counts of a sweep (summed over the scenarios).
 SWEEP_COUNTS = ("collisions", "aeb_activations", "fallbacks")
+#: Metrics whose distributions leave out the runs with a collision (a failed run is no
+#: efficiency to average).
+_EFFICIENCY = ("aave", "fuel_ml")
 MAX_COUNT = 10_000_000
 _MAX_BATCH = 100_000
 _TOP_KEYS = ["name", "description", "hdv", "system", "scenario", "metrics", "controllers", "sweep"]
@@ -144,7 +149,7 @@ def load_sweep(
         check_keys(data, _TOP_KEYS, "")
         system = system_from(data, src)
         scenario = scenario_from(data, system, problem.path.parent)
-        metrics = metrics_from(data, system)
+        metrics = metrics_from(data, system, scenario=scenario)
         sw = get_table(data, "sweep", "sweep")
         check_keys(sw, ["count", "batch_size"], "sweep")
         n = get_int(sw, "count", "sweep", 100, lo=1, hi=MAX_COUNT)
@@ -323,14 +328,21 @@ def aggregate(
     samples: Mapping[str, Mapping[str, np.ndarray]], fallbacks: Mapping[str, int]
 ) -> dict[str, dict[str, Any]]:
     """Per controller: ``{metric: {mean, p5, p95, n}}`` over the finite per-scenario values
-    (``n`` of them: a collided scenario has no AAVE / fuel; a vehicle that never closes in has
-    an infinite time to collision), and the counts ``collisions`` (collided vehicles),
-    ``collision_scenarios``, ``aeb_activations`` (steps), ``aeb_scenarios``, ``fallbacks``
-    (MPC fallback steps) and ``scenarios``."""
+    (``n`` of them: a vehicle that never closes in has an infinite time to collision), AAVE
+    and fuel over the scenarios WITHOUT a collision only (``collided_excluded`` of them left
+    out, whatever their values), and the counts ``collisions`` (collided vehicles),
+    ``collision_scenarios`` (collided runs), ``aeb_activations`` (steps), ``aeb_scenarios``,
+    ``fallbacks`` (MPC fallback steps) and ``scenarios``."""
     out = {}
     for name, per in samples.items():
-        entry: dict[str, Any] = {k: _dist(per[k]) for k in SWEEP_METRICS}
         coll = np.asarray(per["collisions"])
+        entry: dict[str, Any] = {}
+        for k in SWEEP_METRICS:
+            if k in _EFFICIENCY:
+                entry[k] = _dist(np.where(coll > 0, np.nan, np.asarray(per[k], dtype=float)))
+                entry[k]["collided_excluded"] = int(np.count_nonzero(coll))
+            else:
+                entry[k] = _dist(per[k])
         aeb = np.asarray(per["aeb_activations"])
         entry["collisions"] = int(coll.sum())
         entry["collision_scenarios"] = int(np.count_nonzero(coll))
@@ -469,8 +481,13 @@ def run_sweep(
     tables = {name: _inline_gains_file(name, t, spec) for name, t in tables.items()}
     # fail early, in the client, on a controller that cannot be built
     from lcc_synth.experiments.comparison import build_controllers
+    from lcc_synth.simulation.timestep import check_time_step
 
-    build_controllers(tables, spec.system, spec.source)
+    built = build_controllers(tables, spec.system, spec.source)
+    try:  # a step too coarse for a loop: error / warning here, not on the workers
+        check_time_step(spec.scenario, built)
+    except ConfigError as err:
+        raise err.with_source(spec.source) if spec.source else err from None
 
     parts = chunks(spec.count, spec.batch_size)
     args = (spec.scenario, spec.system, tables, spec.metrics, spec.source)
@@ -560,4 +577,10 @@ def format_summary(summary: Mapping[str, Mapping[str, Any]]) -> str:
     lines = ["  ".join(h.ljust(w) for h, w in zip(head, widths, strict=True))]
     lines.append("  ".join("-" * w for w in widths))
     lines += ["  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)) for r in rows]
+    lines.append(
+        "AAVE and fuel: over the runs without a collision (a collided run has none); "
+        "collided runs: "
+        + ", ".join(f"{name} {e['collision_scenarios']}/{e['scenarios']}"
+                    for name, e in summary.items())
+    )
     return "\n".join(lines)

@@ -1,5 +1,11 @@
 """The tables of an experiment: the comparison table's columns (:data:`SUITE_METRICS`) and its
-terminal, Markdown, CSV and JSON forms, JSON-safe copies and the run's results directory."""
+terminal, Markdown, CSV and JSON forms, JSON-safe copies and the run's results directory.
+
+Failed runs rank last: a row whose run collided (``"collided": true``, else ``collisions > 0``)
+has NaN AAVE and fuel (:mod:`lcc_synth.metrics`), is marked (``NAME (collided)`` in the
+terminal and Markdown, a ``collided`` column in CSV, the ``collided`` key in JSON) and comes
+after the scenario's other rows in every form (:func:`rank_failed_last`; file order otherwise).
+"""
 
 from __future__ import annotations
 
@@ -15,6 +21,8 @@ from lcc_synth.errors import ConfigError
 __all__ = [
     "SUITE_METRICS",
     "json_safe",
+    "collided",
+    "rank_failed_last",
     "format_table",
     "markdown_table",
     "write_markdown",
@@ -67,6 +75,22 @@ def json_safe(x: Any) -> Any:
     return x
 
 
+def collided(metrics: Mapping[str, Any]) -> bool:
+    """Whether a table row's run had a collision (its ``collided`` flag, else ``collisions``)."""
+    if "collided" in metrics:
+        return bool(metrics["collided"])
+    return bool(metrics.get("collisions") or 0)
+
+
+def rank_failed_last(table: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> dict[str, dict]:
+    """The table with, within every scenario, the rows whose run collided moved after the
+    others (a stable sort: file order otherwise)."""
+    return {
+        sname: dict(sorted(per.items(), key=lambda item: collided(item[1])))
+        for sname, per in table.items()
+    }
+
+
 def _cell(value: Any, fmt: str) -> str:
     if value is None:
         return "n/a"
@@ -81,10 +105,10 @@ def _cell(value: Any, fmt: str) -> str:
 
 def _rows(table: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> list[list[str]]:
     rows = []
-    for sname, per in table.items():
+    for sname, per in rank_failed_last(table).items():
         for cname, metrics in per.items():
             rows.append(
-                [sname, cname]
+                [sname, f"{cname} (collided)" if collided(metrics) else cname]
                 + [_cell(metrics.get(k), fmt) for k, (_, fmt) in SUITE_METRICS.items()]
             )
     return rows
@@ -138,16 +162,17 @@ def write_markdown(
 
 
 def write_csv(table: Mapping[str, Mapping[str, Mapping[str, Any]]], path: str | Path) -> Path:
-    """CSV with columns ``scenario, controller`` and the :data:`SUITE_METRICS` keys
-    (full precision; ``inf`` for a time to collision that never occurs, empty for NaN)."""
+    """CSV with columns ``scenario, controller``, the :data:`SUITE_METRICS` keys (full
+    precision; ``inf`` for a time to collision that never occurs, empty for NaN) and
+    ``collided`` (``true`` / ``false``; those rows last in their scenario)."""
     import csv
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["scenario", "controller", *SUITE_METRICS])
-        for sname, per in table.items():
+        w.writerow(["scenario", "controller", *SUITE_METRICS, "collided"])
+        for sname, per in rank_failed_last(table).items():
             for cname, metrics in per.items():
                 vals = []
                 for k in SUITE_METRICS:
@@ -156,15 +181,17 @@ def write_csv(table: Mapping[str, Mapping[str, Mapping[str, Any]]], path: str | 
                         vals.append("")
                     else:
                         vals.append(repr(float(v)) if isinstance(v, float) else str(v))
-                w.writerow([sname, cname, *vals])
+                w.writerow([sname, cname, *vals, str(collided(metrics)).lower()])
     return path
 
 
 def write_json(table: Mapping[str, Any], path: str | Path, **extra: Any) -> Path:
-    """``{"results": table, **extra}`` as JSON (non-finite numbers as ``null``)."""
+    """``{"results": table, **extra}`` as JSON (non-finite numbers as ``null``; collided rows
+    last in their scenario)."""
     import json
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(json_safe({"results": table, **extra}), indent=2) + "\n")
+    doc = {"results": rank_failed_last(table), **extra}
+    path.write_text(json.dumps(json_safe(doc), indent=2) + "\n")
     return path

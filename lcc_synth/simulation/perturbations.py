@@ -5,6 +5,11 @@ law, the CAV's controller and its emergency braking included). Outside every act
 head vehicle cruises (zero acceleration) and the other vehicles follow their laws.
 
 Vehicles are named by the paper's index ``-m .. n`` (``0`` = CAV) or ``"head"``.
+
+Signs carry meaning and are checked, never reinterpreted: a ``brake``'s ``decel`` and a
+``brake_profile``'s ``decel`` are braking accelerations (< 0), the profile's ``accel`` its
+recovery acceleration (> 0); a ``sine``'s amplitude and an ``accel_profile``'s values are signed
+accelerations of either sign, a ``speed_profile``'s values speeds (>= 0).
 Activity windows are open intervals ``start < t < end``, tested with a tolerance of
 ``1e-6 dt`` so that floating-point sample times (``t_start + k dt``) never flip an endpoint.
 
@@ -56,6 +61,18 @@ def _window(t: np.ndarray, start: float, end: float, dt: float) -> np.ndarray:
     return (t > start + eps) & (t < end - eps)
 
 
+def _check_sign(name: str, value: float, meaning: str, example: float) -> None:
+    """``value`` must have the sign of ``example`` (strictly): e.g. a deceleration < 0."""
+    neg = example < 0
+    if not (math.isfinite(value) and (value < 0 if neg else value > 0)):
+        hint = "; use accel_time = 0 for no recovery phase" if name == "accel" else ""
+        raise ConfigError(
+            name,
+            f"is {meaning} and must be {'< 0' if neg else '> 0'} (m/s², e.g. {example}), got "
+            f"{value!r}: its sign is not reinterpreted{hint}",
+        )
+
+
 @dataclass(frozen=True)
 class Sine:
     """``a = amplitude cos(2 pi (t - start) / period)`` for ``start < t < end``.
@@ -86,6 +103,9 @@ class Brake:
     decel: float = -5.0
     target = "accel"
 
+    def __post_init__(self) -> None:
+        _check_sign("decel", self.decel, "the braking acceleration", -5.0)
+
     def values(self, t: np.ndarray, dt: float) -> np.ndarray:
         active = _window(t, self.start, self.start + self.duration, dt)
         return np.where(active, self.decel, np.nan)
@@ -104,6 +124,10 @@ class BrakeProfile:
     accel_time: float = 5.0
     vehicle: Vehicle = "head"
     target = "accel"
+
+    def __post_init__(self) -> None:
+        _check_sign("decel", self.decel, "the braking acceleration", -5.0)
+        _check_sign("accel", self.accel, "the recovery acceleration", 2.0)
 
     def values(self, t: np.ndarray, dt: float) -> np.ndarray:
         t1 = self.start + self.decel_time
@@ -249,23 +273,28 @@ def perturbation_from_table(
         end = get_number(table, "end", field, start + period, lo=start)
         amp = get_number(table, "amplitude", field, 0.2)
         return Sine(amp, period, start, end, vehicle)
-    if kind == "brake":
-        return Brake(
-            vehicle,
-            get_number(table, "start", field, 20.0),
-            get_number(table, "duration", field, 1.0, lo=0.0),
-            get_number(table, "decel", field, -5.0),
-        )
-    if kind == "brake_profile":
-        return BrakeProfile(
-            get_number(table, "start", field, 20.0),
-            get_number(table, "decel", field, -5.0),
-            get_number(table, "decel_time", field, 2.0, lo=0.0),
-            get_number(table, "hold_time", field, 5.0, lo=0.0),
-            get_number(table, "accel", field, 2.0),
-            get_number(table, "accel_time", field, 5.0, lo=0.0),
-            vehicle,
-        )
+    try:
+        if kind == "brake":
+            return Brake(
+                vehicle,
+                get_number(table, "start", field, 20.0),
+                get_number(table, "duration", field, 1.0, lo=0.0),
+                get_number(table, "decel", field, -5.0),
+            )
+        if kind == "brake_profile":
+            return BrakeProfile(
+                get_number(table, "start", field, 20.0),
+                get_number(table, "decel", field, -5.0),
+                get_number(table, "decel_time", field, 2.0, lo=0.0),
+                get_number(table, "hold_time", field, 5.0, lo=0.0),
+                get_number(table, "accel", field, 2.0),
+                get_number(table, "accel_time", field, 5.0, lo=0.0),
+                vehicle,
+            )
+    except ConfigError as err:
+        if err.field.startswith(field):  # a reader's error already names the field
+            raise
+        raise ConfigError(f"{field}.{err.field}", err.message) from None
     target = "accel" if kind == "accel_profile" else "speed"
     interp = get_str(table, "interpolation", field, "step", choices=["step", "linear"])
     if "csv" in table:

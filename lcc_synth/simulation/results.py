@@ -75,6 +75,28 @@ class SimResult:
     def n_vehicles(self) -> int:
         return self.position.shape[2]
 
+    def collision_report(self) -> list[str]:
+        """One line per scenario of the batch that had a collision: which vehicle hit which,
+        and when (``scenario i:`` prefixed, ``i`` its index in the study, when the batch has
+        several or starts past the first)."""
+        labels = self.vehicle_labels()
+
+        def who(j: int) -> str:
+            if j == 0:
+                return "the head vehicle"
+            return "the CAV" if j == self.cav else f"HDV {labels[j]}"
+
+        first = self.scenario.first_index if self.scenario is not None else 0
+        out = []
+        for b in np.flatnonzero(self.collided.any(axis=1)):
+            hits = [
+                f"{who(j)} hit {who(j - 1)} at t = {self.collision_time[b, j]:.2f} s"
+                for j in np.flatnonzero(self.collided[b])
+            ]
+            prefix = f"scenario {first + b}: " if self.batch > 1 or first else ""
+            out.append(prefix + ", ".join(hits))
+        return out
+
     def vehicle_labels(self) -> list[str]:
         """``head, -m, ..., -1, CAV, 1, ..., n``."""
         return ["head", *[str(i) for i in range(-self.m, 0)], "CAV"] + [
