@@ -412,11 +412,11 @@ def _inline_gains_file(name: str, table: Mapping[str, Any], spec: SweepSpec) -> 
     the client: workers of a remote cluster need not see the file."""
     if table.get("type") != "gains_file":
         return dict(table)
+    from lcc_synth.controllers.registry import STATIC_RUN_KEYS as passed
     from lcc_synth.problem import get_str
     from lcc_synth.synthesis.gains_file import read_gains
 
     field_name = f"controllers.{name}"
-    passed = ("sample_time", "equilibrium", "equilibrium_tau")  # static-controller keys
     check_keys(table, ["type", "file", *passed], field_name)
     path = Path(get_str(table, "file", field_name))
     if not path.is_absolute() and spec.source:
