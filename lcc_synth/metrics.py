@@ -14,6 +14,11 @@ Failed runs: a scenario with a collision has NaN AAVE and fuel (its run stopped 
 collision; whatever it burnt until then is no efficiency to compare), whenever the collision
 happened.
 
+Comfort: the CAV's jerk ``da/dt`` of its applied acceleration, as an RMS of the step-to-step
+finite differences (:func:`rms_jerk`) and as ISO 15622's "average over 1 s" (:func:`jerk_1s`):
+``j1(t) = (a(t) - a(t - 1 s)) / 1 s``, judged against ISO 15622's limit at the CAV's speed
+(:func:`iso15622_jerk_limit`) outside emergency braking.
+
 Vehicle sets: ``"cav_and_behind"`` (the paper's "sum over i = 0..10": CAV and the HDVs behind),
 ``"all"`` (head included), ``"hdvs"`` (every HDV), or explicit paper indices / ``"head"``.
 """
@@ -46,6 +51,12 @@ __all__ = [
     "max_abs_velocity_error",
     "max_abs_command",
     "rms_jerk",
+    "JERK_WINDOW",
+    "iso15622_jerk_limit",
+    "jerk_1s",
+    "max_jerk_1s",
+    "jerk_limit_margin",
+    "jerk_limit_violation_time",
     "aeb_activations",
     "collisions",
     "summary",
@@ -55,6 +66,11 @@ __all__ = [
 ]
 
 VEHICLE_SETS = ("cav_and_behind", "all", "hdvs")
+
+#: Averaging window (s) of ISO 15622's jerk limit.
+JERK_WINDOW = 1.0
+#: ISO 15622's limit on the 1 s average jerk: (speed m/s, limit m/s^3) at both ends.
+_ISO_JERK = ((5.0, 20.0), (5.0, 2.5))
 
 
 @dataclass(frozen=True)
@@ -208,6 +224,59 @@ def rms_jerk(result) -> np.ndarray:
     return np.sqrt(np.nanmean(jerk**2, axis=1))
 
 
+def iso15622_jerk_limit(v):
+    """ISO 15622's limit (m/s^3) on the 1 s average jerk at speed ``v`` (m/s): 5 at or below
+    5 m/s, 2.5 at or above 20 m/s, linear in ``v`` between; NaN where ``v`` is. Broadcasts."""
+    v = np.asarray(v, dtype=float)
+    return np.where(np.isnan(v), np.nan, np.interp(v, *_ISO_JERK))
+
+
+def jerk_1s(result) -> np.ndarray:
+    """The CAV's 1 s average jerk (m/s^3), ``(batch, T)``, outside emergency braking.
+
+    At recorded sample ``k`` (time ``t``), ``j1 = (a_k - a_{k-w}) / (w dt)``: the mean of
+    ``da/dt`` over the window ``[t - w dt, t]`` of ``w = round(JERK_WINDOW / dt)`` samples
+    (1 s at any ``dt`` dividing it), ``a`` the CAV's applied acceleration. NaN for the first
+    second, after a collision, and where the window holds a sample of the CAV's emergency
+    braking (AEB at ``t - 1 s .. t``: during it and for 1 s after it).
+    """
+    a = result.acceleration[:, :, result.cav]
+    w = max(1, int(round(JERK_WINDOW / result.dt)))
+    j = np.full(a.shape, np.nan)
+    j[:, w:] = (a[:, w:] - a[:, :-w]) / (w * result.dt)
+    aeb = np.cumsum(result.aeb_active, axis=1)  # AEB samples up to k
+    aeb[:, w + 1 :] -= aeb[:, : -w - 1].copy()  # ... in k - w .. k
+    return np.where(aeb > 0, np.nan, j)
+
+
+def max_jerk_1s(result) -> np.ndarray:
+    """``max_t |j1(t)|`` (m/s^3) of :func:`jerk_1s`; NaN when no sample is defined."""
+    return _nanmax(np.abs(jerk_1s(result)))
+
+
+def _jerk_margin(result) -> np.ndarray:
+    """``(batch, T)`` ISO 15622 limit at the CAV's speed at ``t`` minus ``|j1(t)|``."""
+    return iso15622_jerk_limit(result.velocity[:, :, result.cav]) - np.abs(jerk_1s(result))
+
+
+def jerk_limit_margin(result) -> np.ndarray:
+    """``min_t (limit(v_CAV(t)) - |j1(t)|)`` (m/s^3): negative where the CAV's 1 s average
+    jerk exceeds ISO 15622's limit at its speed (:func:`iso15622_jerk_limit`)."""
+    return -_nanmax(-_jerk_margin(result))
+
+
+def jerk_limit_violation_time(result) -> np.ndarray:
+    """Time (s) the CAV's 1 s average jerk spends above ISO 15622's limit at its speed:
+    samples with a negative margin times ``dt`` (0 within the limit)."""
+    return (_jerk_margin(result) < 0).sum(axis=1) * result.dt
+
+
+def _nanmax(x: np.ndarray) -> np.ndarray:
+    """``nanmax`` over axis 1; NaN (no warning) for a row without a defined value."""
+    ok = ~np.isnan(x)
+    return np.where(ok.any(axis=1), np.max(np.where(ok, x, -np.inf), axis=1), np.nan)
+
+
 def aeb_activations(result) -> np.ndarray:
     """Number of samples where the CAV's emergency braking overrode its command."""
     return result.aeb_active.sum(axis=1)
@@ -247,6 +316,9 @@ def _per_scenario(result, cfg: MetricsConfig) -> dict[str, np.ndarray]:
         "max_abs_velocity_error": max_abs_velocity_error(result),
         "max_abs_command": max_abs_command(result),
         "rms_jerk_cav": rms_jerk(result),
+        "max_jerk_1s_cav": max_jerk_1s(result),
+        "jerk_1s_margin_cav": jerk_limit_margin(result),
+        "jerk_1s_over_limit_s": jerk_limit_violation_time(result),
         "aeb_activations": aeb_activations(result),
         "collisions": collisions(result),
     }
@@ -276,6 +348,9 @@ def aggregate(per: dict[str, np.ndarray]) -> dict[str, Any]:
             "aeb_activations": int(per["aeb_activations"].sum()),
             "max_abs_command": float(np.nanmax(per["max_abs_command"])),
             "rms_jerk_cav": _stat(per["rms_jerk_cav"]),
+            "max_jerk_1s_cav": _stat(per["max_jerk_1s_cav"], np.nanmax),
+            "jerk_1s_margin_cav": _stat(per["jerk_1s_margin_cav"], np.nanmin),
+            "jerk_1s_over_limit_s": float(per["jerk_1s_over_limit_s"].sum()),
             "min_ttc": float(np.nanmin(ttc[:, 1:])),
             "per_vehicle": {
                 "max_abs_velocity_error": np.nanmax(mv, axis=0).tolist(),
@@ -293,6 +368,9 @@ def summary(result, config: MetricsConfig | None = None) -> dict[str, Any]:
     scenario); ``min_spacing`` and ``collisions``/``aeb_activations`` are the worst case /
     totals. A scenario that collided has NaN AAVE and fuel: the means and deviations are over
     the other scenarios, and ``scenarios_with_collision`` counts them (NaN when all collided).
+    The CAV's jerk: ``rms_jerk_cav`` is the mean, ``max_jerk_1s_cav`` (:func:`max_jerk_1s`)
+    the worst case, ``jerk_1s_margin_cav`` the least margin to ISO 15622's limit (negative:
+    exceeded), ``jerk_1s_over_limit_s`` the total time above it (0: within the limit).
     Per-vehicle lists are ordered head..tail (head spacing is NaN).
     """
     return aggregate(per_scenario(result, config))

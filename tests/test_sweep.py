@@ -155,12 +155,14 @@ def test_aggregate_matches_numpy(serial, direct):
     # hand-made case: NaN (a collided run) is left out, counts add up
     agg = aggregate(
         {"x": {**{k: np.array([1.0, np.nan, 3.0]) for k in SWEEP_METRICS},
-               "collisions": np.array([0, 2, 0]), "aeb_activations": np.array([0, 5, 1])}},
+               "collisions": np.array([0, 2, 0]), "aeb_activations": np.array([0, 5, 1]),
+               "jerk_1s_over_limit_s": np.array([0.0, 0.0, 0.3])}},
         {"x": 4},
     )["x"]
     assert agg["aave"]["mean"] == 2.0 and agg["aave"]["n"] == 2
     assert (agg["collisions"], agg["collision_scenarios"]) == (2, 1)
     assert (agg["aeb_activations"], agg["aeb_scenarios"], agg["fallbacks"]) == (6, 2, 4)
+    assert agg["jerk_scenarios"] == 1
 
 
 def test_seed_changes_the_draws(problem_file, serial):

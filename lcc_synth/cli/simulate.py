@@ -189,7 +189,8 @@ def print_table(spec, rep: dict[str, Any], file=None, collisions=None) -> None:
     cols = ["controller", "AAVE (m/s)", "fuel (mL)"]
     if has_red:
         cols += ["AAVE red. %", "fuel red. %"]
-    cols += ["min s (m)", "min TTC (s)", "max|u|", "jerk rms", "AEB", "collisions"]
+    cols += ["min s (m)", "min TTC (s)", "max|u|", "jerk rms", "jerk 1 s", "ISO 15622 jerk", "AEB",
+             "collisions"]  # fmt: skip
     rows = []
     for name, e in rep.items():
         b = e["batch"]
@@ -214,6 +215,8 @@ def print_table(spec, rep: dict[str, Any], file=None, collisions=None) -> None:
             f"{e['min_ttc']:.2f}",
             f"{e['max_abs_command']:.3f}",
             f"{e['rms_jerk_cav']:.3f}",
+            f"{e['max_jerk_1s_cav']:.3f}",
+            "ok" if e["jerk_1s_over_limit_s"] == 0 else f"over {e['jerk_1s_over_limit_s']:.2f} s",
             str(e["aeb_activations"]),
             str(e["collisions"]),
         ]

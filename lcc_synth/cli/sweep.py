@@ -93,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     (out_dir / "sweep.json").write_text(json.dumps(doc, indent=2) + "\n")
     with (out_dir / "samples.csv").open("w", newline="") as fh:
         w = csv.writer(fh)
-        keys = [*SWEEP_METRICS, "collisions", "aeb_activations"]
+        keys = [*SWEEP_METRICS, "jerk_1s_over_limit_s", "collisions", "aeb_activations"]
         w.writerow(["scenario", "controller", *keys])
         for c, per in result.samples.items():
             for i in range(spec.count):

@@ -17,12 +17,16 @@ from lcc_synth.models.feedback import SEMANTICS, StaticGains
 from lcc_synth.models.linear import KINDS, model_from_hdv
 from lcc_synth.problem import check_keys, get_number, get_str, get_table
 
-__all__ = ["CONTROLLER_TYPES", "build_controller"]
+__all__ = ["CONTROLLER_TYPES", "STATIC_RUN_KEYS", "build_controller"]
 
 CONTROLLER_TYPES = ("hdv", "static", "gains_file", "mpc")
 
 
-_EQ_KEYS = ("equilibrium", "equilibrium_tau")
+_EQ_KEYS = ("equilibrium", "equilibrium_tau", "measurement_filter")
+
+#: Keys of a static-gain table besides its gains: how the law runs (passed on with an ``h2``
+#: or ``gains_file`` controller's gains).
+STATIC_RUN_KEYS = ("sample_time", *_EQ_KEYS)
 
 
 def _sample_time(table, field: str) -> float | None:
@@ -113,10 +117,11 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
                 'must be "fixed" for fd_lcc: FD-LCC has no vehicle ahead of the CAV to '
                 "estimate the equilibrium velocity from",
             )
+        mf = get_number(table, "measurement_filter", field, 0.0, lo=0.0)
         try:
             gains = StaticGains(raw, semantics)
             model = model_from_hdv(kind, system.m, system.n, system.hdv, system.v_star, warn=False)
-            ctrl = StaticGainController(name, gains, model, sample_time, equilibrium, tau)
+            ctrl = StaticGainController(name, gains, model, sample_time, equilibrium, tau, mf)
         except ConfigError as err:
             raise ConfigError(f"{where}.{err.field}", f"{err.message} (kind {kind!r})") from None
         return ctrl

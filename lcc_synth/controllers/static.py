@@ -40,6 +40,15 @@ class LinearLaw:
     towards the observed velocity ``y`` of the vehicle right ahead of the CAV:
     ``w <- y + (w - y) * equilibrium_decay``, the exact discretisation of ``tau dw/dt = y - w``
     with ``y`` held over the sample period ``Ts`` (``equilibrium_decay = exp(-Ts / tau)``).
+
+    With ``measurement_filter = tau_f > 0`` (s; 0 = off) the law reads, in place of every
+    received spacing and velocity ``y`` (every vehicle but the CAV, whose own spacing, velocity
+    and position are exact), a first-order low-pass ``y_f`` of it,
+    ``tau_f dy_f/dt = y - y_f``, discretised exactly with ``y`` held over the sample period:
+    each controller sample uses the current ``y_f``, then ``y_f <- y + (y_f - y) * d``,
+    ``d = exp(-Ts / tau_f)`` (:meth:`measurement_decay`); ``y_f`` starts at the first value
+    received. Everything the law computes from those values (the HDV law's relative speed,
+    the gains, the equilibrium estimate) uses ``y_f``.
     """
 
     Ks: np.ndarray
@@ -48,6 +57,13 @@ class LinearLaw:
     hdv_law: bool = False
     equilibrium_decay: float | None = None
     v_bounds: tuple[float, float] = (0.0, float("inf"))
+    measurement_filter: float = 0.0
+
+    def measurement_decay(self, ts: float) -> float | None:
+        """``exp(-ts / measurement_filter)`` per sample period ``ts``; ``None`` when off."""
+        if self.measurement_filter <= 0.0:
+            return None
+        return math.exp(-ts / self.measurement_filter)
 
 
 def _law_from_gains(gains, m: int, n: int) -> LinearLaw:
@@ -81,35 +97,52 @@ class _LinearController(ABC):
         self._p_ref = None
         self._t_ref = None
         self._v_hat = np.array(ctx.v_star, dtype=float, copy=True)
+        self._filtered = None  # (spacing, velocity) states of the measurement filter
 
     def linear_law(self, ctx: ControlContext) -> LinearLaw:
         """The law for ``ctx`` (the simulator runs it in its compiled loop)."""
         return self._law(ctx)
 
+    def _received(self, obs: Observation) -> tuple[np.ndarray, np.ndarray]:
+        """Spacings and velocities the law reads: as received, or the filter's outputs."""
+        ts = self._ctx.dt if self.sample_time is None else float(self.sample_time)
+        d = self._law_cache.measurement_decay(ts)
+        if d is None:
+            return obs.spacing, obs.velocity
+        y = (obs.spacing, obs.velocity)
+        if self._filtered is None:  # started at the first received values
+            self._filtered = tuple(x.copy() for x in y)
+        out = tuple(f.copy() for f in self._filtered)
+        for f, x in zip(out, y, strict=True):
+            f[:, self._ctx.cav] = x[:, self._ctx.cav]  # the CAV's own values: exact, unfiltered
+        self._filtered = tuple(x + (f - x) * d for x, f in zip(y, self._filtered, strict=True))
+        return out
+
     def __call__(self, obs: Observation) -> np.ndarray:
         ctx, law = self._ctx, self._law_cache
         cav = ctx.cav
+        spacing, velocity = self._received(obs)
         vs = ctx.v_star
         s_ref = ctx.spacing_reference()
         if law.equilibrium_decay is not None:
             vs = np.clip(self._v_hat, *law.v_bounds)
             shift = ctx.hdv.equilibrium_spacing(vs) - ctx.hdv.equilibrium_spacing(ctx.v_star)
             s_ref = s_ref + np.asarray(shift, dtype=float).reshape(-1)[:, None]
-            y = obs.velocity[:, cav - 1]
+            y = velocity[:, cav - 1]
             self._v_hat = y + (self._v_hat - y) * law.equilibrium_decay
-        u = np.zeros(obs.velocity.shape[0])
+        u = np.zeros(velocity.shape[0])
         if law.hdv_law:
             u += ctx.hdv.accel(
-                obs.spacing[:, cav],
-                obs.velocity[:, cav - 1] - obs.velocity[:, cav],
-                obs.velocity[:, cav],
+                spacing[:, cav],
+                velocity[:, cav - 1] - velocity[:, cav],
+                velocity[:, cav],
             )
         cols = np.flatnonzero(law.Ks)
         if cols.size:
-            u += (obs.spacing[:, cols] - s_ref[:, cols]) @ law.Ks[cols]
+            u += (spacing[:, cols] - s_ref[:, cols]) @ law.Ks[cols]
         cols = np.flatnonzero(law.Kv)
         if cols.size:
-            u += (obs.velocity[:, cols] - vs[:, None]) @ law.Kv[cols]
+            u += (velocity[:, cols] - vs[:, None]) @ law.Kv[cols]
         if law.Kp != 0.0:
             if self._p_ref is None:
                 self._p_ref = obs.position[:, cav].copy()
@@ -174,6 +207,10 @@ class StaticGainController(_LinearController):
         ``fd_lcc`` (no vehicle ahead).
     equilibrium_tau : float
         Time constant (s, > 0) of the estimate; default 1.0. Only with ``"estimated"``.
+    measurement_filter : float
+        Time constant (s, >= 0) of a first-order low-pass on every received spacing and
+        velocity the law reads (see :class:`LinearLaw`); default 0: off (the values as
+        received).
     """
 
     def __init__(
@@ -184,8 +221,14 @@ class StaticGainController(_LinearController):
         sample_time: float | None = None,
         equilibrium: str = "fixed",
         equilibrium_tau: float | None = None,
+        measurement_filter: float = 0.0,
     ):
         gains.check(model)
+        mf = measurement_filter
+        if isinstance(mf, bool) or not isinstance(mf, int | float) or not 0.0 <= mf < np.inf:
+            raise ConfigError(
+                "measurement_filter", f"must be a number of seconds >= 0 (0: off), got {mf!r}"
+            )
         if equilibrium not in EQUILIBRIA:
             raise ConfigError(
                 "equilibrium", f"must be one of {list(EQUILIBRIA)}, got {equilibrium!r}"
@@ -215,6 +258,7 @@ class StaticGainController(_LinearController):
         self.sample_time = sample_time
         self.equilibrium = equilibrium
         self.equilibrium_tau = equilibrium_tau
+        self.measurement_filter = float(mf)
 
     def _law(self, ctx: ControlContext) -> LinearLaw:
         if (ctx.m, ctx.n) != (self.model.m, self.model.n):
@@ -223,7 +267,9 @@ class StaticGainController(_LinearController):
                 f"gains are for m={self.model.m}, n={self.model.n}; the scenario has "
                 f"m={ctx.m}, n={ctx.n}",
             )
-        law = _law_from_gains(self.gains, ctx.m, ctx.n)
+        law = replace(
+            _law_from_gains(self.gains, ctx.m, ctx.n), measurement_filter=self.measurement_filter
+        )
         if self.equilibrium == "fixed":
             return law
         ts = ctx.dt if self.sample_time is None else float(self.sample_time)
@@ -242,6 +288,7 @@ class StaticGainController(_LinearController):
             "gains": dict(self.gains.gains),
             "sample_time": self.sample_time,
             "equilibrium": self.equilibrium,
+            "measurement_filter": self.measurement_filter,
         }
         if self.equilibrium == "estimated":
             out["equilibrium_tau"] = self.equilibrium_tau

@@ -13,7 +13,8 @@ A *suite* problem file (``lcc-synth run``, e.g. ``problems/showcase.toml``) desc
   "static" | "gains_file" | "mpc"``), plus ``type = "h2"``: a gain synthesised for each layout
   by :mod:`lcc_synth.synthesis`, whose other keys are those of the ``[synthesis]`` table of
   ``lcc-synth synthesize`` (``design``, ``pattern``, ``weights``...) plus the optional
-  ``sample_time``, ``equilibrium`` and ``equilibrium_tau`` of the static controller.
+  ``sample_time``, ``equilibrium``, ``equilibrium_tau`` and ``measurement_filter`` of the
+  static controller.
   ``[controllers.NAME.layouts.LAYOUT]`` overrides keys for one layout (merged recursively),
   e.g. the paper's gains, which differ between the Table II string and the Section V-A string.
 
@@ -32,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.controllers.base import Controller
-from lcc_synth.controllers.registry import CONTROLLER_TYPES, build_controller
+from lcc_synth.controllers.registry import CONTROLLER_TYPES, STATIC_RUN_KEYS, build_controller
 from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.tables import SUITE_METRICS, rank_failed_last
 from lcc_synth.metrics import MetricsConfig, metrics_from
@@ -265,8 +266,7 @@ def synthesize_table(
     from lcc_synth.synthesis.config import spec_from_problem
     from lcc_synth.synthesis.design import synthesize
 
-    passed = ("sample_time", "equilibrium", "equilibrium_tau")  # keys of the static controller
-    synth = {k: v for k, v in table.items() if k != "type" and k not in passed}
+    synth = {k: v for k, v in table.items() if k != "type" and k not in STATIC_RUN_KEYS}
     data = {
         "name": label,
         "hdv": dict(hdv_table),
@@ -289,7 +289,7 @@ def synthesize_table(
         "semantics": rep.semantics,
         "gains": dict(rep.gains),
     }
-    for key in passed:
+    for key in STATIC_RUN_KEYS:
         if key in table:
             out[key] = table[key]
     return out, rep

@@ -87,6 +87,7 @@ SWEEP_METRICS: dict[str, str] = {
     "min_ttc": "min TTC (s)",
     "max_abs_command": "max |u| (m/s²)",
     "rms_jerk_cav": "CAV RMS jerk (m/s³)",
+    "max_jerk_1s_cav": "CAV max 1 s jerk (m/s³)",
 }
 #: Per-scenario counts of a sweep (summed over the scenarios).
 SWEEP_COUNTS = ("collisions", "aeb_activations", "fallbacks")
@@ -224,6 +225,8 @@ def _one(result, config: MetricsConfig) -> dict[str, float | int]:
         "min_ttc": np.nanmin(mt.min_time_to_collision(result)[0, 1:]),
         "max_abs_command": mt.max_abs_command(result)[0],
         "rms_jerk_cav": mt.rms_jerk(result)[0],
+        "max_jerk_1s_cav": mt.max_jerk_1s(result)[0],
+        "jerk_1s_over_limit_s": mt.jerk_limit_violation_time(result)[0],
         "collisions": mt.collisions(result)[0],
         "aeb_activations": mt.aeb_activations(result)[0],
     }
@@ -232,13 +235,15 @@ def _one(result, config: MetricsConfig) -> dict[str, float | int]:
 def scenario_metrics(result, config: MetricsConfig) -> dict[str, np.ndarray]:
     """Per-scenario metrics of a batched result (``(batch,)`` arrays), from
     :mod:`lcc_synth.metrics`: AAVE, fuel, worst spacing and time to collision over the
-    vehicles, max |u|, CAV RMS jerk, collided vehicles and emergency-braking steps.
+    vehicles, max |u|, CAV RMS jerk and max 1 s average jerk, the time its 1 s average jerk
+    spends above ISO 15622's limit, collided vehicles and emergency-braking steps.
 
     Each scenario is reduced on its own, so its numbers are bit-for-bit the same whatever the
     batch it was simulated in (a reduction over a whole batch may round differently).
     """
     rows = [_one(_member(result, b), config) for b in range(result.batch)]
-    out = {k: np.array([r[k] for r in rows], dtype=float) for k in SWEEP_METRICS}
+    out = {k: np.array([r[k] for r in rows], dtype=float)
+           for k in (*SWEEP_METRICS, "jerk_1s_over_limit_s")}  # fmt: skip
     for k in ("collisions", "aeb_activations"):
         out[k] = np.array([r[k] for r in rows], dtype=np.int64)
     return out
@@ -332,7 +337,8 @@ def aggregate(
     and fuel over the scenarios WITHOUT a collision only (``collided_excluded`` of them left
     out, whatever their values), and the counts ``collisions`` (collided vehicles),
     ``collision_scenarios`` (collided runs), ``aeb_activations`` (steps), ``aeb_scenarios``,
-    ``fallbacks`` (MPC fallback steps) and ``scenarios``."""
+    ``jerk_scenarios`` (scenarios whose CAV's 1 s average jerk exceeds ISO 15622's limit
+    outside emergency braking), ``fallbacks`` (MPC fallback steps) and ``scenarios``."""
     out = {}
     for name, per in samples.items():
         coll = np.asarray(per["collisions"])
@@ -348,6 +354,7 @@ def aggregate(
         entry["collision_scenarios"] = int(np.count_nonzero(coll))
         entry["aeb_activations"] = int(aeb.sum())
         entry["aeb_scenarios"] = int(np.count_nonzero(aeb))
+        entry["jerk_scenarios"] = int(np.count_nonzero(np.asarray(per["jerk_1s_over_limit_s"]) > 0))
         entry["fallbacks"] = int(fallbacks.get(name, 0))
         entry["scenarios"] = int(coll.size)
         out[name] = entry
@@ -417,11 +424,11 @@ def _inline_gains_file(name: str, table: Mapping[str, Any], spec: SweepSpec) -> 
     the client: workers of a remote cluster need not see the file."""
     if table.get("type") != "gains_file":
         return dict(table)
+    from lcc_synth.controllers.registry import STATIC_RUN_KEYS as passed
     from lcc_synth.problem import get_str
     from lcc_synth.synthesis.gains_file import read_gains
 
     field_name = f"controllers.{name}"
-    passed = ("sample_time", "equilibrium", "equilibrium_tau")  # static-controller keys
     check_keys(table, ["type", "file", *passed], field_name)
     path = Path(get_str(table, "file", field_name))
     if not path.is_absolute() and spec.source:
@@ -493,8 +500,8 @@ def run_sweep(
     args = (spec.scenario, spec.system, tables, spec.metrics, spec.source)
     names = list(tables)
     samples = {
-        c: {k: np.full(spec.count, np.nan) for k in (*SWEEP_METRICS, "collisions",
-                                                    "aeb_activations")}
+        c: {k: np.full(spec.count, np.nan) for k in (*SWEEP_METRICS, "jerk_1s_over_limit_s",
+                                                    "collisions", "aeb_activations")}
         for c in names
     }
     fallbacks = dict.fromkeys(names, 0)
@@ -557,7 +564,7 @@ def run_sweep(
 def format_summary(summary: Mapping[str, Mapping[str, Any]]) -> str:
     """Plain-text table: one row per controller, ``mean [p5, p95]`` per metric, then counts."""
     fmt = {"aave": ".3f", "fuel_ml": ".1f", "min_spacing": ".2f", "min_ttc": ".2f",
-           "max_abs_command": ".2f", "rms_jerk_cav": ".2f"}
+           "max_abs_command": ".2f", "rms_jerk_cav": ".2f", "max_jerk_1s_cav": ".2f"}
 
     def cell(d: Mapping[str, Any], f: str) -> str:
         if d["mean"] is None:
@@ -565,13 +572,14 @@ def format_summary(summary: Mapping[str, Mapping[str, Any]]) -> str:
         return f"{d['mean']:{f}} [{d['p5']:{f}}, {d['p95']:{f}}]"
 
     head = ["controller", *(SWEEP_METRICS[k] for k in SWEEP_METRICS), "collisions (scen.)",
-            "AEB steps (scen.)", "MPC fallbacks"]
+            "AEB steps (scen.)", "over ISO jerk (scen.)", "MPC fallbacks"]
     rows = []
     for name, e in summary.items():
         rows.append(
             [name, *(cell(e[k], fmt[k]) for k in SWEEP_METRICS),
              f"{e['collisions']} ({e['collision_scenarios']})",
-             f"{e['aeb_activations']} ({e['aeb_scenarios']})", str(e["fallbacks"])]
+             f"{e['aeb_activations']} ({e['aeb_scenarios']})", str(e["jerk_scenarios"]),
+             str(e["fallbacks"])]
         )
     widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(head)]
     lines = ["  ".join(h.ljust(w) for h, w in zip(head, widths, strict=True))]

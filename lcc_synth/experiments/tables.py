@@ -32,12 +32,16 @@ __all__ = [
 ]
 
 #: Metrics of the comparison table: key of :func:`lcc_synth.metrics.summary` -> (header, format).
+#: Format ``"iso"``: the time above ISO 15622's jerk limit as a verdict, ``ok`` or ``over X s``.
 SUITE_METRICS: dict[str, tuple[str, str]] = {
     "aave": ("AAVE (m/s)", ".4f"),
     "fuel_ml": ("fuel (mL)", ".2f"),
     "min_spacing": ("min spacing (m)", ".2f"),
     "min_ttc": ("min TTC (s)", ".2f"),
     "max_abs_command": ("max |u| (m/s²)", ".3f"),
+    "rms_jerk_cav": ("RMS jerk (m/s³)", ".2f"),
+    "max_jerk_1s_cav": ("max 1 s jerk (m/s³)", ".2f"),
+    "jerk_1s_over_limit_s": ("ISO 15622 jerk", "iso"),
     "aeb_activations": ("AEB steps", "d"),
     "collisions": ("collisions", "d"),
 }
@@ -100,6 +104,8 @@ def _cell(value: Any, fmt: str) -> str:
         return "inf" if value > 0 else "-inf"
     if fmt == "d":
         return str(int(value))
+    if fmt == "iso":
+        return "ok" if value == 0 else f"over {float(value):.2f} s"
     return format(float(value), fmt)
 
 

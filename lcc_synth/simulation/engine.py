@@ -33,10 +33,10 @@ with probability ``1 - loss_rate``; a lost packet leaves the last received value
 spacing, velocity and position are exact.
 
 The stepping loop is compiled with numba. Controllers with a fixed linear law (the CAV as an
-HDV, static gains, with the fixed or the estimated equilibrium; see
-:class:`~lcc_synth.controllers.static.LinearLaw`) are evaluated inside the compiled loop; any other
-controller is called from Python once per controller sample and the compiled loop advances the
-scenarios between samples.
+HDV, static gains, with the fixed or the estimated equilibrium and the optional measurement
+filter; see :class:`~lcc_synth.controllers.static.LinearLaw`) are evaluated inside the compiled
+loop; any other controller is called from Python once per controller sample and the compiled
+loop advances the scenarios between samples.
 """
 
 from __future__ import annotations
@@ -192,6 +192,10 @@ def simulate(
     est = (-1.0, 0.0, 0.0)  # (decay, v_lo, v_hi); decay < 0: errors from the fixed v*
     if law is not None and law.equilibrium_decay is not None:
         est = (float(law.equilibrium_decay), *map(float, law.v_bounds))
+    meas = None if law is None else law.measurement_decay(ratio * dt)
+    meas_decay = -1.0 if meas is None else float(meas)  # < 0: the values as received
+    f_s = np.full((B, nv), np.nan)  # measurement filter states (NaN: not started)
+    f_v = np.full((B, nv), np.nan)
 
     def advance_range(b0, b1, k0, k1, mode, Ks, Kv, Kp, hdv_law):
         _advance(
@@ -201,7 +205,7 @@ def simulate(
             bool(sc.cav_aeb), bool(sc.hdv_aeb), float(sc.hdv_accel_noise), int(sc.seed),
             int(sc.first_index),
             acc_ovr, spd_ovr, mode, ratio, u_hold, Ks, Kv, float(Kp), bool(hdv_law),
-            v_star, s_ref, p_ref, est[0], est[1], est[2], v_hat,
+            v_star, s_ref, p_ref, est[0], est[1], est[2], v_hat, meas_decay, f_s, f_v,
             loss, lat, obs_noise, obs_s, obs_v, obs_p,
             alive, collided, ctime, stride, out_p, out_v, out_a, out_s, out_u, out_aeb,
         )  # fmt: skip

@@ -104,7 +104,7 @@ def _advance(
     b0, b1, k0, k1, p, v, hp, hv, L, delay_steps, delay_own, code, params, nom_code,
     nom_params, dt, t_start, a_min, a_max, cav, cav_aeb, hdv_aeb, noise_std, seed, sid0,
     acc_ovr, spd_ovr, mode, ratio, u_hold, Ks, Kv, Kp, hdv_law, v_star, s_ref, p_ref,
-    est_decay, v_lo, v_hi, v_hat,
+    est_decay, v_lo, v_hi, v_hat, meas_decay, f_s, f_v,
     loss, lat, obs_noise, obs_s, obs_v, obs_p, alive, collided, ctime,
     stride, out_p, out_v, out_a, out_s, out_u, out_aeb,
 ):  # fmt: skip
@@ -116,10 +116,15 @@ def _advance(
     mode 0 applies the held command ``u_hold`` (set by a Python controller). ``est_decay >= 0``
     takes the law's errors from the equilibrium estimate ``v_hat`` (``(batch,)``, updated in
     place; see :class:`~lcc_synth.controllers.static.LinearLaw`), ``est_decay < 0`` from ``v_star``.
+    ``meas_decay >= 0`` makes the law read the measurement filter's outputs: ``f_s``, ``f_v``
+    (``(batch, n_vehicles)``, the filter states, NaN until the first sample) in place of every
+    received spacing and velocity; ``meas_decay < 0`` the values as received.
     """
     nv = p.shape[1]
     abs_min = abs(a_min)
     acc = np.empty(nv)
+    ys = np.empty(nv)  # spacings and velocities the law reads at a sample
+    yv = np.empty(nv)
     for b in range(b0, b1):
         for k in range(k0, k1):
             rec = k % stride == 0
@@ -163,12 +168,26 @@ def _advance(
             if mode == 1 and k % ratio == 0:
                 _observe(b, k, p, v, hp, hv, L, lat, loss, obs_noise, seed, sid0, cav,
                          obs_s, obs_v, obs_p)  # fmt: skip
+                for j in range(nv):
+                    ys[j] = obs_s[b, j]
+                    yv[j] = obs_v[b, j]
+                if meas_decay >= 0.0:
+                    for j in range(nv):
+                        if j == cav:
+                            continue  # the CAV's own values are exact: not filtered
+                        if f_v[b, j] != f_v[b, j]:  # first sample: start at the received value
+                            f_s[b, j] = ys[j]
+                            f_v[b, j] = yv[j]
+                        y_s, y_v = ys[j], yv[j]
+                        ys[j] = f_s[b, j]
+                        yv[j] = f_v[b, j]
+                        f_s[b, j] = y_s + (f_s[b, j] - y_s) * meas_decay
+                        f_v[b, j] = y_v + (f_v[b, j] - y_v) * meas_decay
                 u = 0.0
                 if hdv_law:
                     u = _hdv_accel(
-                        nom_code, nom_params, obs_s[b, cav],
-                        obs_v[b, cav - 1] - obs_v[b, cav], obs_v[b, cav],
-                    )  # fmt: skip
+                        nom_code, nom_params, ys[cav], yv[cav - 1] - yv[cav], yv[cav]
+                    )
                 ve = v_star[b]
                 sh = 0.0
                 if est_decay >= 0.0:
@@ -176,14 +195,14 @@ def _advance(
                     sh = _eq_spacing(nom_code, nom_params, ve) - _eq_spacing(
                         nom_code, nom_params, v_star[b]
                     )
-                    y = obs_v[b, cav - 1]
+                    y = yv[cav - 1]
                     v_hat[b] = y + (v_hat[b] - y) * est_decay
                 for j in range(1, nv):
                     if Ks[j] != 0.0:
-                        u += Ks[j] * (obs_s[b, j] - (s_ref[b, j] + sh))
+                        u += Ks[j] * (ys[j] - (s_ref[b, j] + sh))
                 for j in range(nv):
                     if Kv[j] != 0.0:
-                        u += Kv[j] * (obs_v[b, j] - ve)
+                        u += Kv[j] * (yv[j] - ve)
                 if Kp != 0.0:
                     u -= Kp * (obs_p[b, cav] - p_ref[b] - v_star[b] * (t - t_start))
                 u_hold[b] = u
