@@ -178,6 +178,7 @@ def test_sweep_counts_collided_runs_and_leaves_them_out_of_the_means():
     per = {k: np.array([1.0, 0.1, 3.0]) for k in SWEEP_METRICS}
     per["collisions"] = np.array([0, 1, 0])
     per["aeb_activations"] = np.zeros(3, dtype=int)
+    per["jerk_1s_over_limit_s"] = np.zeros(3)
     agg = aggregate({"x": per}, {"x": 0})["x"]
     for k in ("aave", "fuel_ml"):
         assert agg[k]["mean"] == 2.0 and agg[k]["n"] == 2 and agg[k]["collided_excluded"] == 1

@@ -6,6 +6,7 @@ import warnings
 
 import numpy as np
 import pytest
+from test_metrics import make_result
 
 from lcc_synth.metrics import (
     iso15622_jerk_limit,
@@ -15,7 +16,6 @@ from lcc_synth.metrics import (
     max_jerk_1s,
     summary,
 )
-from tests.test_metrics import make_result
 
 DT = 0.01
 
