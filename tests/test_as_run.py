@@ -7,7 +7,8 @@ Tolerances of the simulator comparisons (measured, see lcc_synth.experiments.str
   dt (it halves at dt = 0.005: 9e-5, 4e-4, 3.8e-3 at w = 0.05, 0.1, 0.3 rad/s become 5e-5,
   2e-4, 1.7e-3; the same for every controller, fixed or estimated, sampled or not: it is the
   HDVs' integration). Bound used: 0.6 % at 0.3 rad/s, 0.1 % below.
-* amplitude extraction: least squares over 2 whole periods after 150 s; the transient left is
+* amplitude extraction: least squares (multisine) over one period of the slowest frequency
+  after 150 s; the transient left is
   e^-10 of its start (slowest pole -0.068 1/s), below 1e-5;
 * nonlinearity: the ratios at head amplitudes 0.1 and 0.02 m/s differ by < 1e-5.
 Richardson extrapolation (2 r(dt/2) - r(dt)) removes the Euler term: it then matches the

@@ -537,6 +537,7 @@ _VERDICT_TEXT = {
     "string_unstable": "NOT string stable",
     "plant_unstable": "plant unstable",
     "boundary": "boundary (too close to call)",
+    "not_linear": "not linear: measured in the simulator",
 }
 
 
