@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -310,3 +311,92 @@ def test_equilibrium_slope_is_that_of_the_nominal_model():
     h = 1e-5
     num = (hdv.equilibrium_spacing(12.0 + h) - hdv.equilibrium_spacing(12.0 - h)) / (2 * h)
     assert math.isclose(equilibrium_slope(model), num, rel_tol=1e-6)
+
+
+# ------------------------------------------------------------------------- design as run
+
+
+def _plant(kind="lcc", m=2, n=2, semantics="added", head=1.0):
+    from lcc_synth.synthesis.h2 import Weights, make_plant
+
+    model = model_from_hdv(kind, m, n, OVM(), 15.0, warn=False)
+    return make_plant(model, semantics, Weights(q_s=0.1, q_v=1.0, q_a=3.0, r=1.0, head=head))
+
+
+def test_output_cost_and_gradient():
+    from lcc_synth.synthesis.as_run import AsRunSettings, _augmented, _directions, output_cost
+    from lcc_synth.synthesis.h2 import h2_cost
+    from lcc_synth.synthesis.structured import pattern_mask, structured_h2
+
+    plant = _plant()
+    res = structured_h2(plant, [1, 2], "direct")
+    fixed = _augmented(plant, AsRunSettings())
+    assert math.isclose(output_cost(fixed, plant.r, res.g)[0], h2_cost(plant, res.g)[0],
+                        rel_tol=1e-12)
+    aug = _augmented(plant, AsRunSettings(equilibrium_tau=1.0))
+    J, L, P = output_cost(aug, plant.r, res.g)
+    mask = pattern_mask(plant, [1, 2])
+    grad, _ = _directions(aug, plant.r, res.g, L, P, mask)
+    k = int(np.flatnonzero(mask)[0])
+    e = np.zeros(plant.nx)
+    e[k] = 1e-6
+    fd = (output_cost(aug, plant.r, res.g + e)[0] - output_cost(aug, plant.r, res.g - e)[0]) / 2e-6
+    assert math.isclose(grad[k], fd, rel_tol=1e-5)
+    # with the vehicles ahead (m = 2) the estimate sees their noise: the cost differs
+    assert not math.isclose(J, h2_cost(plant, res.g)[0], rel_tol=1e-6)
+
+
+def test_as_run_design_keeps_the_as_run_margin_and_lowers_the_cost():
+    from lcc_synth.synthesis.as_run import AsRunSettings, as_run_check, as_run_design
+    from lcc_synth.synthesis.structured import pattern_mask, structured_h2
+
+    plant = _plant()
+    mask = pattern_mask(plant, [1, 2])
+    g0 = structured_h2(plant, [1, 2], "direct", max_iter=5).g  # not converged: room to descend
+    st = AsRunSettings(sample_time=0.1, latency=0.1, margin=1e-2, polish_steps=30)
+    assert as_run_check(plant, g0, st).margin > st.margin
+    g, info = as_run_design(plant, mask, g0, st)
+    assert info["polished"] and info["string_stable"]
+    rep = as_run_check(plant, g, st)
+    assert rep.string_stable and rep.margin >= st.margin
+    assert info["h2_after"] <= info["h2_before"]
+    assert np.all(g[~mask] == 0.0)
+
+
+def test_as_run_design_reports_an_unstable_loop_it_cannot_fix():
+    from lcc_synth.experiments.comparison import synthesize_table
+
+    system = _system(4)
+    table = {"type": "h2", "design": "structured", "semantics": "replace", "pattern": [1, 2],
+             "method": "direct", "weights": {"q_s": 0.1, "q_a": 3.0},
+             "equilibrium": "estimated", "equilibrium_tau": 1.0, "as_run": True}
+    hdv = {"model": "ovm", "alpha": 0.6, "beta": 0.9, "s_st": 5.0, "s_go": 35.0, "v_max": 30.0}
+    static, rep = synthesize_table("h2", table, system, hdv, "t")
+    assert static["equilibrium"] == "estimated"
+    assert rep.as_run["settings"]["equilibrium_tau"] == 1.0
+    assert rep.as_run["after"]["verdict"] == "string_unstable" and not rep.as_run["string_stable"]
+    assert any("NOT string stable" in n for n in rep.notes)
+    ctrl = build_controller("h2", static, system)
+    assert math.isclose(as_run_report(controller_loop(ctrl, system)).gamma_peak,
+                        rep.as_run["after"]["gamma_peak"], rel_tol=1e-9)
+
+
+def test_as_run_table_is_checked():
+    from lcc_synth.problem import Problem
+    from lcc_synth.synthesis.config import spec_from_problem
+
+    def spec(ar, design="structured"):
+        data = {"hdv": {"model": "ovm"}, "system": {"kind": "cf_lcc", "m": 0, "n": 3},
+                "synthesis": {"design": design, "as_run": ar}}
+        return spec_from_problem(Problem(Path("x.toml"), data))
+
+    assert spec(True).as_run.equilibrium_tau is None
+    assert spec({"equilibrium": "estimated", "equilibrium_tau": 2.0}).as_run.equilibrium_tau == 2
+    from lcc_synth.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="equilibrium_tau"):
+        spec({"equilibrium_tau": 2.0})
+    with pytest.raises(ConfigError, match="as_run"):
+        spec(True, design="full_state")
+    with pytest.raises(ConfigError, match="unknown|not allowed|bogus"):
+        spec({"bogus": 1})

@@ -268,6 +268,12 @@ def synthesize_table(
 
     passed = ("sample_time", "equilibrium", "equilibrium_tau")  # keys of the static controller
     synth = {k: v for k, v in table.items() if k != "type" and k not in passed}
+    if synth.get("as_run") not in (None, False):  # design the loop the controller runs
+        ar = {} if synth["as_run"] is True else dict(synth["as_run"])
+        for key in passed:
+            if key in table and key not in ar:
+                ar[key] = table[key]
+        synth["as_run"] = ar
     data = {
         "name": label,
         "hdv": dict(hdv_table),
