@@ -186,7 +186,8 @@ def plot_gamma_curves(curves, omega, path: str | Path, title: str | None = None)
     curves : mapping of str to (magnitude, report)
         ``{label: (|Gamma| on omega, StringStabilityReport)}``, e.g. from
         :func:`lcc_synth.experiments.comparison.gamma_curves`; the legend gives each peak and
-        verdict.
+        verdict. A report with measured points (``omega``, ``ratio``: a controller that is not
+        linear) is drawn as markers.
     omega : array_like
         Frequencies (rad/s).
     path : str or Path
@@ -199,7 +200,11 @@ def plot_gamma_curves(curves, omega, path: str | Path, title: str | None = None)
     fig, ax = plt.subplots(figsize=(6.5, 4), constrained_layout=True)
     for label, (mag, rep) in curves.items():
         verdict = verdict_text(rep.verdict)
-        ax.semilogx(omega, mag, label=f"{label}: peak {rep.gamma_peak:.3f} ({verdict})")
+        text = f"{label}: peak {rep.gamma_peak:.3f} ({verdict})"
+        if hasattr(rep, "ratio"):  # measured in the simulator (not linear): points
+            ax.semilogx(rep.omega, rep.ratio, "o--", ms=4, label=text)
+        else:
+            ax.semilogx(omega, mag, label=text)
     ax.axhline(1.0, color="k", lw=0.8, ls="--")
     ax.set_xlabel("ω (rad/s)")
     ax.set_ylabel("|Γ(jω)|  (head → tail velocity)")

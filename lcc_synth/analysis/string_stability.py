@@ -225,12 +225,12 @@ class _Decision:
     b2: np.ndarray
 
 
-def _decision(A: np.ndarray, h: np.ndarray, c: np.ndarray) -> _Decision:
+def _decision(A: np.ndarray, h: np.ndarray, c: np.ndarray, d: float = 0.0) -> _Decision:
     lu = sla.lu_factor(A)
     b1 = sla.lu_solve(lu, h)
     b2 = sla.lu_solve(lu, b1)
     b3 = sla.lu_solve(lu, b2)
-    g0 = -float(c @ b1)
+    g0 = d - float(c @ b1)  # Gamma1, Gamma2 do not depend on the feed-through d
     G1_0 = -float(c @ b2)
     G2_0 = -float(c @ b3)
     curv = G1_0 * G1_0 - 2.0 * g0 * G2_0
@@ -241,7 +241,7 @@ def _decision(A: np.ndarray, h: np.ndarray, c: np.ndarray) -> _Decision:
     def evaluate(w):
         w = np.asarray(w, dtype=float)
         y = solver(1j * w)
-        G, G1, G2 = y[..., 0], y[..., 1], y[..., 2]
+        G, G1, G2 = y[..., 0] + d, y[..., 1], y[..., 2]
         a = G1.real * G1.real + G1.imag * G1.imag
         b = 2.0 * g0 * G2.real
         S = a + np.abs(b)
@@ -392,9 +392,9 @@ def _hamiltonian_search(A, h, c, dec: _Decision):
 
 
 def loop_string_stability(
-    A: np.ndarray, h: np.ndarray, c: np.ndarray, method: str = "grid"
+    A: np.ndarray, h: np.ndarray, c: np.ndarray, method: str = "grid", d: float = 0.0
 ) -> StringStabilityReport:
-    """Plant and string stability of the SISO loop ``Gamma(s) = c (sI - A)^-1 h``.
+    """Plant and string stability of the SISO loop ``Gamma(s) = d + c (sI - A)^-1 h``.
 
     Parameters
     ----------
@@ -405,9 +405,18 @@ def loop_string_stability(
     method : {"grid", "hamiltonian"}
         How ``max q`` and ``sup |Gamma|`` are searched (module docstring); the band and the
         decision function are the same for both.
+    d : float
+        Feed-through (default 0). The Taylor remainders ``Gamma1``, ``Gamma2`` do not depend on
+        it (``Gamma(s) - Gamma(0) = s c (sI - A)^-1 A^-1 h`` for every ``d``), only
+        ``g0 = d - c A^-1 h`` and ``|Gamma|`` do: the decision function and the band are
+        unchanged. A Tustin image of a sampled loop has ``d != 0``
+        (:mod:`lcc_synth.analysis.as_run`). Only ``method = "grid"`` supports ``d != 0``.
     """
     if method not in ("grid", "hamiltonian"):
         raise ConfigError("method", f"must be 'grid' or 'hamiltonian', got {method!r}")
+    d = float(d)
+    if d != 0.0 and method != "grid":
+        raise ConfigError("method", "a loop with a feed-through d != 0 needs method = 'grid'")
     A = np.asarray(A, dtype=float)
     h = np.asarray(h, dtype=float).reshape(-1)
     c = np.asarray(c, dtype=float).reshape(-1)
@@ -430,7 +439,7 @@ def loop_string_stability(
     if np.isfinite(band):
         with np.errstate(all="ignore"):
             try:
-                dec = _decision(A, h, c)
+                dec = _decision(A, h, c, d)
             except (np.linalg.LinAlgError, ValueError):
                 dec = None
         if dec is not None and not (np.isfinite(dec.g0) and np.isfinite(dec.curvature)):
@@ -439,9 +448,9 @@ def loop_string_stability(
     if dec is None:  # an eigenvalue at 0: no DC gain, the formal response on the grid only
         solver = hessenberg_solver(A, h, c)
         w = _frequency_grid(eigs)
-        mag = np.abs(solver(1j * w))
+        mag = np.abs(solver(1j * w) + d)
         mag = np.where(np.isfinite(mag), mag, np.inf)
-        pw, pv = _local_maxima(lambda x: np.abs(solver(1j * x)), w, mag, lowest=None)
+        pw, pv = _local_maxima(lambda x: np.abs(solver(1j * x) + d), w, mag, lowest=None)
         j = int(np.argmax(pv)) if pv.size else -1
         peak = float(pv[j]) if j >= 0 else float(mag[0])
         peak_w = float(pw[j]) if j >= 0 else float(w[0])
@@ -528,6 +537,7 @@ _VERDICT_TEXT = {
     "string_unstable": "NOT string stable",
     "plant_unstable": "plant unstable",
     "boundary": "boundary (too close to call)",
+    "not_linear": "not linear: measured in the simulator",
 }
 
 

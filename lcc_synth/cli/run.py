@@ -85,7 +85,12 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from lcc_synth.analysis.string_stability import verdict_text
-    from lcc_synth.experiments.comparison import gamma_curves, load_suite, run_suite
+    from lcc_synth.experiments.comparison import (
+        gamma_curves,
+        gamma_settings,
+        load_suite,
+        run_suite,
+    )
     from lcc_synth.experiments.tables import (
         format_table,
         json_safe,
@@ -113,10 +118,11 @@ def run(args: argparse.Namespace) -> int:
     out_dir = run_directory(args.out, suite.name, stamp)  # fail early on an unwritable --out
     ctrl_names = list(suite.controllers)
     layouts = suite.layouts_used()
-    has_head = [lname for lname in layouts if suite.layouts[lname].kind != "fd_lcc"]
-    linear = [c for c, t in suite.controllers.items() if t.get("type") in ("hdv", "static", "h2",
-                                                                         "gains_file")]
-    gamma_cases = [f"{lname}.{c}" for lname in has_head for c in linear]
+    settings = gamma_settings(suite)  # {layout: [(suffix, dt, latency, scenarios)]}
+    gamma_cases = [
+        f"{lname}.{c}{suffix}" for lname, rows in settings.items() for suffix, *_ in rows
+        for c in ctrl_names
+    ]  # fmt: skip
     design_names = [
         f"{lname}.{c}" for lname in layouts for c, t in suite.controllers.items()
         if t.get("type") == "h2"
@@ -147,15 +153,22 @@ def run(args: argparse.Namespace) -> int:
             print(f"lcc-synth run: synthesis failed: {err}", file=sys.stderr)
             return 1
 
+        import time
+
+        t0 = time.perf_counter()
         omega = np.logspace(*_OMEGA)
-        curves = {
-            lname: gamma_curves(result.controllers[lname], suite.layouts[lname], omega)
-            for lname in has_head
-        }
+        curves: dict[str, dict] = {}  # {layout: {controller + suffix: (|Gamma|, report)}}
+        for lname, rows in settings.items():
+            curves[lname] = {}
+            for suffix, dt, lat, _ in rows:
+                per = gamma_curves(result.controllers[lname], suite.layouts[lname], omega, dt, lat)
+                curves[lname].update({f"{c}{suffix}": v for c, v in per.items()})
+        result.timings["string_stability"] = time.perf_counter() - t0
         if rec is not None:
             for lname, per in curves.items():
                 for cname, (mag, rep) in per.items():
-                    record_gamma(rec, f"{lname}.{cname}", omega, mag, rep.as_dict())
+                    w, m = (rep.omega, rep.ratio) if hasattr(rep, "ratio") else (omega, mag)
+                    record_gamma(rec, f"{lname}.{cname}", w, m, rep.as_dict())
             for lname, per in result.designs.items():
                 from lcc_synth.synthesis.gains_file import gains_document
 
@@ -240,16 +253,21 @@ def run(args: argparse.Namespace) -> int:
                         f"step time median {_ms(stt.get('median'))} / p99 {_ms(stt.get('p99'))}"
                         " ms",
                     )
-        for lname, per in curves.items():
-            for cname, (_, rep) in per.items():
-                verdict = verdict_text(rep.verdict)
-                print(f"|Γ| {lname}/{cname}: peak {rep.gamma_peak:.4f} -> {verdict}")
+        for lname, rows in settings.items():
+            for suffix, _, lat, snames in rows:
+                if suffix:
+                    print(f"|Γ| on {lname} with the V2V latency {lat:g} s of {', '.join(snames)}:")
+                for cname in ctrl_names:
+                    if f"{cname}{suffix}" in curves[lname]:
+                        rep = curves[lname][f"{cname}{suffix}"][1]
+                        print(f"|Γ| {lname}/{cname}{suffix}: {_gamma_line(rep, verdict_text)}")
     print(f"results: {out_dir}", file=log)
     if rrd is not None:
         print(f"recording: {rrd}  (open with: lcc-synth review {rrd})", file=log)
     t = result.timings
     print(
-        f"time: controllers {t['controllers']:.1f} s, simulations {t['simulations']:.1f} s",
+        f"time: controllers {t['controllers']:.1f} s, simulations {t['simulations']:.1f} s, "
+        f"string stability as run {t.get('string_stability', 0.0):.1f} s",
         file=log,
     )
     return 0
@@ -266,6 +284,26 @@ def _collision_lines(result) -> list[str]:
     if lines:
         lines.append("(a collided run has NaN AAVE and fuel and is ranked last in its scenario)")
     return lines
+
+
+def _gamma_line(rep, verdict_text) -> str:
+    """``peak ... -> verdict`` of an as-run report, or the measured ratios of a nonlinear one."""
+    if hasattr(rep, "ratio"):
+        pts = ", ".join(f"{r:.3f}@{w:g}" for w, r in zip(rep.omega, rep.ratio, strict=True))
+        return f"not linear; measured tail/head (ratio@rad/s) {pts} -> max {rep.gamma_peak:.4f}"
+    loop = rep.loop
+    what = [f"{loop['equilibrium']} equilibrium"]
+    if loop.get("sample_time"):
+        what.append(f"T = {loop['sample_time']:g} s")
+    if loop.get("latency"):
+        what.append(f"latency {loop['latency']:g} s")
+    if loop.get("measurement_filter"):
+        what.append(f"filter {loop['measurement_filter']:g} s")
+    at = f" at {rep.gamma_peak_omega:.3g} rad/s" if rep.gamma_peak_omega > 0 else ""
+    return (
+        f"as run ({', '.join(what)}): peak {rep.gamma_peak:.4f}{at}, margin {rep.margin:+.3g}"
+        f" -> {verdict_text(rep.verdict)}"
+    )
 
 
 def _ms(value) -> str:

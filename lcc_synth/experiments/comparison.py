@@ -63,6 +63,7 @@ __all__ = [
     "metrics_row",
     "run_suite",
     "gamma_curves",
+    "gamma_settings",
     "progress_bar",
 ]
 
@@ -267,6 +268,12 @@ def synthesize_table(
     from lcc_synth.synthesis.design import synthesize
 
     synth = {k: v for k, v in table.items() if k != "type" and k not in STATIC_RUN_KEYS}
+    if synth.get("as_run") not in (None, False):  # design the loop the controller runs
+        ar = {} if synth["as_run"] is True else dict(synth["as_run"])
+        for key in STATIC_RUN_KEYS:
+            if key in table and key not in ar:
+                ar[key] = table[key]
+        synth["as_run"] = ar
     data = {
         "name": label,
         "hdv": dict(hdv_table),
@@ -476,30 +483,45 @@ def run_suite(
 
 
 def gamma_curves(
-    controllers: Mapping[str, Controller], system: System, omega: np.ndarray
+    controllers: Mapping[str, Controller],
+    system: System,
+    omega: np.ndarray,
+    dt: float = 0.01,
+    latency: float = 0.0,
+    measure_omega: Sequence[float] | None = None,
 ) -> dict[str, tuple[np.ndarray, Any]]:
-    """``|Gamma(j omega)|`` and the string-stability report of every linear controller.
-
-    Static-gain controllers use their own gains and model; the CAV driving as an HDV is the
-    empty gain added to the HDV law. MPC (not linear) and layouts without a head vehicle
-    (``fd_lcc``) give no curve. Returns ``{name: (magnitude, StringStabilityReport)}``.
+    """``|Gamma(j omega)|`` and the string-stability report of every controller **as it runs**
+    on ``system`` with simulator step ``dt`` and V2V ``latency``
+    (:func:`lcc_synth.experiments.string_as_run.gamma_curves`): a linear controller's loop
+    holds its equilibrium estimator, sample-and-hold, latency and measurement filter; a
+    controller that is not linear (MPC) gets the simulated small-signal amplitude ratio at
+    ``measure_omega`` (default :data:`~lcc_synth.experiments.string_as_run.MEASURE_OMEGA`).
+    Layouts without a head vehicle (``fd_lcc``) give ``{}``.
     """
-    from lcc_synth.analysis.string_stability import string_stability
-    from lcc_synth.analysis.transfer import gamma_state_space
-    from lcc_synth.controllers.static import HDVController, StaticGainController
-    from lcc_synth.models.feedback import StaticGains, input_feedback
+    from lcc_synth.experiments.string_as_run import MEASURE_OMEGA
+    from lcc_synth.experiments.string_as_run import gamma_curves as as_run_curves
 
-    if system.kind == "fd_lcc":
-        return {}
-    out = {}
-    for name, ctrl in controllers.items():
-        if isinstance(ctrl, StaticGainController):
-            model, gains = ctrl.model, ctrl.gains
-        elif isinstance(ctrl, HDVController):
-            model, gains = system.linear_model(warn=False), StaticGains({}, "added")
-        else:
+    wm = MEASURE_OMEGA if measure_omega is None else measure_omega
+    return as_run_curves(controllers, system, omega, dt, latency, wm)
+
+
+def gamma_settings(suite: Suite) -> dict[str, list[tuple[str, float, float, list[str]]]]:
+    """Per layout with a head vehicle, the distinct ``(dt, V2V latency)`` of its scenarios:
+    ``{layout: [(label suffix, dt, latency, scenario names)]}``; the suffix is ``""`` for the
+    first (ideal links first), else e.g. ``" @ 0.1 s latency"``."""
+    out: dict[str, list[tuple[str, float, float, list[str]]]] = {}
+    for lname in suite.layouts_used():
+        if suite.layouts[lname].kind == "fd_lcc":
             continue
-        K, kh = input_feedback(model, gains)
-        mag = np.abs(gamma_state_space(model, K, kh, omega))
-        out[name] = (mag, string_stability(model, K, kh))
+        pairs: dict[tuple[float, float], list[str]] = {}
+        for sname, ss in suite.scenarios.items():
+            if ss.layout == lname:
+                key = (float(ss.scenario.dt), float(ss.scenario.v2v.latency))
+                pairs.setdefault(key, []).append(sname)
+        rows = []
+        for k, ((dt, lat), names) in enumerate(sorted(pairs.items(), key=lambda p: p[0][1])):
+            suffix = "" if k == 0 else f" @ {lat:g} s latency" + (f", dt {dt:g} s" if dt != 0.01
+                                                                   else "")
+            rows.append((suffix, dt, lat, names))
+        out[lname] = rows
     return out

@@ -41,6 +41,18 @@
     margin = 1e-4             # relative string-stability margin every polishing step keeps,
                               # [0, 0.1] (string_stability's margin; the verdict's band ~1e-11)
 
+    [synthesis.as_run]        # optional: design the loop as it runs (synthesis/as_run.py);
+                              # `as_run = true` = this table with its defaults
+    equilibrium = "estimated" # "fixed" | "estimated" (the controller's equilibrium)
+    equilibrium_tau = 1.0     # s, > 0, with "estimated"
+    sample_time = 0.1         # controller period (s); default: every simulator step dt
+    dt = 0.01                 # simulator step (s)
+    latency = 0.0             # V2V latency (s) of the string check, a multiple of the period
+    measurement_filter = 0.0  # s, 0 = off
+    margin = 1e-3             # relative as-run string-stability margin of accepted steps
+    weight = 0.0              # trade-off weight on the as-run amplification, >= 0
+    polish_steps = 200        # as-run-string-stable polishing iterations, >= 0
+
     [synthesis.baseline]      # optional: compare with hand-picked gains (e.g. the paper's)
     name = "paper"
     semantics = "replace"
@@ -94,6 +106,7 @@ class SynthesisSpec:
     string_margin: float = 1e-4
     baseline: tuple[str, StaticGains] | None = None
     source: str | None = None
+    as_run: Any = None  # lcc_synth.synthesis.as_run.AsRunSettings
 
 
 def _pattern(table: dict, system: System) -> tuple[int, ...] | None:
@@ -118,6 +131,43 @@ def _pattern(table: dict, system: System) -> tuple[int, ...] | None:
     return tuple(sorted(set(value) - {0}))
 
 
+def _as_run(t: dict, system: System, design: str):
+    """The ``[synthesis.as_run]`` table (or ``as_run = true``) as ``AsRunSettings``."""
+    from lcc_synth.synthesis.as_run import AsRunSettings
+
+    f = "synthesis.as_run"
+    raw = t.get("as_run", False)
+    if raw is False:
+        return None
+    if raw is True:
+        raw = {}
+    if not isinstance(raw, dict):
+        raise ConfigError(f, f"must be true, false or a table, got {raw!r}")
+    keys = ["equilibrium", "equilibrium_tau", "sample_time", "dt", "latency",
+            "measurement_filter", "margin", "weight", "polish_steps"]  # fmt: skip
+    check_keys(raw, keys, f)
+    if design not in ("structured", "string_stable"):
+        raise ConfigError(f, f"applies to design = 'structured' or 'string_stable', not {design!r}")
+    if system.kind == "fd_lcc":
+        raise ConfigError(f, "needs a head vehicle: fd_lcc has none")
+    eq = get_str(raw, "equilibrium", f, "fixed", choices=("fixed", "estimated"))
+    tau = get_number(raw, "equilibrium_tau", f, 1.0, lo=0.0, lo_open=True)
+    if eq == "fixed" and "equilibrium_tau" in raw:
+        raise ConfigError(f"{f}.equilibrium_tau", 'only applies with equilibrium = "estimated"')
+    st = None if "sample_time" not in raw else get_number(raw, "sample_time", f, lo=0.0,
+                                                          lo_open=True)  # fmt: skip
+    return AsRunSettings(
+        equilibrium_tau=tau if eq == "estimated" else None,
+        sample_time=st,
+        dt=get_number(raw, "dt", f, 0.01, lo=0.0, lo_open=True),
+        latency=get_number(raw, "latency", f, 0.0, lo=0.0),
+        measurement_filter=get_number(raw, "measurement_filter", f, 0.0, lo=0.0),
+        margin=get_number(raw, "margin", f, 1e-3, lo=0.0, hi=0.5),
+        weight=get_number(raw, "weight", f, 0.0, lo=0.0),
+        polish_steps=get_int(raw, "polish_steps", f, 200, lo=0, hi=100000),
+    )
+
+
 def spec_from_problem(problem: Problem) -> SynthesisSpec:
     """Parse the ``[hdv]``, ``[system]`` and ``[synthesis]`` tables of a problem file."""
     src = str(problem.path)
@@ -131,7 +181,7 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec:
             t,
             [
                 "design", "semantics", "pattern", "method", "cross_check", "tol", "max_iter",
-                "band", "weights", "sparsity", "string", "baseline",
+                "band", "weights", "sparsity", "string", "baseline", "as_run",
             ],
             "synthesis",
         )
@@ -214,7 +264,9 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec:
             except ConfigError as err:
                 raise ConfigError(f"synthesis.baseline.{err.field}", err.message) from None
             baseline = (bname, gains)
+        as_run = _as_run(t, system, design)
         return SynthesisSpec(
+            as_run=as_run,
             name=problem.name,
             system=system,
             design=design,

@@ -199,6 +199,20 @@ def synthesize(spec: SynthesisSpec) -> SynthesisReport:
     else:  # pragma: no cover - validated by the config
         raise SynthesisError(f"unknown design {spec.design!r}")
 
+    as_run = None
+    if spec.as_run is not None:
+        from lcc_synth.synthesis.as_run import as_run_design
+
+        g, as_run = as_run_design(plant, mask, np.where(mask, g, 0.0), spec.as_run)
+        timings["as_run"] = as_run["timings"]["total"]
+        if not as_run["string_stable"]:
+            after = as_run["after"]
+            notes.append(
+                "as run (" + ("estimated" if spec.as_run.equilibrium_tau else "fixed")
+                + f" equilibrium, period {spec.as_run.period:g} s): NOT string stable "
+                f"(peak |Gamma| {after['gamma_peak']:.4f}, margin {after['margin']:.3g}); no "
+                "step could be accepted"
+            )
     g = np.where(mask, g, 0.0)  # exact zeros off the pattern (already so; kept explicit)
     chk = check_gain(plant, g, f"{spec.design} design", solver)
     if spec.design == "string_stable" and not chk.string_stable:
@@ -237,4 +251,5 @@ def synthesize(spec: SynthesisSpec) -> SynthesisReport:
         pareto=pareto,
         timings=timings,
         notes=notes,
+        as_run=as_run,
     )

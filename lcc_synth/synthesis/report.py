@@ -113,6 +113,7 @@ class SynthesisReport:
     pareto: list[dict[str, Any]] | None = None
     timings: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    as_run: dict[str, Any] | None = None  # lcc_synth.synthesis.as_run.as_run_design's info
 
     def as_dict(self) -> dict[str, Any]:
         d = asdict(self)

@@ -1,0 +1,198 @@
+"""Head-to-tail string stability of the controllers as they run, and as they are measured.
+
+* :func:`controller_loop`: the exact linear loop (:mod:`lcc_synth.analysis.as_run`) of a linear
+  controller of the registry (the CAV as an HDV, static gains with a fixed or estimated
+  equilibrium, a sample time, a measurement filter) on a string with a given simulator step
+  and V2V latency: the law the simulator runs (``controller.linear_law``), evaluated every
+  ``sample_time`` (or every simulator step).
+* :func:`measured_ratio`: the small-signal tail/head velocity amplitude ratio measured in the
+  simulator, for any controller (the only answer for a controller that is not linear, such as
+  the MPC). The head vehicle's velocity is ``v*`` plus a multisine, one sine of amplitude
+  ``a / sqrt(k)`` per frequency (``a = MEASURE_AMPLITUDE = 0.1`` m/s, ``k`` frequencies): the
+  spacings move by < 0.1 m and accelerations by < 0.1 m/s^2 at 1 rad/s, the OVM stays in its
+  linear regime (at ``v* = v_max / 2``, its inflection point, the quadratic term vanishes;
+  amplitudes 0.1 and 0.02 m/s give ratios within 1e-5) and far from every constraint of the
+  MPC. The run lasts ``MEASURE_SETTLE = 150`` s (the slowest pole of the showcase's loops is
+  -0.068 1/s: its transient is e^-10 of its start) plus ``MEASURE_PERIODS = 1`` period of the
+  slowest frequency, over which the head and tail velocities are fitted by least squares to
+  a constant plus a sine and a cosine per frequency; the ratio is that of the fitted
+  amplitudes. No noise, no packet loss, no reaction delays: the nominal string.
+* :func:`gamma_curves`: both, for every controller of a layout (``lcc-synth run``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from lcc_synth.analysis.as_run import NotRepresentable, as_run_report, law_loop
+from lcc_synth.controllers.base import ControlContext, Controller
+from lcc_synth.controllers.static import HDVController, StaticGainController
+
+__all__ = [
+    "MEASURE_AMPLITUDE",
+    "MEASURE_SETTLE",
+    "MEASURE_PERIODS",
+    "MEASURE_OMEGA",
+    "MEASURE_SETTLE_RUN",
+    "MeasuredReport",
+    "controller_loop",
+    "measured_ratio",
+    "gamma_curves",
+]
+
+MEASURE_AMPLITUDE = 0.1
+MEASURE_SETTLE = 150.0
+MEASURE_PERIODS = 1
+#: Frequencies (rad/s) at which ``lcc-synth run`` measures a controller that is not linear,
+#: and its settling time (s): the showcase's MPC gives the same ratios to 1e-5 after 80 s and
+#: after 150 s (6.6 s instead of 11 s per string10 measurement).
+MEASURE_OMEGA = (0.05, 0.1, 0.3, 1.0)
+MEASURE_SETTLE_RUN = 80.0
+
+
+def _context(system, dt: float) -> ControlContext:
+    v = np.array([float(system.v_star)])
+    s = np.array([float(system.hdv.equilibrium_spacing(system.v_star))])
+    return ControlContext(system.m, system.n, 1, float(dt), v, s, -5.0, 2.0, system.hdv)
+
+
+def controller_loop(ctrl: Controller, system, dt: float = 0.01, latency: float = 0.0):
+    """The :class:`~lcc_synth.analysis.as_run.AsRunLoop` of ``ctrl`` on ``system`` (``None``
+    when the controller is not linear). Raises ``NotRepresentable`` for a latency that is not
+    a multiple of the controller's period."""
+    if isinstance(ctrl, StaticGainController):
+        model = ctrl.model
+    elif isinstance(ctrl, HDVController):
+        model = system.linear_model(warn=False)
+    else:
+        return None
+    law = ctrl.linear_law(_context(system, dt))
+    period = float(dt if ctrl.sample_time is None else ctrl.sample_time)
+    lat = round(float(latency) / dt) * float(dt)  # the simulator rounds it to steps
+    return law_loop(model, law, period, lat)
+
+
+def measured_ratio(
+    ctrl: Controller,
+    system,
+    omega: Sequence[float],
+    dt: float = 0.01,
+    latency: float = 0.0,
+    amplitude: float = MEASURE_AMPLITUDE,
+    settle: float = MEASURE_SETTLE,
+    periods: int = MEASURE_PERIODS,
+) -> np.ndarray:
+    """Tail/head velocity amplitude ratio of ``ctrl`` in the simulator at each ``omega``.
+
+    One run with all the frequencies at once (a multisine: head velocity
+    ``v* + sum_i (a / sqrt(k)) sin(w_i t + phi_i)``, Schroeder phases ``phi_i = -pi i (i-1)/k``
+    to keep the peak low; superposition holds in the linear regime), ``settle`` s plus
+    ``periods`` periods of the slowest frequency; the amplitudes are the least-squares fit of
+    ``c0 + sum_i (a_i sin(w_i t) + b_i cos(w_i t))`` to the head and tail velocities over those
+    last periods (an exact decomposition for a sum of these sines and a constant: the Euler
+    integration of the head's cosine acceleration adds a constant offset).
+    """
+    from lcc_synth.simulation.engine import simulate
+    from lcc_synth.simulation.perturbations import Profile
+    from lcc_synth.simulation.scenario import V2V, Scenario
+
+    w = np.asarray(omega, dtype=float)
+    k = w.size
+    amp = amplitude / np.sqrt(k)
+    phase = -np.pi * np.arange(k) * (np.arange(k) - 1) / k
+    window = periods * 2.0 * np.pi / w.min()
+    duration = settle + window
+    t = dt * np.arange(int(round(duration / dt)) + 1)
+    accel = (amp * w * np.cos(np.outer(t, w) + phase)).sum(axis=1)
+    head = Profile(tuple(t), tuple(accel), target="accel", interpolation="step")
+    sc = Scenario(
+        m=system.m, n=system.n, hdv=system.hdv, v_star=system.v_star, dt=dt,
+        duration=duration, perturbations=(head,), v2v=V2V(latency=latency),
+    )  # fmt: skip
+    res = simulate(sc, ctrl)
+    tt = res.t
+    keep = tt >= tt[-1] - window
+    tt = tt[keep]
+    basis = np.column_stack([np.ones(tt.size), np.sin(np.outer(tt, w)), np.cos(np.outer(tt, w))])
+    vel = res.velocity[0][keep]
+    coef = np.linalg.lstsq(basis, vel[:, [0, -1]], rcond=None)[0]
+    amps = np.hypot(coef[1 : 1 + k], coef[1 + k :])
+    return amps[:, 1] / amps[:, 0]
+
+
+@dataclass(frozen=True)
+class MeasuredReport:
+    """The measured amplitude ratio of a controller that is not linear (``verdict``
+    ``"not_linear"``: no analysis; ``gamma_peak`` is the largest measured ratio)."""
+
+    omega: np.ndarray
+    ratio: np.ndarray
+    settings: dict = field(default_factory=dict)
+    verdict: str = "not_linear"
+
+    @property
+    def gamma_peak(self) -> float:
+        return float(np.max(self.ratio))
+
+    @property
+    def gamma_peak_omega(self) -> float:
+        return float(self.omega[int(np.argmax(self.ratio))])
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "verdict": self.verdict,
+            "linear": False,
+            "measured_omega": [float(w) for w in self.omega],
+            "measured_ratio": [float(r) for r in self.ratio],
+            "gamma_peak": self.gamma_peak,
+            "gamma_peak_omega": self.gamma_peak_omega,
+            "measurement": dict(self.settings),
+        }
+
+
+def gamma_curves(
+    controllers: Mapping[str, Controller],
+    system,
+    omega: np.ndarray,
+    dt: float = 0.01,
+    latency: float = 0.0,
+    measure_omega: Sequence[float] | None = MEASURE_OMEGA,
+) -> dict[str, tuple[np.ndarray, Any]]:
+    """``{name: (|Gamma| on omega, report)}`` of every controller as it runs on ``system``.
+
+    A linear controller gets its as-run loop's ``|Gamma|`` and
+    :class:`~lcc_synth.analysis.as_run.AsRunReport`; any other controller (or a loop with no
+    exact linear model) the :class:`MeasuredReport` at ``measure_omega`` (its curve is NaN
+    except at those frequencies, interpolated on ``log omega``); ``measure_omega=None`` skips
+    them. Layouts without a head vehicle (``fd_lcc``) give ``{}``.
+    """
+    if system.kind == "fd_lcc":
+        return {}
+    omega = np.asarray(omega, dtype=float)
+    out: dict[str, tuple[np.ndarray, Any]] = {}
+    for name, ctrl in controllers.items():
+        why = "not linear"
+        try:
+            loop = controller_loop(ctrl, system, dt, latency)
+        except NotRepresentable as err:
+            loop, why = None, err.message
+        if loop is not None:
+            out[name] = (np.abs(loop.response(omega)), as_run_report(loop))
+            continue
+        if measure_omega is None:
+            continue
+        wm = np.asarray(measure_omega, dtype=float)
+        ratio = measured_ratio(ctrl, system, wm, dt, latency, settle=MEASURE_SETTLE_RUN)
+        inside = (omega >= wm.min()) & (omega <= wm.max())
+        mag = np.full(omega.shape, np.nan)
+        mag[inside] = np.interp(np.log(omega[inside]), np.log(wm), ratio)
+        settings = {
+            "why": why, "amplitude_m_s": MEASURE_AMPLITUDE, "settle_s": MEASURE_SETTLE_RUN,
+            "periods": MEASURE_PERIODS, "dt": dt, "latency": latency,
+        }  # fmt: skip
+        out[name] = (mag, MeasuredReport(wm, ratio, settings))
+    return out
