@@ -143,8 +143,8 @@ class FilteredLaw(LinearLaw):
 def _reference(model, law, T, latency, tau, tf, omega):
     """Gamma(e^{jwT}) by a direct solve of the loop's equations in the frequency domain: the
     head is e^{jwkT} (first-order hold into the plant), every received value is delayed by
-    z^-d and filtered by (1-a) z / (z - a), the estimate is (1-b) / (z - b) of the filtered
-    velocity ahead."""
+    z^-d and filtered by (1-a) / (z - a) (the law reads the filter's state), the estimate is
+    (1-b) / (z - b) of the filtered velocity ahead."""
     from lcc_synth.analysis.as_run import _physical_plant
 
     A0, B0, H0, names, own = _physical_plant(model, 0.0)
@@ -161,7 +161,7 @@ def _reference(model, law, T, latency, tau, tf, omega):
     out = []
     for w in omega:
         z = np.exp(1j * w * T)
-        F = (1 - a) * z / (z - a) * z**-d  # received: delayed then filtered
+        F = ((1 - a) / (z - a) if tf else 1.0) * z**-d  # received: delayed then filtered
         # x_k = X V: (z I - Ad) X = Bd U + (Hd + (Ad - I) Lam) ... with the FOH written on x
         # directly: x_{k+1} = Ad x_k + Bd u_k + (Hd - Lam') v_k + Lam' v_{k+1}, Lam' = Lam
         Kown = np.where(own, K, 0.0)
@@ -194,7 +194,7 @@ def test_measurement_filter_read_from_the_law():
     from lcc_synth.experiments.string_as_run import _context
 
     base = ctrl.linear_law(_context(system, 0.01))
-    kw = {k: getattr(base, k) for k in base.__dataclass_fields__}
+    kw = {k: getattr(base, k) for k in base.__dataclass_fields__ if k != "measurement_filter"}
     filtered = FilteredLaw(**kw, measurement_filter=0.5)
     model = ctrl.model
     plain = law_loop(model, base, 0.01)
@@ -206,15 +206,19 @@ def test_measurement_filter_read_from_the_law():
     ref = _reference(model, law, 0.01, 0.0, 1.0, 0.5, omega)
     assert np.allclose(loop.response(omega), ref, rtol=1e-8)
     assert not np.allclose(loop.response(omega), plain.response(omega), rtol=1e-3)
+    # a vanishing filter is one sample of delay (the law reads the state before the update)
     tiny = law_loop(model, FilteredLaw(**kw, measurement_filter=1e-9), 0.01)
-    assert np.allclose(tiny.response(omega), plain.response(omega), rtol=1e-12)
-    if "measurement_filter" in LinearLaw.__dataclass_fields__:  # once the simulator has it
+    delayed = law_loop(model, base, 0.01, latency=0.01)
+    assert np.allclose(tiny.response(omega), delayed.response(omega), rtol=1e-12)
+    # against the simulator, also at a 0.1 s sample time, where a one-sample difference in the
+    # filter's convention would show (a 0.1 s delay: 3 % of phase at 0.3 rad/s)
+    for extra in ({}, {"sample_time": 0.1}):
         ctrl_f = build_controller(
-            "p", _table(PAPER, equilibrium="estimated", measurement_filter=0.5), system
+            "p", _table(PAPER, equilibrium="estimated", measurement_filter=0.5, **extra), system
         )
         analysed = np.abs(controller_loop(ctrl_f, system).response(OMEGA))
         measured = measured_ratio(ctrl_f, system, OMEGA)
-        assert np.all(np.abs(measured / analysed - 1) < np.array([1e-3, 1e-3, 6e-3]))
+        assert np.all(np.abs(measured / analysed - 1) < np.array([1e-3, 1e-3, 6e-3])), extra
 
 
 # ------------------------------------------------------------------- verdict and H2 norm

@@ -9,8 +9,10 @@ time. The simulator runs more than that (:class:`~lcc_synth.controllers.static.L
 * every value the CAV receives over V2V (every vehicle but the CAV itself, the head's velocity
   included) is ``latency`` seconds old; the CAV's own spacing and velocity are exact;
 * optionally each received value passes a first-order filter ``tau_f dy_f/dt = y - y_f``
-  (``measurement_filter`` seconds; 0 = off), discretised exactly at ``T`` with the new
-  measurement used in the same sample: ``y_f,k = a y_f,k-1 + (1 - a) y_k``, ``a = e^(-T/tau_f)``;
+  (``measurement_filter`` seconds; 0 = off), discretised exactly at ``T`` with the received
+  value held over the period, as the simulator runs it: the law reads the filter's state, which
+  then takes the new value in, ``y_f,k+1 = a y_f,k + (1 - a) y_k``, ``a = e^(-T/tau_f)`` (so
+  ``tau_f -> 0`` is one sample of delay, not the unfiltered law);
 * with ``equilibrium = "estimated"`` the errors are taken from an estimate ``w = v_hat - v*``
   of the equilibrium velocity, a low-pass of the (received, filtered) velocity ``y`` of the
   vehicle right ahead, updated after it is used: ``w_k+1 = b w_k + (1 - b) y_k``,
@@ -359,9 +361,9 @@ def as_run_loop(
         f_now = r_now
     elif T is None:
         f_now = (sel(i_f, nr), np.zeros(nr))
-    else:
+    else:  # the law reads the filter's state, then the state takes the new value in
         a_f = math.exp(-T / tf)
-        f_now = (a_f * sel(i_f, nr) + (1 - a_f) * r_now[0], (1 - a_f) * r_now[1])
+        f_now = (sel(i_f, nr), np.zeros(nr))
 
     def command(Kx, kh):  # (row on xi, coefficient of v_h) of Kx x + kh v_h as measured
         Kr = np.array([Kx[j] for j in chans] + ([kh] if use_head else []))
@@ -393,8 +395,8 @@ def as_run_loop(
             A[i_w] = b * sel(i_w, 1)[0] + (1 - b) * f_now[0][y_idx]
             h[i_w] = (1 - b) * f_now[1][y_idx]
         if tf > 0:
-            A[i_f : i_f + nr] = f_now[0]
-            h[i_f : i_f + nr] = f_now[1]
+            A[i_f : i_f + nr] = a_f * sel(i_f, nr) + (1 - a_f) * r_now[0]
+            h[i_f : i_f + nr] = (1 - a_f) * r_now[1]
         if d > 0:
             A[i_d : i_d + nr] = r_raw[0]
             h[i_d : i_d + nr] = r_raw[1]
