@@ -146,3 +146,29 @@ def test_closed_loop_head_brake_keeps_the_iso_jerk_limit(problem):
     res_off = simulate(replace(spec.scenario, batch=1), ctrl)
     j_off = np.abs(jerk_1s(res_off))
     assert np.nanmax(j_off - iso15622_jerk_limit(res_off.velocity[:, :, res_off.cav])) > 0
+
+
+def test_closed_loop_safety_wins_over_a_strict_comfort_bound(monkeypatch):
+    """A comfort bound far below ISO's (jerk_scale 0.1: 0.25-0.5 m/s^3) cannot follow the
+    head's -5 m/s^2 brake safely: the MPC drops it on the steps where it would cost spacing
+    and keeps the absolute safe spacing without emergency braking. Kept hard instead, the same
+    bound lets the CAV into the safety margin."""
+    import lcc_synth.mpc.controller as ctl
+    from lcc_synth.mpc.report import bound_margin
+
+    spec = load_spec(PROBLEMS / "mpc_head_brake.toml")
+    base = spec.controllers["mpc"]
+    strict = replace(base.settings, constraints=replace(base.settings.constraints,
+                                                        jerk_scale=0.1))
+    c = ctl.MPCController("strict", strict, base.system)
+    res = simulate(spec.scenario, c)
+    assert c.stats()["jerk_relaxed"] > 0
+    assert not res.aeb_active.any() and bound_margin(res).min() >= 0.0
+
+    def hard(solver, form, q, lo, hi, wz, wy, record):
+        return solver.solve(q, lo, hi, wz, wy)
+
+    monkeypatch.setattr(ctl, "solve_prioritised", hard)
+    c = ctl.MPCController("hard", strict, base.system)
+    res = simulate(spec.scenario, c)
+    assert res.aeb_active.any() or bound_margin(res).min() < 0.0
