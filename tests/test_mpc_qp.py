@@ -34,8 +34,9 @@ def _setup(kind, m, n, N=30, weights=None, behind=()):
     return s, lin, form, form.matrices(lin)
 
 
-def _numpy_cost(s, lin, form, x0, d, u_prev, z):
-    """The MPC cost evaluated by simulating the prediction model (independent of CasADi)."""
+def _numpy_cost(s, lin, form, x0, d, u_prev, z, past=None):
+    """The MPC cost evaluated by simulating the prediction model (independent of CasADi);
+    ``past``: the applied commands before the step, newest first (comfort rows)."""
     N = s.horizon
     w = s.weights
     q = state_weights(lin.model, s)
@@ -58,6 +59,11 @@ def _numpy_cost(s, lin, form, x0, d, u_prev, z):
     for f, fam in enumerate(form.families):
         rows.append(X[1:, fam.s_index] - fam.t_gap * X[1:, fam.v_index] + E[f * N:(f + 1) * N])
     rows.append(E)
+    W = form.W
+    if W:
+        past = np.full(W, u_prev) if past is None else np.asarray(past)
+        ext = np.concatenate([past[:W][::-1], a])  # a_{-W} .. a_{N-1}
+        rows.append(ext[W:] - ext[:-W])
     return J, np.concatenate(rows)
 
 
@@ -76,17 +82,21 @@ def test_qp_matches_numpy_cost_and_constraints(kind, m, n, jerk, input_on):
         x0 = rng.normal(size=lin.model.nx)
         d = rng.normal(size=s.horizon)
         u_prev = rng.normal()
-        p = form.param(x0, d, u_prev)
-        q, lo, hi = form.bounds(qp, p, -5.0, 2.0, np.zeros((len(form.families), s.horizon)))
-        J0, g0 = _numpy_cost(s, lin, form, x0, d, u_prev, np.zeros(form.nz))
+        past = rng.normal(size=form.W)
+        p = form.param(x0, d, u_prev, past)
+        q, lo, hi = form.bounds(qp, p, -5.0, 2.0, np.zeros((len(form.families), s.horizon)),
+                                jerk=3.0)
+        J0, g0 = _numpy_cost(s, lin, form, x0, d, u_prev, np.zeros(form.nz), past)
         for _ in range(3):
             z = rng.normal(size=form.nz)
-            J, g = _numpy_cost(s, lin, form, x0, d, u_prev, z)
+            J, g = _numpy_cost(s, lin, form, x0, d, u_prev, z, past)
             assert 0.5 * z @ H @ z + q @ z == pytest.approx(J - J0, rel=1e-9, abs=1e-8)
             # constraint rows: A z + offset reproduces the rows; l/u are shifted by the offset
             off = g0
             np.testing.assert_allclose(qp.A @ z + off, g, rtol=1e-9, atol=1e-9)
             np.testing.assert_allclose(lo[: s.horizon] + off[: s.horizon], -5.0, atol=1e-9)
+            r = form.jerk_rows
+            np.testing.assert_allclose(hi[r] + off[r], 3.0 * form.window, atol=1e-9)
 
 
 @pytest.mark.parametrize("kind,input_on", [("cf_lcc", "total"), ("cf_lcc", "model"),
@@ -162,7 +172,7 @@ def test_l1_slack_penalty_is_exact():
     for _ in range(40):
         q, lo, hi = _random_problem(rng, form, qp, s, lin, N)
         hard_hi = hi.copy()
-        hard_hi[2 * N:] = lo[2 * N:]  # slacks fixed at 0
+        hard_hi[2 * N:3 * N] = lo[2 * N:3 * N]  # slacks fixed at 0
         try:
             solve_exact(qp, q, lo, hard_hi, "daqp")
         except RuntimeError:

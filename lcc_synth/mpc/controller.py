@@ -33,6 +33,9 @@ At every sample (``sample_time``, default 0.1 s; the simulator holds the command
    gain (``fallback_gains_file`` if configured, else the paper's Section V-B gain for FD-/CF-LCC
    and the CAV's HDV law for LCC/CCC) on the same error state, clipped to the acceleration
    limits; the simulator's emergency braking is the last layer. Nothing raises inside the loop.
+7. **Comfort** (``constraints.jerk_scale``): the QP bounds the 1 s average jerk by a fraction of
+   ISO 15622's limit at the CAV's speed, and yields to the safe spacing (:mod:`~lcc_synth.mpc.
+   comfort`: its priority order).
 
 The applied command is the model input for LCC/FD-LCC/CCC and ``K_law x + k_h d_0 + u_hat`` (the
 CAV's linear HDV law plus the MPC's added input) for CF-LCC.
@@ -51,6 +54,7 @@ from lcc_synth.controllers.base import ControlContext, Observation
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains, cav_feedback
 from lcc_synth.models.hdv import free_speed
+from lcc_synth.mpc.comfort import jerk_bound, solve_prioritised
 from lcc_synth.mpc.formulation import (
     Family,
     Formulation,
@@ -89,6 +93,7 @@ class _Member:
     plan: np.ndarray | None = None
     plan_age: int = 0
     warm: tuple | None = None
+    past: np.ndarray = field(default_factory=lambda: np.zeros(1))  # commands, newest first
     hist: dict[str, list] = field(default_factory=dict)
 
 
@@ -242,6 +247,7 @@ class MPCController:
             s_off = np.nan_to_num(s_off, nan=0.0)
             mem = _Member(solver, lin, qp, K, kh, np.zeros(W), s_off, v_eq=float(ctx.v_star[b]))
             mem.hist = {k: [] for k in _HIST_KEYS}
+            mem.past = np.zeros(max(1, self.formulation.W))
             self._members.append(mem)
 
     def __call__(self, obs: Observation) -> np.ndarray:
@@ -262,6 +268,8 @@ class MPCController:
                     self._st["error_messages"].append(f"t={obs.t:g}: {type(err).__name__}: {err}")
                 out[b] = self._hold(mem)
                 self._record_fail(mem, out[b])
+            mem.past[1:] = mem.past[:-1]
+            mem.past[0] = out[b]
             self._st["step_time"].append(time.perf_counter() - t0)
         self._st["steps"] += 1
         return out
@@ -372,14 +380,15 @@ class MPCController:
         N = self.settings.horizon
         if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(d_model))):
             return self._fallback(mem, x0, xi, d_model, "nonfinite_state")
-        p = form.param(x0, d_model, mem.u_prev)
+        p = form.param(x0, d_model, mem.u_prev, mem.past)
         fb = self._family_bounds(mem, x0, d, s_eq, s0)
-        q, lo, hi = form.bounds(mem.qp, p, self._a_min, self._a_max, fb)
+        jb = jerk_bound(c.jerk_scale, v0)
+        q, lo, hi = form.bounds(mem.qp, p, self._a_min, self._a_max, fb, jb)
         warm = mem.warm
-        res = mem.solver.solve(
-            q, lo, hi,
+        res = solve_prioritised(
+            mem.solver, form, q, lo, hi,
             None if warm is None else warm[0][self._shift_z],
-            None if warm is None else warm[1][self._shift_y],
+            None if warm is None else warm[1][self._shift_y], st,
         )  # fmt: skip
         st["solves"] += 1
         st["osqp_time"].append(res.run_time)

@@ -14,6 +14,16 @@ spacing slack per constrained family and step), and
     s.t. a_min <= a_k = K_law x_k + k_h d_k + u_k <= a_max      (hard, total CAV acceleration)
          c_f' x_k + e_{f,k} >= b_{f,k}                           (soft spacing, k = 1..N)
          e >= 0
+         |a_k - a_{k-W}| <= J W Ts                              (comfort, k = 0..N-1; option)
+
+The comfort rows (``constraints.jerk_scale > 0``) bound the CAV's 1 s average jerk: with a
+command held for ``Ts``, the applied acceleration's change over ``W Ts`` (``W = round(
+constraints.jerk_window / Ts)``, 1 s by default) is ``a_k - a_{k-W}``, so the rows are ISO
+15622's "average over 1 s" exactly, not a conservative per-sample bound. For ``k < W`` the
+earlier value ``a_{k-W}`` is a past applied command (parameter). ``J`` (the bound, per
+step) comes with the vectors (:meth:`Formulation.bounds`), so the speed-dependent limit never
+touches the matrices; ``J = inf`` disables the rows (the controller does so when the comfort
+rows would cost spacing slack: safety first, see :mod:`lcc_synth.mpc.comfort`).
 
 ``x_dir d`` is the steady state of the string when the head's velocity error is ``d``: every
 velocity error equals ``d`` and every spacing error is ``(alpha2 - alpha3) / alpha1 * d`` (the
@@ -38,9 +48,11 @@ k_h)`` are CasADi symbols too, so the sparsity pattern of the Hessian and of the
 matrix is structural and never changes: re-linearising at a new equilibrium only re-evaluates
 the numeric values (one call of the CasADi function) and hands them to OSQP with
 ``update(Px=..., Ax=...)``. The vectors are affine in the step parameter
-``p = [x_0, d_0..d_{N-1}, u_{-1}]``: ``q = Qp p + q0`` and the constraint offset ``Gp p + g0``
-(``q0`` holds the l1 slack penalty), extracted as dense matrices once per linearisation, so a
-control step is two small matrix-vector products plus the OSQP update and solve.
+``p = [x_0, d_0..d_{N-1}, u_{-1}, c_{-1}..c_{-W}]`` (``u_{-1}`` the jerk weight's previous
+input, ``c_{-j}`` the applied commands of the comfort rows, absent without them):
+``q = Qp p + q0`` and the constraint offset ``Gp p + g0`` (``q0`` holds the l1 slack
+penalty), extracted as dense matrices once per linearisation, so a control step is two small
+matrix-vector products plus the OSQP update and solve.
 (``tests/test_mpc_qp.py`` checks these matrices against the cost and constraints evaluated by
 simulating the prediction model in numpy.)
 """
@@ -279,8 +291,12 @@ class Formulation:
         self.families = list(families)
         F = len(self.families)
         self.nz = N + F * N
-        self.nc = N + 2 * F * N
-        self.n_param = nx + N + 1
+        c = settings.constraints
+        self.W = W = max(1, int(round(c.jerk_window / settings.sample_time))) \
+            if c.jerk_scale > 0 else 0
+        self.window = W * settings.sample_time
+        self.nc = N + 2 * F * N + (N if W else 0)
+        self.n_param = nx + N + 1 + W
         w = settings.weights
 
         Ad = ca.MX.sym("Ad", nx, nx)
@@ -302,7 +318,7 @@ class Formulation:
 
         # x_k = Xu[k] U + Xp[k] p, with p = [x0, d, u_prev] (structural zeros kept sparse)
         Xu = [ca.MX(nx, N)]
-        Xp = [ca.MX(ca.horzcat(ca.DM.eye(nx), ca.DM(nx, N + 1)))]
+        Xp = [ca.MX(ca.horzcat(ca.DM.eye(nx), ca.DM(nx, N + 1 + W)))]
         au, ap = [], []  # total CAV acceleration a_k = au[k] U + ap[k] p
         for k in range(N):
             if cf:
@@ -335,7 +351,7 @@ class Formulation:
         add(Wu, Wp, ca.DM(w.input))
         if w.jerk > 0:
             prev_u = ca.vertcat(ca.MX(1, N), Wu[: N - 1, :])
-            prev_p = ca.vertcat(ca.MX(unit(npar, npar - 1)), Wp[: N - 1, :])
+            prev_p = ca.vertcat(ca.MX(unit(npar, nx + N)), Wp[: N - 1, :])
             add(Wu - prev_u, Wp - prev_p, ca.DM(w.jerk))
 
         # Hessian, linear term, constraints
@@ -355,6 +371,15 @@ class Formulation:
             rows_p.append(ca.vertcat(*[c @ Xp[k] for k in range(1, N + 1)]))
         rows_u.append(ca.horzcat(ca.MX(FN, N), ca.MX(ca.DM.eye(FN))))
         rows_p.append(ca.MX(FN, npar))
+        if W:  # comfort rows a_k - a_{k-W}, a_{k-W} = c_{k-W} (parameter) for k < W
+            for k in range(N):
+                ru, rp = au[k], ap[k]
+                if k >= W:
+                    ru, rp = ru - au[k - W], rp - ap[k - W]
+                else:
+                    rp = rp - unit(npar, nx + N + W - k)
+                rows_u.append(ca.horzcat(ru, ca.MX(1, FN)))
+                rows_p.append(rp)
         A = ca.vertcat(*rows_u)
         Gp = ca.vertcat(*rows_p)
         g0 = ca.DM(self.nc, 1)
@@ -381,16 +406,30 @@ class Formulation:
             np.array(g0).reshape(-1),
         )
 
-    def param(self, x0: np.ndarray, d: np.ndarray, u_prev: float) -> np.ndarray:
-        """The step parameter ``p = [x0, d, u_prev]``."""
-        return np.concatenate([x0, d, [u_prev]])
+    @property
+    def jerk_rows(self) -> slice:
+        """Rows of the comfort constraints (empty without them)."""
+        return slice(self.nc - (self.N if self.W else 0), self.nc)
+
+    def param(self, x0: np.ndarray, d: np.ndarray, u_prev: float,
+              past: np.ndarray | None = None) -> np.ndarray:
+        """The step parameter ``p = [x0, d, u_prev, c_{-1}..c_{-W}]``.
+
+        ``past`` holds the last applied commands, newest first (at least ``W``; default: all
+        equal to ``u_prev``).
+        """
+        W = self.W
+        c = np.full(W, float(u_prev)) if past is None else np.asarray(past, float)[:W]
+        return np.concatenate([x0, d, [u_prev], c])
 
     def bounds(self, qp: QPMatrices, p: np.ndarray, a_min: float, a_max: float,
-               fam_bounds: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               fam_bounds: np.ndarray, jerk: float = np.inf,
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(q, l, u)`` of OSQP for parameter ``p``.
 
         ``fam_bounds`` is ``(F, N)``: the right-hand side ``b_{f,k}`` of every spacing row
-        (``-inf`` disables a row).
+        (``-inf`` disables a row). ``jerk`` (m/s^3) bounds the average jerk over the comfort
+        window: ``|a_k - a_{k-W}| <= jerk * W * Ts`` (``inf`` disables the rows).
         """
         N, F = self.N, len(self.families)
         off = qp.Gp @ p + qp.g0
@@ -402,6 +441,10 @@ class Formulation:
         hi[N:N + F * N] = np.inf
         lo[N + F * N:] = 0.0
         hi[N + F * N:] = np.inf
+        if self.W:
+            r = self.jerk_rows
+            lo[r] = -jerk * self.window
+            hi[r] = jerk * self.window
         return qp.Qp @ p + qp.q0, lo - off, hi - off
 
     def shift_indices(self) -> tuple[np.ndarray, np.ndarray]:

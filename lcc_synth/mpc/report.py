@@ -76,6 +76,7 @@ def new_step_record() -> dict[str, Any]:
         "relinearize_failures": 0,
         "slack_steps": 0,
         "max_slack": 0.0,
+        "jerk_relaxed": 0,
         "violation_steps": 0,
         "max_violation": 0.0,
         "step_time": [],
@@ -125,6 +126,7 @@ def step_statistics(st: dict[str, Any]) -> dict[str, Any]:
         "relinearize_failures": st["relinearize_failures"],
         "slack_steps": st["slack_steps"],
         "max_slack_m": st["max_slack"],
+        "jerk_relaxed": st.get("jerk_relaxed", 0),
         "violation_steps": st["violation_steps"],
         "max_violation_m": st["max_violation"],
     }

@@ -31,6 +31,9 @@ A problem file selects the MPC with a controller table (every key optional)::
     behind = []                # HDVs behind with soft bounds s_i >= s_min_behind + t_gap_behind v_i
     s_min_behind = 5.0
     t_gap_behind = 0.8
+    jerk_scale = 0.9           # comfort: |a_k - a_{k-W}| <= jerk_scale * ISO 15622 limit at the
+                               #   CAV's speed * W Ts (0 = off; yields to the spacing bounds)
+    jerk_window = 1.0          # W Ts (s): 1 s = ISO 15622's average, sample_time = per step
 
     [controllers.mpc.prediction]
     head = "constant"          # "constant": head velocity held; "accel": its measured
@@ -116,6 +119,8 @@ class Constraints:
     behind: tuple[int, ...] = ()
     s_min_behind: float = 5.0
     t_gap_behind: float = 0.8
+    jerk_scale: float = 0.9
+    jerk_window: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -226,6 +231,18 @@ def validate(s: MPCSettings, field_prefix: str = "") -> None:
         )
     for name in ("s_min", "t_gap", "margin", "s_min_behind", "t_gap_behind"):
         _pos(getattr(c, name), f"{pre}constraints.{name}")
+    _pos(c.jerk_scale, f"{pre}constraints.jerk_scale")
+    if c.jerk_scale > 1.0:
+        raise ConfigError(
+            f"{pre}constraints.jerk_scale",
+            f"is a fraction of ISO 15622's limit, in [0, 1] (0 = off), got {c.jerk_scale}",
+        )
+    _pos(c.jerk_window, f"{pre}constraints.jerk_window", strict=True)
+    if c.jerk_scale > 0 and not 0.5 * s.sample_time <= c.jerk_window <= 10.0:
+        raise ConfigError(
+            f"{pre}constraints.jerk_window",
+            f"must be in [sample_time = {s.sample_time}, 10] s, got {c.jerk_window}",
+        )
     for i in c.behind:
         if isinstance(i, bool) or not isinstance(i, int) or i < 1:
             raise ConfigError(
@@ -312,6 +329,10 @@ def settings_from_table(table: Mapping[str, Any], field_name: str) -> MPCSetting
         behind=tuple(behind),
         s_min_behind=get_number(ct, "s_min_behind", f"{f}.constraints", dc.s_min_behind, lo=0.0),
         t_gap_behind=get_number(ct, "t_gap_behind", f"{f}.constraints", dc.t_gap_behind, lo=0.0),
+        jerk_scale=get_number(ct, "jerk_scale", f"{f}.constraints", dc.jerk_scale, lo=0.0,
+                              hi=1.0),
+        jerk_window=get_number(ct, "jerk_window", f"{f}.constraints", dc.jerk_window, lo=0.0,
+                               lo_open=True),
     )
     pt = get_table(table, "prediction", f"{f}.prediction")
     check_keys(pt, [k for k in Prediction.__dataclass_fields__], f"{f}.prediction")
