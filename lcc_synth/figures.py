@@ -209,7 +209,8 @@ def plot_gamma_curves(curves, omega, path: str | Path, title: str | None = None)
     ax.set_xlabel("ω (rad/s)")
     ax.set_ylabel("|Γ(jω)|  (head → tail velocity)")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    # below |Γ| = 1 at low frequency every curve is flat at 1: the legend hides nothing there
+    ax.legend(fontsize=7, loc="lower left")
     ax.set_title(title or "Head-to-tail transfer")
     return _save(fig, path, dpi=120)
 
