@@ -19,12 +19,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--figure", metavar="PNG", help="design = 'sparsity': write the Pareto-front PNG"
     )
+    parser.add_argument(
+        "--no-progress", action="store_true", help="no progress lines (stages) on stderr"
+    )
     add_recording(parser)
 
 
 def run(args: argparse.Namespace) -> int:
     from lcc_synth.problem import load_problem
     from lcc_synth.recording import record_synthesis_file, recording_path
+    from lcc_synth.resources import set_progress
     from lcc_synth.synthesis.config import spec_from_problem
     from lcc_synth.synthesis.design import synthesize
     from lcc_synth.synthesis.gains_file import write_gains
@@ -33,6 +37,7 @@ def run(args: argparse.Namespace) -> int:
 
     spec = spec_from_problem(load_problem(args.problem))
     rrd = recording_path(args, spec.name)  # bad --rrd fails before the synthesis runs
+    set_progress(not args.no_progress)
     try:
         rep = synthesize(spec)
     except SynthesisError as err:

@@ -59,6 +59,7 @@ from lcc_synth.mpc.formulation import (
     Family,
     Formulation,
     Linearization,
+    check_horizon,
     linearize,
     state_weights,
 )
@@ -151,6 +152,7 @@ class MPCController:
             raise ConfigError(f"weights ({err.field})", err.message) from None
         model = self._lin0.model
         self._families = self._make_families(model)
+        check_horizon(settings.horizon, model.nx, len(self._families))
         self.formulation = Formulation(
             self.kind, model.nx, settings, state_weights(model, settings), self._families
         )

@@ -256,6 +256,33 @@ def steady_direction(model: LCCModel) -> np.ndarray:
     return x
 
 
+#: longest MPC horizon: building the condensed QP grows like N^3 (N = 400: 9 s, 1.4 GiB)
+MAX_HORIZON = 500
+
+
+def formulation_bytes(N: int, nx: int, families: int) -> float:
+    """Estimated peak bytes of :class:`Formulation` for horizon ``N``: the CasADi build of the
+    condensed QP (measured about ``20 N^3`` bytes) plus the dense Hessian, constraint and
+    parameter maps (``8 (N + F N) (nx + 2 N)`` each)."""
+    return 20.0 * N**3 + 8.0 * (3 + 2 * families) * N * (nx + 2 * N)
+
+
+def check_horizon(N: int, nx: int, families: int) -> None:
+    """Refuse a horizon above :data:`MAX_HORIZON` or one whose QP cannot fit in memory."""
+    from lcc_synth.errors import ConfigError
+    from lcc_synth.resources import format_bytes, require_memory
+
+    need = formulation_bytes(N, nx, families)
+    if N > MAX_HORIZON:
+        raise ConfigError(
+            "horizon",
+            f"{N} is above the limit {MAX_HORIZON} (the condensed QP would take about "
+            f"{format_bytes(need)} to build, growing like N^3); use a longer sample_time",
+        )
+    require_memory("horizon", need, f"condensed QP, horizon {N}, {nx} states",
+                   "shorten the horizon")
+
+
 def _to_csc(dm) -> sp.csc_matrix:
     s = dm.sparsity()
     colind, row = s.get_ccs()

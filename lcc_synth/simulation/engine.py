@@ -50,6 +50,7 @@ import numpy as np
 
 from lcc_synth.controllers.base import ControlContext, Controller, Observation
 from lcc_synth.errors import ConfigError
+from lcc_synth.resources import require_memory
 from lcc_synth.simulation.kernels import _advance, _observe_all
 from lcc_synth.simulation.perturbations import overrides
 from lcc_synth.simulation.results import SimResult
@@ -93,6 +94,18 @@ def _steps_of(value: float, dt: float, field: str, multiple: bool) -> int:
     return r
 
 
+def simulation_bytes(sc: Scenario) -> int:
+    """Bytes :func:`simulate` allocates for ``sc``: the time grid and the perturbation
+    overrides (``steps x (1 + 2 vehicles)``), the recorded samples (``batch x kept samples x
+    (4 vehicles + 1)`` floats) and the delay ring buffer."""
+    T, nv, B = sc.steps, sc.n_vehicles, sc.batch
+    kept = (T - 1) // sc.record_every + 1
+    delay = float(np.max(np.asarray(sc.delay, dtype=float), initial=0.0)) + sc.delay_spread
+    delay = max(delay if np.isfinite(delay) else 0.0, sc.v2v.latency, 0.0)
+    ring = (int(delay / sc.dt) + 2) * B * nv * 16
+    return 8 * T * (1 + 2 * nv) + B * kept * (8 * (4 * nv + 1) + 1) + ring
+
+
 def simulate(
     scenario: Scenario, controller: Controller, draws: Draws | None = None
 ) -> SimResult:
@@ -116,6 +129,13 @@ def simulate(
     sc = scenario
     B, nv, T, dt = sc.batch, sc.n_vehicles, sc.steps, sc.dt
     cav = sc.cav
+    require_memory(
+        "scenario.duration",
+        simulation_bytes(sc),
+        f"{T} steps x {nv} vehicles x {B} scenario(s), every {sc.record_every} step(s) kept",
+        "shorten scenario.duration, raise scenario.dt or scenario.record_every, or run fewer "
+        "seeds at once",
+    )
     draws = sc.draw() if draws is None else draws
     t = sc.times()
 

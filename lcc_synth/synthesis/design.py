@@ -7,7 +7,9 @@ import time
 
 import numpy as np
 
+from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import input_feedback
+from lcc_synth.resources import format_bytes, progress, require_memory
 from lcc_synth.synthesis.config import SynthesisSpec
 from lcc_synth.synthesis.h2 import (
     H2Plant,
@@ -24,6 +26,37 @@ from lcc_synth.synthesis.string_lmi import string_aware_h2
 from lcc_synth.synthesis.structured import pattern_mask, pattern_vehicles, structured_h2
 
 __all__ = ["synthesize", "baseline_check", "design_gain_of"]
+
+#: largest string (m + n) of the designs that solve an LMI (Clarabel): beyond it the solve
+#: takes minutes and its KKT system tens of GiB; method = 'direct' has no such limit
+MAX_LMI_VEHICLES = 100
+
+
+def _uses_lmi(spec: SynthesisSpec) -> bool:
+    if spec.design == "full_state":
+        return spec.method == "lmi" or bool(spec.cross_check)
+    return (spec.design == "structured" and spec.method == "lmi") or spec.design == "string_stable"
+
+
+def check_size(spec: SynthesisSpec, nx: int) -> None:
+    """Refuse an LMI design that cannot finish: ``m + n`` above :data:`MAX_LMI_VEHICLES` or
+    a KKT estimate (``8 (nx (nx + 1) / 2)^2`` bytes, dense in the worst case) above the
+    available memory."""
+    if not _uses_lmi(spec):
+        return
+    m, n = spec.system.m, spec.system.n
+    svec = nx * (nx + 1) // 2
+    need = 8.0 * svec**2
+    if m + n > MAX_LMI_VEHICLES:
+        raise ConfigError(
+            "system.n",
+            f"{spec.design} synthesis solves an LMI of {nx} states: m + n = {m + n} is above "
+            f"the limit {MAX_LMI_VEHICLES} (estimated KKT memory {format_bytes(need)}); use "
+            "[synthesis] method = 'direct' for long strings",
+        )
+    require_memory("system.n", need, f"LMI with {nx} states, {svec} unknowns per cone",
+                   "use [synthesis] method = 'direct'")
+
 
 #: relative H2 disagreement between the LMI and Riccati designs that counts as a failure
 CROSS_CHECK_TOL = 1e-5
@@ -74,6 +107,9 @@ def synthesize(spec: SynthesisSpec) -> SynthesisReport:
     t_start = time.perf_counter()
     model = spec.system.linear_model(warn=False)
     plant = make_plant(model, spec.semantics, spec.weights)
+    check_size(spec, plant.nx)
+    progress(f"synthesis: {spec.design} design, {plant.nx} states ({model.kind}, m = "
+             f"{model.m}, n = {model.n})")
     vehicles = spec.pattern if spec.pattern is not None else [v for v in model.vehicles if v]
     notes: list[str] = []
     solver: dict = {}
@@ -82,6 +118,7 @@ def synthesize(spec: SynthesisSpec) -> SynthesisReport:
     bound = restr = None
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
+    progress("synthesis: Riccati (unstructured optimum)")
     g_ric, _ = riccati_gain(plant)
     timings["riccati"] = time.perf_counter() - t0
     h2_star = h2_norm(plant, g_ric)
@@ -108,6 +145,7 @@ def synthesize(spec: SynthesisSpec) -> SynthesisReport:
         mask = np.ones(plant.nx, bool)
         g = g_ric
         if spec.method == "lmi" or spec.cross_check:
+            progress("synthesis: LMI solve (Clarabel)")
             lmi = lmi_full_state(plant)
             timings["lmi"] = lmi.solve_time
             h_lmi = h2_norm(plant, lmi.g)
@@ -213,6 +251,7 @@ def synthesize(spec: SynthesisSpec) -> SynthesisReport:
                 f"(peak |Gamma| {after['gamma_peak']:.4f}, margin {after['margin']:.3g}); no "
                 "step could be accepted"
             )
+    progress("synthesis: checking the gain (stability, H2, string stability)")
     g = np.where(mask, g, 0.0)  # exact zeros off the pattern (already so; kept explicit)
     chk = check_gain(plant, g, f"{spec.design} design", solver)
     if spec.design == "string_stable" and not chk.string_stable:
@@ -225,6 +264,7 @@ def synthesize(spec: SynthesisSpec) -> SynthesisReport:
     K_in, kh_in = plant.input_feedback(g)
     baseline = baseline_check(spec, plant) if spec.baseline else None
     timings["total"] = time.perf_counter() - t_start
+    progress(f"synthesis: done in {timings['total']:.1f} s")
     return SynthesisReport(
         problem=spec.name,
         design=spec.design,

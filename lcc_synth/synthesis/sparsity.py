@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lcc_synth.errors import ConfigError
+from lcc_synth.resources import progress
 from lcc_synth.synthesis.h2 import (
     H2Plant,
     SynthesisError,
@@ -203,7 +204,8 @@ def sparsity_sweep(
         return math.isfinite(h2_cost(plant, G)[0])
 
     F = g_opt.copy()
-    for gamma in gammas:
+    for i, gamma in enumerate(gammas, 1):
+        progress(f"synthesis: sparsity sweep, penalty {i}/{len(gammas)} (gamma = {gamma:.3g})")
         G, heard = run(gamma, F)
         if stabilising(G):
             F = G  # warm start along the sweep (G has the exact zeros)
@@ -229,7 +231,8 @@ def sparsity_sweep(
     t_admm = time.perf_counter() - t0
     polished: dict[tuple[int, ...], ParetoPoint] = {}
     g_opt_J = J_opt
-    for heard in sorted(found, key=len):
+    for i, heard in enumerate(sorted(found, key=len), 1):
+        progress(f"synthesis: sparsity sweep, polishing pattern {i}/{len(found)}")
         gamma, G = found[heard]
         mask = pattern_mask(plant, heard)
         starts = []

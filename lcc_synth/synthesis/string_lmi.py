@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lcc_synth.errors import ConfigError
+from lcc_synth.resources import progress
 from lcc_synth.synthesis.h2 import (
     H2Plant,
     LMIResult,
@@ -118,6 +119,7 @@ def string_lmi(
     ]
     cons = [k for k in cons if k is not None]
     prob = cp.Problem(cp.Minimize(cp.trace(plant.Q @ X) + plant.r * W[0, 0]), cons)
+    progress(f"synthesis: string-stability LMI solve ({plant.nx} states, Clarabel)")
     status, dt = solve_checked(
         prob,
         f"string-stability LMI (gamma = {gamma:g})",

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lcc_synth.errors import ConfigError
+from lcc_synth.resources import progress
 from lcc_synth.synthesis.h2 import (
     STABILITY_TOL,
     H2Plant,
@@ -309,6 +310,8 @@ def polish(
     converged = False
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007
+        if it == 1 or it % 25 == 0:
+            progress(f"synthesis: polish iteration {it}/{max_iter}, H2^2 = {J:.6g}")
         grad = 2.0 * (plant.r * g.reshape(1, -1) + plant.B.T @ P) @ L
         grad = np.where(mask, grad.ravel(), 0.0)
         gn = float(np.linalg.norm(grad))
@@ -412,6 +415,7 @@ def structured_h2(
     starts = []
     if method == "lmi":
         t0 = time.perf_counter()
+        progress(f"synthesis: LMI solve (convex restriction, {plant.nx} states, Clarabel)")
         lmi = convex_restriction(plant, mask, band=band)
         timings["lmi"] = time.perf_counter() - t0
         J_lmi, _, _ = h2_cost(plant, lmi.g)

@@ -1,0 +1,90 @@
+"""Resource limits (refused before allocating, exit 2), progress lines and Ctrl-C (exit 130)."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from lcc_synth.cli.main import main
+
+ROOT = Path(__file__).resolve().parents[1]
+PROBLEMS = ROOT / "problems"
+
+
+def _mutate(tmp_path, name, pattern, repl):
+    src = (PROBLEMS / name).read_text()
+    out = re.sub(pattern, repl, src, count=1, flags=re.M)
+    assert out != src
+    p = tmp_path / name
+    p.write_text(out)
+    return p
+
+
+def _refused(capsys, argv, field, budget=20.0):
+    t0 = time.perf_counter()
+    assert main(argv) == 2
+    assert time.perf_counter() - t0 < budget
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and field in err[0] and "Traceback" not in err[0], err
+    return err[0]
+
+
+def test_duration_refused_with_estimate(tmp_path, capsys):
+    p = _mutate(tmp_path, "mpc_head_brake.toml", r"^duration = .*$", "duration = 1e9")
+    msg = _refused(capsys, ["simulate", str(p), "--no-record"], "scenario.duration")
+    assert "TiB" in msg and "available" in msg
+
+
+def test_mpc_horizon_refused(tmp_path, capsys):
+    p = _mutate(tmp_path, "mpc_head_brake.toml", r"^horizon = .*$", "horizon = 100000")
+    msg = _refused(capsys, ["simulate", str(p), "--no-record"], "controllers.mpc.horizon")
+    assert "limit 500" in msg
+
+
+def test_synthesis_size_refused(tmp_path, capsys):
+    p = _mutate(tmp_path, "synth_cf_lcc_pattern.toml", r"^n = 10$", "n = 200")
+    msg = _refused(capsys, ["synthesize", str(p), "--no-record"], "system.n")
+    assert "method = 'direct'" in msg and "GiB" in msg
+
+
+def test_memory_estimate_against_available(monkeypatch):
+    import pytest
+
+    from lcc_synth import resources
+    from lcc_synth.errors import ConfigError
+
+    monkeypatch.setattr(resources, "available_memory", lambda: 1 << 30)
+    resources.require_memory("x", 1 << 20, "small")
+    with pytest.raises(ConfigError, match="x: the run needs about 2 GiB"):
+        resources.require_memory("x", 2 << 30, "large")
+
+
+def test_synthesis_progress_on_stderr(capsys):
+    assert main(["synthesize", str(PROBLEMS / "synth_cf_lcc_pattern.toml"), "--no-record"]) == 0
+    err = capsys.readouterr().err
+    for stage in ("Riccati", "LMI solve", "polish iteration", "done in"):
+        assert "lcc-synth: synthesis: " in err and stage in err, err
+    assert main(["synthesize", str(PROBLEMS / "synth_cf_lcc_pattern.toml"), "--no-record",
+                 "--no-progress"]) == 0
+    assert "lcc-synth: synthesis:" not in capsys.readouterr().err
+
+
+def test_ctrl_c_exits_130_in_one_line(tmp_path):
+    p = _mutate(tmp_path, "mpc_head_brake.toml", r"^duration = .*$", "duration = 3000.0")
+    env = {**os.environ, "RERUN_ANALYTICS": "0", "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "lcc_synth.cli.main", "simulate", str(p), "--no-record"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path,
+    )  # fmt: skip
+    time.sleep(6.0)
+    assert proc.poll() is None, proc.communicate()
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err
+    assert err.strip().splitlines()[-1] == "lcc-synth simulate: interrupted"
