@@ -26,6 +26,13 @@ def add_arguments(parser) -> None:
         metavar="N",
         help="run N random draws (scenario batch) per controller; overrides [scenario].batch",
     )
+    parser.add_argument(
+        "--record-seeds",
+        default=None,
+        metavar="LIST",
+        help="with --seeds N: record only these scenarios (e.g. 0,3 or 2-5; default: all N, "
+        "each as <controller>_seed<k>, one tab per seed in the viewer)",
+    )
     add_recording(parser)
 
 
@@ -258,19 +265,24 @@ def run(args) -> int:
     with ExitStack() as stack:  # the recording is finalised however the run ends
         recorder = SimulationRecorder(args, stack)
         spec = load(args)
+        if recorder.enabled:  # a bad --record-seeds fails before the simulation runs
+            from lcc_synth.recording.cli import parse_record_seeds
+
+            parse_record_seeds(getattr(args, "record_seeds", None), spec.scenario.batch)
+        offsets = [c.first_index - spec.scenario.first_index for c in chunks(spec.scenario)]
         parts: dict[str, list] = {name: [] for name in spec.controllers}
         crashes: dict[str, list[str]] = {name: [] for name in spec.controllers}
         info: dict[str, tuple] = {}
         for chunk, name, result in iter_results(spec):
-            if chunk == 0:  # a study too large for memory records its first seed chunk
-                recorder(spec, name, result)
+            recorder(spec, name, result, offset=offsets[chunk])  # the selected seeds
             parts[name].append(per_scenario(result, spec.metrics))
             crashes[name] += result.collision_report()[: _MAX_LISTED - len(crashes[name])]
             wall = info[name][2] + result.wall_time if name in info else result.wall_time
             info[name] = (result.controller_info, result.controller_stats, wall)
             del result
-        rep = report_from(spec, {n: concatenate(p) for n, p in parts.items()}, info)
-        recorder.metrics(rep)
+        per = {n: concatenate(p) for n, p in parts.items()}
+        rep = report_from(spec, per, info)
+        recorder.metrics(rep, per)
     if recorder.path is not None:
         print(f"recording: {recorder.path} (lcc-synth review {recorder.path})", file=sys.stderr)
     if args.json:

@@ -9,12 +9,20 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from lcc_synth.errors import ConfigError
 from lcc_synth.recording.core import (
     entity_name,
     open_recording,
 )
-from lcc_synth.recording.layout import simulation_blueprint
+from lcc_synth.recording.layout import (
+    merge_ranges,
+    plot_ranges,
+    seed_entity,
+    seeds_blueprint,
+    simulation_blueprint,
+)
 from lcc_synth.recording.simulation import record_metrics, record_simulation
 
 
@@ -98,34 +106,116 @@ class SimulationRecorder:
         self.path: Path | None = None
         self.rec: Any = None
         self.scenario: str | None = None
+        self.record_seeds: str | None = getattr(args, "record_seeds", None)
+        self.seeds: list[int] = []  # study scenarios recorded (several-seed recordings)
+        self.ranges: dict[str, Any] = {}
+        self._layout: tuple = ()
 
-    def __call__(self, spec: Any, name: str, result: Any) -> None:
+    def __call__(self, spec: Any, name: str, result: Any, offset: int = 0) -> None:
         """Record controller ``name``'s ``result`` of ``spec`` (``spec.name``,
-        ``spec.controllers``); MPC controllers' ``history()`` is recorded too."""
+        ``spec.controllers``); MPC controllers' ``history()`` is recorded too.
+
+        A study of one scenario records the controller as ``name``; a study of several
+        (``spec.scenario.batch > 1``) records each selected scenario ``k`` (``--record-seeds``,
+        default all) as ``<name>_seed<k>``; ``result`` holds scenarios ``offset ..`` (a seed
+        chunk)."""
         if not self.enabled:
             return
+        batch = int(getattr(getattr(spec, "scenario", None), "batch", 1))  # study size
         if self.rec is None:
             self.scenario = spec.name
             self.path = recording_path(self.args, spec.name)
+            self.seeds = parse_record_seeds(self.record_seeds, batch)
             mpc = [
                 n
                 for n, c in dict(spec.controllers).items()
                 if callable(getattr(c, "history", None))
             ]
-            blueprint = simulation_blueprint(spec.name, list(spec.controllers), mpc)
-            self.rec = self.stack.enter_context(open_recording(self.path, spec.name, blueprint))
+            self.ranges = plot_ranges(result)
+            self._layout = (spec.name, list(spec.controllers), mpc, batch > 1)
+            self.rec = self.stack.enter_context(
+                open_recording(self.path, spec.name, self._blueprint())
+            )
+        else:
+            self.ranges = merge_ranges(self.ranges, plot_ranges(result))
         controller = dict(spec.controllers).get(name)
         history = None
         if callable(getattr(controller, "history", None)):
             history = controller.history() or None
-        record_simulation(
-            self.rec, result, self.scenario, controller=name, decimate=self.every,
-            mpc_history=history,
-        )  # fmt: skip
+        if batch == 1:
+            runs = [(name, 0)]
+        else:
+            members = int(np.asarray(result.velocity).shape[0])
+            runs = [(seed_entity(name, k), k - offset) for k in self.seeds
+                    if offset <= k < offset + members]  # fmt: skip
+        for entity, run in runs:
+            record_simulation(
+                self.rec, result, self.scenario, controller=entity, decimate=self.every,
+                mpc_history=history, run=run,
+            )  # fmt: skip
 
-    def metrics(self, report: Mapping[str, Mapping[str, Any]]) -> None:
-        """Write each controller's final metrics (``{name: metrics}``) and the comparison."""
+    def _blueprint(self):
+        scenario, controllers, mpc, several = self._layout
+        if several:
+            return seeds_blueprint(scenario, controllers, self.seeds, mpc, self.ranges)
+        return simulation_blueprint(scenario, controllers, mpc, self.ranges)
+
+    def metrics(
+        self, report: Mapping[str, Mapping[str, Any]], per: Mapping[str, Any] | None = None
+    ) -> None:
+        """Write each controller's final metrics (``{name: metrics}``) and the comparison; in a
+        several-seed recording each recorded seed gets its own metrics from ``per``
+        (``{name: per-scenario arrays}``, :func:`lcc_synth.metrics.per_scenario`)."""
         if self.rec is None:
             return
+        several = self._layout[3]
         for name, entry in report.items():
-            record_metrics(self.rec, self.scenario, name, entry)
+            if not several:
+                record_metrics(self.rec, self.scenario, name, entry)
+                continue
+            arrays = (per or {}).get(name, {})
+            for k in self.seeds:
+                one = {key: _item(v, k) for key, v in arrays.items()}
+                one = {key: v for key, v in one.items() if v is not None}
+                record_metrics(self.rec, self.scenario, seed_entity(name, k),
+                               {"seed": k, **one})  # fmt: skip
+        # The opening view ranges now cover every controller's run (re-sent as default).
+        self.rec.send_blueprint(self._blueprint(), make_active=True, make_default=True)
+
+
+def _item(values: Any, k: int):
+    """Scenario ``k``'s value of a per-scenario metric array (``None`` if not one)."""
+    x = np.asarray(values)
+    if x.ndim == 0 or k >= x.shape[0]:
+        return None
+    v = x[k]
+    return v.item() if np.ndim(v) == 0 else v.tolist()
+
+
+def parse_record_seeds(value: str | None, batch: int) -> list[int]:
+    """The scenarios ``--record-seeds`` selects (``"0,3"``, ``"2-5"``, ``"all"``) of a study of
+    ``batch`` scenarios; ``None`` = all of them."""
+    if value is None or str(value).strip().lower() == "all":
+        return list(range(batch))
+    out: set[int] = set()
+    for part in str(value).split(","):
+        part = part.strip()
+        try:
+            if "-" in part:
+                a, b = (int(x) for x in part.split("-", 1))
+                chosen = range(a, b + 1)
+            else:
+                chosen = [int(part)]
+        except ValueError:
+            raise ConfigError(
+                "--record-seeds", f"expected seed indices like 0,3 or 2-5, got {value!r}"
+            ) from None
+        for k in chosen:
+            if not 0 <= k < batch:
+                raise ConfigError(
+                    "--record-seeds", f"seed {k} is not in [0, {batch - 1}] (--seeds {batch})"
+                )
+            out.add(k)
+    if not out:
+        raise ConfigError("--record-seeds", f"selects no seed: {value!r}")
+    return sorted(out)

@@ -77,6 +77,13 @@ def vehicle_colors(m: int, n: int) -> np.ndarray:
     return colors
 
 
+def vehicle_widths(m: int, n: int) -> list[float]:
+    """Line widths of the per-vehicle series: the CAV and the head drawn thicker than HDVs."""
+    widths = [1.0] * (m + n + 2)
+    widths[0], widths[m + 1] = 2.5, 3.0
+    return widths
+
+
 @contextmanager
 def open_recording(
     path: str | Path, name: str, blueprint: Any = None, scenario: str | None = None
@@ -169,9 +176,11 @@ def _rows(rr: Any, descriptor: Any, flat: Any, rows: int, per_row: int):
     return rr.ComponentColumn(descriptor, _ArrowBatch(flat), offsets=offsets)
 
 
-def _send_series(rec: Any, entity: str, t: Any, values: np.ndarray, names, colors) -> None:
+def _send_series(
+    rec: Any, entity: str, t: Any, values: np.ndarray, names, colors, widths=None
+) -> None:
     """One entity with ``values.shape[1]`` scalar series (one ``send_columns`` call); ``t`` is
-    the times (s) or a ready ``TimeColumn``."""
+    the times (s) or a ready ``TimeColumn``; ``widths`` the line widths (default 1.5)."""
     import pyarrow as pa
 
     rr = _rr()
@@ -180,7 +189,9 @@ def _send_series(rec: Any, entity: str, t: Any, values: np.ndarray, names, color
     rec.log(
         entity,
         rr.SeriesLines(
-            names=list(names), colors=np.asarray(colors, dtype=np.uint8), widths=[1.5] * k
+            names=list(names),
+            colors=np.asarray(colors, dtype=np.uint8),
+            widths=[1.5] * k if widths is None else [float(w) for w in widths],
         ),
         static=True,
     )

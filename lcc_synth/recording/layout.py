@@ -2,13 +2,104 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.recording.core import ROAD_Y_SCALE, _rrb, entity_name
 
+#: Quantities of the time-series rows of :func:`simulation_blueprint` (and ``"u_cmd"``).
+PLOT_QUANTITIES = ("velocity", "spacing", "acceleration")
 
-def simulation_blueprint(scenario: str, controllers: Sequence[str], mpc: Sequence[str] = ()):
+#: What the colours of the per-vehicle plots mean (their legends are hidden: 12 series would
+#: cover the curves; hovering a curve names it).
+COLOR_KEY = "head yellow, CAV blue (thick), HDVs grey"
+
+
+def _span(lo: float, hi: float, pad: float = 0.08, min_span: float = 1.0) -> tuple[float, float]:
+    """``[lo, hi]`` padded by ``pad`` of its span, at least ``min_span`` wide (a flat signal
+    would otherwise open on an axis like 14.9999998 .. 15)."""
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return (0.0, 1.0)
+    mid, half = 0.5 * (lo + hi), 0.5 * max(hi - lo, 0.0)
+    half = max(half * (1.0 + pad), 0.5 * min_span)
+    return (float(mid - half), float(mid + half))
+
+
+def plot_ranges(result: Any) -> dict[str, Any]:
+    """Axis ranges for :func:`simulation_blueprint` from a ``SimResult``: ``{"time": (t0, t1),
+    "velocity" | "spacing" | "acceleration" | "u_cmd": (lo, hi)}`` over the whole batch, padded.
+
+    Non-finite samples (after a collision) are ignored; spacings are clipped below at -5 m."""
+    t = np.asarray(result.t, dtype=np.float64)
+    out: dict[str, Any] = {}
+    if t.size:
+        out["time"] = (float(t[0]), float(t[-1]))
+
+    def finite(x):
+        x = np.asarray(x, dtype=np.float64)
+        return x[np.isfinite(x)]
+
+    data = {
+        "velocity": finite(result.velocity),
+        "spacing": finite(np.asarray(result.spacing)[..., 1:]),
+        "acceleration": finite(result.acceleration),
+        "u_cmd": np.concatenate([finite(result.u_cmd), [0.0, 1.0]]),  # + the AEB flag 0/1
+    }
+    for key, x in data.items():
+        if x.size:
+            lo, hi = float(x.min()), float(x.max())
+            if key == "spacing":
+                lo = max(lo, -5.0)
+            out[key] = _span(lo, hi)
+    return out
+
+
+def merge_ranges(*ranges: Mapping[str, Any]) -> dict[str, Any]:
+    """The union of several :func:`plot_ranges`."""
+    out: dict[str, Any] = {}
+    for r in ranges:
+        for key, (lo, hi) in r.items():
+            a, b = out.get(key, (lo, hi))
+            out[key] = (min(a, lo), max(b, hi))
+    return out
+
+
+def _time_views(rrb, ranges: Mapping[str, Any]) -> dict[str, Any]:
+    """Keyword arguments of every time-series view: the whole run on the x axis (linked across
+    views, so zooming one zooms all) and the whole timeline queried."""
+    t = ranges.get("time")
+    if t is not None:
+        start = rrb.TimeRangeBoundary.absolute(seconds=float(t[0]))
+        end = rrb.TimeRangeBoundary.absolute(seconds=float(t[1]))
+    else:
+        start = end = rrb.TimeRangeBoundary.infinite()
+    return {
+        "axis_x": rrb.TimeAxis(
+            view_range=rrb.TimeRange(start=start, end=end),
+            link=rrb.components.LinkAxis.LinkToGlobal,
+        ),
+        "time_ranges": rrb.VisibleTimeRange(
+            "time",
+            start=rrb.TimeRangeBoundary.infinite(),
+            end=rrb.TimeRangeBoundary.infinite(),
+        ),
+    }
+
+
+def _y_axis(rrb, ranges: Mapping[str, Any], key: str):
+    r = ranges.get(key)
+    return rrb.ScalarAxis(range=r, zoom_lock=False) if r is not None else None
+
+
+def simulation_blueprint(
+    scenario: str,
+    controllers: Sequence[str],
+    mpc: Sequence[str] = (),
+    ranges: Mapping[str, Any] | None = None,
+):
     """Default layout of a simulation recording.
 
     Left: one row per quantity (velocity, spacing, acceleration), one time-series view per
@@ -16,24 +107,37 @@ def simulation_blueprint(scenario: str, controllers: Sequence[str], mpc: Sequenc
     controllers overlaid, the comparison metrics and each controller's description; for the
     MPC controllers named in ``mpc``, tabs with their solve times / status and their predicted
     velocities.
+
+    Every time-series view opens on the whole run (x axes linked). ``ranges``
+    (:func:`plot_ranges`) fixes the opening time span and y ranges; without it the x axis spans
+    the recording and y fits the data. The per-vehicle plots hide their legends (12 series
+    would cover the curves; hovering names a curve) and say the colours in their titles.
     """
     rrb = _rrb()
     s = entity_name(scenario)
     ctrls = [entity_name(c) for c in controllers]
     if not ctrls:
         raise ConfigError("controllers", "a simulation recording needs at least one controller")
+    ranges = dict(ranges or {})
+    tkw = _time_views(rrb, ranges)
 
     def row(quantity: str, title: str):
         return rrb.Horizontal(
             *[
-                rrb.TimeSeriesView(origin=f"/{s}/{c}/{quantity}", name=f"{c}: {title}")
+                rrb.TimeSeriesView(
+                    origin=f"/{s}/{c}/{quantity}",
+                    name=f"{c}: {title}",
+                    axis_y=_y_axis(rrb, ranges, quantity),
+                    plot_legend=rrb.PlotLegend(visible=False),
+                    **tkw,
+                )
                 for c in ctrls
             ],
             name=title,
         )
 
     plots = rrb.Vertical(
-        row("velocity", "velocity (m/s)"),
+        row("velocity", f"velocity (m/s): {COLOR_KEY}"),
         row("spacing", "spacing (m)"),
         row("acceleration", "acceleration (m/s²)"),
         name="time series",
@@ -52,6 +156,9 @@ def simulation_blueprint(scenario: str, controllers: Sequence[str], mpc: Sequenc
         origin=f"/{s}",
         contents=[f"+ /{s}/{c}/cav/**" for c in ctrls],
         name="CAV command u_cmd (m/s²) and AEB",
+        axis_y=_y_axis(rrb, ranges, "u_cmd"),
+        plot_legend=rrb.PlotLegend(rrb.Corner2D.RightBottom),
+        **tkw,
     )
     tabs = [
         rrb.TextDocumentView(origin=f"/{s}/metrics", name="metrics"),
@@ -70,6 +177,8 @@ def simulation_blueprint(scenario: str, controllers: Sequence[str], mpc: Sequenc
                 origin=f"/{s}/{c}/mpc",
                 contents=[f"+ /{s}/{c}/mpc/solve_time_ms", f"+ /{s}/{c}/mpc/status"],
                 name=f"{c}: MPC solve time (ms), status",
+                plot_legend=rrb.PlotLegend(rrb.Corner2D.RightTop),
+                **tkw,
             ),
             rrb.Spatial2DView(
                 origin=f"/{s}/{c}/mpc/predicted/velocity",
@@ -78,7 +187,47 @@ def simulation_blueprint(scenario: str, controllers: Sequence[str], mpc: Sequenc
         ]
     texts = rrb.Tabs(*tabs, name="reports")
     right = rrb.Vertical(road, u_cmd, texts, row_shares=[2, 1, 2])
-    return rrb.Blueprint(rrb.Horizontal(plots, right, column_shares=[3, 2]), collapse_panels=False)
+    return rrb.Blueprint(
+        rrb.Horizontal(plots, right, column_shares=[3, 2]),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(state="collapsed"),
+    )
+
+
+def seeds_blueprint(
+    scenario: str,
+    controllers: Sequence[str],
+    seeds: Sequence[int],
+    mpc: Sequence[str] = (),
+    ranges: Mapping[str, Any] | None = None,
+):
+    """Default layout of a recording of several seeds: one tab per seed, each the
+    :func:`simulation_blueprint` of the controllers recorded as ``<controller>_seed<k>``."""
+    rrb = _rrb()
+    tabs = [
+        rrb.Vertical(
+            simulation_blueprint(
+                scenario,
+                [seed_entity(c, k) for c in controllers],
+                [seed_entity(c, k) for c in mpc],
+                ranges,
+            ).root_container,
+            name=f"seed {k}",
+        )
+        for k in seeds
+    ]
+    return rrb.Blueprint(
+        rrb.Tabs(*tabs),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(state="collapsed"),
+    )
+
+
+def seed_entity(controller: str, seed: int) -> str:
+    """Entity name of scenario ``seed`` of ``controller`` in a several-seed recording."""
+    return f"{entity_name(controller)}_seed{int(seed)}"
 
 
 def analysis_blueprint(

@@ -27,6 +27,7 @@ from lcc_synth.recording.core import (
     record_text,
     vehicle_colors,
     vehicle_names,
+    vehicle_widths,
 )
 
 
@@ -117,10 +118,11 @@ def record_simulation(
     tcol = _time_column(t)
     names = vehicle_names(m, n)
     colors = vehicle_colors(m, n)
+    widths = vehicle_widths(m, n)
     label = [f"{c} {v}" for v in names]
 
     vel = velocity[run, idx]
-    _send_series(rec, f"{base}/velocity", tcol, vel, label, colors)
+    _send_series(rec, f"{base}/velocity", tcol, vel, label, colors, widths)
     _send_series(
         rec,
         f"{base}/spacing",
@@ -128,14 +130,14 @@ def record_simulation(
         np.asarray(result.spacing)[run, idx, 1:],
         label[1:],
         colors[1:],
+        widths[1:],
     )
-    _send_series(
-        rec, f"{base}/acceleration", tcol, np.asarray(result.acceleration)[run, idx], label, colors
-    )
+    acc = np.asarray(result.acceleration)[run, idx]
+    _send_series(rec, f"{base}/acceleration", tcol, acc, label, colors, widths)
     state = _state(rec)
     u_color = state.color(base)  # one color per controller: u_cmd of all controllers overlaid
     u_cmd = np.asarray(result.u_cmd)[run, idx, None]
-    _send_series(rec, f"{base}/cav/u_cmd", tcol, u_cmd, [f"{c} u_cmd"], [u_color])
+    _send_series(rec, f"{base}/cav/u_cmd", tcol, u_cmd, [f"{c} u_cmd"], [u_color], [2.0])
     aeb = np.asarray(result.aeb_active)[run, idx].astype(np.float64)[:, None]
     _send_series(rec, f"{base}/cav/aeb_active", tcol, aeb, [f"{c} AEB active"], [(214, 39, 40)])
 
@@ -308,7 +310,8 @@ def record_mpc_history(
         item = pa.list_(pa.field("item", pa.float32(), nullable=False), 2)
         pts = pa.FixedSizeListArray.from_arrays(pa.array(xy.reshape(-1)), type=item)
         strip_off = np.arange(0, K * V * H + 1, H, dtype=np.int32)
-        strips = pa.ListArray.from_arrays(pa.array(strip_off), pts)
+        strip_type = pa.list_(pa.field("item", item, nullable=False))  # what the viewer expects
+        strips = pa.ListArray.from_arrays(pa.array(strip_off), pts, type=strip_type)
         rec.send_columns(
             f"{base}/mpc/predicted/{label}",
             indexes=[_time_column(t[steps])],

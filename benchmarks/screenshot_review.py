@@ -1,0 +1,158 @@
+"""Screenshot of a recording as ``lcc-synth review --web`` shows it, in headless Chromium.
+
+Serves ``PATH.rrd`` with the web viewer bound to 127.0.0.1 (``lcc-synth review --web``),
+starts Chromium headless with its DevTools endpoint on 127.0.0.1, navigates to the viewer,
+waits for the WebAssembly viewer to load the recording and its blueprint, and saves a PNG
+(``Page.captureScreenshot`` over the DevTools protocol). Both processes are stopped at the end.
+
+Needs the Debian package ``chromium`` (``apt-get install -y chromium``) and the optional extra
+``screenshot`` (``pip install -e .[screenshot]``: websocket-client)::
+
+    python benchmarks/screenshot_review.py logs/showcase-*.rrd -o review.png [--wait 60]
+
+``chromium --headless --screenshot`` alone returns before the viewer has started (the PNG
+shows "Loading Application Bundle"): this script waits instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _stop(proc: subprocess.Popen | None) -> None:
+    """Stop ``proc`` and its process group (the viewer's own children too)."""
+    if proc is None or proc.poll() is not None:
+        return
+    for sig, wait in ((signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            return
+        try:
+            proc.wait(wait)
+            return
+        except subprocess.TimeoutExpired:
+            continue
+
+
+def _serve(rrd: Path, log) -> tuple[subprocess.Popen, str]:
+    """Start ``lcc-synth review --web`` on 127.0.0.1; return the process and the viewer URL."""
+    web, grpc = _free_port(), _free_port()
+    env = {**os.environ, "RERUN_ANALYTICS": "0"}
+    cmd = [sys.executable, "-m", "lcc_synth.cli.main", "review", str(rrd), "--web",
+           "--web-port", str(web), "--port", str(grpc)]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True, env=env,
+                            start_new_session=True)  # fmt: skip
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        if not line:
+            if proc.poll() is not None:
+                raise RuntimeError(f"lcc-synth review exited with {proc.returncode}")
+            continue
+        if "open http" in line:
+            return proc, line.split("open ", 1)[1].strip()
+    raise RuntimeError("lcc-synth review did not print the viewer address within 60 s")
+
+
+def _chromium(port: int, profile: str, size: tuple[int, int], log) -> subprocess.Popen:
+    binary = shutil.which("chromium") or shutil.which("chromium-browser")
+    if binary is None:
+        raise RuntimeError("chromium not found: apt-get install -y chromium")
+    cmd = [binary, "--headless=new", "--no-sandbox", "--use-angle=swiftshader",
+           "--enable-unsafe-swiftshader", f"--remote-debugging-port={port}",
+           "--remote-debugging-address=127.0.0.1", f"--user-data-dir={profile}",
+           f"--window-size={size[0]},{size[1]}", "--no-first-run", "about:blank"]  # fmt: skip
+    return subprocess.Popen(cmd, stdout=log, stderr=log, start_new_session=True)
+
+
+def _page_socket(port: int, timeout: float = 30.0) -> str:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/json", timeout=2) as r:
+                for target in json.load(r):
+                    if target.get("type") == "page":
+                        return target["webSocketDebuggerUrl"]
+        except OSError:
+            pass
+        time.sleep(0.5)
+    raise RuntimeError("Chromium's DevTools endpoint did not answer")
+
+
+class _DevTools:
+    def __init__(self, url: str):
+        import websocket  # optional extra "screenshot"
+
+        self.ws = websocket.create_connection(url, timeout=120, suppress_origin=True)
+        self.next_id = 0
+
+    def call(self, method: str, **params):
+        self.next_id += 1
+        self.ws.send(json.dumps({"id": self.next_id, "method": method, "params": params}))
+        while True:
+            msg = json.loads(self.ws.recv())
+            if msg.get("id") == self.next_id:
+                if "error" in msg:
+                    raise RuntimeError(f"{method}: {msg['error']}")
+                return msg.get("result", {})
+
+
+def screenshot(rrd: Path, out: Path, wait: float = 60.0, size=(1920, 1080)) -> Path:
+    """Serve ``rrd``, screenshot the web viewer after ``wait`` seconds, save ``out`` (PNG)."""
+    viewer = browser = None
+    with tempfile.TemporaryDirectory() as profile, open(Path(profile) / "log", "w") as log:
+        try:
+            viewer, url = _serve(rrd, log)
+            port = _free_port()
+            browser = _chromium(port, os.path.join(profile, "chrome"), size, log)
+            tools = _DevTools(_page_socket(port))
+            tools.call("Emulation.setDeviceMetricsOverride", width=size[0], height=size[1],
+                       deviceScaleFactor=1, mobile=False)  # fmt: skip
+            tools.call("Page.enable")
+            tools.call("Page.navigate", url=url)
+            time.sleep(wait)
+            png = base64.b64decode(tools.call("Page.captureScreenshot", format="png")["data"])
+            tools.ws.close()
+        finally:
+            _stop(browser)
+            _stop(viewer)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_bytes(png)
+    return out
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("rrd", type=Path, help="the recording (.rrd)")
+    p.add_argument("-o", "--out", type=Path, default=Path("review.png"), help="PNG to write")
+    p.add_argument(
+        "--wait", type=float, default=60.0, help="seconds to let the viewer load (default 60)"
+    )
+    p.add_argument("--size", default="1920x1080", help="window size WIDTHxHEIGHT")
+    a = p.parse_args(argv)
+    w, h = (int(x) for x in a.size.lower().split("x"))
+    print(screenshot(a.rrd, a.out, a.wait, (w, h)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
