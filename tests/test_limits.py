@@ -80,6 +80,8 @@ def test_ctrl_c_exits_130_in_one_line(tmp_path):
     proc = subprocess.Popen(
         [sys.executable, "-m", "lcc_synth.cli.main", "simulate", str(p), "--no-record"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path,
+        # a shell's background job ignores SIGINT and a child inherits that: restore the default
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )  # fmt: skip
     time.sleep(6.0)
     assert proc.poll() is None, proc.communicate()

@@ -23,6 +23,7 @@ from lcc_synth.mpc.settings import SolverSettings
 __all__ = ["SolveResult", "OSQPSolver", "solve_exact", "solve_rebuild"]
 
 OSQP_SOLVED = 1
+OSQP_SIGINT = 10  # osqp.SolverStatus.OSQP_SIGINT: interrupted by Ctrl-C
 POLISH_NAMES = {
     -2: "linsys_error",
     -1: "failed",
@@ -131,6 +132,9 @@ class OSQPSolver:
         else:
             res = self._solver.solve(raise_error=False)
         info = res.info
+        if info.status_val == OSQP_SIGINT:
+            # OSQP catches Ctrl-C during a solve and returns: hand it back to Python
+            raise KeyboardInterrupt
         ok = info.status_val == OSQP_SOLVED and not self.force_failure
         z = None if res.x is None else np.array(res.x)
         if ok and (z is None or not np.all(np.isfinite(z))):
