@@ -31,6 +31,11 @@ class ConfigError(ValueError):
         return ConfigError(self.field, self.message, source)
 
 
+class ImplausibleValueWarning(UserWarning):
+    """A value that is valid but implausible (e.g. a static gain of magnitude above 100): the
+    run goes on, the warning on stderr names the field."""
+
+
 def require(cond: bool, field: str, message: str) -> None:
     """Raise :class:`ConfigError` for ``field`` unless ``cond`` holds."""
     if not cond:

@@ -21,26 +21,38 @@ A problem file has a few common tables, and each command reads its own:
     n = 10                         # HDVs behind the CAV (required for lcc, cf_lcc, fd_lcc)
     v_star = 15.0                  # equilibrium velocity (m/s)
 
-Errors are :class:`~lcc_synth.errors.ConfigError` naming the file and the dotted field.
+Errors are :class:`~lcc_synth.errors.ConfigError` naming the file and the dotted field. An
+unknown key or table, at any level, is an error naming it and the closest known name
+(:data:`TOP_LEVEL` lists the top-level tables of every command: a table another command reads
+is allowed). Values that are valid but implausible (:func:`warn_implausible`) give an
+:class:`~lcc_synth.errors.ImplausibleValueWarning`.
 """
 
 from __future__ import annotations
 
+import difflib
 import math
 import tomllib
+import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from lcc_synth.errors import ConfigError
+from lcc_synth.errors import ConfigError, ImplausibleValueWarning
 from lcc_synth.models.hdv import IDM, OVM, model_from_dict
 from lcc_synth.models.linear import KINDS, LCCModel, model_from_hdv
 
 __all__ = [
     "Problem",
     "load_problem",
+    "MAX_FILE_BYTES",
+    "TOP_LEVEL",
+    "GAIN_LIMIT",
     "check_keys",
+    "check_top_level",
+    "warn_implausible",
+    "warn_large_gains",
     "check_range",
     "get_number",
     "get_int",
@@ -73,17 +85,80 @@ class Problem:
         return get_table(self.data, key, key, required=required)
 
 
+#: Largest problem file :func:`load_problem` reads (the shipped ones are a few KiB).
+MAX_FILE_BYTES = 1 << 20
+
+
 def load_problem(path: str | Path) -> Problem:
-    """Read a TOML problem file; a missing file or a TOML syntax error is a ConfigError."""
+    """Read a TOML problem file; a missing, oversized (above :data:`MAX_FILE_BYTES`) or binary
+    file, a TOML syntax error or an unknown top-level key is a ConfigError."""
     p = Path(path)
     if not p.is_file():
         raise ConfigError("path", "no such problem file", str(p))
+    size = p.stat().st_size
+    if size > MAX_FILE_BYTES:
+        raise ConfigError(
+            "path",
+            f"is {size / 2**20:.1f} MiB; a problem file is a small text file "
+            f"(at most {MAX_FILE_BYTES // 2**20} MiB)",
+            str(p),
+        )
     try:
         with p.open("rb") as fh:
-            data = tomllib.load(fh)
+            data = tomllib.loads(fh.read().decode("utf-8"))
+    except UnicodeDecodeError as err:
+        raise ConfigError(
+            "toml", f"not a UTF-8 text file (byte {err.start}): a binary file?", str(p)
+        ) from None
     except tomllib.TOMLDecodeError as err:
         raise ConfigError("toml", f"not valid TOML: {err}", str(p)) from None
+    except RecursionError:
+        raise ConfigError("toml", "nested too deeply", str(p)) from None
+    try:
+        check_top_level(data)
+    except ConfigError as err:
+        raise err.with_source(str(p)) from None
     return Problem(p, data)
+
+
+#: Every top-level key of a problem file, with the commands that read it. One registry for all
+#: commands: a file may carry the tables of several commands (each reads its own, ignores the
+#: others), but a key no command reads is an error naming the closest known one.
+TOP_LEVEL: dict[str, tuple[str, ...]] = {
+    "name": ("all",),
+    "description": ("all",),
+    "hdv": ("all",),
+    "system": ("simulate", "sweep", "synthesize", "analyze", "regions"),
+    "scenario": ("simulate", "sweep"),
+    "metrics": ("simulate", "sweep", "run"),
+    "controllers": ("simulate", "sweep", "run"),
+    "sweep": ("sweep",),
+    "layouts": ("run",),
+    "scenarios": ("run",),
+    "synthesis": ("synthesize",),
+    "analysis": ("analyze",),
+    "cases": ("analyze",),
+    "regions": ("regions",),
+    "maps": ("regions",),
+}
+
+_SCALAR_TOP = ("name", "description")
+
+
+def check_top_level(data: Mapping[str, Any]) -> None:
+    """Reject top-level keys of a problem file that no command reads (see :data:`TOP_LEVEL`)."""
+    for key, value in data.items():
+        if key in TOP_LEVEL:
+            continue
+        close = difflib.get_close_matches(key, list(TOP_LEVEL), n=1, cutoff=0.6)
+        if isinstance(value, dict):
+            hint = f"; did you mean [{close[0]}]?" if close else "."
+            known = ", ".join(f"[{k}]" for k in TOP_LEVEL if k not in _SCALAR_TOP)
+            raise ConfigError(key, f"unknown table [{key}]{hint} Known tables: {known}")
+        hint = f"; did you mean {close[0]!r}?" if close else "."
+        raise ConfigError(
+            key, f"unknown top-level key{hint} Known keys: name, description and the tables"
+        )
 
 
 # --------------------------------------------------------------------------------------------
@@ -94,12 +169,41 @@ _MISSING = object()
 
 
 def check_keys(table: Mapping[str, Any], allowed: Iterable[str], field: str) -> None:
-    """Reject keys of ``table`` not in ``allowed`` (typos must not pass silently)."""
+    """Reject keys of ``table`` not in ``allowed`` (typos must not pass silently); the error
+    names the key and the closest allowed one."""
+    if not field:  # the top level of a file: one registry for every command
+        check_top_level(table)
+        return
     allowed = set(allowed)
     for key in table:
         if key not in allowed:
             where = f"{field}.{key}" if field else key
-            raise ConfigError(where, f"unknown key; allowed keys: {sorted(allowed)}")
+            close = difflib.get_close_matches(str(key), sorted(allowed), n=1, cutoff=0.6)
+            hint = f"did you mean {close[0]!r}? " if close else ""
+            raise ConfigError(where, f"unknown key; {hint}allowed keys: {sorted(allowed)}")
+
+
+#: Above this magnitude a static feedback gain (per unit: 1/s² on a spacing, 1/s on a
+#: velocity) is valid but implausible: the paper's gains are of order 1.
+GAIN_LIMIT = 100.0
+
+
+def warn_implausible(name: str, message: str) -> None:
+    """Warn (:class:`ImplausibleValueWarning`, on stderr) that field ``name`` is valid but
+    implausible."""
+    warnings.warn(f"{name}: {message}", ImplausibleValueWarning, stacklevel=3)
+
+
+def warn_large_gains(gains: Mapping[str, Any], field: str, limit: float = GAIN_LIMIT) -> None:
+    """Warn for every gain of ``gains`` (a ``gains`` table) with magnitude above ``limit``."""
+    for key, value in gains.items():
+        if isinstance(value, int | float) and not isinstance(value, bool):
+            if math.isfinite(value) and abs(value) > limit:
+                warn_implausible(
+                    f"{field}.{key}",
+                    f"gain {value:g} has magnitude above {limit:g} per unit (the paper's gains "
+                    "are of order 1); check the units",
+                )
 
 
 def _lookup(table: Mapping[str, Any], key: str, field: str, default: Any, requirement: str):

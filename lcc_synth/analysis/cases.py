@@ -75,7 +75,7 @@ def cases_from(data: Mapping, model: LCCModel, source: str | None = None) -> dic
     Errors name ``cases.NAME.<field>`` and the file.
     """
     from lcc_synth.models.feedback import StaticGains
-    from lcc_synth.problem import check_keys, get_str, get_table
+    from lcc_synth.problem import check_keys, get_str, get_table, warn_large_gains
 
     out = {}
     try:
@@ -87,6 +87,7 @@ def cases_from(data: Mapping, model: LCCModel, source: str | None = None) -> dic
             check_keys(table, ["semantics", "gains", "label"], field)
             semantics = get_str(table, "semantics", field, "added", choices=["added", "replace"])
             raw = get_table(table, "gains", f"{field}.gains")
+            warn_large_gains(raw, f"{field}.gains")
             label = get_str(table, "label", field, name)
             try:
                 gains = StaticGains(raw, semantics)

@@ -82,6 +82,7 @@ def region_specs_from(
         get_number_list,
         get_str,
         get_table,
+        warn_large_gains,
     )
 
     try:
@@ -129,6 +130,7 @@ def region_specs_from(
                 )
             semantics = get_str(t, "semantics", field, "added", choices=["added", "replace"])
             raw = get_table(t, "gains", f"{field}.gains")
+            warn_large_gains(raw, f"{field}.gains")
             try:
                 gains = StaticGains(raw, semantics)
                 gains.check(model)

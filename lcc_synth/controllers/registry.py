@@ -15,7 +15,7 @@ from lcc_synth.controllers.static import EQUILIBRIA, HDVController, StaticGainCo
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import SEMANTICS, StaticGains
 from lcc_synth.models.linear import KINDS, model_from_hdv
-from lcc_synth.problem import check_keys, get_number, get_str, get_table
+from lcc_synth.problem import check_keys, get_number, get_str, get_table, warn_large_gains
 
 __all__ = ["CONTROLLER_TYPES", "STATIC_RUN_KEYS", "build_controller"]
 
@@ -102,6 +102,7 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
             if not isinstance(raw, dict):
                 raise ConfigError(f"{field}.file", f"{path}: gains must be an object")
             where = f"{field}.file"
+        warn_large_gains(raw, f"{where}.gains")
         sample_time = _sample_time(table, field)
         equilibrium = get_str(table, "equilibrium", field, "fixed", choices=EQUILIBRIA)
         tau = None

@@ -40,7 +40,7 @@ from lcc_synth.metrics import MetricsConfig, metrics_from
 from lcc_synth.problem import (
     Problem,
     System,
-    check_keys,
+    check_top_level,
     get_str,
     get_table,
     load_problem,
@@ -69,9 +69,6 @@ __all__ = [
 
 #: Controller types of a suite file: those of ``lcc-synth simulate`` plus synthesised ``h2``.
 SUITE_TYPES = (*CONTROLLER_TYPES, "h2")
-
-_TOP_KEYS = ["name", "description", "hdv", "metrics", "layouts", "scenarios", "controllers"]
-
 
 # --------------------------------------------------------------------------------------------
 # Suite file
@@ -140,7 +137,7 @@ def load_suite(
     src = str(problem.path)
     try:
         data = problem.data
-        check_keys(data, _TOP_KEYS, "")
+        check_top_level(data)
         hdv_table = get_table(data, "hdv", "hdv")
         layouts_t = get_table(data, "layouts", "layouts", required=True)
         if not layouts_t:

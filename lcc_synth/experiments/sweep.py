@@ -56,6 +56,7 @@ from lcc_synth.problem import (
     Problem,
     System,
     check_keys,
+    check_top_level,
     get_int,
     get_table,
     load_problem,
@@ -96,9 +97,6 @@ SWEEP_COUNTS = ("collisions", "aeb_activations", "fallbacks")
 _EFFICIENCY = ("aave", "fuel_ml")
 MAX_COUNT = 10_000_000
 _MAX_BATCH = 100_000
-_TOP_KEYS = ["name", "description", "hdv", "system", "scenario", "metrics", "controllers", "sweep"]
-
-
 @dataclass(frozen=True)
 class SweepSpec:
     """A parsed sweep problem (see the module docstring)."""
@@ -147,7 +145,7 @@ def load_sweep(
     src = str(problem.path)
     try:
         data = problem.data
-        check_keys(data, _TOP_KEYS, "")
+        check_top_level(data)
         system = system_from(data, src)
         scenario = scenario_from(data, system, problem.path.parent)
         metrics = metrics_from(data, system, scenario=scenario)

@@ -13,6 +13,7 @@ analytic for OVM, by central differences of ``F`` for any other model.
 
 from __future__ import annotations
 
+import difflib
 import math
 import warnings
 from dataclasses import dataclass, fields
@@ -316,9 +317,11 @@ def model_from_dict(data: dict, field: str = "hdv") -> OVM | IDM:
     kwargs = {}
     for key, value in data.items():
         if key not in allowed:
+            close = difflib.get_close_matches(str(key), sorted(allowed | {"model"}), n=1)
+            hint = f"did you mean {close[0]!r}? " if close else ""
             raise ConfigError(
                 f"{field}.{key}",
-                f"unknown parameter for model {kind!r}; allowed: {sorted(allowed)}",
+                f"unknown parameter for model {kind!r}; {hint}allowed: {sorted(allowed)}",
             )
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise ConfigError(f"{field}.{key}", f"must be a number, got {value!r}")

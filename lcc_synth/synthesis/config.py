@@ -70,6 +70,7 @@ from lcc_synth.problem import (
     Problem,
     System,
     check_keys,
+    check_top_level,
     get_bool,
     get_int,
     get_number,
@@ -77,6 +78,7 @@ from lcc_synth.problem import (
     get_str,
     get_table,
     system_from,
+    warn_large_gains,
 )
 from lcc_synth.synthesis.h2 import Weights
 
@@ -172,9 +174,7 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec:
     """Parse the ``[hdv]``, ``[system]`` and ``[synthesis]`` tables of a problem file."""
     src = str(problem.path)
     try:
-        check_keys(
-            problem.data, ["name", "description", "hdv", "system", "synthesis"], ""
-        )
+        check_top_level(problem.data)
         system = system_from(problem.data, src)
         t = get_table(problem.data, "synthesis", "synthesis", required=True)
         check_keys(
@@ -258,6 +258,7 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec:
             bname = get_str(b, "name", "synthesis.baseline", "baseline")
             bsem = get_str(b, "semantics", "synthesis.baseline", semantics, choices=SEMANTICS)
             bg = get_table(b, "gains", "synthesis.baseline.gains", required=True)
+            warn_large_gains(bg, "synthesis.baseline.gains")
             try:
                 gains = StaticGains(bg, bsem)
                 gains.check(system.linear_model(warn=False))
