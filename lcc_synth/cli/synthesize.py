@@ -46,6 +46,8 @@ def run(args: argparse.Namespace) -> int:
                              default=str))
         print(f"lcc-synth synthesize: synthesis failed: {err}", file=sys.stderr)
         return 1
+    finally:
+        set_progress(False)  # the switch is process-wide: back to off for later in-process calls
     if rrd is not None:
         record_synthesis_file(rrd, rep, spec.system)
         print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
