@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from lcc_synth.cli.main import main
@@ -47,9 +48,29 @@ def test_mpc_horizon_refused(tmp_path, capsys):
 
 
 def test_synthesis_size_refused(tmp_path, capsys):
-    p = _mutate(tmp_path, "synth_cf_lcc_pattern.toml", r"^n = 10$", "n = 200")
+    # dense cones (string-aware design): refused with the KKT memory estimate
+    p = _mutate(tmp_path, "synth_string_stable_m2n2.toml", r"^n = 2$", "n = 150")
     msg = _refused(capsys, ["synthesize", str(p), "--no-record"], "system.n")
-    assert "method = 'direct'" in msg and "GiB" in msg
+    assert "method = 'direct'" in msg and "GiB" in msg and "limit 100" in msg
+
+
+def test_long_structured_design_is_accepted():
+    """402 states (n = 200), refused before the Newton polishing, is within the limit now."""
+    import pytest
+
+    from lcc_synth.errors import ConfigError
+    from lcc_synth.problem import load_problem
+    from lcc_synth.synthesis.config import spec_from_problem
+    from lcc_synth.synthesis.design import MAX_CHORDAL_VEHICLES, check_size
+
+    assert MAX_CHORDAL_VEHICLES >= 200
+    spec = spec_from_problem(load_problem(PROBLEMS / "synth_cf_lcc_pattern.toml"))
+    spec = replace(spec, system=replace(spec.system, n=200))
+    check_size(spec, 402)  # no ConfigError
+    # the structured restriction (small chordal cones) has its own, larger limit
+    longer = replace(spec, system=replace(spec.system, kind="lcc", m=5))
+    with pytest.raises(ConfigError, match="m \\+ n = 205 is above the limit 200.*'direct'"):
+        check_size(longer, 412)
 
 
 def test_memory_estimate_against_available(monkeypatch):

@@ -27,9 +27,16 @@ from lcc_synth.synthesis.structured import pattern_mask, pattern_vehicles, struc
 
 __all__ = ["synthesize", "baseline_check", "design_gain_of"]
 
-#: largest string (m + n) of the designs that solve an LMI (Clarabel): beyond it the solve
-#: takes minutes and its KKT system tens of GiB; method = 'direct' has no such limit
+#: largest string (m + n) of the designs that solve an LMI with dense cones (full-state and
+#: string-aware designs, Clarabel): beyond it the solve takes minutes and its KKT system tens of
+#: GiB; method = 'direct' has no such limit
 MAX_LMI_VEHICLES = 100
+
+#: largest string (m + n) of the structured design with method = 'lmi': its convex restriction
+#: is split into small cones (chordal decomposition) and grows linearly, the Newton polishing
+#: as nx^3 (measured, CF-LCC with the pattern CAV + HDVs 1, 2: 402 states about 45 s), so the
+#: limit is the largest string a problem file accepts (n <= 200)
+MAX_CHORDAL_VEHICLES = 200
 
 
 def _uses_lmi(spec: SynthesisSpec) -> bool:
@@ -39,23 +46,27 @@ def _uses_lmi(spec: SynthesisSpec) -> bool:
 
 
 def check_size(spec: SynthesisSpec, nx: int) -> None:
-    """Refuse an LMI design that cannot finish: ``m + n`` above :data:`MAX_LMI_VEHICLES` or
-    a KKT estimate (``8 (nx (nx + 1) / 2)^2`` bytes, dense in the worst case) above the
-    available memory."""
+    """Refuse an LMI design that cannot finish: ``m + n`` above :data:`MAX_LMI_VEHICLES`
+    (:data:`MAX_CHORDAL_VEHICLES` for the structured restriction, whose cones are small) or,
+    for the dense cones, a KKT estimate (``8 (nx (nx + 1) / 2)^2`` bytes, dense in the worst
+    case) above the available memory."""
     if not _uses_lmi(spec):
         return
     m, n = spec.system.m, spec.system.n
+    chordal = spec.design == "structured"
+    limit = MAX_CHORDAL_VEHICLES if chordal else MAX_LMI_VEHICLES
     svec = nx * (nx + 1) // 2
     need = 8.0 * svec**2
-    if m + n > MAX_LMI_VEHICLES:
+    if m + n > limit:
+        cost = "" if chordal else f" (estimated KKT memory {format_bytes(need)})"
         raise ConfigError(
             "system.n",
             f"{spec.design} synthesis solves an LMI of {nx} states: m + n = {m + n} is above "
-            f"the limit {MAX_LMI_VEHICLES} (estimated KKT memory {format_bytes(need)}); use "
-            "[synthesis] method = 'direct' for long strings",
+            f"the limit {limit}{cost}; use [synthesis] method = 'direct' for long strings",
         )
-    require_memory("system.n", need, f"LMI with {nx} states, {svec} unknowns per cone",
-                   "use [synthesis] method = 'direct'")
+    if not chordal:
+        require_memory("system.n", need, f"LMI with {nx} states, {svec} unknowns per cone",
+                       "use [synthesis] method = 'direct'")
 
 
 #: relative H2 disagreement between the LMI and Riccati designs that counts as a failure

@@ -52,6 +52,7 @@ import scipy.linalg as sla
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import SEMANTICS, StaticGains, input_feedback
 from lcc_synth.models.linear import LCCModel
+from lcc_synth.synthesis.lyapunov import closed_loop_schur
 
 __all__ = [
     "SynthesisError",
@@ -62,6 +63,7 @@ __all__ = [
     "closed_loop_matrix",
     "max_real_eig",
     "h2_cost",
+    "h2_cost_schur",
     "h2_norm",
     "riccati_gain",
     "LMIResult",
@@ -349,19 +351,28 @@ def h2_cost(plant: H2Plant, g: np.ndarray) -> tuple[float, np.ndarray | None, np
     ``A_K L + L A_K' + B_w B_w' = 0``, ``A_K' P + P A_K + Q + g' R g = 0``,
     ``J = tr(B_w' P B_w) = tr((Q + g' R g) L)``.
     """
+    J, L, P, _ = h2_cost_schur(plant, g)
+    return J, L, P
+
+
+def h2_cost_schur(plant: H2Plant, g: np.ndarray):
+    """:func:`h2_cost` plus the closed loop's Schur form
+    (:class:`~lcc_synth.synthesis.lyapunov.ClosedLoopSchur`, ``None`` if unstable) for further
+    Lyapunov equations with the same closed loop (one factorisation for all of them)."""
     g = np.asarray(g, dtype=float).reshape(1, -1)
     AK = plant.A + plant.B @ g
-    if max_real_eig(AK) >= -STABILITY_TOL:
-        return math.inf, None, None
-    L = sla.solve_continuous_lyapunov(AK, -plant.Bw @ plant.Bw.T)
+    if not np.all(np.isfinite(AK)):
+        return math.inf, None, None, None
+    S = closed_loop_schur(AK)
+    if S.max_real_eig >= -STABILITY_TOL:
+        return math.inf, None, None, None
+    L = S.solve(plant.Bw @ plant.Bw.T)
     Qk = plant.Q + plant.r * (g.T @ g)
-    P = sla.solve_continuous_lyapunov(AK.T, -Qk)
-    L = 0.5 * (L + L.T)
-    P = 0.5 * (P + P.T)
+    P = S.solve(Qk, transpose=True)
     J = float(np.trace(Qk @ L))
     if not math.isfinite(J) or J < 0:
-        return math.inf, None, None
-    return J, L, P
+        return math.inf, None, None, None
+    return J, L, P, S
 
 
 def h2_norm(plant: H2Plant, g: np.ndarray) -> float:
