@@ -1,0 +1,109 @@
+"""The reference page of the problem-file schema (``problems/REFERENCE.md``), generated."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+from lcc_synth.schema.spec import REQUIRED, Derived, Key, Table
+
+__all__ = ["reference_markdown", "format_default", "format_range"]
+
+_HEADER = """# Problem-file reference
+
+Generated from `lcc_synth.schema` by `python -m lcc_synth.schema > problems/REFERENCE.md`; do
+not edit by hand (`tests/test_schema.py` fails when this file is stale). How the files work,
+with examples: [README.md](README.md).
+
+Every key is optional unless its default says **required**; "none" means absent = not set (the
+meaning says what then happens). Ranges: `(lo, hi)` open, `[lo, hi]` closed. Upper-case parts of
+a table name (`NAME`, `LAYOUT`) are names you choose. An unknown table or key is an error naming
+it and the closest declared one; a wrong type or a value out of range is an error naming the
+file and the dotted field (exit code 2).
+"""
+
+
+def _value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return f'"{v}"'
+    if isinstance(v, float) and math.isfinite(v):
+        return repr(v) if 1e-3 <= abs(v) < 1e6 or v == 0 else f"{v:g}"
+    if isinstance(v, list):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{}" if not v else str(v)
+    return str(v)
+
+
+def format_default(key: Key) -> str:
+    """The default as the reference shows it."""
+    d = key.default
+    if d is REQUIRED:
+        return "**required**"
+    if d is None:
+        return "none"
+    if isinstance(d, Derived):
+        return f"*{d.rule}*"
+    return f"`{_value(d)}`"
+
+
+def format_range(key: Key) -> str:
+    """The allowed values as the reference shows them."""
+    if key.choices is not None:
+        if isinstance(key.choices, Derived):
+            return f"*{key.choices.rule}*"
+        return " \\| ".join(f"`{_value(c)}`" for c in key.choices)
+    parts = []
+    if key.lo is not None or key.hi is not None:
+        lo = "-∞" if key.lo is None else _value(key.lo)
+        hi = "∞" if key.hi is None else _value(key.hi)
+        left = "(" if key.lo_open or key.lo is None else "["
+        right = ")" if key.hi_open or key.hi is None else "]"
+        parts.append(f"{left}{lo}, {hi}{right}")
+    if key.length is not None:
+        parts.append(f"{key.length} entries")
+    return ", ".join(parts)
+
+
+def _commands(t: Table) -> str:
+    return ", ".join(f"`{c}`" for c in t.commands)
+
+
+def _title(t: Table) -> str:
+    if not t.path:
+        return "Top level"
+    name = f"[[{t.path}]]" if t.path == "scenario.perturbations" else f"[{t.path}]"
+    return f"`{name}`" + (f" — `{t.variant}`" if t.variant else "")
+
+
+def _row(k: Key) -> str:
+    meaning = k.meaning.replace("|", "\\|")
+    return (f"| `{k.name}` | {k.type} | {format_default(k)} | {format_range(k)} | {k.unit} | "
+            f"{meaning} |")  # fmt: skip
+
+
+def reference_markdown(tables: Mapping[str, Table]) -> str:
+    """Markdown of every table of ``tables`` (in order) and its keys."""
+    out = [_HEADER]
+    out.append("## Contents\n")
+    for t in tables.values():
+        out.append(f"- {_title(t)}: {t.meaning}")
+    out.append("")
+    for t in tables.values():
+        out.append(f"## {_title(t)}\n")
+        out.append(f"{t.meaning} Read by {_commands(t)}.\n")
+        if t.includes:
+            inc = ", ".join(f"`[{tables[i].path}]`" for i in t.includes)
+            out.append(f"Also takes every key of {inc}.\n")
+        if t.notes:
+            out.append(f"{t.notes}\n")
+        rows = list(t.keys) + ([t.any_key] if t.any_key is not None else [])
+        if rows:
+            out.append("| key | type | default | allowed | unit | meaning |")
+            out.append("|---|---|---|---|---|---|")
+            out.extend(_row(k) for k in rows)
+            out.append("")
+    return "\n".join(out).rstrip() + "\n"
