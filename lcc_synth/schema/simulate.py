@@ -166,8 +166,8 @@ V2V = Table(
     "What the CAV receives from the other vehicles at every controller sample.",
     _SIM,
     (
-        Key("loss_rate", "any", "Per-link packet-loss probability in [0, 1], or a number list "
-            "with one entry per vehicle head..tail (m + n + 2; the CAV's is ignored).", 0.0,
+        Key("loss_rate", "number", "Per-link packet-loss probability, or a number list with one "
+            "entry per vehicle head..tail (m + n + 2; the CAV's is ignored).", 0.0,
             lo=0.0, hi=1.0),
         Key("latency", "number", "Age of received values (rounded to steps).", 0.0, lo=0.0,
             unit="s"),
@@ -183,7 +183,7 @@ V2V = Table(
 #: ``loss_rate`` as a list (the loader reads it so when the value is a list).
 LOSS_RATE_LIST = Table(
     "scenario.v2v",
-    "The per-vehicle form of loss_rate.",
+    "The per-vehicle form of loss_rate (a list instead of a number).",
     _SIM,
     (Key("loss_rate", "number list", "One loss probability per vehicle head..tail.", 0.0,
          lo=0.0, hi=1.0, length=Derived("m + n + 2")),),

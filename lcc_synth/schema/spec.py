@@ -170,10 +170,18 @@ class Table:
                 "(type, default, range, unit, meaning) before reading it"
             ) from None
 
-    def check(self, table: Mapping[str, Any], field: str) -> None:
+    def check(
+        self, table: Mapping[str, Any], field: str, allowed: list[str] | None = None
+    ) -> None:
         """Reject keys of ``table`` this table does not declare (the error names the closest
-        declared one)."""
-        rd.check_keys(table, self.names, field)
+        declared one). A table whose keys the user names (``any_key``) takes its ``allowed``
+        names from the loader (e.g. the ``[hdv]`` model's parameters), or accepts any."""
+        if self.any_key is None:
+            if allowed is not None:
+                raise TypeError(f"table {self.id!r} declares its keys: do not pass allowed")
+            allowed = self.names
+        if allowed is not None:
+            rd.check_keys(table, allowed, field)
 
     def raw(self, table: Mapping[str, Any], name: str, **given: Any) -> Any:
         """``table[name]`` unchecked (the loader validates it), else the declared default."""
@@ -192,23 +200,32 @@ class Table:
         """
         key = self.key(name)
         READS.add((self.id, name))
-        a = key.resolved(given)
-        default = a["default"]
-        if key.type == "number":
-            return rd.get_number(
-                table, name, field, default, a["lo"], a["hi"], key.lo_open, key.hi_open
-            )
-        if key.type == "integer":
-            return rd.get_int(table, name, field, default, a["lo"], a["hi"])
-        if key.type == "boolean":
-            return rd.get_bool(table, name, field, default)
-        if key.type == "string":
-            return rd.get_str(table, name, field, default, a["choices"])
-        if key.type == "number list":
-            return rd.get_number_list(
-                table, name, field, default, a["length"], a["lo"], a["hi"]
-            )
-        if key.type == "table":
-            sub = f"{field}.{name}" if field else name
-            return rd.get_table(table, name, sub, required=key.required)
-        raise TypeError(f"{self.id}.{name} has type {key.type!r}: read it with raw()")
+        return _read(key, key.resolved(given), table, name, field)
+
+    def get_each(self, table: Mapping[str, Any], field: str, **given: Any) -> dict[str, Any]:
+        """Every key of ``table`` read as the declared ``any_key`` (in file order)."""
+        if self.any_key is None:
+            raise TypeError(f"table {self.id!r} declares its keys: read them with get()")
+        READS.add((self.id, self.any_key.name))
+        a = self.any_key.resolved(given)
+        return {name: _read(self.any_key, a, table, name, field) for name in table}
+
+
+def _read(key: Key, a: Mapping[str, Any], table: Mapping[str, Any], name: str, field: str):
+    """``table[name]`` read as ``key`` with the resolved attributes ``a``."""
+    default = a["default"]
+    if key.type == "number":
+        return rd.get_number(table, name, field, default, a["lo"], a["hi"], key.lo_open,
+                             key.hi_open)  # fmt: skip
+    if key.type == "integer":
+        return rd.get_int(table, name, field, default, a["lo"], a["hi"])
+    if key.type == "boolean":
+        return rd.get_bool(table, name, field, default)
+    if key.type == "string":
+        return rd.get_str(table, name, field, default, a["choices"])
+    if key.type == "number list":
+        return rd.get_number_list(table, name, field, default, a["length"], a["lo"], a["hi"])
+    if key.type == "table":
+        sub = f"{field}.{name}" if field else name
+        return rd.get_table(table, name, sub, required=default is REQUIRED)
+    raise TypeError(f"{key.name} has type {key.type!r}: read it with raw()")
