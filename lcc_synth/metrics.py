@@ -34,7 +34,7 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.problem import System
-from lcc_synth.schema import spec
+from lcc_synth.schema import declared
 from lcc_synth.simulation.perturbations import vehicle_column
 
 __all__ = [
@@ -383,8 +383,8 @@ def metrics_from(
     """The ``[metrics]`` table; with ``scenario`` (a
     :class:`~lcc_synth.simulation.scenario.Scenario`) the window must lie in its simulated time."""
     f = "metrics"
-    mt = spec("").get(data, "metrics", "")
-    table = spec("metrics")
+    mt = declared("").get(data, "metrics", "")
+    table = declared("metrics")
     table.check(mt, f)
     window = tuple(table.get(mt, "window", f))
     if scenario is not None and window[1] > window[0]:  # t1 <= t0: MetricsConfig says so

@@ -43,7 +43,7 @@ from typing import Any
 from lcc_synth.errors import ConfigError, ImplausibleValueWarning
 from lcc_synth.models.hdv import IDM, OVM, model_from_dict
 from lcc_synth.models.linear import LCCModel, model_from_hdv
-from lcc_synth.schema import TOP_LEVEL, check_top_level, spec
+from lcc_synth.schema import TOP_LEVEL, check_top_level, declared
 from lcc_synth.schema.readers import (
     check_keys as _check_keys,
 )
@@ -201,8 +201,8 @@ class System:
 #: for CCC) may be left out, a size it leaves free may not (it never silently becomes 0).
 REQUIRED_SIZES = {"lcc": ("m", "n"), "cf_lcc": ("n",), "fd_lcc": ("n",), "ccc": ("m",)}
 _SIZE_MEANING = {"m": "HDVs ahead of the CAV", "n": "HDVs behind the CAV"}
-_TOP = spec("")
-_SYSTEM = spec("system")
+_TOP = declared("")
+_SYSTEM = declared("system")
 
 
 def system_from(data: Mapping[str, Any], source: str | None = None) -> System:

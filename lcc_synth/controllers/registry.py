@@ -16,7 +16,7 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains
 from lcc_synth.models.linear import KINDS, model_from_hdv
 from lcc_synth.problem import warn_large_gains
-from lcc_synth.schema import spec
+from lcc_synth.schema import declared
 
 __all__ = ["CONTROLLER_TYPES", "STATIC_RUN_KEYS", "build_controller"]
 
@@ -31,7 +31,7 @@ STATIC_RUN_KEYS = ("sample_time", *_EQ_KEYS)
 
 
 def _sample_time(table, field: str, ctype: str) -> float | None:
-    return spec(f"controllers.NAME:{ctype}").get(table, "sample_time", field)
+    return declared(f"controllers.NAME:{ctype}").get(table, "sample_time", field)
 
 
 def build_controller(name: str, table, system, source: str | None = None) -> Controller:
@@ -53,7 +53,7 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
     try:
         if not isinstance(table, dict):
             raise ConfigError(field, f"must be a table, got {table!r}")
-        ctype = spec("controllers.NAME").get(table, "type", field)
+        ctype = declared("controllers.NAME").get(table, "type", field)
         if ctype == "mpc":
             try:
                 from lcc_synth.mpc.build import mpc_controller_from_table
@@ -62,7 +62,7 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
                     f"{field}.type", f"'mpc' controllers need lcc_synth.mpc, which failed: {err}"
                 ) from None
             return mpc_controller_from_table(name, table, system, source=source)
-        T = spec(f"controllers.NAME:{ctype}")
+        T = declared(f"controllers.NAME:{ctype}")
         T.check(table, field)
         if ctype == "hdv":
             return HDVController(name, _sample_time(table, field, ctype))

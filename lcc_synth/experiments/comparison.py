@@ -38,7 +38,7 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.tables import SUITE_METRICS, rank_failed_last
 from lcc_synth.metrics import MetricsConfig, metrics_from
 from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
-from lcc_synth.schema import spec
+from lcc_synth.schema import declared
 from lcc_synth.simulation.results import SimResult
 from lcc_synth.simulation.scenario import Scenario, scenario_from
 
@@ -131,7 +131,7 @@ def load_suite(
     try:
         data = problem.data
         check_top_level(data)
-        top = spec("")
+        top = declared("")
         hdv_table = top.get(data, "hdv", "")
         layouts_t = top.get(data, "layouts", "")
         if not layouts_t:
@@ -148,7 +148,7 @@ def load_suite(
                 ) from None
 
         scen_t = top.get(data, "scenarios", "")
-        S = spec("scenarios.NAME")
+        S = declared("scenarios.NAME")
         if not scen_t:
             raise ConfigError("scenarios", "needs at least one [scenarios.NAME] table")
         chosen = select_names(list(scen_t), scenarios, "--scenarios")
@@ -179,7 +179,7 @@ def load_suite(
             suite_scenarios[sname] = SuiteScenario(sname, lname, sc, mcfg, title)
 
         ctrl_t = top.get(data, "controllers", "")
-        C = spec("controllers.NAME:suite")
+        C = declared("controllers.NAME:suite")
         if not ctrl_t:
             raise ConfigError("controllers", "needs at least one [controllers.NAME] table")
         names = select_names(list(ctrl_t), controllers, "--controllers")

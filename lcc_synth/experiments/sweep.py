@@ -53,7 +53,7 @@ import numpy as np
 from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import MetricsConfig
 from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
-from lcc_synth.schema import spec
+from lcc_synth.schema import declared
 from lcc_synth.simulation.scenario import Scenario
 
 __all__ = [
@@ -88,8 +88,8 @@ SWEEP_COUNTS = ("collisions", "aeb_activations", "fallbacks")
 #: efficiency to average).
 _EFFICIENCY = ("aave", "fuel_ml")
 #: Largest ``[sweep].count`` and ``batch_size`` (declared in :mod:`lcc_synth.schema`).
-MAX_COUNT = int(spec("sweep").key("count").hi)
-_MAX_BATCH = int(spec("sweep").key("batch_size").hi)
+MAX_COUNT = int(declared("sweep").key("count").hi)
+_MAX_BATCH = int(declared("sweep").key("batch_size").hi)
 @dataclass(frozen=True)
 class SweepSpec:
     """A parsed sweep problem (see the module docstring)."""
@@ -141,8 +141,8 @@ def load_sweep(
         system = system_from(data, src)
         scenario = scenario_from(data, system, problem.path.parent)
         metrics = metrics_from(data, system, scenario=scenario)
-        SW = spec("sweep")
-        sw = spec("").get(data, "sweep", "")
+        SW = declared("sweep")
+        sw = declared("").get(data, "sweep", "")
         SW.check(sw, "sweep")
         n = SW.get(sw, "count", "sweep")
         bs = SW.get(sw, "batch_size", "sweep")
@@ -155,7 +155,7 @@ def load_sweep(
                 raise ConfigError("--seed", f"must be an integer >= 0, got {seed!r}")
             scenario = replace(scenario, seed=int(seed))
         scenario = replace(scenario, batch=1, first_index=0, name=problem.name)
-        tables = spec("").get(data, "controllers", "")
+        tables = declared("").get(data, "controllers", "")
         if not tables:
             raise ConfigError("controllers", "needs at least one [controllers.NAME] table")
         names = select_names(list(tables), controllers, "--controllers")
@@ -164,7 +164,7 @@ def load_sweep(
             t = tables[name]
             if not isinstance(t, dict):
                 raise ConfigError(f"controllers.{name}", "must be a table")
-            spec("controllers.NAME:suite").get(t, "type", f"controllers.{name}")
+            declared("controllers.NAME:suite").get(t, "type", f"controllers.{name}")
             if "layouts" in t:
                 raise ConfigError(f"controllers.{name}.layouts", "a sweep has one layout")
             ctrls[name] = dict(t)
@@ -176,7 +176,7 @@ def load_sweep(
             controllers=ctrls,
             count=n,
             batch_size=min(bs, n),
-            hdv_table=dict(spec("").get(data, "hdv", "")),
+            hdv_table=dict(declared("").get(data, "hdv", "")),
             source=src,
         )
     except ConfigError as err:
@@ -419,7 +419,7 @@ def _inline_gains_file(name: str, table: Mapping[str, Any], spec: SweepSpec) -> 
     from lcc_synth.synthesis.gains_file import read_gains
 
     field_name = f"controllers.{name}"
-    gf = spec("controllers.NAME:gains_file")
+    gf = declared("controllers.NAME:gains_file")
     gf.check(table, field_name)
     path = Path(gf.get(table, "file", field_name))
     if not path.is_absolute() and spec.source:

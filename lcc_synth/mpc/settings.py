@@ -62,7 +62,7 @@ from typing import Any
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains
-from lcc_synth.schema import spec
+from lcc_synth.schema import declared
 
 __all__ = [
     "paper_fallback_gains",
@@ -285,12 +285,12 @@ def settings_from_table(table: Mapping[str, Any], field_name: str) -> MPCSetting
         Its dotted path (e.g. ``"controllers.mpc"``), used in error messages.
     """
     f = field_name
-    top = spec("controllers.NAME:mpc")
+    top = declared("controllers.NAME:mpc")
     top.check(table, f)
 
     def read(sub: str, cls) -> Any:
         """The sub-table ``sub`` as ``cls``, every declared key read through the schema."""
-        t = spec(f"controllers.NAME.{sub}:mpc")
+        t = declared(f"controllers.NAME.{sub}:mpc")
         raw = top.get(table, sub, f)
         t.check(raw, f"{f}.{sub}")
         values = {}

@@ -2,8 +2,8 @@
 
 Each key has a type, a default (or "required"), an allowed range or choice list, a unit, a
 one-line meaning, and its table says which commands read it. The loaders take their keys,
-defaults and ranges from here (:func:`spec` gives a :class:`~lcc_synth.schema.spec.Table`:
-``spec("scenario").get(sc, "dt", "scenario")``), so the validation, the error messages
+defaults and ranges from here (:func:`declared` gives a :class:`~lcc_synth.schema.spec.Table`:
+``declared("scenario").get(sc, "dt", "scenario")``), so the validation, the error messages
 (``scenario.dt: must be > 0, got -1.0``), the "did you mean" suggestions and the reference page
 ``problems/REFERENCE.md`` (:func:`reference_markdown`; ``python -m lcc_synth.schema``) come
 from the same declaration. Reading an undeclared key raises
@@ -38,7 +38,7 @@ __all__ = [
     "UndeclaredKeyError",
     "check_top_level",
     "reference_markdown",
-    "spec",
+    "declared",
 ]
 
 #: Every declared table by id (``path`` or ``path:variant``), in reference order.
@@ -49,7 +49,7 @@ if len(TABLES) != len(_simulate.TABLES) + len(_controllers.TABLES) + len(_design
     raise RuntimeError("lcc_synth.schema: two tables share an id")
 
 
-def spec(table_id: str) -> Table:
+def declared(table_id: str) -> Table:
     """The declared table ``table_id`` (e.g. ``"scenario"``, ``"controllers.NAME:mpc"``)."""
     try:
         return TABLES[table_id]

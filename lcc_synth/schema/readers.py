@@ -1,7 +1,7 @@
 """Typed field readers of problem-file tables: each names the dotted field in its error.
 
 These are the primitives behind :class:`lcc_synth.schema.Table`: a loader never calls them with
-its own default or range, it asks the declared key (``spec("scenario").get(sc, "dt", f)``),
+its own default or range, it asks the declared key (``declared("scenario").get(sc, "dt", f)``),
 which passes the declared default, bounds and choices here. The messages are those of the
 strict-inputs corpus (``tests/test_strict_problems.py``): ``FIELD: must be > 0, got -1.0``,
 ``FIELD: is required (>= 0)``, ``FIELD: unknown key; did you mean 'dt'? allowed keys: [...]``.

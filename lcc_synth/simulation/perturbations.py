@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.schema import spec
+from lcc_synth.schema import declared
 
 __all__ = [
     "Sine",
@@ -252,8 +252,8 @@ def perturbation_from_table(
     """Build one perturbation from a ``[[scenario.perturbations]]`` entry."""
     if not isinstance(table, Mapping):
         raise ConfigError(field, f"must be a table, got {table!r}")
-    kind = spec("scenario.perturbations").get(table, "type", field)
-    P = spec(f"scenario.perturbations:{kind}")
+    kind = declared("scenario.perturbations").get(table, "type", field)
+    P = declared(f"scenario.perturbations:{kind}")
     P.check(table, field)
     vehicle = P.raw(table, "vehicle")
     vehicle_column(vehicle, m, n, f"{field}.vehicle")

@@ -17,7 +17,7 @@ import numpy as np
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import IDM, MODELS, OVM
 from lcc_synth.problem import System, check_range
-from lcc_synth.schema import spec
+from lcc_synth.schema import declared
 from lcc_synth.simulation.perturbations import Perturbation, perturbation_from_table
 
 __all__ = ["MODEL_PARAMS", "V2V", "Scenario", "Draws", "scenario_from"]
@@ -317,13 +317,13 @@ class Draws:
 def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None = None):
     """Build the :class:`Scenario` of a problem's ``[scenario]`` table."""
     f = "scenario"
-    S = spec("scenario")
-    sc = spec("").get(data, "scenario", "")
+    S = declared("scenario")
+    sc = declared("").get(data, "scenario", "")
     S.check(sc, f)
     hv_t = S.get(sc, "hdv_values", f)
     hdv_values = None
     if hv_t:
-        HV = spec("scenario.hdv_values")
+        HV = declared("scenario.hdv_values")
         HV.check(hv_t, f"{f}.hdv_values", allowed=list(MODEL_PARAMS[system.hdv.name]))
         hdv_values = {}
         hdv_cols = [j for j in range(system.m + system.n + 2) if j not in (0, system.m + 1)]
@@ -333,19 +333,19 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
             full[hdv_cols] = vals
             hdv_values[key] = full
     het = S.get(sc, "heterogeneity", f)
-    heterogeneity = spec("scenario.heterogeneity").get_each(het, f"{f}.heterogeneity")
-    D = spec("scenario.delay")
+    heterogeneity = declared("scenario.heterogeneity").get_each(het, f"{f}.heterogeneity")
+    D = declared("scenario.delay")
     delay_t = S.get(sc, "delay", f)
     D.check(delay_t, f"{f}.delay")
     delay_model = D.get(delay_t, "model", f"{f}.delay")
     delay = D.get(delay_t, "mean", f"{f}.delay")
     spread = D.get(delay_t, "spread", f"{f}.delay", hi=delay)
-    V = spec("scenario.v2v")
+    V = declared("scenario.v2v")
     v2v_t = S.get(sc, "v2v", f)
     V.check(v2v_t, f"{f}.v2v")
     nv = system.m + system.n + 2
     if isinstance(V.raw(v2v_t, "loss_rate"), list):
-        loss = spec("scenario.v2v:list").get(v2v_t, "loss_rate", f"{f}.v2v", length=nv)
+        loss = declared("scenario.v2v:list").get(v2v_t, "loss_rate", f"{f}.v2v", length=nv)
     else:
         loss = V.get(v2v_t, "loss_rate", f"{f}.v2v")
     v2v = V2V(
