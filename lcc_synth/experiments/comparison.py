@@ -203,7 +203,7 @@ def load_suite(
             ctrls[cname] = dict(table)
         return Suite(
             name=problem.name,
-            description=str(data.get("description", "")),
+            description=str(top.raw(data, "description")),
             layouts=layouts,
             scenarios=suite_scenarios,
             controllers=ctrls,

@@ -95,4 +95,4 @@ def check_top_level(data: Mapping[str, Any]) -> None:
 def reference_markdown() -> str:
     """``problems/REFERENCE.md``: every table and key with type, default, range, unit,
     meaning and the commands that read it."""
-    return _reference(TABLES)
+    return _reference(TABLES, TOP_LEVEL)

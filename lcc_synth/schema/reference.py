@@ -16,11 +16,12 @@ Generated from `lcc_synth.schema` by `python -m lcc_synth.schema > problems/REFE
 not edit by hand (`tests/test_schema.py` fails when this file is stale). How the files work,
 with examples: [README.md](README.md).
 
-Every key is optional unless its default says **required**; "none" means absent = not set (the
-meaning says what then happens). Ranges: `(lo, hi)` open, `[lo, hi]` closed. Upper-case parts of
-a table name (`NAME`, `LAYOUT`) are names you choose. An unknown table or key is an error naming
-it and the closest declared one; a wrong type or a value out of range is an error naming the
-file and the dotted field (exit code 2).
+Every key is optional unless its default says **required** (a top-level table: required by the
+commands that read it); "none" means absent = not set (the meaning says what then happens);
+*italics* are computed from other values. Ranges: `(lo, hi)` open, `[lo, hi]` closed.
+Upper-case parts of a table name (`NAME`, `LAYOUT`) are names you choose. An unknown table or
+key is an error naming it and the closest declared one; a wrong type or a value out of range is
+an error naming the file and the dotted field (exit code 2).
 """
 
 
@@ -34,7 +35,7 @@ def _value(v: Any) -> str:
     if isinstance(v, list):
         return "[" + ", ".join(_value(x) for x in v) + "]"
     if isinstance(v, dict):
-        return "{}" if not v else str(v)
+        return "empty" if not v else str(v)
     return str(v)
 
 
@@ -47,6 +48,8 @@ def format_default(key: Key) -> str:
         return "none"
     if isinstance(d, Derived):
         return f"*{d.rule}*"
+    if isinstance(d, dict) and not d:
+        return "empty"
     return f"`{_value(d)}`"
 
 
@@ -68,8 +71,10 @@ def format_range(key: Key) -> str:
     return ", ".join(parts)
 
 
-def _commands(t: Table) -> str:
-    return ", ".join(f"`{c}`" for c in t.commands)
+def _commands(commands: tuple[str, ...]) -> str:
+    if tuple(commands) == ("all",):
+        return "every command"
+    return ", ".join(f"`{c}`" for c in commands)
 
 
 def _title(t: Table) -> str:
@@ -79,14 +84,19 @@ def _title(t: Table) -> str:
     return f"`{name}`" + (f" — `{t.variant}`" if t.variant else "")
 
 
-def _row(k: Key) -> str:
+def _row(k: Key, read_by: tuple[str, ...] = ()) -> str:
     meaning = k.meaning.replace("|", "\\|")
+    if read_by:
+        meaning += f" Read by {_commands(read_by)}."
     return (f"| `{k.name}` | {k.type} | {format_default(k)} | {format_range(k)} | {k.unit} | "
             f"{meaning} |")  # fmt: skip
 
 
-def reference_markdown(tables: Mapping[str, Table]) -> str:
-    """Markdown of every table of ``tables`` (in order) and its keys."""
+def reference_markdown(
+    tables: Mapping[str, Table], top_level: Mapping[str, tuple[str, ...]]
+) -> str:
+    """Markdown of every table of ``tables`` (in order) and its keys; ``top_level`` gives the
+    commands that read each top-level key."""
     out = [_HEADER]
     out.append("## Contents\n")
     for t in tables.values():
@@ -94,7 +104,10 @@ def reference_markdown(tables: Mapping[str, Table]) -> str:
     out.append("")
     for t in tables.values():
         out.append(f"## {_title(t)}\n")
-        out.append(f"{t.meaning} Read by {_commands(t)}.\n")
+        if t.path:
+            out.append(f"{t.meaning} Read by {_commands(t.commands)}.\n")
+        else:
+            out.append(f"{t.meaning}\n")
         if t.includes:
             inc = ", ".join(f"`[{tables[i].path}]`" for i in t.includes)
             out.append(f"Also takes every key of {inc}.\n")
@@ -104,6 +117,6 @@ def reference_markdown(tables: Mapping[str, Table]) -> str:
         if rows:
             out.append("| key | type | default | allowed | unit | meaning |")
             out.append("|---|---|---|---|---|---|")
-            out.extend(_row(k) for k in rows)
+            out.extend(_row(k, top_level.get(k.name, ()) if not t.path else ()) for k in rows)
             out.append("")
     return "\n".join(out).rstrip() + "\n"

@@ -55,14 +55,14 @@ _HDV_MEANING = {
 }
 
 
-def _model_keys(cls, label: str) -> tuple[Key, ...]:
+def _model_keys(cls) -> tuple[Key, ...]:
     """The parameters of a car-following model, defaults from its dataclass (one source)."""
     out = []
     for f in fields(cls):
         if f.name == "name":
             continue
         meaning, unit = _HDV_MEANING[f.name]
-        out.append(Key(f.name, "number", f"{meaning} ({label} only)", f.default, unit=unit))
+        out.append(Key(f.name, "number", meaning, f.default, unit=unit))
     return tuple(out)
 
 
@@ -73,8 +73,8 @@ HDV = Table(
     ("all",),
     (
         Key("model", "string", "The car-following model.", "ovm", choices=("ovm", "idm")),
-        *_model_keys(OVM, "ovm"),
-        *_model_keys(IDM, "idm"),
+        *_model_keys(OVM),
+        *_model_keys(IDM),
     ),
 )
 
