@@ -554,3 +554,49 @@ def test_bounds_choices_and_names_of_every_key_reach_the_loader(tid):
         assert e.value.field == f"{prefix}.{k.name}x", k.name
         assert f"did you mean {k.name!r}?" in e.value.message, (k.name, e.value.message)
     assert bounds + choices > 0 or tid in ("metrics", "synthesis.sparsity")
+
+
+# --------------------------------------------------------------------------------------------
+# The hand-written examples name only declared keys
+# --------------------------------------------------------------------------------------------
+
+
+def _tables_for(header: str) -> list[Table]:
+    """The declared tables a concrete header (``controllers.all_hdv.weights``) can be."""
+    parts = header.split(".") if header else []
+    out = []
+    for t in TABLES.values():
+        pat = t.path.split(".") if t.path else []
+        if len(pat) == len(parts) and all(
+            p == q or p.isupper() for p, q in zip(pat, parts, strict=True)
+        ):
+            out.append(t)
+    return out
+
+
+def _example_keys(markdown: str) -> list[tuple[str, str]]:
+    """``(table, key)`` of every ``key = value`` line in the TOML blocks of ``markdown``."""
+    out = []
+    for block in re.findall(r"```toml\n(.*?)```", markdown, flags=re.S):
+        header = ""
+        for line in block.splitlines():
+            if m := re.match(r"\[\[?([\w.]+)\]?\]", line):
+                header = m.group(1)
+            elif m := re.match(r"([A-Za-z_]\w*)\s*=", line):
+                out.append((header, m.group(1)))
+    return out
+
+
+@pytest.mark.parametrize("page", ["problems/README.md", "README.md"])
+def test_every_key_of_the_examples_is_declared(page):
+    pairs = _example_keys((ROOT / page).read_text())
+    assert len(pairs) > 20
+    bad = []
+    for header, key in pairs:
+        tables = _tables_for(header)
+        names = set()
+        for t in tables:
+            names |= set(t.names) | {n for i in t.includes for n in TABLES[i].names}
+        if not any(t.any_key for t in tables) and key not in names:
+            bad.append(f"[{header}] {key}")
+    assert not bad, f"{page} shows keys the schema does not declare: {bad}"
