@@ -44,10 +44,8 @@ from lcc_synth.errors import ConfigError, ImplausibleValueWarning
 from lcc_synth.models.hdv import IDM, OVM, model_from_dict
 from lcc_synth.models.linear import LCCModel, model_from_hdv
 from lcc_synth.schema import TOP_LEVEL, check_top_level, declared
-from lcc_synth.schema.readers import (
-    check_keys as _check_keys,
-)
-from lcc_synth.schema.readers import (
+from lcc_synth.schema import readers as _readers
+from lcc_synth.schema.readers import (  # re-exported: the typed readers behind the schema
     check_range,
     get_bool,
     get_int,
@@ -146,7 +144,7 @@ def check_keys(table: Mapping[str, Any], allowed: Iterable[str], field: str) -> 
     if not field:  # the top level of a file: one registry for every command
         check_top_level(table)
         return
-    _check_keys(table, allowed, field)
+    _readers.check_keys(table, allowed, field)
 
 
 #: Above this magnitude a static feedback gain (per unit: 1/s² on a spacing, 1/s on a
