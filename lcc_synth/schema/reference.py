@@ -81,7 +81,11 @@ def _title(t: Table) -> str:
     if not t.path:
         return "Top level"
     name = f"[[{t.path}]]" if t.path == "scenario.perturbations" else f"[{t.path}]"
-    return f"`{name}`" + (f" — `{t.variant}`" if t.variant else "")
+    if not t.variant:
+        return f"`{name}`"
+    typed = t.path.startswith(("controllers.", "scenario.perturbations"))
+    form = f'type = "{t.variant}"' if typed and t.variant != "suite" else t.variant
+    return f"`{name}` (`{form}`)"
 
 
 def _row(k: Key, read_by: tuple[str, ...] = ()) -> str:
