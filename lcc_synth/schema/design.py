@@ -51,21 +51,19 @@ WEIGHTS = Table(
     "Weights of the H2 problem (lcc_synth.synthesis.h2.Weights).",
     _SYN,
     (
-        Key("q_s", "number", "Every spacing error squared.", 1.0, lo=0.0, lo_open=True,
-            unit="m⁻²"),
-        Key("q_s0", "number", "The CAV's own spacing error s_0 (LCC, CF-LCC); absent: q_s.",
-            None, lo=0.0, lo_open=True, unit="m⁻²"),
-        Key("q_v", "number", "Every velocity error squared.", 1.0, lo=0.0, lo_open=True,
-            unit="(m/s)⁻²"),
-        Key("q_a", "number", "Every HDV's acceleration squared (a smooth-driving / fuel proxy).",
-            0.0, lo=0.0, unit="(m/s²)⁻²"),
-        Key("q_p", "number", "FD-LCC's -p_0 when position = weight (> 0 then).", 0.1, lo=0.0,
-            unit="m⁻²"),
-        Key("r", "number", "The gain's input squared.", 1.0, lo=0.0, lo_open=True,
-            unit="(m/s²)⁻²"),
-        Key("head", "number", "Head-vehicle velocity disturbance (> 0 for string_stable; head "
-            "and accel not both 0).", 0.0, lo=0.0),
-        Key("accel", "number", "Acceleration noise on every velocity state (> 0 for fd_lcc).",
+        Key("q_s", "number", "Weight on every spacing error squared.", 1.0, lo=0.0, lo_open=True),
+        Key("q_s0", "number", "Weight on the CAV's own spacing error s_0 (LCC, CF-LCC); "
+            "absent: q_s.", None, lo=0.0, lo_open=True),
+        Key("q_v", "number", "Weight on every velocity error squared.", 1.0, lo=0.0, lo_open=True),
+        Key("q_a", "number", "Weight on every HDV's acceleration squared (smooth driving / "
+            "fuel proxy).", 0.0, lo=0.0),
+        Key("q_p", "number", "Weight on FD-LCC's -p_0 when position = weight (> 0 then).", 0.1,
+            lo=0.0),
+        Key("r", "number", "Weight on the gain's input squared.", 1.0, lo=0.0, lo_open=True),
+        Key("head", "number", "Weight of the head-vehicle velocity disturbance (> 0 for "
+            "string_stable; head and accel not both 0).", 0.0, lo=0.0),
+        Key("accel", "number", "Weight of the acceleration noise on every velocity state (> 0 for "
+            "fd_lcc).",
             1.0, lo=0.0),
         Key("position", "string", "FD-LCC position state: drop it or weight it with q_p.",
             "drop", choices=("drop", "weight")),
