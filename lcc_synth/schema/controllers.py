@@ -91,22 +91,23 @@ MPC = Table(
 )
 MPC_WEIGHTS = Table(
     f"{_C}.weights", "MPC stage cost x'Qx + input u^2 + jerk (du)^2.", _CMDS,
-    (Key("velocity", "number", "Velocity error of every vehicle.", 1.0, lo=0.0, unit="(m/s)⁻²"),
-     Key("spacing", "number", "Spacing error of every HDV.", 0.5, lo=0.0, unit="m⁻²"),
-     Key("spacing_cav", "number", "The CAV's own spacing error s_0; absent: spacing.", None,
-         lo=0.0, unit="m⁻²"),
-     Key("position", "number", "FD-LCC's -p_0 state (0: not regulated).", 0.0, lo=0.0,
+    (Key("velocity", "number", "Weight on the velocity error of every vehicle.", 1.0, lo=0.0,
+         unit="(m/s)⁻²"),
+     Key("spacing", "number", "Weight on the spacing error of every HDV.", 0.5, lo=0.0,
          unit="m⁻²"),
-     Key("input", "number", "CAV acceleration (see input_on).", 1.0, lo=0.0, lo_open=True,
-         unit="(m/s²)⁻²"),
-     Key("jerk", "number", "Change of that acceleration between steps.", 0.0, lo=0.0,
-         unit="(m/s²)⁻²"),
+     Key("spacing_cav", "number", "Weight on the CAV's own spacing error s_0; absent: "
+         "spacing.", None, lo=0.0, unit="m⁻²"),
+     Key("position", "number", "Weight on FD-LCC's -p_0 state (0: not regulated).", 0.0,
+         lo=0.0),
+     Key("input", "number", "Weight on the CAV acceleration (see input_on).", 1.0, lo=0.0,
+         lo_open=True),
+     Key("jerk", "number", "Weight on its change between steps.", 0.0, lo=0.0),
      Key("input_on", "string", "CF-LCC: the total CAV acceleration or the model input u_hat.",
          "total", choices=("total", "model")),
      Key("slack", "number", "Exact (l1) penalty on spacing-constraint violation, per m and "
-         "step.", 100.0, lo=0.0, unit="1/m"),
+         "step.", 100.0, lo=0.0),
      Key("slack_quadratic", "number", "Small quadratic slack term (keeps the QP strictly "
-         "convex).", 1.0, lo=0.0, unit="m⁻²")),
+         "convex).", 1.0, lo=0.0)),
     variant=_MPC,
 )
 MPC_CONSTRAINTS = Table(
