@@ -33,7 +33,8 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.problem import System, check_keys, get_number_list, get_str, get_table
+from lcc_synth.problem import System
+from lcc_synth.schema import declared
 from lcc_synth.simulation.perturbations import vehicle_column
 
 __all__ = [
@@ -382,13 +383,14 @@ def metrics_from(
     """The ``[metrics]`` table; with ``scenario`` (a
     :class:`~lcc_synth.simulation.scenario.Scenario`) the window must lie in its simulated time."""
     f = "metrics"
-    mt = get_table(data, "metrics", f)
-    check_keys(mt, ["window", "vehicles", "baseline"], f)
-    window = tuple(get_number_list(mt, "window", f, [20.0, 40.0], length=2))
+    mt = declared("").get(data, "metrics", "")
+    table = declared("metrics")
+    table.check(mt, f)
+    window = tuple(table.get(mt, "window", f))
     if scenario is not None and window[1] > window[0]:  # t1 <= t0: MetricsConfig says so
         t_end = scenario.t_start + scenario.steps * scenario.dt
         check_window(window, scenario.t_start, t_end, scenario.dt, f"{f}.window")
-    vehicles = mt.get("vehicles", "cav_and_behind")
+    vehicles = table.raw(mt, "vehicles")
     if isinstance(vehicles, list):
         for v in vehicles:
             vehicle_column(v, system.m, system.n, f"{f}.vehicles")
@@ -397,7 +399,7 @@ def metrics_from(
         raise ConfigError(
             f"{f}.vehicles", f"must be one of {list(VEHICLE_SETS)} or a list of vehicle indices"
         )
-    baseline = get_str(mt, "baseline", f, None)
+    baseline = table.get(mt, "baseline", f)
     if baseline is not None and controllers and baseline not in controllers:
         raise ConfigError(f"{f}.baseline", f"must name a controller, one of {list(controllers)}")
     return MetricsConfig(window, vehicles, baseline)

@@ -243,8 +243,9 @@ def test_registry_covers_every_table_the_commands_read():
     read = set()
     for src in (ROOT / "lcc_synth").rglob("*.py"):
         text = src.read_text()
-        read |= set(re.findall(r"get_table\(\s*(?:data|problem\.data|prob\.data),\s*\"(\w+)\"",
-                               text))
+        # a top-level table is read through the schema's top-level declaration
+        read |= set(re.findall(r"(?:get_table\(|declared\(\"\"\)\.get\()\s*"
+                               r"(?:data|problem\.data|prob\.data),\s*\"(\w+)\"", text))
     assert read, "no top-level get_table found"
     assert read <= set(TOP_LEVEL), read - set(TOP_LEVEL)
 
@@ -419,3 +420,43 @@ def test_huge_gains_warn_in_analyze_regions_and_synthesis_baseline(tmp_path):
     p.write_text(base.replace("s_2 = -1.0", "s_2 = -1e6"))
     with pytest.warns(ImplausibleValueWarning, match=r"synthesis\.baseline\.gains\.s_2"):
         spec_from_problem(load_problem(p))
+
+
+# --------------------------------------------------------------------------------------------
+# Keys first documented by the schema (problems/REFERENCE.md): their errors are as good
+# --------------------------------------------------------------------------------------------
+
+SCHEMA_CASES = [
+    ("synthesize", "as_run_misspelled_key", _append("[synthesis.as_run]\nmargni = 1e-3"),
+     "synthesis.as_run.margni", "did you mean 'margin'?"),
+    ("synthesize", "weight_q_a_negative", _sub(r"^\[synthesis.weights\]$",
+                                               "[synthesis.weights]\nq_a = -1.0"),
+     "synthesis.weights.q_a", "must be >= 0.0, got -1.0"),
+    ("sweep", "count_zero", _sub(r"^count = .*$", "count = 0"), "sweep.count",
+     "must be an integer >= 1 and <= 10000000, got 0"),
+    ("run", "scenario_title_not_a_string",
+     _sub(r'^title = "Table II: .*$', "title = 3"),
+     "scenarios.brake_behind.title", "must be a string, got 3"),
+    ("simulate", "measurement_filter_negative",
+     _sub(r"^\[controllers.cf_lcc\]$", "[controllers.cf_lcc]\nmeasurement_filter = -1.0"),
+     "controllers.cf_lcc.measurement_filter", "must be >= 0.0, got -1.0"),
+]
+
+
+@pytest.mark.parametrize(
+    "cmd, mutate, field, text",
+    [pytest.param(c, m, f, t, id=f"{c}-{i}") for c, i, m, f, t in SCHEMA_CASES],
+)
+def test_schema_documented_keys_exit_2_naming_the_field(
+    cmd, mutate, field, text, tmp_path, monkeypatch, capsys
+):
+    monkeypatch.chdir(tmp_path)
+    path = _write(tmp_path, cmd, mutate)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        code = main([cmd, str(path), *BASES[cmd][1]])
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert code == 2 and len(lines) == 1 and "Traceback" not in err, err
+    assert lines[0].startswith(f"lcc-synth {cmd}: error: {path}: {field}: "), err
+    assert text in lines[0], err

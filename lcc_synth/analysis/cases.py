@@ -36,23 +36,24 @@ class AnalysisOptions:
 
 def analysis_options_from(data: Mapping, source: str | None = None) -> AnalysisOptions:
     """Parse the optional ``[analysis]`` table (see :func:`cases_from`)."""
-    from lcc_synth.problem import check_keys, get_int, get_number, get_str, get_table
+    from lcc_synth.schema import declared
 
     try:
-        t = get_table(data, "analysis", "analysis")
-        check_keys(t, ["outputs", "method", "omega_min", "omega_max", "points"], "analysis")
+        A = declared("analysis")
+        t = declared("").get(data, "analysis", "")
+        A.check(t, "analysis")
         outputs = None
-        if "outputs" in t:
-            raw = t["outputs"]
+        raw = A.raw(t, "outputs")
+        if raw is not None:
             if not isinstance(raw, list) or not raw or not all(isinstance(x, str) for x in raw):
                 raise ConfigError(
                     "analysis.outputs", f"must be a non-empty list of state names, got {raw!r}"
                 )
             outputs = tuple(raw)
-        method = get_str(t, "method", "analysis", "grid", choices=["grid", "hamiltonian"])
-        lo = get_number(t, "omega_min", "analysis", 1e-3, lo=0.0, lo_open=True)
-        hi = get_number(t, "omega_max", "analysis", 10.0, lo=lo, lo_open=True)
-        points = get_int(t, "points", "analysis", 400, lo=2, hi=100_000)
+        method = A.get(t, "method", "analysis")
+        lo = A.get(t, "omega_min", "analysis")
+        hi = A.get(t, "omega_max", "analysis", lo=lo)
+        points = A.get(t, "points", "analysis")
         return AnalysisOptions(outputs, method, lo, hi, points)
     except ConfigError as err:
         raise err.with_source(source) if source and not err.source else err from None
@@ -75,20 +76,22 @@ def cases_from(data: Mapping, model: LCCModel, source: str | None = None) -> dic
     Errors name ``cases.NAME.<field>`` and the file.
     """
     from lcc_synth.models.feedback import StaticGains
-    from lcc_synth.problem import check_keys, get_str, get_table, warn_large_gains
+    from lcc_synth.problem import warn_large_gains
+    from lcc_synth.schema import declared
 
     out = {}
     try:
-        cases = get_table(data, "cases", "cases")
+        C = declared("cases.NAME")
+        cases = declared("").get(data, "cases", "")
         for name, table in cases.items():
             field = f"cases.{name}"
             if not isinstance(table, dict):
                 raise ConfigError(field, f"must be a table, got {table!r}")
-            check_keys(table, ["semantics", "gains", "label"], field)
-            semantics = get_str(table, "semantics", field, "added", choices=["added", "replace"])
-            raw = get_table(table, "gains", f"{field}.gains")
+            C.check(table, field)
+            semantics = C.get(table, "semantics", field)
+            raw = C.get(table, "gains", field)
             warn_large_gains(raw, f"{field}.gains")
-            label = get_str(table, "label", field, name)
+            label = C.get(table, "label", field, default=name)
             try:
                 gains = StaticGains(raw, semantics)
                 gains.check(model)

@@ -14,8 +14,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from lcc_synth.analysis.regions import (
-    DEFAULT_DENSE_PER_DECADE,
-    DEFAULT_PER_DECADE,
     STRING_STABLE,
     RegionMap,
     region_frequency_grid,
@@ -61,12 +59,6 @@ class RegionSpec:
     title: str = ""
 
 
-_REGION_KEYS = [
-    "mu", "k", "step", "omega_min", "omega_max", "per_decade", "dense_min", "dense_max",
-    "dense_per_decade",
-]
-
-
 def region_specs_from(
     data: Mapping, model: LCCModel, source: str | None = None, step: float | None = None
 ) -> tuple[dict[str, RegionSpec], np.ndarray]:
@@ -75,41 +67,34 @@ def region_specs_from(
     ``step`` (e.g. from the command line) overrides every grid step. Returns the specs in file
     order and the frequency grid. Errors name the dotted field and the file.
     """
-    from lcc_synth.problem import (
-        check_keys,
-        get_int,
-        get_number,
-        get_number_list,
-        get_str,
-        get_table,
-        warn_large_gains,
-    )
+    from lcc_synth.problem import warn_large_gains
+    from lcc_synth.schema import declared
 
     try:
         if model.kind == "fd_lcc":
             raise ConfigError(
                 "system.kind", "region maps need a head vehicle (lcc, cf_lcc or ccc), not fd_lcc"
             )
-        opts = get_table(data, "regions", "regions")
-        check_keys(opts, _REGION_KEYS, "regions")
-        d_step = get_number(opts, "step", "regions", 0.02, lo=0.0, lo_open=True)
-        d_mu = get_number_list(opts, "mu", "regions", [-10.0, 10.0], length=2)
-        d_k = get_number_list(opts, "k", "regions", [-10.0, 10.0], length=2)
+        R = declared("regions")
+        opts = declared("").get(data, "regions", "")
+        R.check(opts, "regions")
+        d_step = R.get(opts, "step", "regions")
+        d_mu = R.get(opts, "mu", "regions")
+        d_k = R.get(opts, "k", "regions")
         step_field = "--step" if step is not None else "regions.step"
         d_step_used = step if step is not None else d_step
         mu_default = grid_axis(*d_mu, d_step_used, "regions.mu", step_field)
         k_default = grid_axis(*d_k, d_step_used, "regions.k", step_field)
-        w_lo = get_number(opts, "omega_min", "regions", 1e-3, lo=0.0, lo_open=True)
-        w_hi = get_number(opts, "omega_max", "regions", 1e2, lo=w_lo, lo_open=True)
-        per_dec = get_int(opts, "per_decade", "regions", DEFAULT_PER_DECADE, lo=10, hi=100_000)
-        dn_lo = get_number(opts, "dense_min", "regions", 0.03, lo=0.0, lo_open=True)
-        dn_hi = get_number(opts, "dense_max", "regions", 10.0, lo=dn_lo, lo_open=True)
-        dn_per = get_int(
-            opts, "dense_per_decade", "regions", DEFAULT_DENSE_PER_DECADE, lo=0, hi=100_000
-        )
+        w_lo = R.get(opts, "omega_min", "regions")
+        w_hi = R.get(opts, "omega_max", "regions", lo=w_lo)
+        per_dec = R.get(opts, "per_decade", "regions")
+        dn_lo = R.get(opts, "dense_min", "regions")
+        dn_hi = R.get(opts, "dense_max", "regions", lo=dn_lo)
+        dn_per = R.get(opts, "dense_per_decade", "regions")
         omega = region_frequency_grid(w_lo, w_hi, per_dec, (dn_lo, dn_hi), dn_per)
 
-        maps = get_table(data, "maps", "maps", required=True)
+        maps = declared("").get(data, "maps", "")
+        M = declared("maps.NAME")
         if not maps:
             raise ConfigError("maps", "needs at least one [maps.NAME] table")
         allowed_vehicles = [i for i in model.vehicles if i != 0]
@@ -118,18 +103,16 @@ def region_specs_from(
             field = f"maps.{name}"
             if not isinstance(t, dict):
                 raise ConfigError(field, f"must be a table, got {t!r}")
-            check_keys(
-                t, ["vehicle", "gains", "semantics", "baseline", "title", "mu", "k", "step"], field
-            )
-            vehicle = get_int(t, "vehicle", field)
+            M.check(t, field)
+            vehicle = M.get(t, "vehicle", field)
             if vehicle not in allowed_vehicles:
                 raise ConfigError(
                     f"{field}.vehicle",
                     f"must be one of {allowed_vehicles} (an HDV of this m={model.m}, "
                     f"n={model.n} system), got {vehicle}",
                 )
-            semantics = get_str(t, "semantics", field, "added", choices=["added", "replace"])
-            raw = get_table(t, "gains", f"{field}.gains")
+            semantics = M.get(t, "semantics", field)
+            raw = M.get(t, "gains", field)
             warn_large_gains(raw, f"{field}.gains")
             try:
                 gains = StaticGains(raw, semantics)
@@ -142,18 +125,16 @@ def region_specs_from(
                         f"{field}.gains.{own}", "is the map's own axis; remove it from gains"
                     )
             if any(key in t for key in ("mu", "k", "step")):
-                st = step if step is not None else get_number(
-                    t, "step", field, d_step, lo=0.0, lo_open=True
-                )
+                st = step if step is not None else M.get(t, "step", field, default=d_step)
                 sf = step_field if step is not None else f"{field}.step"
-                lo_hi = get_number_list(t, "mu", field, d_mu, length=2)
+                lo_hi = M.get(t, "mu", field, default=d_mu)
                 mu = grid_axis(*lo_hi, st, f"{field}.mu", sf)
-                lo_hi = get_number_list(t, "k", field, d_k, length=2)
+                lo_hi = M.get(t, "k", field, default=d_k)
                 k = grid_axis(*lo_hi, st, f"{field}.k", sf)
             else:
                 mu, k = mu_default, k_default
-            baseline = get_str(t, "baseline", field, None) if "baseline" in t else None
-            title = get_str(t, "title", field, name)
+            baseline = M.get(t, "baseline", field)
+            title = M.get(t, "title", field, default=name)
             specs[name] = RegionSpec(name, vehicle, mu, k, gains, baseline, title)
         for name, spec in specs.items():
             if spec.baseline is None:

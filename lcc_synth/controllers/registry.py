@@ -11,11 +11,12 @@ import json
 from pathlib import Path
 
 from lcc_synth.controllers.base import Controller
-from lcc_synth.controllers.static import EQUILIBRIA, HDVController, StaticGainController
+from lcc_synth.controllers.static import HDVController, StaticGainController
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.feedback import SEMANTICS, StaticGains
+from lcc_synth.models.feedback import StaticGains
 from lcc_synth.models.linear import KINDS, model_from_hdv
-from lcc_synth.problem import check_keys, get_number, get_str, get_table, warn_large_gains
+from lcc_synth.problem import warn_large_gains
+from lcc_synth.schema import declared
 
 __all__ = ["CONTROLLER_TYPES", "STATIC_RUN_KEYS", "build_controller"]
 
@@ -29,10 +30,8 @@ _EQ_KEYS = ("equilibrium", "equilibrium_tau", "measurement_filter")
 STATIC_RUN_KEYS = ("sample_time", *_EQ_KEYS)
 
 
-def _sample_time(table, field: str) -> float | None:
-    if "sample_time" not in table:
-        return None
-    return get_number(table, "sample_time", field, lo=0.0, lo_open=True)
+def _sample_time(table, field: str, ctype: str) -> float | None:
+    return declared(f"controllers.NAME:{ctype}").get(table, "sample_time", field)
 
 
 def build_controller(name: str, table, system, source: str | None = None) -> Controller:
@@ -54,7 +53,7 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
     try:
         if not isinstance(table, dict):
             raise ConfigError(field, f"must be a table, got {table!r}")
-        ctype = get_str(table, "type", field, choices=CONTROLLER_TYPES)
+        ctype = declared("controllers.NAME").get(table, "type", field)
         if ctype == "mpc":
             try:
                 from lcc_synth.mpc.build import mpc_controller_from_table
@@ -63,19 +62,17 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
                     f"{field}.type", f"'mpc' controllers need lcc_synth.mpc, which failed: {err}"
                 ) from None
             return mpc_controller_from_table(name, table, system, source=source)
+        T = declared(f"controllers.NAME:{ctype}")
+        T.check(table, field)
         if ctype == "hdv":
-            check_keys(table, ["type", "sample_time"], field)
-            return HDVController(name, _sample_time(table, field))
+            return HDVController(name, _sample_time(table, field, ctype))
         if ctype == "static":
-            check_keys(table, ["type", "kind", "semantics", "gains", "sample_time", *_EQ_KEYS],
-                       field)  # fmt: skip
-            kind = get_str(table, "kind", field, system.kind, choices=KINDS)
-            semantics = get_str(table, "semantics", field, "added", choices=SEMANTICS)
-            raw = get_table(table, "gains", f"{field}.gains", required=True)
+            kind = T.get(table, "kind", field, default=system.kind)
+            semantics = T.get(table, "semantics", field)
+            raw = T.get(table, "gains", field)
             where = field
         else:
-            check_keys(table, ["type", "file", "sample_time", *_EQ_KEYS], field)
-            rel = get_str(table, "file", field)
+            rel = T.get(table, "file", field)
             path = Path(rel)
             if not path.is_absolute() and source:
                 path = Path(source).parent / path
@@ -103,22 +100,22 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
                 raise ConfigError(f"{field}.file", f"{path}: gains must be an object")
             where = f"{field}.file"
         warn_large_gains(raw, f"{where}.gains")
-        sample_time = _sample_time(table, field)
-        equilibrium = get_str(table, "equilibrium", field, "fixed", choices=EQUILIBRIA)
+        sample_time = _sample_time(table, field, ctype)
+        equilibrium = T.get(table, "equilibrium", field)
         tau = None
         if "equilibrium_tau" in table:
             if equilibrium != "estimated":
                 raise ConfigError(
                     f"{field}.equilibrium_tau", 'only applies with equilibrium = "estimated"'
                 )
-            tau = get_number(table, "equilibrium_tau", field, lo=0.0, lo_open=True)
+            tau = T.get(table, "equilibrium_tau", field)
         if equilibrium == "estimated" and kind == "fd_lcc":
             raise ConfigError(
                 f"{field}.equilibrium",
                 'must be "fixed" for fd_lcc: FD-LCC has no vehicle ahead of the CAV to '
                 "estimate the equilibrium velocity from",
             )
-        mf = get_number(table, "measurement_filter", field, 0.0, lo=0.0)
+        mf = T.get(table, "measurement_filter", field)
         try:
             gains = StaticGains(raw, semantics)
             model = model_from_hdv(kind, system.m, system.n, system.hdv, system.v_star, warn=False)

@@ -37,15 +37,8 @@ from lcc_synth.controllers.registry import CONTROLLER_TYPES, STATIC_RUN_KEYS, bu
 from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.tables import SUITE_METRICS, rank_failed_last
 from lcc_synth.metrics import MetricsConfig, metrics_from
-from lcc_synth.problem import (
-    Problem,
-    System,
-    check_top_level,
-    get_str,
-    get_table,
-    load_problem,
-    system_from,
-)
+from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
+from lcc_synth.schema import declared
 from lcc_synth.simulation.results import SimResult
 from lcc_synth.simulation.scenario import Scenario, scenario_from
 
@@ -138,8 +131,9 @@ def load_suite(
     try:
         data = problem.data
         check_top_level(data)
-        hdv_table = get_table(data, "hdv", "hdv")
-        layouts_t = get_table(data, "layouts", "layouts", required=True)
+        top = declared("")
+        hdv_table = top.get(data, "hdv", "")
+        layouts_t = top.get(data, "layouts", "")
         if not layouts_t:
             raise ConfigError("layouts", "needs at least one [layouts.NAME] table")
         layouts: dict[str, System] = {}
@@ -153,7 +147,8 @@ def load_suite(
                     err.field.replace("system", f"layouts.{lname}", 1), err.message
                 ) from None
 
-        scen_t = get_table(data, "scenarios", "scenarios", required=True)
+        scen_t = top.get(data, "scenarios", "")
+        S = declared("scenarios.NAME")
         if not scen_t:
             raise ConfigError("scenarios", "needs at least one [scenarios.NAME] table")
         chosen = select_names(list(scen_t), scenarios, "--scenarios")
@@ -163,16 +158,16 @@ def load_suite(
             table = scen_t[sname]
             if not isinstance(table, dict):
                 raise ConfigError(f, "must be a table")
-            lname = get_str(table, "layout", f, choices=list(layouts))
-            title = get_str(table, "title", f, "")
-            sc_table = {k: v for k, v in table.items() if k not in ("layout", "title", "metrics")}
+            lname = S.get(table, "layout", f, choices=list(layouts))
+            title = S.get(table, "title", f)
+            sc_table = {k: v for k, v in table.items() if k not in S.names}
             system = layouts[lname]
             try:
                 sc = scenario_from({"scenario": sc_table}, system, problem.path.parent)
             except ConfigError as err:
                 raise ConfigError(err.field.replace("scenario", f, 1), err.message) from None
-            mt = dict(get_table(data, "metrics", "metrics"))
-            mt.update(get_table(table, "metrics", f"{f}.metrics"))
+            mt = dict(top.get(data, "metrics", ""))
+            mt.update(S.get(table, "metrics", f))
             try:
                 mcfg = metrics_from({"metrics": mt}, system, scenario=sc)
             except ConfigError as err:
@@ -183,7 +178,8 @@ def load_suite(
             sc = replace(sc, name=sname)
             suite_scenarios[sname] = SuiteScenario(sname, lname, sc, mcfg, title)
 
-        ctrl_t = get_table(data, "controllers", "controllers", required=True)
+        ctrl_t = top.get(data, "controllers", "")
+        C = declared("controllers.NAME:suite")
         if not ctrl_t:
             raise ConfigError("controllers", "needs at least one [controllers.NAME] table")
         names = select_names(list(ctrl_t), controllers, "--controllers")
@@ -193,8 +189,8 @@ def load_suite(
             f = f"controllers.{cname}"
             if not isinstance(table, dict):
                 raise ConfigError(f, "must be a table")
-            get_str(table, "type", f, choices=SUITE_TYPES)
-            over = get_table(table, "layouts", f"{f}.layouts")
+            C.get(table, "type", f)
+            over = C.get(table, "layouts", f)
             for lname, t in over.items():
                 if lname not in layouts:
                     raise ConfigError(
@@ -207,7 +203,7 @@ def load_suite(
             ctrls[cname] = dict(table)
         return Suite(
             name=problem.name,
-            description=str(data.get("description", "")),
+            description=str(top.raw(data, "description")),
             layouts=layouts,
             scenarios=suite_scenarios,
             controllers=ctrls,

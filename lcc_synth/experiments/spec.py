@@ -12,7 +12,8 @@ from lcc_synth.controllers.base import Controller
 from lcc_synth.controllers.registry import build_controller
 from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import MetricsConfig, metrics_from
-from lcc_synth.problem import Problem, System, get_table, load_problem, system_from
+from lcc_synth.problem import Problem, System, load_problem, system_from
+from lcc_synth.schema import declared
 from lcc_synth.simulation.scenario import Scenario, scenario_from
 from lcc_synth.simulation.timestep import check_time_step
 
@@ -33,7 +34,7 @@ class SimulationSpec:
 
 def controllers_from(data: Mapping[str, Any], system: System, source: str | None = None):
     """Every ``[controllers.NAME]`` table, built in file order."""
-    tables = get_table(data, "controllers", "controllers", required=True)
+    tables = declared("").get(data, "controllers", "")
     if not tables:
         raise ConfigError("controllers", "needs at least one [controllers.NAME] table")
     return {name: build_controller(name, t, system, source) for name, t in tables.items()}

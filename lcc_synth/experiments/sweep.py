@@ -52,16 +52,8 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import MetricsConfig
-from lcc_synth.problem import (
-    Problem,
-    System,
-    check_keys,
-    check_top_level,
-    get_int,
-    get_table,
-    load_problem,
-    system_from,
-)
+from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
+from lcc_synth.schema import declared
 from lcc_synth.simulation.scenario import Scenario
 
 __all__ = [
@@ -95,8 +87,9 @@ SWEEP_COUNTS = ("collisions", "aeb_activations", "fallbacks")
 #: Metrics whose distributions leave out the runs with a collision (a failed run is no
 #: efficiency to average).
 _EFFICIENCY = ("aave", "fuel_ml")
-MAX_COUNT = 10_000_000
-_MAX_BATCH = 100_000
+#: Largest ``[sweep].count`` and ``batch_size`` (declared in :mod:`lcc_synth.schema`).
+MAX_COUNT = int(declared("sweep").key("count").hi)
+_MAX_BATCH = int(declared("sweep").key("batch_size").hi)
 @dataclass(frozen=True)
 class SweepSpec:
     """A parsed sweep problem (see the module docstring)."""
@@ -136,9 +129,8 @@ def load_sweep(
     ConfigError
         A bad table or value, an unknown controller name, counts out of range.
     """
-    from lcc_synth.experiments.comparison import SUITE_TYPES, select_names
+    from lcc_synth.experiments.comparison import select_names
     from lcc_synth.metrics import metrics_from
-    from lcc_synth.problem import get_str
     from lcc_synth.simulation.scenario import scenario_from
 
     problem = path if isinstance(path, Problem) else load_problem(path)
@@ -149,10 +141,11 @@ def load_sweep(
         system = system_from(data, src)
         scenario = scenario_from(data, system, problem.path.parent)
         metrics = metrics_from(data, system, scenario=scenario)
-        sw = get_table(data, "sweep", "sweep")
-        check_keys(sw, ["count", "batch_size"], "sweep")
-        n = get_int(sw, "count", "sweep", 100, lo=1, hi=MAX_COUNT)
-        bs = get_int(sw, "batch_size", "sweep", 50, lo=1, hi=_MAX_BATCH)
+        SW = declared("sweep")
+        sw = declared("").get(data, "sweep", "")
+        SW.check(sw, "sweep")
+        n = SW.get(sw, "count", "sweep")
+        bs = SW.get(sw, "batch_size", "sweep")
         if count is not None:
             n = _count(count, "--count", MAX_COUNT)
         if batch_size is not None:
@@ -162,7 +155,7 @@ def load_sweep(
                 raise ConfigError("--seed", f"must be an integer >= 0, got {seed!r}")
             scenario = replace(scenario, seed=int(seed))
         scenario = replace(scenario, batch=1, first_index=0, name=problem.name)
-        tables = get_table(data, "controllers", "controllers", required=True)
+        tables = declared("").get(data, "controllers", "")
         if not tables:
             raise ConfigError("controllers", "needs at least one [controllers.NAME] table")
         names = select_names(list(tables), controllers, "--controllers")
@@ -171,7 +164,7 @@ def load_sweep(
             t = tables[name]
             if not isinstance(t, dict):
                 raise ConfigError(f"controllers.{name}", "must be a table")
-            get_str(t, "type", f"controllers.{name}", choices=SUITE_TYPES)
+            declared("controllers.NAME:suite").get(t, "type", f"controllers.{name}")
             if "layouts" in t:
                 raise ConfigError(f"controllers.{name}.layouts", "a sweep has one layout")
             ctrls[name] = dict(t)
@@ -183,7 +176,7 @@ def load_sweep(
             controllers=ctrls,
             count=n,
             batch_size=min(bs, n),
-            hdv_table=dict(get_table(data, "hdv", "hdv")),
+            hdv_table=dict(declared("").get(data, "hdv", "")),
             source=src,
         )
     except ConfigError as err:
@@ -423,12 +416,12 @@ def _inline_gains_file(name: str, table: Mapping[str, Any], spec: SweepSpec) -> 
     if table.get("type") != "gains_file":
         return dict(table)
     from lcc_synth.controllers.registry import STATIC_RUN_KEYS as passed
-    from lcc_synth.problem import get_str
     from lcc_synth.synthesis.gains_file import read_gains
 
     field_name = f"controllers.{name}"
-    check_keys(table, ["type", "file", *passed], field_name)
-    path = Path(get_str(table, "file", field_name))
+    gf = declared("controllers.NAME:gains_file")
+    gf.check(table, field_name)
+    path = Path(gf.get(table, "file", field_name))
     if not path.is_absolute() and spec.source:
         path = Path(spec.source).parent / path
     try:

@@ -62,14 +62,7 @@ from typing import Any
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains
-from lcc_synth.problem import (
-    check_keys,
-    get_bool,
-    get_int,
-    get_number,
-    get_str,
-    get_table,
-)
+from lcc_synth.schema import declared
 
 __all__ = [
     "paper_fallback_gains",
@@ -281,10 +274,6 @@ def validate(s: MPCSettings, field_prefix: str = "") -> None:
 # Problem-file table -> settings
 # --------------------------------------------------------------------------------------------
 
-_TOP = ["type", "sample_time", "horizon", "n_model", "fallback_gains_file",
-        "weights", "constraints", "prediction", "solver"]
-
-
 def settings_from_table(table: Mapping[str, Any], field_name: str) -> MPCSettings:
     """Parse a ``[controllers.NAME]`` table of ``type = "mpc"`` into :class:`MPCSettings`.
 
@@ -296,82 +285,39 @@ def settings_from_table(table: Mapping[str, Any], field_name: str) -> MPCSetting
         Its dotted path (e.g. ``"controllers.mpc"``), used in error messages.
     """
     f = field_name
-    check_keys(table, _TOP, f)
-    wt = get_table(table, "weights", f"{f}.weights")
-    check_keys(wt, [k for k in Weights.__dataclass_fields__], f"{f}.weights")
-    d = Weights()
-    weights = Weights(
-        velocity=get_number(wt, "velocity", f"{f}.weights", d.velocity, lo=0.0),
-        spacing=get_number(wt, "spacing", f"{f}.weights", d.spacing, lo=0.0),
-        spacing_cav=get_number(wt, "spacing_cav", f"{f}.weights", None, lo=0.0),
-        position=get_number(wt, "position", f"{f}.weights", d.position, lo=0.0),
-        input=get_number(wt, "input", f"{f}.weights", d.input, lo=0.0, lo_open=True),
-        jerk=get_number(wt, "jerk", f"{f}.weights", d.jerk, lo=0.0),
-        input_on=get_str(wt, "input_on", f"{f}.weights", d.input_on, choices=INPUT_ON),
-        slack=get_number(wt, "slack", f"{f}.weights", d.slack, lo=0.0),
-        slack_quadratic=get_number(
-            wt, "slack_quadratic", f"{f}.weights", d.slack_quadratic, lo=0.0
-        ),
-    )
-    ct = get_table(table, "constraints", f"{f}.constraints")
-    check_keys(ct, [k for k in Constraints.__dataclass_fields__], f"{f}.constraints")
-    dc = Constraints()
-    behind = ct.get("behind", [])
-    if not isinstance(behind, list):
-        raise ConfigError(f"{f}.constraints.behind", f"must be a list of integers, got {behind!r}")
-    constraints = Constraints(
-        a_min=get_number(ct, "a_min", f"{f}.constraints", dc.a_min),
-        a_max=get_number(ct, "a_max", f"{f}.constraints", dc.a_max),
-        s_min=get_number(ct, "s_min", f"{f}.constraints", dc.s_min, lo=0.0),
-        t_gap=get_number(ct, "t_gap", f"{f}.constraints", dc.t_gap, lo=0.0),
-        margin=get_number(ct, "margin", f"{f}.constraints", dc.margin, lo=0.0),
-        spacing_ahead=get_bool(ct, "spacing_ahead", f"{f}.constraints", dc.spacing_ahead),
-        behind=tuple(behind),
-        s_min_behind=get_number(ct, "s_min_behind", f"{f}.constraints", dc.s_min_behind, lo=0.0),
-        t_gap_behind=get_number(ct, "t_gap_behind", f"{f}.constraints", dc.t_gap_behind, lo=0.0),
-        jerk_scale=get_number(ct, "jerk_scale", f"{f}.constraints", dc.jerk_scale, lo=0.0,
-                              hi=1.0),
-        jerk_window=get_number(ct, "jerk_window", f"{f}.constraints", dc.jerk_window, lo=0.0,
-                               lo_open=True),
-    )
-    pt = get_table(table, "prediction", f"{f}.prediction")
-    check_keys(pt, [k for k in Prediction.__dataclass_fields__], f"{f}.prediction")
-    dp = Prediction()
-    prediction = Prediction(
-        head=get_str(pt, "head", f"{f}.prediction", dp.head, choices=HEAD_PREDICTIONS),
-        head_accel_hold=get_number(
-            pt, "head_accel_hold", f"{f}.prediction", dp.head_accel_hold, lo=0.0
-        ),
-        equilibrium=get_str(pt, "equilibrium", f"{f}.prediction", None, choices=EQUILIBRIA),
-        equilibrium_window=get_number(
-            pt, "equilibrium_window", f"{f}.prediction", dp.equilibrium_window,
-            lo=0.0, lo_open=True,
-        ),
-        relinearize=get_bool(pt, "relinearize", f"{f}.prediction", dp.relinearize),
-        relinearize_threshold=get_number(
-            pt, "relinearize_threshold", f"{f}.prediction", dp.relinearize_threshold,
-            lo=0.0, lo_open=True,
-        ),
-    )
-    st = get_table(table, "solver", f"{f}.solver")
-    check_keys(st, [k for k in SolverSettings.__dataclass_fields__], f"{f}.solver")
-    ds = SolverSettings()
-    solver = SolverSettings(
-        eps_abs=get_number(st, "eps_abs", f"{f}.solver", ds.eps_abs, lo=0.0, lo_open=True),
-        eps_rel=get_number(st, "eps_rel", f"{f}.solver", ds.eps_rel, lo=0.0),
-        max_iter=get_int(st, "max_iter", f"{f}.solver", ds.max_iter, lo=1),
-        polish=get_bool(st, "polish", f"{f}.solver", ds.polish),
-        warm_start=get_bool(st, "warm_start", f"{f}.solver", ds.warm_start),
-        time_limit=get_number(st, "time_limit", f"{f}.solver", ds.time_limit, lo=0.0),
-    )
-    fb = table.get("fallback_gains_file")
+    top = declared("controllers.NAME:mpc")
+    top.check(table, f)
+
+    def read(sub: str, cls) -> Any:
+        """The sub-table ``sub`` as ``cls``, every declared key read through the schema."""
+        t = declared(f"controllers.NAME.{sub}:mpc")
+        raw = top.get(table, sub, f)
+        t.check(raw, f"{f}.{sub}")
+        values = {}
+        for k in t.names:
+            if k == "behind":
+                behind = t.raw(raw, "behind")
+                if not isinstance(behind, list):
+                    raise ConfigError(
+                        f"{f}.constraints.behind", f"must be a list of integers, got {behind!r}"
+                    )
+                values[k] = tuple(behind)
+            else:
+                values[k] = t.get(raw, k, f"{f}.{sub}")
+        return cls(**values)
+
+    weights = read("weights", Weights)
+    constraints = read("constraints", Constraints)
+    prediction = read("prediction", Prediction)
+    solver = read("solver", SolverSettings)
+    fb = top.raw(table, "fallback_gains_file")
     if fb is not None and (not isinstance(fb, str) or not fb):
         raise ConfigError(f"{f}.fallback_gains_file", f"must be a file path, got {fb!r}")
-    n_model = get_int(table, "n_model", f, None, lo=0)
+    n_model = top.get(table, "n_model", f)
     try:
         return MPCSettings(
-            sample_time=get_number(table, "sample_time", f, 0.1, lo=0.0, lo_open=True),
-            horizon=get_int(table, "horizon", f, 50, lo=1),
+            sample_time=top.get(table, "sample_time", f),
+            horizon=top.get(table, "horizon", f),
             n_model=n_model,
             weights=weights,
             constraints=constraints,

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.problem import check_keys, get_number, get_number_list, get_str
+from lcc_synth.schema import declared
 
 __all__ = [
     "Sine",
@@ -246,49 +246,39 @@ def read_profile_csv(path: Path, field: str) -> tuple[list[float], list[float]]:
     return times, vals
 
 
-_KEYS = {
-    "sine": ["type", "vehicle", "amplitude", "period", "start", "end"],
-    "brake": ["type", "vehicle", "start", "duration", "decel"],
-    "brake_profile": [
-        "type", "vehicle", "start", "decel", "decel_time", "hold_time", "accel", "accel_time"
-    ],
-    "accel_profile": ["type", "vehicle", "times", "values", "csv", "interpolation"],
-    "speed_profile": ["type", "vehicle", "times", "values", "csv", "interpolation"],
-}
-
-
 def perturbation_from_table(
     table: Mapping[str, Any], field: str, m: int, n: int, base_dir: Path | None = None
 ) -> Perturbation:
     """Build one perturbation from a ``[[scenario.perturbations]]`` entry."""
     if not isinstance(table, Mapping):
         raise ConfigError(field, f"must be a table, got {table!r}")
-    kind = get_str(table, "type", field, choices=list(_KEYS))
-    check_keys(table, _KEYS[kind], field)
-    vehicle = table.get("vehicle", "head")
+    kind = declared("scenario.perturbations").get(table, "type", field)
+    P = declared(f"scenario.perturbations:{kind}")
+    P.check(table, field)
+    vehicle = P.raw(table, "vehicle")
     vehicle_column(vehicle, m, n, f"{field}.vehicle")
     if kind == "sine":
-        period = get_number(table, "period", field, 12.0, lo=0.0, lo_open=True)
-        start = get_number(table, "start", field, 20.0)
-        end = get_number(table, "end", field, start + period, lo=start)
-        amp = get_number(table, "amplitude", field, 0.2)
+        period = P.get(table, "period", field)
+        start = P.get(table, "start", field)
+        end = P.get(table, "end", field, default=start + period, lo=start)
+        amp = P.get(table, "amplitude", field)
         return Sine(amp, period, start, end, vehicle)
     try:
         if kind == "brake":
             return Brake(
                 vehicle,
-                get_number(table, "start", field, 20.0),
-                get_number(table, "duration", field, 1.0, lo=0.0),
-                get_number(table, "decel", field, -5.0),
+                P.get(table, "start", field),
+                P.get(table, "duration", field),
+                P.get(table, "decel", field),
             )
         if kind == "brake_profile":
             return BrakeProfile(
-                get_number(table, "start", field, 20.0),
-                get_number(table, "decel", field, -5.0),
-                get_number(table, "decel_time", field, 2.0, lo=0.0),
-                get_number(table, "hold_time", field, 5.0, lo=0.0),
-                get_number(table, "accel", field, 2.0),
-                get_number(table, "accel_time", field, 5.0, lo=0.0),
+                P.get(table, "start", field),
+                P.get(table, "decel", field),
+                P.get(table, "decel_time", field),
+                P.get(table, "hold_time", field),
+                P.get(table, "accel", field),
+                P.get(table, "accel_time", field),
                 vehicle,
             )
     except ConfigError as err:
@@ -296,16 +286,16 @@ def perturbation_from_table(
             raise
         raise ConfigError(f"{field}.{err.field}", err.message) from None
     target = "accel" if kind == "accel_profile" else "speed"
-    interp = get_str(table, "interpolation", field, "step", choices=["step", "linear"])
+    interp = P.get(table, "interpolation", field)
     if "csv" in table:
         if "times" in table or "values" in table:
             raise ConfigError(f"{field}.csv", "give either csv or times/values, not both")
-        rel = get_str(table, "csv", field)
+        rel = P.get(table, "csv", field)
         path = Path(rel) if base_dir is None or Path(rel).is_absolute() else base_dir / rel
         times, vals = read_profile_csv(path, f"{field}.csv")
     else:
-        times = get_number_list(table, "times", field)
-        vals = get_number_list(table, "values", field)
+        times = P.get(table, "times", field)
+        vals = P.get(table, "values", field)
     try:
         return Profile(tuple(times), tuple(vals), target, interp, vehicle)
     except ConfigError as err:

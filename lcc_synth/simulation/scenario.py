@@ -16,17 +16,8 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import IDM, MODELS, OVM
-from lcc_synth.problem import (
-    System,
-    check_keys,
-    check_range,
-    get_bool,
-    get_int,
-    get_number,
-    get_number_list,
-    get_str,
-    get_table,
-)
+from lcc_synth.problem import System, check_range
+from lcc_synth.schema import declared
 from lcc_synth.simulation.perturbations import Perturbation, perturbation_from_table
 
 __all__ = ["MODEL_PARAMS", "V2V", "Scenario", "Draws", "scenario_from"]
@@ -323,56 +314,48 @@ class Draws:
 # The [scenario] table
 # --------------------------------------------------------------------------------------------
 
-_SCENARIO_KEYS = [
-    "dt", "duration", "t_start", "a_min", "a_max", "cav_aeb", "hdv_aeb", "seed", "batch",
-    "record_every", "spacing_reference", "hdv_accel_noise", "heterogeneity", "delay", "v2v",
-    "perturbations", "hdv_values",
-]  # fmt: skip
-
-
 def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None = None):
     """Build the :class:`Scenario` of a problem's ``[scenario]`` table."""
     f = "scenario"
-    sc = get_table(data, "scenario", f)
-    check_keys(sc, _SCENARIO_KEYS, f)
-    hv_t = get_table(sc, "hdv_values", f"{f}.hdv_values")
+    S = declared("scenario")
+    sc = declared("").get(data, "scenario", "")
+    S.check(sc, f)
+    hv_t = S.get(sc, "hdv_values", f)
     hdv_values = None
     if hv_t:
-        allowed = MODEL_PARAMS[system.hdv.name]
-        check_keys(hv_t, allowed, f"{f}.hdv_values")
+        HV = declared("scenario.hdv_values")
+        HV.check(hv_t, f"{f}.hdv_values", allowed=list(MODEL_PARAMS[system.hdv.name]))
         hdv_values = {}
         hdv_cols = [j for j in range(system.m + system.n + 2) if j not in (0, system.m + 1)]
-        for key in hv_t:
-            vals = get_number_list(hv_t, key, f"{f}.hdv_values", length=len(hdv_cols))
+        each = HV.get_each(hv_t, f"{f}.hdv_values", length=len(hdv_cols))
+        for key, vals in each.items():
             full = np.full(system.m + system.n + 2, float(getattr(system.hdv, key)))
             full[hdv_cols] = vals
             hdv_values[key] = full
-    het = get_table(sc, "heterogeneity", f"{f}.heterogeneity")
-    heterogeneity = {k: get_number(het, k, f"{f}.heterogeneity", lo=0.0) for k in het}
-    delay_t = get_table(sc, "delay", f"{f}.delay")
-    check_keys(delay_t, ["mean", "spread", "model"], f"{f}.delay")
-    delay_model = get_str(delay_t, "model", f"{f}.delay", "full", choices=["full", "perception"])
-    delay = get_number(delay_t, "mean", f"{f}.delay", 0.0, lo=0.0)
-    spread = get_number(delay_t, "spread", f"{f}.delay", 0.0, lo=0.0, hi=delay)
-    v2v_t = get_table(sc, "v2v", f"{f}.v2v")
-    check_keys(
-        v2v_t,
-        ["loss_rate", "latency", "spacing_noise", "velocity_noise", "position_noise"],
-        f"{f}.v2v",
-    )
+    het = S.get(sc, "heterogeneity", f)
+    heterogeneity = declared("scenario.heterogeneity").get_each(het, f"{f}.heterogeneity")
+    D = declared("scenario.delay")
+    delay_t = S.get(sc, "delay", f)
+    D.check(delay_t, f"{f}.delay")
+    delay_model = D.get(delay_t, "model", f"{f}.delay")
+    delay = D.get(delay_t, "mean", f"{f}.delay")
+    spread = D.get(delay_t, "spread", f"{f}.delay", hi=delay)
+    V = declared("scenario.v2v")
+    v2v_t = S.get(sc, "v2v", f)
+    V.check(v2v_t, f"{f}.v2v")
     nv = system.m + system.n + 2
-    if isinstance(v2v_t.get("loss_rate"), list):
-        loss = get_number_list(v2v_t, "loss_rate", f"{f}.v2v", length=nv, lo=0.0, hi=1.0)
+    if isinstance(V.raw(v2v_t, "loss_rate"), list):
+        loss = declared("scenario.v2v:list").get(v2v_t, "loss_rate", f"{f}.v2v", length=nv)
     else:
-        loss = get_number(v2v_t, "loss_rate", f"{f}.v2v", 0.0, lo=0.0, hi=1.0)
+        loss = V.get(v2v_t, "loss_rate", f"{f}.v2v")
     v2v = V2V(
         loss,
-        get_number(v2v_t, "latency", f"{f}.v2v", 0.0, lo=0.0),
-        get_number(v2v_t, "spacing_noise", f"{f}.v2v", 0.0, lo=0.0),
-        get_number(v2v_t, "velocity_noise", f"{f}.v2v", 0.0, lo=0.0),
-        get_number(v2v_t, "position_noise", f"{f}.v2v", 0.0, lo=0.0),
+        V.get(v2v_t, "latency", f"{f}.v2v"),
+        V.get(v2v_t, "spacing_noise", f"{f}.v2v"),
+        V.get(v2v_t, "velocity_noise", f"{f}.v2v"),
+        V.get(v2v_t, "position_noise", f"{f}.v2v"),
     )
-    perts = sc.get("perturbations", [])
+    perts = S.raw(sc, "perturbations")
     if not isinstance(perts, list):
         raise ConfigError(
             f"{f}.perturbations", "must be an array of tables [[scenario.perturbations]]"
@@ -386,25 +369,23 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
         n=system.n,
         hdv=system.hdv,
         v_star=system.v_star,
-        dt=get_number(sc, "dt", f, 0.01, lo=0.0, lo_open=True),
-        duration=get_number(sc, "duration", f, 100.0, lo=0.0, lo_open=True),
-        t_start=get_number(sc, "t_start", f, 0.0),
-        batch=get_int(sc, "batch", f, 1, lo=1),
-        a_min=get_number(sc, "a_min", f, -5.0, hi=0.0, hi_open=True),
-        a_max=get_number(sc, "a_max", f, 2.0, lo=0.0, lo_open=True),
-        cav_aeb=get_bool(sc, "cav_aeb", f, True),
-        hdv_aeb=get_bool(sc, "hdv_aeb", f, False),
+        dt=S.get(sc, "dt", f),
+        duration=S.get(sc, "duration", f),
+        t_start=S.get(sc, "t_start", f),
+        batch=S.get(sc, "batch", f),
+        a_min=S.get(sc, "a_min", f),
+        a_max=S.get(sc, "a_max", f),
+        cav_aeb=S.get(sc, "cav_aeb", f),
+        hdv_aeb=S.get(sc, "hdv_aeb", f),
         perturbations=perturbations,
         hdv_values=hdv_values,
         heterogeneity=heterogeneity,
         delay=delay,
         delay_spread=spread,
         delay_model=delay_model,
-        hdv_accel_noise=get_number(sc, "hdv_accel_noise", f, 0.0, lo=0.0),
+        hdv_accel_noise=S.get(sc, "hdv_accel_noise", f),
         v2v=v2v,
-        seed=get_int(sc, "seed", f, 0, lo=0),
-        record_every=get_int(sc, "record_every", f, 1, lo=1),
-        spacing_reference=get_str(
-            sc, "spacing_reference", f, "nominal", choices=["nominal", "own_equilibrium"]
-        ),
+        seed=S.get(sc, "seed", f),
+        record_every=S.get(sc, "record_every", f),
+        spacing_reference=S.get(sc, "spacing_reference", f),
     )

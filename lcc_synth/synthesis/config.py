@@ -65,26 +65,15 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.feedback import SEMANTICS, StaticGains
-from lcc_synth.problem import (
-    Problem,
-    System,
-    check_keys,
-    check_top_level,
-    get_bool,
-    get_int,
-    get_number,
-    get_number_list,
-    get_str,
-    get_table,
-    system_from,
-    warn_large_gains,
-)
+from lcc_synth.models.feedback import StaticGains
+from lcc_synth.problem import Problem, System, check_top_level, system_from, warn_large_gains
+from lcc_synth.schema import declared
 from lcc_synth.synthesis.h2 import Weights
 
 __all__ = ["DESIGNS", "SynthesisSpec", "spec_from_problem"]
 
-DESIGNS = ("full_state", "structured", "sparsity", "string_stable")
+#: The designs of ``[synthesis].design`` (declared in :mod:`lcc_synth.schema`).
+DESIGNS = declared("synthesis").key("design").choices
 
 
 @dataclass(frozen=True)
@@ -112,9 +101,7 @@ class SynthesisSpec:
 
 
 def _pattern(table: dict, system: System) -> tuple[int, ...] | None:
-    if "pattern" not in table:
-        return None
-    value = table["pattern"]
+    value = declared("synthesis").raw(table, "pattern")
     if value == "all":
         return None
     lo, hi = -system.m, system.n
@@ -138,35 +125,33 @@ def _as_run(t: dict, system: System, design: str):
     from lcc_synth.synthesis.as_run import AsRunSettings
 
     f = "synthesis.as_run"
-    raw = t.get("as_run", False)
+    raw = declared("synthesis").raw(t, "as_run")
     if raw is False:
         return None
     if raw is True:
         raw = {}
     if not isinstance(raw, dict):
         raise ConfigError(f, f"must be true, false or a table, got {raw!r}")
-    keys = ["equilibrium", "equilibrium_tau", "sample_time", "dt", "latency",
-            "measurement_filter", "margin", "weight", "polish_steps"]  # fmt: skip
-    check_keys(raw, keys, f)
+    A = declared("synthesis.as_run")
+    A.check(raw, f)
     if design not in ("structured", "string_stable"):
         raise ConfigError(f, f"applies to design = 'structured' or 'string_stable', not {design!r}")
     if system.kind == "fd_lcc":
         raise ConfigError(f, "needs a head vehicle: fd_lcc has none")
-    eq = get_str(raw, "equilibrium", f, "fixed", choices=("fixed", "estimated"))
-    tau = get_number(raw, "equilibrium_tau", f, 1.0, lo=0.0, lo_open=True)
+    eq = A.get(raw, "equilibrium", f)
+    tau = A.get(raw, "equilibrium_tau", f)
     if eq == "fixed" and "equilibrium_tau" in raw:
         raise ConfigError(f"{f}.equilibrium_tau", 'only applies with equilibrium = "estimated"')
-    st = None if "sample_time" not in raw else get_number(raw, "sample_time", f, lo=0.0,
-                                                          lo_open=True)  # fmt: skip
+    st = A.get(raw, "sample_time", f)
     return AsRunSettings(
         equilibrium_tau=tau if eq == "estimated" else None,
         sample_time=st,
-        dt=get_number(raw, "dt", f, 0.01, lo=0.0, lo_open=True),
-        latency=get_number(raw, "latency", f, 0.0, lo=0.0),
-        measurement_filter=get_number(raw, "measurement_filter", f, 0.0, lo=0.0),
-        margin=get_number(raw, "margin", f, 1e-3, lo=0.0, hi=0.5),
-        weight=get_number(raw, "weight", f, 0.0, lo=0.0),
-        polish_steps=get_int(raw, "polish_steps", f, 200, lo=0, hi=100000),
+        dt=A.get(raw, "dt", f),
+        latency=A.get(raw, "latency", f),
+        measurement_filter=A.get(raw, "measurement_filter", f),
+        margin=A.get(raw, "margin", f),
+        weight=A.get(raw, "weight", f),
+        polish_steps=A.get(raw, "polish_steps", f),
     )
 
 
@@ -176,43 +161,31 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec:
     try:
         check_top_level(problem.data)
         system = system_from(problem.data, src)
-        t = get_table(problem.data, "synthesis", "synthesis", required=True)
-        check_keys(
-            t,
-            [
-                "design", "semantics", "pattern", "method", "cross_check", "tol", "max_iter",
-                "band", "weights", "sparsity", "string", "baseline", "as_run",
-            ],
-            "synthesis",
-        )
-        design = get_str(t, "design", "synthesis", "structured", choices=DESIGNS)
+        T = declared("synthesis")
+        t = declared("").get(problem.data, "synthesis", "")
+        T.check(t, "synthesis")
+        design = T.get(t, "design", "synthesis")
         default_sem = "replace" if system.kind in ("fd_lcc", "cf_lcc") else "added"
-        semantics = get_str(t, "semantics", "synthesis", default_sem, choices=SEMANTICS)
+        semantics = T.get(t, "semantics", "synthesis", default=default_sem)
         if semantics == "added" and system.kind == "fd_lcc":
             raise ConfigError(
                 "synthesis.semantics", "fd_lcc has no vehicle ahead to follow: use 'replace'"
             )
         pattern = _pattern(t, system)
         if design == "full_state":
-            method = get_str(t, "method", "synthesis", "riccati", choices=("riccati", "lmi"))
+            method = T.get(t, "method", "synthesis", default="riccati", choices=("riccati", "lmi"))
         else:
-            method = get_str(t, "method", "synthesis", "lmi", choices=("lmi", "direct"))
-        cross_check = get_bool(t, "cross_check", "synthesis", True)
-        tol = get_number(t, "tol", "synthesis", 1e-7, lo=0.0, hi=1e-2, lo_open=True)
-        max_iter = get_int(t, "max_iter", "synthesis", 500, lo=1, hi=100000)
-        band = get_int(t, "band", "synthesis", 4, lo=0, hi=50)
+            method = T.get(t, "method", "synthesis", default="lmi", choices=("lmi", "direct"))
+        cross_check = T.get(t, "cross_check", "synthesis")
+        tol = T.get(t, "tol", "synthesis")
+        max_iter = T.get(t, "max_iter", "synthesis")
+        band = T.get(t, "band", "synthesis")
 
-        w = get_table(t, "weights", "synthesis.weights")
-        wkeys = ["q_s", "q_s0", "q_v", "q_a", "q_p", "r", "head", "accel", "position"]
-        check_keys(w, wkeys, "synthesis.weights")
-        kw = {}
-        for key, dflt in (("q_s", 1.0), ("q_s0", None), ("q_v", 1.0), ("r", 1.0)):
-            kw[key] = get_number(w, key, "synthesis.weights", dflt, lo=0.0, lo_open=True)
-        for key, dflt in (("q_a", 0.0), ("q_p", 0.1), ("head", 0.0), ("accel", 1.0)):
-            kw[key] = get_number(w, key, "synthesis.weights", dflt, lo=0.0)
-        kw["position"] = get_str(
-            w, "position", "synthesis.weights", "drop", choices=("drop", "weight")
-        )
+        W = declared("synthesis.weights")
+        w = T.get(t, "weights", "synthesis")
+        W.check(w, "synthesis.weights")
+        order = ("q_s", "q_s0", "q_v", "r", "q_a", "q_p", "head", "accel", "position")
+        kw = {key: W.get(w, key, "synthesis.weights") for key in order}
         if kw["head"] == 0 and kw["accel"] == 0:
             raise ConfigError("synthesis.weights", "head and accel cannot both be 0")
         if system.kind == "fd_lcc" and kw["accel"] == 0:
@@ -224,23 +197,19 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec:
             raise ConfigError("synthesis.weights.q_p", "must be > 0 when position = 'weight'")
         weights = Weights(**kw)
 
-        sp = get_table(t, "sparsity", "synthesis.sparsity")
-        check_keys(sp, ["gammas", "n_gamma", "reweight", "rho", "max_loss"], "synthesis.sparsity")
-        sparsity = {
-            "gammas": get_number_list(sp, "gammas", "synthesis.sparsity", None, lo=0.0),
-            "n_gamma": get_int(sp, "n_gamma", "synthesis.sparsity", 12, lo=2, hi=60),
-            "reweight": get_bool(sp, "reweight", "synthesis.sparsity", True),
-            "rho": get_number(sp, "rho", "synthesis.sparsity", 10.0, lo=0.0, lo_open=True),
-            "max_loss": get_number(sp, "max_loss", "synthesis.sparsity", 0.01, lo=0.0, hi=10.0),
-        }
+        SP = declared("synthesis.sparsity")
+        sp = T.get(t, "sparsity", "synthesis")
+        SP.check(sp, "synthesis.sparsity")
+        sparsity = {key: SP.get(sp, key, "synthesis.sparsity") for key in SP.names}
         if sparsity["gammas"] is not None and not sparsity["gammas"]:
             raise ConfigError("synthesis.sparsity.gammas", "must not be empty")
 
-        st = get_table(t, "string", "synthesis.string")
-        check_keys(st, ["gamma", "polish_steps", "margin"], "synthesis.string")
-        string_gamma = get_number(st, "gamma", "synthesis.string", 1.0, lo=1.0, hi=100.0)
-        polish_steps = get_int(st, "polish_steps", "synthesis.string", 200, lo=0, hi=100000)
-        string_margin = get_number(st, "margin", "synthesis.string", 1e-4, lo=0.0, hi=0.1)
+        ST = declared("synthesis.string")
+        st = T.get(t, "string", "synthesis")
+        ST.check(st, "synthesis.string")
+        string_gamma = ST.get(st, "gamma", "synthesis.string")
+        polish_steps = ST.get(st, "polish_steps", "synthesis.string")
+        string_margin = ST.get(st, "margin", "synthesis.string")
         if design == "string_stable" and system.kind == "fd_lcc":
             raise ConfigError(
                 "synthesis.design", "string_stable needs a head vehicle; fd_lcc has none"
@@ -252,12 +221,13 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec:
             )
 
         baseline = None
-        b = get_table(t, "baseline", "synthesis.baseline")
+        B = declared("synthesis.baseline")
+        b = T.get(t, "baseline", "synthesis")
         if b:
-            check_keys(b, ["name", "semantics", "gains"], "synthesis.baseline")
-            bname = get_str(b, "name", "synthesis.baseline", "baseline")
-            bsem = get_str(b, "semantics", "synthesis.baseline", semantics, choices=SEMANTICS)
-            bg = get_table(b, "gains", "synthesis.baseline.gains", required=True)
+            B.check(b, "synthesis.baseline")
+            bname = B.get(b, "name", "synthesis.baseline")
+            bsem = B.get(b, "semantics", "synthesis.baseline", default=semantics)
+            bg = B.get(b, "gains", "synthesis.baseline")
             warn_large_gains(bg, "synthesis.baseline.gains")
             try:
                 gains = StaticGains(bg, bsem)

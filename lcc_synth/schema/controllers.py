@@ -1,0 +1,163 @@
+"""Declarations of the ``[controllers.NAME]`` tables: one per controller ``type``, the MPC's
+sub-tables, and the suite form of ``run`` and ``sweep`` (``type = "h2"``, per-layout
+overrides). The MPC defaults are those of :mod:`lcc_synth.mpc.settings`' dataclasses (a test
+compares them)."""
+
+from __future__ import annotations
+
+from lcc_synth.schema.spec import REQUIRED, Derived, Key, Table
+
+__all__ = ["TABLES"]
+
+_CMDS = ("simulate", "sweep", "run")
+_C = "controllers.NAME"
+
+_TYPE = Key("type", "string", "The controller.", REQUIRED,
+            choices=("hdv", "static", "gains_file", "mpc"))
+_SUITE_TYPE = Key("type", "string", "The controller; h2 is synthesised for each layout.",
+                  REQUIRED, choices=("hdv", "static", "gains_file", "mpc", "h2"))
+_SAMPLE_TIME = Key("sample_time", "number", "Controller period (zero-order hold; a multiple of "
+                   "[scenario].dt); absent: every step.", None, lo=0.0, lo_open=True, unit="s")
+_EQUILIBRIUM = Key("equilibrium", "string", "Errors from the nominal v*, s* (fixed) or from a "
+                   "low-pass estimate of the speed of the vehicle ahead (not fd_lcc).", "fixed",
+                   choices=("fixed", "estimated"))
+_EQ_TAU = Key("equilibrium_tau", "number", 'Time constant of that estimate (only with '
+              'equilibrium = "estimated"); absent: 1.0 s.', None, lo=0.0, lo_open=True, unit="s")
+_FILTER = Key("measurement_filter", "number", "Time constant of a first-order low-pass on every "
+              "received spacing and velocity (0: off).", 0.0, lo=0.0, unit="s")
+_SEMANTICS = Key("semantics", "string", "replace: u = sum(gain * error); added: the CAV's HDV "
+                 "law plus that sum.", "added", choices=("added", "replace"))
+_GAINS = Key("gains", "table", "State name (s_i, v_i, -p_0) -> gain; missing states 0.",
+             REQUIRED)
+
+GENERIC = Table(_C, "A CAV controller of simulate: its type selects the keys (below).",
+                ("simulate",), (_TYPE,))
+SUITE = Table(
+    _C,
+    "A CAV controller of run and sweep: the keys of its type, plus h2 and per-layout overrides.",
+    ("sweep", "run"),
+    (_SUITE_TYPE,
+     Key("layouts", "table", "Per-layout overrides [controllers.NAME.layouts.LAYOUT] (run "
+         "only).", {})),
+    variant="suite",
+)
+LAYOUT_OVERRIDE = Table(
+    f"{_C}.layouts.LAYOUT",
+    "Keys of the controller's type replacing (tables: merged into) its base keys on that "
+    "layout; the type cannot change.",
+    ("run",),
+    any_key=Key("KEY", "any", "A key of this controller's type.", None),
+)
+HDV = Table(_C, 'type = "hdv": the CAV drives with the nominal [hdv] law.', _CMDS,
+            (_TYPE, _SAMPLE_TIME), variant="hdv")
+STATIC = Table(
+    _C, 'type = "static": static state feedback, eq. (23).', _CMDS,
+    (_TYPE,
+     Key("kind", "string", "Linear model whose state names the gains use.",
+         Derived("[system].kind"), choices=("lcc", "cf_lcc", "fd_lcc", "ccc")),
+     _SEMANTICS, _GAINS, _SAMPLE_TIME, _EQUILIBRIUM, _EQ_TAU, _FILTER),
+    variant="static",
+)
+GAINS_FILE = Table(
+    _C, 'type = "gains_file": static gains from a JSON file of lcc-synth synthesize.', _CMDS,
+    (_TYPE,
+     Key("file", "string", "The gains file, relative to the problem file.", REQUIRED),
+     _SAMPLE_TIME, _EQUILIBRIUM, _EQ_TAU, _FILTER),
+    variant="gains_file",
+)
+H2 = Table(
+    _C, 'type = "h2" (run and sweep): an H2 gain synthesised for each layout from the keys of '
+    "[synthesis], then run as a static gain with these keys.", ("sweep", "run"),
+    (_SUITE_TYPE, _SAMPLE_TIME, _EQUILIBRIUM, _EQ_TAU, _FILTER),
+    variant="h2", includes=("synthesis",),
+)
+
+_MPC = "mpc"
+MPC = Table(
+    _C, 'type = "mpc": the safety-constrained MPC (lcc_synth.mpc), every key optional.', _CMDS,
+    (_TYPE,
+     Key("sample_time", "number", "Controller period; the simulator holds the command.", 0.1,
+         lo=0.0, lo_open=True, unit="s"),
+     Key("horizon", "integer", "Prediction steps N (at most 500).", 50, lo=1),
+     Key("n_model", "integer", "HDVs behind that the MPC predicts; absent: all of [system].n.",
+         None, lo=0),
+     Key("fallback_gains_file", "any", "Static fallback gain file (a path); absent: the "
+         "paper's gain.", None),
+     Key("weights", "table", "Stage cost: [controllers.NAME.weights].", {}),
+     Key("constraints", "table", "Bounds: [controllers.NAME.constraints].", {}),
+     Key("prediction", "table", "Prediction model: [controllers.NAME.prediction].", {}),
+     Key("solver", "table", "OSQP settings: [controllers.NAME.solver].", {})),
+    variant=_MPC,
+)
+MPC_WEIGHTS = Table(
+    f"{_C}.weights", "MPC stage cost x'Qx + input u^2 + jerk (du)^2.", _CMDS,
+    (Key("velocity", "number", "Weight on the velocity error of every vehicle.", 1.0, lo=0.0,
+         unit="(m/s)⁻²"),
+     Key("spacing", "number", "Weight on the spacing error of every HDV.", 0.5, lo=0.0,
+         unit="m⁻²"),
+     Key("spacing_cav", "number", "Weight on the CAV's own spacing error s_0; absent: "
+         "spacing.", None, lo=0.0, unit="m⁻²"),
+     Key("position", "number", "Weight on FD-LCC's -p_0 state (0: not regulated).", 0.0,
+         lo=0.0),
+     Key("input", "number", "Weight on the CAV acceleration (see input_on).", 1.0, lo=0.0,
+         lo_open=True),
+     Key("jerk", "number", "Weight on its change between steps.", 0.0, lo=0.0),
+     Key("input_on", "string", "CF-LCC: the total CAV acceleration or the model input u_hat.",
+         "total", choices=("total", "model")),
+     Key("slack", "number", "Exact (l1) penalty on spacing-constraint violation, per m and "
+         "step.", 100.0, lo=0.0),
+     Key("slack_quadratic", "number", "Small quadratic slack term (keeps the QP strictly "
+         "convex).", 1.0, lo=0.0)),
+    variant=_MPC,
+)
+MPC_CONSTRAINTS = Table(
+    f"{_C}.constraints", "MPC bounds: hard acceleration, soft spacing, ISO 15622 comfort.", _CMDS,
+    (Key("a_min", "number", "Hard lower bound on the CAV's total acceleration.", -5.0,
+         unit="m/s²"),
+     Key("a_max", "number", "Hard upper bound on it.", 2.0, unit="m/s²"),
+     Key("s_min", "number", "Soft safe spacing ahead: s_0 >= s_min + t_gap v_0 (absolute).",
+         5.0, lo=0.0, unit="m"),
+     Key("t_gap", "number", "Time gap of that bound.", 0.8, lo=0.0, unit="s"),
+     Key("margin", "number", "The QP enforces the bounds this much tighter.", 0.1, lo=0.0,
+         unit="m"),
+     Key("spacing_ahead", "boolean", "Enforce the spacing ahead (needs a vehicle ahead).", True),
+     Key("behind", "any", "A list of integers: HDVs behind with soft bounds s_i >= "
+         "s_min_behind + t_gap_behind v_i.", []),
+     Key("s_min_behind", "number", "Safe spacing of those HDVs.", 5.0, lo=0.0, unit="m"),
+     Key("t_gap_behind", "number", "Their time gap.", 0.8, lo=0.0, unit="s"),
+     Key("jerk_scale", "number", "|a_k - a_{k-W}| <= jerk_scale * ISO 15622 limit * W Ts "
+         "(0: off).", 0.9, lo=0.0, hi=1.0),
+     Key("jerk_window", "number", "W Ts, in [sample_time, 10] when jerk_scale > 0 (1 s: ISO "
+         "15622's average).", 1.0, lo=0.0, lo_open=True, unit="s")),
+    variant=_MPC,
+)
+MPC_PREDICTION = Table(
+    f"{_C}.prediction", "How the MPC predicts the head vehicle and the equilibrium.", _CMDS,
+    (Key("head", "string", "constant: the head velocity is held; accel: its measured "
+         "acceleration is held for head_accel_hold.", "constant", choices=("constant", "accel")),
+     Key("head_accel_hold", "number", "How long that acceleration is held.", 1.0, lo=0.0,
+         unit="s"),
+     Key("equilibrium", "string", "v_eq: a moving average of the head's speed or the fixed "
+         "v_star; absent: fixed for fd_lcc, else moving_average.", None,
+         choices=("moving_average", "fixed")),
+     Key("equilibrium_window", "number", "Moving-average window.", 5.0, lo=0.0, lo_open=True,
+         unit="s"),
+     Key("relinearize", "boolean", "Re-linearise the HDV model when v_eq drifts.", False),
+     Key("relinearize_threshold", "number", "... by more than this.", 1.0, lo=0.0,
+         lo_open=True, unit="m/s")),
+    variant=_MPC,
+)
+MPC_SOLVER = Table(
+    f"{_C}.solver", "OSQP settings of the MPC's QP.", _CMDS,
+    (Key("eps_abs", "number", "Absolute tolerance.", 1.0e-6, lo=0.0, lo_open=True),
+     Key("eps_rel", "number", "Relative tolerance.", 1.0e-6, lo=0.0),
+     Key("max_iter", "integer", "Iteration limit.", 10000, lo=1),
+     Key("polish", "boolean", "Polish the solution.", True),
+     Key("warm_start", "boolean", "Warm-start from the previous solve.", True),
+     Key("time_limit", "number", "Wall-clock limit per solve (0: none).", 0.0, lo=0.0,
+         unit="s")),
+    variant=_MPC,
+)
+
+TABLES = (GENERIC, SUITE, HDV, STATIC, GAINS_FILE, H2, LAYOUT_OVERRIDE, MPC, MPC_WEIGHTS,
+          MPC_CONSTRAINTS, MPC_PREDICTION, MPC_SOLVER)  # fmt: skip

@@ -1,0 +1,193 @@
+"""Typed field readers of problem-file tables: each names the dotted field in its error.
+
+These are the primitives behind :class:`lcc_synth.schema.Table`: a loader never calls them with
+its own default or range, it asks the declared key (``declared("scenario").get(sc, "dt", f)``),
+which passes the declared default, bounds and choices here. The messages are those of the
+strict-inputs corpus (``tests/test_strict_problems.py``): ``FIELD: must be > 0, got -1.0``,
+``FIELD: is required (>= 0)``, ``FIELD: unknown key; did you mean 'dt'? allowed keys: [...]``.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+from lcc_synth.errors import ConfigError
+
+__all__ = [
+    "REQUIRED",
+    "check_keys",
+    "check_range",
+    "fmt_range",
+    "get_bool",
+    "get_int",
+    "get_number",
+    "get_number_list",
+    "get_str",
+    "get_table",
+]
+
+#: The default of a required key.
+REQUIRED = _MISSING = object()
+
+
+def check_keys(table: Mapping[str, Any], allowed: Iterable[str], field: str) -> None:
+    """Reject keys of ``table`` not in ``allowed`` (typos must not pass silently); the error
+    names the key and the closest allowed one."""
+    allowed = set(allowed)
+    for key in table:
+        if key not in allowed:
+            where = f"{field}.{key}" if field else key
+            close = difflib.get_close_matches(str(key), sorted(allowed), n=1, cutoff=0.6)
+            hint = f"did you mean {close[0]!r}? " if close else ""
+            raise ConfigError(where, f"unknown key; {hint}allowed keys: {sorted(allowed)}")
+
+
+def _lookup(table: Mapping[str, Any], key: str, field: str, default: Any, requirement: str):
+    """``(dotted name, value, present)``: ``table[key]``, or ``default`` when absent (a required
+    key, ``default is _MISSING``, raises naming the field and ``requirement``)."""
+    name = f"{field}.{key}" if field else key
+    if key in table:
+        return name, table[key], True
+    if default is _MISSING:
+        raise ConfigError(name, f"is required{requirement}")
+    return name, default, False
+
+
+def fmt_range(lo, hi, lo_open, hi_open) -> str:
+    parts = []
+    if lo is not None:
+        parts.append(f"{'>' if lo_open else '>='} {lo}")
+    if hi is not None:
+        parts.append(f"{'<' if hi_open else '<='} {hi}")
+    return " and ".join(parts) if parts else "a finite number"
+
+
+def get_number(
+    table: Mapping[str, Any],
+    key: str,
+    field: str,
+    default: Any = _MISSING,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    hi_open: bool = False,
+) -> float:
+    """A finite number ``table[key]`` within the bounds; ``default`` when absent."""
+    name, value, present = _lookup(
+        table, key, field, default, f" ({fmt_range(lo, hi, lo_open, hi_open)})"
+    )
+    if not present:
+        return value
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(name, f"must be a number, got {value!r}")
+    return check_range(name, float(value), lo, hi, lo_open, hi_open)
+
+
+def check_range(
+    name: str,
+    value: float,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    shown: Any = _MISSING,
+) -> float:
+    """``value`` when finite and within the bounds, else a :class:`ConfigError` for ``name``
+    (``shown``, default ``value``, is what the message says was given)."""
+    ok = math.isfinite(value)
+    if ok and lo is not None:
+        ok = value > lo if lo_open else value >= lo
+    if ok and hi is not None:
+        ok = value < hi if hi_open else value <= hi
+    if not ok:
+        shown = value if shown is _MISSING else shown
+        raise ConfigError(name, f"must be {fmt_range(lo, hi, lo_open, hi_open)}, got {shown!r}")
+    return value
+
+
+def get_int(
+    table: Mapping[str, Any],
+    key: str,
+    field: str,
+    default: Any = _MISSING,
+    lo: int | None = None,
+    hi: int | None = None,
+) -> int:
+    """An integer ``table[key]`` in ``[lo, hi]``; ``default`` when absent."""
+    name, value, present = _lookup(
+        table, key, field, default, f" (an integer {fmt_range(lo, hi, 0, 0)})"
+    )
+    if not present:
+        return value
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ConfigError(name, f"must be an integer, got {value!r}")
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        raise ConfigError(name, f"must be an integer {fmt_range(lo, hi, 0, 0)}, got {value}")
+    return value
+
+
+def get_bool(table: Mapping[str, Any], key: str, field: str, default: Any = _MISSING) -> bool:
+    """A boolean ``table[key]``; ``default`` when absent."""
+    name, value, present = _lookup(table, key, field, default, " (true or false)")
+    if not present:
+        return value
+    if not isinstance(value, bool):
+        raise ConfigError(name, f"must be true or false, got {value!r}")
+    return value
+
+
+def get_str(
+    table: Mapping[str, Any],
+    key: str,
+    field: str,
+    default: Any = _MISSING,
+    choices: Iterable[str] | None = None,
+) -> str:
+    """A string ``table[key]``, one of ``choices`` when given; ``default`` when absent."""
+    extra = f" (one of {sorted(choices)})" if choices is not None else ""
+    name, value, present = _lookup(table, key, field, default, extra)
+    if not present:
+        return value
+    if not isinstance(value, str):
+        raise ConfigError(name, f"must be a string, got {value!r}")
+    if choices is not None and value not in set(choices):
+        raise ConfigError(name, f"must be one of {sorted(choices)}, got {value!r}")
+    return value
+
+
+def get_table(
+    table: Mapping[str, Any], key: str, field: str, required: bool = False
+) -> dict[str, Any]:
+    """A sub-table ``table[key]`` (empty dict when absent and not required)."""
+    if key not in table:
+        if required:
+            raise ConfigError(field, "table is required")
+        return {}
+    value = table[key]
+    if not isinstance(value, dict):
+        raise ConfigError(field, f"must be a table, got {value!r}")
+    return value
+
+
+def get_number_list(
+    table: Mapping[str, Any],
+    key: str,
+    field: str,
+    default: Any = _MISSING,
+    length: int | None = None,
+    lo: float | None = None,
+    hi: float | None = None,
+) -> list[float]:
+    """A list of finite numbers (optionally of fixed ``length`` and within bounds)."""
+    name, value, present = _lookup(table, key, field, default, " (a list of numbers)")
+    if not present:
+        return value
+    if not isinstance(value, list):
+        raise ConfigError(name, f"must be a list of numbers, got {value!r}")
+    if length is not None and len(value) != length:
+        raise ConfigError(name, f"must have {length} entries, got {len(value)}")
+    wrapper = {str(i): v for i, v in enumerate(value)}
+    return [get_number(wrapper, str(i), name, lo=lo, hi=hi) for i in range(len(value))]

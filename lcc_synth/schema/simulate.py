@@ -1,0 +1,293 @@
+"""Declarations of the common tables and of what ``simulate``, ``run`` and ``sweep`` read:
+the top level, ``[hdv]``, ``[system]``, ``[scenario]`` and its sub-tables, the perturbations,
+``[metrics]``, ``[sweep]``, ``[layouts.NAME]`` and ``[scenarios.NAME]``."""
+
+from __future__ import annotations
+
+from dataclasses import fields
+
+from lcc_synth.models.hdv import IDM, OVM
+from lcc_synth.schema.spec import REQUIRED, Derived, Key, Table
+
+__all__ = ["TABLES"]
+
+_SIM = ("simulate", "sweep")
+_SYSTEM_CMDS = ("simulate", "sweep", "synthesize", "analyze", "regions")
+
+TOP = Table(
+    "",
+    "The top level of a problem file: a file may carry the tables of several commands (each "
+    "reads its own); a key no command reads is an error.",
+    ("all",),
+    (
+        Key("name", "string", "The problem's name (in outputs and recordings).",
+            Derived("the file's stem")),
+        Key("description", "string", "Free text about the problem.", ""),
+        Key("hdv", "table", "The nominal HDV car-following model: [hdv].", {}),
+        Key("system", "table", "Layout and equilibrium of the linear model: [system].", REQUIRED),
+        Key("scenario", "table", "What simulate and sweep run: [scenario].", {}),
+        Key("metrics", "table", "AAVE / fuel window and vehicles: [metrics].", {}),
+        Key("controllers", "table", "The CAV controllers to compare: [controllers.NAME].",
+            REQUIRED),
+        Key("sweep", "table", "Scenario count and batching of sweep: [sweep].", {}),
+        Key("layouts", "table", "The systems run compares on: [layouts.NAME].", REQUIRED),
+        Key("scenarios", "table", "The scenarios of run: [scenarios.NAME].", REQUIRED),
+        Key("synthesis", "table", "The gain design of synthesize: [synthesis].", REQUIRED),
+        Key("analysis", "table", "Frequency grid of analyze: [analysis].", {}),
+        Key("cases", "table", "The gains analyze studies: [cases.NAME].", {}),
+        Key("regions", "table", "Grid and frequency defaults of regions: [regions].", {}),
+        Key("maps", "table", "The stability maps of regions: [maps.NAME].", REQUIRED),
+    ),
+)
+
+_HDV_MEANING = {
+    "alpha": ("OVM headway gain (eq. 2).", "1/s"),
+    "beta": ("OVM relative-velocity gain (eq. 2).", "1/s"),
+    "s_st": ("OVM stopping spacing, < s_go.", "m"),
+    "s_go": ("OVM free-flow spacing.", "m"),
+    "v_max": ("OVM maximum speed.", "m/s"),
+    "v0": ("IDM desired speed.", "m/s"),
+    "T": ("IDM time headway.", "s"),
+    "s0": ("IDM jam distance.", "m"),
+    "a": ("IDM maximum acceleration.", "m/s²"),
+    "b": ("IDM comfortable deceleration.", "m/s²"),
+    "delta": ("IDM acceleration exponent.", ""),
+}
+
+
+def _model_keys(cls) -> tuple[Key, ...]:
+    """The parameters of a car-following model, defaults from its dataclass (one source)."""
+    out = []
+    for f in fields(cls):
+        if f.name == "name":
+            continue
+        meaning, unit = _HDV_MEANING[f.name]
+        out.append(Key(f.name, "number", meaning, f.default, unit=unit))
+    return tuple(out)
+
+
+HDV = Table(
+    "hdv",
+    "The nominal nonlinear HDV model (read by lcc_synth.models.hdv.model_from_dict; the "
+    "model checks its own parameters).",
+    ("all",),
+    (
+        Key("model", "string", "The car-following model.", "ovm", choices=("ovm", "idm")),
+        *_model_keys(OVM),
+        *_model_keys(IDM),
+    ),
+)
+
+SYSTEM = Table(
+    "system",
+    "The linear model family, the string's layout and its equilibrium.",
+    _SYSTEM_CMDS,
+    (
+        Key("kind", "string", "Linear model family (Sec. II).", "lcc",
+            choices=("lcc", "cf_lcc", "fd_lcc", "ccc")),
+        Key("m", "integer", "HDVs ahead of the CAV (required for lcc and ccc; 0 for cf_lcc, "
+            "fd_lcc).", 0, lo=0, hi=50),
+        Key("n", "integer", "HDVs behind the CAV (required for lcc, cf_lcc, fd_lcc; 0 for ccc).",
+            0, lo=0, hi=200),
+        Key("v_star", "number", "Equilibrium velocity; s* follows from the HDV model.", 15.0,
+            lo=0.0, lo_open=True, unit="m/s"),
+    ),
+)
+
+SCENARIO = Table(
+    "scenario",
+    "What simulate (and each draw of sweep) runs: integration, limits, draws, V2V and "
+    "perturbations.",
+    _SIM,
+    (
+        Key("dt", "number", "Integration step (checked against the loops' time constants).",
+            0.01, lo=0.0, lo_open=True, unit="s"),
+        Key("duration", "number", "Simulated time; steps = round(duration / dt).", 100.0,
+            lo=0.0, lo_open=True, unit="s"),
+        Key("t_start", "number", "Time label of the first sample.", 0.0, unit="s"),
+        Key("a_min", "number", "Acceleration lower limit of every vehicle.", -5.0, hi=0.0,
+            hi_open=True, unit="m/s²"),
+        Key("a_max", "number", "Acceleration upper limit of every vehicle.", 2.0, lo=0.0,
+            lo_open=True, unit="m/s²"),
+        Key("cav_aeb", "boolean", "CAV emergency braking, eq. (29).", True),
+        Key("hdv_aeb", "boolean", "Also apply eq. (29) to every HDV.", False),
+        Key("seed", "integer", "Base seed of every random draw (scenario b uses [seed, b]).", 0,
+            lo=0),
+        Key("batch", "integer", "Scenarios run together (--seeds overrides).", 1, lo=1),
+        Key("record_every", "integer", "Keep every k-th sample (metrics use kept samples).", 1,
+            lo=1),
+        Key("spacing_reference", "string", "Spacing errors the controllers see: s* for "
+            "everyone, or each HDV's own equilibrium spacing.", "nominal",
+            choices=("nominal", "own_equilibrium")),
+        Key("hdv_accel_noise", "number", "Std of white acceleration noise on every HDV.", 0.0,
+            lo=0.0, unit="m/s²"),
+        Key("heterogeneity", "table", "Per-HDV parameter draws: [scenario.heterogeneity].", {}),
+        Key("delay", "table", "HDV reaction delay: [scenario.delay].", {}),
+        Key("v2v", "table", "What the CAV receives: [scenario.v2v].", {}),
+        Key("perturbations", "any", "Prescribed motions: an array of tables "
+            "[[scenario.perturbations]].", []),
+        Key("hdv_values", "table", "Explicit per-HDV model parameters: [scenario.hdv_values].",
+            {}),
+    ),
+)
+
+HETEROGENEITY = Table(
+    "scenario.heterogeneity",
+    "Each HDV of each scenario gets nominal + U[-w, w] for every parameter listed.",
+    _SIM,
+    any_key=Key("PARAMETER", "number", "Half-width w of the uniform draw of this [hdv] model "
+                "parameter (in its unit).", 0.0, lo=0.0),
+)
+
+HDV_VALUES = Table(
+    "scenario.hdv_values",
+    "Explicit per-HDV values of [hdv] model parameters (the same in every scenario; draws are "
+    "added on top).",
+    _SIM,
+    any_key=Key("PARAMETER", "number list", "One value per HDV, front to tail (m + n entries), "
+                "for this [hdv] model parameter.", REQUIRED, length=Derived("m + n")),
+)
+
+DELAY = Table(
+    "scenario.delay",
+    "HDV reaction delay: delay_i = mean + U[-spread, spread], rounded to steps.",
+    _SIM,
+    (
+        Key("mean", "number", "Mean reaction delay of the HDVs.", 0.0, lo=0.0, unit="s"),
+        Key("spread", "number", "Half-width of its uniform draw.", 0.0, lo=0.0,
+            hi=Derived("mean"), unit="s"),
+        Key("model", "string", "full: every input is delayed; perception: spacing and relative "
+            "speed are, own speed is current.", "full", choices=("full", "perception")),
+    ),
+)
+
+V2V = Table(
+    "scenario.v2v",
+    "What the CAV receives from the other vehicles at every controller sample.",
+    _SIM,
+    (
+        Key("loss_rate", "number", "Per-link packet-loss probability, or a number list with one "
+            "entry per vehicle head..tail (m + n + 2; the CAV's is ignored).", 0.0,
+            lo=0.0, hi=1.0),
+        Key("latency", "number", "Age of received values (rounded to steps).", 0.0, lo=0.0,
+            unit="s"),
+        Key("spacing_noise", "number", "Std of noise on received spacings.", 0.0, lo=0.0,
+            unit="m"),
+        Key("velocity_noise", "number", "Std of noise on received velocities.", 0.0, lo=0.0,
+            unit="m/s"),
+        Key("position_noise", "number", "Std of noise on received positions.", 0.0, lo=0.0,
+            unit="m"),
+    ),
+)
+
+#: ``loss_rate`` as a list (the loader reads it so when the value is a list).
+LOSS_RATE_LIST = Table(
+    "scenario.v2v",
+    "The per-vehicle form of loss_rate (a list instead of a number).",
+    _SIM,
+    (Key("loss_rate", "number list", "One loss probability per vehicle head..tail.", 0.0,
+         lo=0.0, hi=1.0, length=Derived("m + n + 2")),),
+    variant="list",
+)
+
+_P_TYPE = Key("type", "string", "The kind of motion.", REQUIRED,
+              choices=("sine", "brake", "brake_profile", "accel_profile", "speed_profile"))
+_P_VEHICLE = Key("vehicle", "any", 'The vehicle driven: "head" or a paper index (-m..n).',
+                 "head")
+_P_START = Key("start", "number", "Start of the window (open interval start < t < end).",
+               20.0, unit="s")
+_P_DECEL = Key("decel", "number", "Braking acceleration, < 0.", -5.0, unit="m/s²")
+_P_TIMES = Key("times", "number list", "Breakpoint times (required unless csv).", REQUIRED,
+               unit="s")
+_P_INTERP = Key("interpolation", "string", "step: the value holds until the next time; linear.",
+                "step", choices=("step", "linear"))
+_P_CSV = Key("csv", "string", "Two-column t,value file instead of times/values (relative to the "
+             "problem file).", None)
+
+_PERT = "scenario.perturbations"
+PERTURBATION = Table(_PERT, "Each entry overrides one vehicle's acceleration while active.",
+                     _SIM, (_P_TYPE,))
+PERTURBATIONS = (
+    PERTURBATION,
+    Table(_PERT, "Section V-A: a = amplitude cos(2 pi (t - start) / period).", _SIM, (
+        _P_TYPE, _P_VEHICLE,
+        Key("amplitude", "number", "Acceleration amplitude (either sign).", 0.2, unit="m/s²"),
+        Key("period", "number", "Period of the cosine.", 12.0, lo=0.0, lo_open=True, unit="s"),
+        _P_START,
+        Key("end", "number", "End of the window.", Derived("start + period"),
+            lo=Derived("start"), unit="s"),
+    ), variant="sine"),
+    Table(_PERT, "Section V-B: a = decel for duration s.", _SIM, (
+        _P_TYPE, _P_VEHICLE, _P_START,
+        Key("duration", "number", "Braking time.", 1.0, lo=0.0, unit="s"),
+        _P_DECEL,
+    ), variant="brake"),
+    Table(_PERT, "Brake, hold, recover, cruise.", _SIM, (
+        _P_TYPE, _P_VEHICLE, _P_START, _P_DECEL,
+        Key("decel_time", "number", "Braking time.", 2.0, lo=0.0, unit="s"),
+        Key("hold_time", "number", "Time at a = 0 after braking.", 5.0, lo=0.0, unit="s"),
+        Key("accel", "number", "Recovery acceleration, > 0.", 2.0, unit="m/s²"),
+        Key("accel_time", "number", "Recovery time (0: none).", 5.0, lo=0.0, unit="s"),
+    ), variant="brake_profile"),
+    Table(_PERT, "Piecewise acceleration, active from times[0] to times[-1].", _SIM, (
+        _P_TYPE, _P_VEHICLE, _P_TIMES,
+        Key("values", "number list", "Accelerations at the times (required unless csv).",
+            REQUIRED, unit="m/s²"),
+        _P_CSV, _P_INTERP,
+    ), variant="accel_profile"),
+    Table(_PERT, "Piecewise speed the vehicle tracks within its acceleration limits.", _SIM, (
+        _P_TYPE, _P_VEHICLE, _P_TIMES,
+        Key("values", "number list", "Speeds at the times, >= 0 (required unless csv).",
+            REQUIRED, unit="m/s"),
+        _P_CSV, _P_INTERP,
+    ), variant="speed_profile"),
+)
+
+METRICS = Table(
+    "metrics",
+    "The window and vehicles of AAVE and fuel, and the baseline of reductions.",
+    ("simulate", "sweep", "run"),
+    (
+        Key("window", "number list", "Closed interval of sample times of AAVE and fuel, inside "
+            "the simulated time.", [20.0, 40.0], length=2, unit="s"),
+        Key("vehicles", "any", 'Vehicles averaged: "cav_and_behind", "all" (head included), '
+            '"hdvs" or a list of paper indices.', "cav_and_behind"),
+        Key("baseline", "string", "A controller name: report reductions versus it (not in "
+            "run).", None),
+    ),
+)
+
+SWEEP = Table(
+    "sweep",
+    "How many random scenarios sweep draws and how many run per batch.",
+    ("sweep",),
+    (
+        Key("count", "integer", "Scenarios (--count overrides).", 100, lo=1, hi=10_000_000),
+        Key("batch_size", "integer", "Scenarios per worker batch (--batch-size overrides).", 50,
+            lo=1, hi=100_000),
+    ),
+)
+
+LAYOUTS = Table(
+    "layouts.NAME",
+    "A system run compares on: the keys of [system], with [hdv] shared.",
+    ("run",),
+    includes=("system",),
+)
+
+SCENARIOS = Table(
+    "scenarios.NAME",
+    "A scenario of run: the keys of [scenario] plus these.",
+    ("run",),
+    (
+        Key("layout", "string", "The [layouts.NAME] it runs on.", REQUIRED,
+            choices=Derived("the [layouts] names")),
+        Key("title", "string", "Heading in tables and figures.", ""),
+        Key("metrics", "table", "Keys of [metrics] overriding the file's for this scenario "
+            "(no baseline).", {}),
+    ),
+    includes=("scenario",),
+)
+
+TABLES = (TOP, HDV, SYSTEM, SCENARIO, HETEROGENEITY, HDV_VALUES, DELAY, V2V, LOSS_RATE_LIST,
+          *PERTURBATIONS, METRICS, SWEEP, LAYOUTS, SCENARIOS)  # fmt: skip
