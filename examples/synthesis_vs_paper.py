@@ -2,7 +2,7 @@
 
 For each of ``problems/synth_fd_lcc_pattern.toml`` and ``problems/synth_cf_lcc_pattern.toml``:
 synthesise the structured gain on the paper's pattern (CAV + HDVs 1, 2), write the gains file
-(contract 3) to ``results/``, and compare with the paper's gain:
+(``lcc-synth synthesize --out``) under ``--out``, and compare with the paper's gain:
 
 * linear: true H2 norm, closed-loop eigenvalues, string stability (CF-LCC);
 * nonlinear: the Table II scenario of ``problems/paper_table2.toml`` (vehicle 1 brakes at

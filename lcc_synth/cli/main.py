@@ -15,6 +15,7 @@ import argparse
 import importlib
 import sys
 
+from lcc_synth.cli.arguments import check_options
 from lcc_synth.errors import ConfigError
 
 COMMANDS = ("run", "analyze", "regions", "simulate", "synthesize", "sweep", "review")
@@ -65,6 +66,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        check_options(args)
         return int(args._run(args) or 0)
     except ConfigError as err:
         problem = getattr(args, "problem", None)
