@@ -1,4 +1,5 @@
-"""The command-line arguments that several ``lcc-synth`` commands share, set up one way."""
+"""The command-line arguments that several ``lcc-synth`` commands (and the scripts under
+``examples/``) share, set up one way."""
 
 from __future__ import annotations
 
@@ -57,3 +58,12 @@ def add_output_arguments(parser: argparse.ArgumentParser, what: str, figures: st
     )  # fmt: skip
     parser.add_argument("--no-figures", action="store_true", help=f"do not write {figures}")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars on stderr")
+
+
+def add_example_out(parser: argparse.ArgumentParser) -> None:
+    """``--out DIR`` of the scripts under ``examples/``: every file a script writes goes under
+    ``DIR`` (default ``results``), and the script prints ``wrote PATH`` for each."""
+    parser.add_argument(
+        "--out", metavar="DIR", default="results",
+        help="directory the outputs are written under (default results)",
+    )  # fmt: skip

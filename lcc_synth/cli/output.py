@@ -19,8 +19,8 @@ def sig(value: Any, digits: int = 3) -> str:
 
     Examples
     --------
-    >>> sig(0.35019700044358615), sig(5.414282189412915), sig(850), sig(None)
-    ('0.350', '5.41', '850', 'n/a')
+    >>> sig(0.35019700044358615), sig(5.414282189412915), sig(850), sig(1234.5), sig(None)
+    ('0.350', '5.41', '850', '1234', 'n/a')
     """
     if value is None:
         return "n/a"
@@ -30,10 +30,9 @@ def sig(value: Any, digits: int = 3) -> str:
     if x == 0:
         return "0"
     exponent = math.floor(math.log10(abs(x)))
-    decimals = max(0, digits - 1 - exponent)
-    if exponent >= digits or exponent < -4:
+    if exponent < -4:
         return f"{x:.{digits - 1}e}"
-    return f"{x:.{decimals}f}"
+    return f"{x:.{max(0, digits - 1 - exponent)}f}"  # 1234.5 -> "1234": no exponent
 
 
 def text_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
