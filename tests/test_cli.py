@@ -324,12 +324,14 @@ def test_controller_stats_lines_digits_and_counts():
           "step_time_ms": {"median": 0.35019700044358615, "p99": 5.414282189412915,
                            "max": 13.07, "mean": 0.6, "count": 1800},
           "iterations": {"median": 25.5, "max": 850}}  # fmt: skip
+    st["error_messages"] = ["QP raised: boom"]
     lines = controller_stats_lines({"head_brake/mpc": st, "paper": {}, "x": {"k": 0.123456789}})
     assert lines[0].startswith("MPC solver")
     assert re.split(r"\s{2,}", lines[3]) == [
         "head_brake/mpc", "600", "1800", "0.350", "5.41", "13.1", "25.5 / 850", "2", "4", "7", "0"
     ]  # fmt: skip
-    assert lines[4:] == ["x: k = 0.123"]
+    assert lines[4:] == ["head_brake/mpc: solver errors, the first: QP raised: boom",
+                         "x: k = 0.123"]
     assert controller_stats_lines({"a": {}, "b": {}}) == []
 
 

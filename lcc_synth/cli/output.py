@@ -68,7 +68,8 @@ def controller_stats_lines(stats: Mapping[str, Mapping[str, Any]]) -> list[str]:
     MPC statistics give one row each: samples (``steps``), QP solves (all batch members),
     controller step time per batch member (median / p99 / max, ms), OSQP iterations
     (median / max), fallbacks, QP failures (every non-solved status), steps that used the
-    safety slack, and errors. Other controllers' statistics follow as ``label: key = value``.
+    safety slack, and errors (then the first error message). Other controllers' statistics
+    follow as ``label: key = value``.
     Empty when no controller has statistics.
     """
     rows, other = [], []
@@ -91,6 +92,8 @@ def controller_stats_lines(stats: Mapping[str, Mapping[str, Any]]) -> list[str]:
             _count(st.get("qp_failures")), _count(st.get("slack_steps")),
             _count(st.get("errors")),
         ])  # fmt: skip
+        if st.get("error_messages"):
+            other.append(f"{label}: solver errors, the first: {st['error_messages'][0]}")
     lines = []
     if rows:
         lines.append("MPC solver (step time per batch member, ms; iterations median / max):")
