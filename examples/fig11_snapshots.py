@@ -2,10 +2,10 @@
 ahead only (upper rows) versus FD-LCC and CF-LCC (lower rows).
 
 Runs ``problems/paper_table2.toml`` through the package's API and writes one PNG per LCC
-variant. With ``--appendix-c`` it draws the heterogeneous, delayed Appendix C scenario (first
-draw) instead (Fig. 15).
+variant under ``--out``. With ``--appendix-c`` it draws the heterogeneous, delayed Appendix C
+scenario (first draw) instead (Fig. 15).
 
-Usage: python examples/fig11_snapshots.py [OUTPUT_PREFIX] [--appendix-c]   (default fig11)
+Usage: python examples/fig11_snapshots.py [--out DIR] [--appendix-c]   (default results)
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lcc_synth.cli.arguments import add_example_out
 from lcc_synth.experiments.spec import load_spec
 from lcc_synth.figures import plot_snapshots
 from lcc_synth.simulation.engine import simulate_many
@@ -23,15 +24,16 @@ TIMES = (20.5, 22.0, 25.0, 28.0, 32.0)
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("prefix", nargs="?", default="fig11")
+    add_example_out(ap)
     ap.add_argument("--appendix-c", action="store_true")
     args = ap.parse_args()
     problem = "paper_appendix_c.toml" if args.appendix_c else "paper_table2.toml"
     spec = load_spec(PROBLEMS / problem, seeds=1 if args.appendix_c else None)
     res = simulate_many(spec.scenario, spec.controllers)
+    prefix = "fig15" if args.appendix_c else "fig11"
     for name in ("fd_lcc", "cf_lcc"):
         out = plot_snapshots(
-            res["all_hdv"], res[name], TIMES, f"{args.prefix}_{name}.png",
+            res["all_hdv"], res[name], TIMES, Path(args.out) / f"{prefix}_{name}.png",
             title=f"{spec.name}: vehicle 1 brakes at t = 20 s",
             labels=("looking ahead only", name.replace("_", "-").upper()),
         )  # fmt: skip

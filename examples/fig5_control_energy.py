@@ -4,20 +4,25 @@ lambda_min(W(t)) and tr(W(t)^-1) for t = 10, 20, 30 s with the paper's OVM param
 (alpha 0.6, beta 0.9, v_max 30, s_st 5, s_go 35, v* 15). Each curve stops at the size where the
 Gramian becomes numerically singular in double precision, and the script says where.
 
-Usage: python examples/fig5_control_energy.py [OUTPUT.png]   (default fig5_control_energy.png)
+Usage: python examples/fig5_control_energy.py [--out DIR]   (writes DIR/fig5_control_energy.png,
+default results)
 """
 
 from __future__ import annotations
 
-import sys
+import argparse
+from pathlib import Path
 
 from lcc_synth.analysis.energy import energy_vs_size
+from lcc_synth.cli.arguments import add_example_out
 from lcc_synth.figures import plot_control_energy
 from lcc_synth.models.hdv import OVM, linear_coefficients
 
 
-def main(argv: list[str]) -> int:
-    out = argv[0] if argv else "fig5_control_energy.png"
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_example_out(ap)
+    out = Path(ap.parse_args().out) / "fig5_control_energy.png"
     coef = linear_coefficients(
         OVM(alpha=0.6, beta=0.9, v_max=30.0, s_st=5.0, s_go=35.0), v_star=15.0
     )
@@ -37,4 +42,4 @@ def main(argv: list[str]) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    raise SystemExit(main())

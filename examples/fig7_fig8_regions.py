@@ -5,25 +5,30 @@ grid mu, k in [-10, 10] step 0.02: 1001 x 1001 points per map, eight maps), prin
 of each grid that is plant stable and string stable and, for Fig. 7(c)-(f), the area gained
 over Fig. 7(a)(b), and writes all maps in one PNG.
 
-Usage: python examples/fig7_fig8_regions.py [OUTPUT.png] [STEP]
-       (default fig7_fig8_regions.png and the file's step 0.02; e.g. STEP = 0.1 for a quick run)
+Usage: python examples/fig7_fig8_regions.py [--out DIR] [--step STEP]
+       (writes DIR/fig7_fig8_regions.png, default results; the file's step 0.02 unless given,
+       e.g. --step 0.1 for a quick run)
 """
 
 from __future__ import annotations
 
-import sys
+import argparse
 from pathlib import Path
 
 from lcc_synth.analysis.region_specs import expansion, region_specs_from, run_region_specs
+from lcc_synth.cli.arguments import add_example_out
 from lcc_synth.figures import plot_region_maps
 from lcc_synth.problem import load_problem, system_from
 
 PROBLEM = Path(__file__).resolve().parents[1] / "problems" / "paper_fig7_fig8_regions.toml"
 
 
-def main(argv: list[str]) -> int:
-    out = argv[0] if argv else "fig7_fig8_regions.png"
-    step = float(argv[1]) if len(argv) > 1 else None
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_example_out(ap)
+    ap.add_argument("--step", type=float, help="grid step of every map (default: the file's)")
+    args = ap.parse_args()
+    out, step = Path(args.out) / "fig7_fig8_regions.png", args.step
     problem = load_problem(PROBLEM)
     system = system_from(problem.data, str(problem.path))
     model = system.linear_model()
@@ -45,4 +50,4 @@ def main(argv: list[str]) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    raise SystemExit(main())

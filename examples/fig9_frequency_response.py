@@ -4,13 +4,13 @@ Reads ``problems/paper_fig9_cases.toml`` (OVM alpha 0.6, beta 0.9, v_max 30, s_s
 v* 15; the CAV's HDV law plus the added gains of Table I), prints each case's plant stability,
 string-stability verdict and peak |Gamma| (global search), and writes the frequency response.
 
-Usage: python examples/fig9_frequency_response.py [OUTPUT.png] [PROBLEM.toml]
-       (default fig9_frequency_response.png, problems/paper_fig9_cases.toml)
+Usage: python examples/fig9_frequency_response.py [--out DIR] [--problem PROBLEM.toml]
+       (writes DIR/fig9_frequency_response.png, default results; problems/paper_fig9_cases.toml)
 """
 
 from __future__ import annotations
 
-import sys
+import argparse
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +18,7 @@ import numpy as np
 from lcc_synth.analysis.cases import analysis_options_from, cases_from
 from lcc_synth.analysis.string_stability import string_stability
 from lcc_synth.analysis.transfer import gamma_state_space
+from lcc_synth.cli.arguments import add_example_out
 from lcc_synth.figures import plot_gamma_curves
 from lcc_synth.models.feedback import input_feedback
 from lcc_synth.problem import load_problem, system_from
@@ -25,9 +26,13 @@ from lcc_synth.problem import load_problem, system_from
 DEFAULT = Path(__file__).resolve().parents[1] / "problems" / "paper_fig9_cases.toml"
 
 
-def main(argv: list[str]) -> int:
-    out = argv[0] if argv else "fig9_frequency_response.png"
-    problem = load_problem(argv[1] if len(argv) > 1 else DEFAULT)
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_example_out(ap)
+    ap.add_argument("--problem", default=str(DEFAULT))
+    args = ap.parse_args()
+    out = Path(args.out) / "fig9_frequency_response.png"
+    problem = load_problem(args.problem)
     system = system_from(problem.data, str(problem.path))
     model = system.linear_model()
     options = analysis_options_from(problem.data, str(problem.path))
@@ -49,4 +54,4 @@ def main(argv: list[str]) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    raise SystemExit(main())

@@ -4,7 +4,8 @@ Runs ``problems/mpc_head_brake.toml`` (or the heterogeneous / noisy / lossy vari
 the Table II MPC problems) through the package's API, prints per controller: AAVE, fuel, minimum
 spacing and time-to-collision, violations of the absolute bound s_0 >= 5 m + 0.8 s * v_0 at
 every simulation step, emergency-braking activations, MPC fallbacks and the per-step solve time;
-writes the velocity/spacing profiles and the MPC's predicted trajectories as PNGs.
+writes the velocity/spacing profiles and the MPC's predicted trajectories as PNGs under
+``--out`` (default results).
 
 Usage: python examples/mpc_head_brake.py [--problem PATH] [--out DIR]
 """
@@ -14,6 +15,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lcc_synth.cli.arguments import add_example_out
 from lcc_synth.cli.simulate import report
 from lcc_synth.experiments.spec import load_spec
 from lcc_synth.figures import plot_mpc_predictions, plot_profiles
@@ -26,7 +28,7 @@ PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--problem", default=str(PROBLEMS / "mpc_head_brake.toml"))
-    ap.add_argument("--out", default="mpc_head_brake")
+    add_example_out(ap)
     args = ap.parse_args()
 
     spec = load_spec(args.problem)
@@ -55,11 +57,11 @@ def main() -> int:
               f"{s['collisions']:5d} {fb:>6} {tms:>22}")  # fmt: skip
 
     out = Path(args.out)
-    print(f"wrote {plot_profiles(results, out / 'profiles.png', spec.name)}")
+    print(f"wrote {plot_profiles(results, out / f'{spec.name}_profiles.png', spec.name)}")
     for name in mpc_names:
         ctrl = spec.controllers[name]
         path = plot_mpc_predictions(
-            results[name], ctrl.history(), out / f"{name}_predictions.png",
+            results[name], ctrl.history(), out / f"{spec.name}_{name}_predictions.png",
             every=1.0, window=(15.0, 45.0), s_min=s_min, t_gap=t_gap,
             title=f"{spec.name}: {name} predictions every 1 s",
         )  # fmt: skip

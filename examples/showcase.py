@@ -4,7 +4,7 @@ controller, the metrics table and the velocity / spacing profiles.
 ``lcc-synth run`` does the same for every scenario (plus files, figures and a recording); this
 script shows the API underneath: ``load_suite`` -> ``run_suite`` -> table and figure.
 
-Usage: python examples/showcase.py [SCENARIO] [--out DIR]   (default scenario: head_brake)
+Usage: python examples/showcase.py [SCENARIO] [--out DIR]   (default head_brake, results)
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lcc_synth.cli.arguments import add_example_out
 from lcc_synth.experiments.comparison import load_suite, run_suite
 from lcc_synth.experiments.tables import format_table
 from lcc_synth.figures import plot_profiles
@@ -22,7 +23,7 @@ PROBLEM = Path(__file__).resolve().parents[1] / "problems" / "showcase.toml"
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("scenario", nargs="?", default="head_brake")
-    ap.add_argument("--out", default="results/examples")
+    add_example_out(ap)
     args = ap.parse_args()
     suite = load_suite(PROBLEM, scenarios=[args.scenario])
     run = run_suite(suite)

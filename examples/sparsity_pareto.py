@@ -2,11 +2,11 @@
 
 Runs the ``problems/synth_sparsity_pareto.toml`` design through the package's API, prints the
 table of every pattern found by the penalty sweep (true H2 after re-polishing on the pattern,
-loss relative to hearing every vehicle) and writes the Pareto-front PNG.
+loss relative to hearing every vehicle) and writes the Pareto-front PNG under ``--out``.
 
 Usage::
 
-    python examples/sparsity_pareto.py [--problem FILE] [--png results/sparsity_pareto.png]
+    python examples/sparsity_pareto.py [--problem FILE] [--out DIR]   (DIR/sparsity_pareto.png)
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def main() -> None:
+    from lcc_synth.cli.arguments import add_example_out
     from lcc_synth.figures import plot_pareto_front
     from lcc_synth.problem import load_problem
     from lcc_synth.synthesis.config import spec_from_problem
@@ -25,7 +26,7 @@ def main() -> None:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--problem", default=str(ROOT / "problems" / "synth_sparsity_pareto.toml"))
-    ap.add_argument("--png", default=str(ROOT / "results" / "sparsity_pareto.png"))
+    add_example_out(ap)
     args = ap.parse_args()
 
     rep = synthesize(spec_from_problem(load_problem(args.problem)))
@@ -36,7 +37,9 @@ def main() -> None:
         print(f"{p['count']:>5d} {p['h2']:>9.4f} {100 * p['loss']:>7.3f} "
               f"{'*' if p['on_front'] else '':>5s} {p['gamma']:>9.3g}  {p['vehicles']}")
     print(f"chosen: vehicles {rep.pattern} (H2 {rep.check.h2:.4f})")
-    path = plot_pareto_front(rep.pareto, rep.h2_unstructured, args.png, title=rep.problem)
+    path = plot_pareto_front(
+        rep.pareto, rep.h2_unstructured, Path(args.out) / "sparsity_pareto.png", title=rep.problem
+    )
     print(f"wrote {path}")
 
 

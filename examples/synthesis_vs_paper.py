@@ -2,7 +2,7 @@
 
 For each of ``problems/synth_fd_lcc_pattern.toml`` and ``problems/synth_cf_lcc_pattern.toml``:
 synthesise the structured gain on the paper's pattern (CAV + HDVs 1, 2), write the gains file
-(contract 3) to ``results/``, and compare with the paper's gain:
+(``lcc-synth synthesize --out``) under ``--out``, and compare with the paper's gain:
 
 * linear: true H2 norm, closed-loop eigenvalues, string stability (CF-LCC);
 * nonlinear: the Table II scenario of ``problems/paper_table2.toml`` (vehicle 1 brakes at
@@ -11,7 +11,9 @@ synthesise the structured gain on the paper's pattern (CAV + HDVs 1, 2), write t
 
 Usage::
 
-    python examples/synthesis_vs_paper.py [--weights q_s=0.1,q_v=1,r=1] [--json]
+    python examples/synthesis_vs_paper.py [--weights q_s=0.1,q_v=1,r=1] [--out DIR] [--json]
+
+``wrote PATH`` lines go to stdout, or to stderr with ``--json`` (stdout: the JSON object).
 """
 
 from __future__ import annotations
@@ -35,6 +37,9 @@ def parse_weights(text: str | None) -> dict[str, float]:
 
 
 def main() -> None:
+    import sys
+
+    from lcc_synth.cli.arguments import add_example_out
     from lcc_synth.controllers.registry import build_controller
     from lcc_synth.experiments.spec import load_spec
     from lcc_synth.metrics import summary
@@ -47,10 +52,10 @@ def main() -> None:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--weights", help="override weights, e.g. q_s=0.1,r=2")
-    ap.add_argument("--out-dir", default=str(ROOT / "results"))
+    add_example_out(ap)
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
-    out_dir = Path(args.out_dir)
+    out_dir = Path(args.out)
     override = parse_weights(args.weights)
 
     sim = load_spec(ROOT / "problems" / "paper_table2.toml")
@@ -63,6 +68,7 @@ def main() -> None:
             spec = replace(spec, weights=Weights(**{**spec.weights.as_dict(), **override}))
         rep = synthesize(spec)
         path = write_gains(out_dir / f"synth_{kind}_gains.json", rep)
+        print(f"wrote {path}", file=sys.stderr if args.json else sys.stdout)
         linear[kind] = {
             "synthesised": {
                 "h2": rep.check.h2,

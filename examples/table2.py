@@ -1,11 +1,11 @@
 """Table II of the paper (Section V-B): AAVE and fuel of "looking ahead only", FD-LCC, CF-LCC.
 
 Runs ``problems/paper_table2.toml`` through the package's API, prints the table with the paper's
-numbers beside ours and writes a bar chart. With ``--appendix-c N`` it also runs the
+numbers beside ours and writes a bar chart under ``--out``. With ``--appendix-c N`` it also runs the
 heterogeneous, delayed Appendix C scenario over N random draws and prints the mean and spread
 of the reductions (the paper reports one draw).
 
-Usage: python examples/table2.py [OUTPUT.png] [--appendix-c N]   (default table2.png)
+Usage: python examples/table2.py [--out DIR] [--appendix-c N]   (DIR/table2.png, default results)
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from lcc_synth.cli.arguments import add_example_out
 from lcc_synth.cli.simulate import report
 from lcc_synth.experiments.spec import load_spec
 from lcc_synth.figures import plot_metric_bars
@@ -25,7 +26,7 @@ PAPER_C = {"fd_lcc": (23.0, 17.55), "cf_lcc": (8.77, 13.72)}
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("output", nargs="?", default="table2.png")
+    add_example_out(ap)
     ap.add_argument("--appendix-c", type=int, default=0, metavar="N")
     args = ap.parse_args()
 
@@ -40,7 +41,8 @@ def main() -> int:
         pa, pf = PAPER[name]
         print(f"{name:<10} {e['aave']:8.4f} {pa:6.2f} {e['fuel_ml']:10.3f} {pf:8.2f} "
               f"{ra:>10} {rf:>10}")  # fmt: skip
-    out = plot_metric_bars(rep, args.output, "Table II: vehicle 1 brakes at t = 20 s")
+    title = "Table II: vehicle 1 brakes at t = 20 s"
+    out = plot_metric_bars(rep, Path(args.out) / "table2.png", title)
     print(f"wrote {out}")
 
     if args.appendix_c:
@@ -52,7 +54,7 @@ def main() -> int:
             print(f"  {name}: AAVE -{r['aave_pct']:.2f} ± {r['aave_pct_std']:.2f} % "
                   f"(paper -{pa} %), fuel -{r['fuel_pct']:.2f} ± {r['fuel_pct_std']:.2f} % "
                   f"(paper -{pf} %)")  # fmt: skip
-        out_c = Path(args.output).with_name(Path(args.output).stem + "_appendix_c.png")
+        out_c = Path(args.out) / "table2_appendix_c.png"
         plot_metric_bars(rep_c, out_c, f"Appendix C: {args.appendix_c} heterogeneous draws")
         print(f"wrote {out_c}")
     return 0

@@ -22,7 +22,7 @@ HELP = "controllability/observability and head-to-tail string stability of the g
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_problem_arguments(parser, "problem file with [system] and optional [cases.NAME]")
     parser.add_argument("--png", metavar="PATH", help="write |Gamma(jw)| of every case (Fig. 9)")
-    add_recording(parser)
+    add_recording(parser, steps=False)
 
 
 def _fmt(x, spec: str) -> str:

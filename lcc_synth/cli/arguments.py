@@ -1,4 +1,5 @@
-"""The command-line arguments that several ``lcc-synth`` commands share, set up one way."""
+"""The command-line arguments that several ``lcc-synth`` commands (and the scripts under
+``examples/``) share, set up one way."""
 
 from __future__ import annotations
 
@@ -19,12 +20,30 @@ def add_problem_arguments(
     parser.add_argument("--json", action="store_true", help=json_help)
 
 
-def add_recording(parser: argparse.ArgumentParser) -> None:
-    """``--rrd``, ``--no-record`` and ``--record-every`` (imported only when a command is set
-    up, so that ``lcc-synth --help`` stays fast)."""
+def add_recording(parser: argparse.ArgumentParser, steps: bool = True) -> None:
+    """``--rrd``, ``--no-record`` and, for the commands that record simulation ``steps``,
+    ``--record-every`` (imported only when a command is set up, so that ``lcc-synth --help``
+    stays fast)."""
     from lcc_synth.recording import add_recording_arguments
 
-    add_recording_arguments(parser)
+    add_recording_arguments(parser, steps=steps)
+
+
+def check_options(args: argparse.Namespace) -> None:
+    """Reject options that do not apply together (before any work is done).
+
+    Raises
+    ------
+    ConfigError
+        ``--record-every`` or ``--record-seeds`` with ``--no-record`` (nothing is recorded).
+    """
+    from lcc_synth.errors import ConfigError
+
+    if getattr(args, "no_record", False):
+        if getattr(args, "record_every", 1) != 1:
+            raise ConfigError("--record-every", "does not apply with --no-record")
+        if getattr(args, "record_seeds", None) is not None:
+            raise ConfigError("--record-seeds", "does not apply with --no-record")
 
 
 def add_output_arguments(parser: argparse.ArgumentParser, what: str, figures: str) -> None:
@@ -39,3 +58,12 @@ def add_output_arguments(parser: argparse.ArgumentParser, what: str, figures: st
     )  # fmt: skip
     parser.add_argument("--no-figures", action="store_true", help=f"do not write {figures}")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars on stderr")
+
+
+def add_example_out(parser: argparse.ArgumentParser) -> None:
+    """``--out DIR`` of the scripts under ``examples/``: every file a script writes goes under
+    ``DIR`` (default ``results``), and the script prints ``wrote PATH`` for each."""
+    parser.add_argument(
+        "--out", metavar="DIR", default="results",
+        help="directory the outputs are written under (default results)",
+    )  # fmt: skip

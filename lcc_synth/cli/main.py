@@ -5,7 +5,8 @@ Each command lives in its own module ``lcc_synth.cli.<command>`` exposing
 dependencies inside ``run`` so that ``lcc-synth --help`` stays fast.
 
 Exit codes: 0 success, 1 a run that found a failure (e.g. a solver failure), 2 bad input
-(problem file, option) with a one-line message naming the field.
+(problem file, option) with a one-line message naming the file and the field. A bad option of a
+command prints that command's usage, not the top-level one.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import argparse
 import importlib
 import sys
 
+from lcc_synth.cli.arguments import check_options
 from lcc_synth.errors import ConfigError
 
 COMMANDS = ("run", "analyze", "regions", "simulate", "synthesize", "sweep", "review")
@@ -36,9 +38,23 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
+class _CommandParser(_Parser):
+    """A command's parser: an option it does not know is its error (with its usage), not one
+    of the top-level parser (which would print the top-level usage)."""
+
+    def parse_known_args(self, args=None, namespace=None):
+        namespace, extra = super().parse_known_args(args, namespace)
+        if extra:
+            self.error(f"unrecognized arguments: {' '.join(extra)}")
+        return namespace, extra
+
+
 def build_parser() -> argparse.ArgumentParser:
+    from lcc_synth import __version__
+
     parser = _Parser(prog="lcc-synth", description="Design and test LCC controllers for a CAV.")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    parser.add_argument("--version", action="version", version=f"lcc-synth {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_CommandParser)
     for name, mod in _available().items():
         p = sub.add_parser(name, help=mod.HELP, description=mod.HELP)
         mod.add_arguments(p)
@@ -50,8 +66,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
+        check_options(args)
         return int(args._run(args) or 0)
     except ConfigError as err:
+        problem = getattr(args, "problem", None)
+        if err.source is None and problem and not err.field.startswith("-"):
+            err = err.with_source(problem)  # a field of the problem file: name the file
         print(f"lcc-synth {args.command}: error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -22,7 +22,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--step", type=float, metavar="STEP", help="override the grid step of every map"
     )
-    add_recording(parser)
+    add_recording(parser, steps=False)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -243,16 +243,12 @@ def run(args: argparse.Namespace) -> int:
         print(format_table(result.table))
         for line in _collision_lines(result):
             print(line)
-        for sname, per in result.results.items():
-            for cname, res in per.items():
-                st = res.controller_stats
-                if st and "fallbacks" in st:
-                    stt = st.get("step_time_ms", {})
-                    print(
-                        f"{sname}/{cname}: {st['fallbacks']} fallbacks, "
-                        f"step time median {_ms(stt.get('median'))} / p99 {_ms(stt.get('p99'))}"
-                        " ms",
-                    )
+        from lcc_synth.cli.output import controller_stats_lines
+
+        stats = {f"{s}/{c}": r.controller_stats for s, per in result.results.items()
+                 for c, r in per.items()}  # fmt: skip
+        for line in controller_stats_lines(stats):
+            print(line)
         for lname, rows in settings.items():
             for suffix, _, lat, snames in rows:
                 if suffix:
@@ -304,10 +300,6 @@ def _gamma_line(rep, verdict_text) -> str:
         f"as run ({', '.join(what)}): peak {rep.gamma_peak:.4f}{at}, margin {rep.margin:+.3g}"
         f" -> {verdict_text(rep.verdict)}"
     )
-
-
-def _ms(value) -> str:
-    return "n/a" if value is None else f"{value:.2f}"
 
 
 def _title(suite) -> str:

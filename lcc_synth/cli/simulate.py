@@ -234,9 +234,10 @@ def print_table(spec, rep: dict[str, Any], file=None, collisions=None) -> None:
         print("  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)), file=file)
     for line in collision_lines(rep, collisions):
         print(line, file=file)
-    for name, e in rep.items():
-        if e["controller_stats"]:
-            print(f"{name} stats: {json.dumps(_clean(e['controller_stats']))}", file=file)
+    from lcc_synth.cli.output import controller_stats_lines
+
+    for line in controller_stats_lines({n: e["controller_stats"] for n, e in rep.items()}):
+        print(line, file=file)
 
 
 def collision_lines(rep: dict[str, Any], collisions=None) -> list[str]:
@@ -265,6 +266,13 @@ def run(args) -> int:
     with ExitStack() as stack:  # the recording is finalised however the run ends
         recorder = SimulationRecorder(args, stack)
         spec = load(args)
+        if args.record_seeds is not None and spec.scenario.batch == 1:
+            from lcc_synth.errors import ConfigError
+
+            raise ConfigError(
+                "--record-seeds", "applies to a study of several scenarios (--seeds N, or "
+                "[scenario].batch > 1); this one has a single scenario",
+            )  # fmt: skip
         if recorder.enabled:  # a bad --record-seeds fails before the simulation runs
             from lcc_synth.recording.cli import parse_record_seeds
 

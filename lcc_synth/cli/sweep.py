@@ -35,8 +35,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "local cluster on this machine",
     )
     parser.add_argument(
-        "--workers", type=int, default=2, metavar="N",
-        help="worker processes of the local cluster (default 2)",
+        "--workers", type=int, default=None, metavar="N",
+        help="worker processes of the local cluster (default 2; not with --scheduler)",
     )
     add_output_arguments(parser, "the sweep", "the PNG")
 
@@ -55,7 +55,7 @@ def _client(args):
             ) from None
     from lcc_synth.experiments.sweep import local_cluster
 
-    cluster = local_cluster(args.workers)
+    cluster = local_cluster(2 if args.workers is None else args.workers)
     return Client(cluster), cluster
 
 
@@ -68,10 +68,12 @@ def run(args: argparse.Namespace) -> int:
     from lcc_synth.experiments.tables import json_safe, run_directory
     from lcc_synth.synthesis.h2 import SynthesisError
 
+    if args.scheduler is not None and args.workers is not None:
+        raise ConfigError("--workers", "does not apply with --scheduler (its cluster has its own)")
+    if args.workers is not None and not 1 <= args.workers <= 256:
+        raise ConfigError("--workers", f"must be an integer in [1, 256], got {args.workers}")
     names = None if args.controllers is None else args.controllers.split(",")
     spec = load_sweep(args.problem, args.count, args.batch_size, args.seed, names)
-    if args.scheduler is None and not 1 <= args.workers <= 256:
-        raise ConfigError("--workers", f"must be an integer in [1, 256], got {args.workers}")
     stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
     log = sys.stderr if args.json else sys.stdout
     progress = not args.no_progress

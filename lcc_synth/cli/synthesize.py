@@ -15,18 +15,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_problem_arguments(
         parser, "problem file with a [synthesis] table", "print the report as one JSON object"
     )
-    parser.add_argument("--out", metavar="GAINS.json", help="write the gains file (contract 3)")
+    parser.add_argument(
+        "--out", metavar="GAINS.json",
+        help="write the gains as a JSON file that a [controllers.NAME] table can load (file = ...)",
+    )  # fmt: skip
     parser.add_argument(
         "--figure", metavar="PNG", help="design = 'sparsity': write the Pareto-front PNG"
     )
     parser.add_argument(
         "--no-progress", action="store_true", help="no progress lines (stages) on stderr"
     )
-    add_recording(parser)
+    add_recording(parser, steps=False)
 
 
 def run(args: argparse.Namespace) -> int:
-    from lcc_synth.problem import load_problem
+    from lcc_synth.errors import ConfigError
+    from lcc_synth.problem import check_top_level, load_problem
     from lcc_synth.recording import record_synthesis_file, recording_path
     from lcc_synth.resources import set_progress
     from lcc_synth.synthesis.config import spec_from_problem
@@ -35,7 +39,23 @@ def run(args: argparse.Namespace) -> int:
     from lcc_synth.synthesis.h2 import SynthesisError
     from lcc_synth.synthesis.report import format_report
 
-    spec = spec_from_problem(load_problem(args.problem))
+    problem = load_problem(args.problem)
+    src = str(problem.path)
+    try:
+        check_top_level(problem.data)  # a misspelled [synthesis] gets its "did you mean"
+    except ConfigError as err:
+        raise err.with_source(src) from None
+    if "synthesis" not in problem.data:
+        raise ConfigError(
+            "synthesis", "this file has no [synthesis] table (required by synthesize; e.g. "
+            "problems/synth_cf_lcc_pattern.toml)", src,
+        )  # fmt: skip
+    spec = spec_from_problem(problem)
+    if args.figure and spec.design != "sparsity":
+        raise ConfigError(
+            "--figure", f"only design = 'sparsity' draws a Pareto front; this one is "
+            f"{spec.design!r}", src,
+        )  # fmt: skip
     rrd = recording_path(args, spec.name)  # bad --rrd fails before the synthesis runs
     set_progress(not args.no_progress)
     try:
@@ -55,10 +75,6 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         written.append(str(write_gains(args.out, rep)))
     if args.figure:
-        if not rep.pareto:
-            from lcc_synth.errors import ConfigError
-
-            raise ConfigError("--figure", "only design = 'sparsity' produces a Pareto front")
         from lcc_synth.figures import plot_pareto_front
 
         written.append(str(plot_pareto_front(rep.pareto, rep.h2_unstructured, args.figure,

@@ -1,4 +1,4 @@
-"""``build_controller``: the controller of a ``[controllers.NAME]`` problem table (contract 4).
+"""``build_controller``: the controller of a ``[controllers.NAME]`` problem table.
 
 ``type = "hdv"`` and ``"static"`` build the controllers of :mod:`lcc_synth.controllers.static`,
 ``"gains_file"`` a static-gain controller from a gains file written by ``lcc-synth synthesize``,

@@ -15,7 +15,7 @@ __all__ = ["mpc_controller_from_table"]
 
 
 def _load_gains_file(path: Path, system, field_name: str) -> StaticGains:
-    """Read a gains file (contract 3 of the brief) as the fallback gain."""
+    """Read a gains file (``lcc-synth synthesize --out``) as the fallback gain."""
     if not path.is_file():
         raise ConfigError(field_name, f"no such gains file: {path}")
     try:

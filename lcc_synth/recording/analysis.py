@@ -134,8 +134,8 @@ def gamma_grid(peak_omega: float | None = None, points: int = 400) -> np.ndarray
 def record_synthesis(rec: Any, rep: Any, system: Any = None) -> None:
     """Record a synthesis report (``lcc_synth.synthesis.report.SynthesisReport``).
 
-    Under ``/synthesis/<problem>/``: the gains bar chart and report (the gains file of contract
-    3 plus solver, polish, baseline, timings and notes), the Pareto front of a sparsity sweep
+    Under ``/synthesis/<problem>/``: the gains bar chart and report (the gains file
+    plus solver, polish, baseline, timings and notes), the Pareto front of a sparsity sweep
     (``pareto``: LineStrips2D of the front and Points2D of every pattern found, x = vehicles
     heard, y = true H2); and, when ``system`` (the problem's :class:`~lcc_synth.problem.System`)
     is given and the model has a head vehicle, ``/analysis/gamma/<problem>``: |Gamma(j omega)|

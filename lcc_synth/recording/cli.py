@@ -26,8 +26,9 @@ from lcc_synth.recording.layout import (
 from lcc_synth.recording.simulation import record_metrics, record_simulation
 
 
-def add_recording_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add ``--rrd PATH``, ``--no-record`` and ``--record-every N`` to a command's parser."""
+def add_recording_arguments(parser: argparse.ArgumentParser, steps: bool = True) -> None:
+    """Add ``--rrd PATH``, ``--no-record`` and (``steps``: for commands that record simulation
+    steps) ``--record-every N`` to a command's parser."""
     group = parser.add_argument_group("recording (Rerun .rrd, see `lcc-synth review`)")
     excl = group.add_mutually_exclusive_group()
     excl.add_argument(
@@ -36,6 +37,8 @@ def add_recording_arguments(parser: argparse.ArgumentParser) -> None:
         help="write the recording to PATH (default: logs/<problem>-<UTC timestamp>.rrd)",
     )
     excl.add_argument("--no-record", action="store_true", help="do not write a recording")
+    if not steps:
+        return
     group.add_argument(
         "--record-every",
         type=int,

@@ -75,7 +75,7 @@ def record_simulation(
     rec : rerun.RecordingStream
         From :func:`open_recording`.
     result : lcc_synth.simulation.results.SimResult
-        Arrays ``(batch, T, n_vehicles)`` etc. (see the simulator's contract).
+        Arrays ``(batch, T, n_vehicles)`` etc.
     scenario : str
         Entity prefix (the problem name).
     controller : str, optional

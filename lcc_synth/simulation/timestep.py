@@ -208,11 +208,19 @@ def check_time_step(
 ) -> list[StepCheck]:
     """Check ``scenario.dt`` against the loop of every controller (module docstring).
 
-    Raises :class:`ConfigError` naming ``field`` when Euler is unstable for some loop; warns
-    (:class:`TimeStepWarning`) when a mode's damping error exceeds :data:`WARN_FRACTION`.
-    Returns the checks.
+    Raises :class:`ConfigError` naming ``field`` when Euler is unstable for some loop, or
+    naming ``controllers.NAME.sample_time`` when a controller's period is not a positive
+    multiple of the step (as the simulator would, but before any run, so that the caller can
+    name the file); warns (:class:`TimeStepWarning`) when a mode's damping error exceeds
+    :data:`WARN_FRACTION`. Returns the checks.
     """
+    from lcc_synth.simulation.engine import _steps_of
+
     dt = float(scenario.dt)
+    for name, ctrl in controllers.items():
+        ts = getattr(ctrl, "sample_time", None)
+        if ts is not None:
+            _steps_of(ts, dt, f"controllers.{name}.sample_time", multiple=True)
     checks = []
     for ctrl in controllers.values():
         loop = loop_matrix(ctrl, scenario)

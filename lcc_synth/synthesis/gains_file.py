@@ -1,4 +1,4 @@
-"""The gains file (contract 3): JSON written by ``lcc-synth synthesize --out``.
+"""The gains file: JSON written by ``lcc-synth synthesize --out``.
 
 Keys: ``kind, m, n, semantics, state_names, K, gains`` (``K`` = the gains in ``state_names``
 order, ``gains`` = ``{state_name: value}``; ``u = +K x`` with the semantics of ``feedback.py``),
@@ -24,7 +24,7 @@ REQUIRED_KEYS = ("kind", "m", "n", "semantics", "state_names", "K", "gains")
 
 
 def gains_document(rep: SynthesisReport) -> dict[str, Any]:
-    """The JSON object of contract 3 for a synthesis report."""
+    """The gains-file JSON object of a synthesis report."""
     c = rep.check
     doc = {
         "kind": rep.kind,

@@ -2,7 +2,7 @@
 
 :func:`evaluate_gain` computes, from the gain alone: the closed-loop eigenvalues (design plant
 and full model), the TRUE H2 norm (Lyapunov), and for models with a head vehicle the global
-string-stability check of contract 1 (peak ``|Gamma|``, its frequency, verdict).
+string-stability check (peak ``|Gamma|``, its frequency, verdict).
 :func:`check_gain` turns an unusable result (non-finite entries, unstable closed loop, infinite
 H2 norm) into a :class:`~lcc_synth.synthesis.h2.SynthesisError` -- never a returned gain.
 """

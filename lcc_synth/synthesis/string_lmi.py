@@ -15,7 +15,7 @@ with ``h`` the head-velocity input column of the design plant and ``c`` the tail
 Every stabilising gain has ``|Gamma(0)| = 1`` (the tail follows the head's steady velocity), so
 ``gamma = 1`` is the smallest meaningful bound and the LMI is only feasible on its boundary
 at ``w = 0``: the verdict of every result is therefore taken from the global check
-:func:`lcc_synth.analysis.string_stability.string_stability` (contract 1), never from the LMI.
+:func:`lcc_synth.analysis.string_stability.string_stability`, never from the LMI.
 
 Polishing step: descent on the true H2 cost restricted to the pattern in which a step is
 accepted only when the trial gain is plant- and string-stable by that global check with a
@@ -57,7 +57,7 @@ DESIGN_MARGIN = 1e-4
 
 
 def string_check(plant: H2Plant, g: np.ndarray):
-    """Global string-stability report (contract 1) of design gain ``g``."""
+    """Global string-stability report of design gain ``g``."""
     from lcc_synth.analysis.string_stability import string_stability
 
     K, kh = plant.input_feedback(g)

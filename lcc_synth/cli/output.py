@@ -1,0 +1,101 @@
+"""Human output of the commands: aligned text tables and numbers with sensible digits.
+
+The ``--json`` documents are the machine face and keep every digit; what a person reads goes
+through :func:`text_table` and :func:`sig`: times with 3 significant digits (``0.350 ms``,
+``5.41 ms``), counts as integers, no Python or JSON literals among the rows.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+__all__ = ["sig", "text_table", "controller_stats_lines"]
+
+
+def sig(value: Any, digits: int = 3) -> str:
+    """``value`` with ``digits`` significant digits (``"n/a"`` for ``None``, ``"nan"``...).
+
+    Examples
+    --------
+    >>> sig(0.35019700044358615), sig(5.414282189412915), sig(850), sig(1234.5), sig(None)
+    ('0.350', '5.41', '850', '1234', 'n/a')
+    """
+    if value is None:
+        return "n/a"
+    x = float(value)
+    if not math.isfinite(x):
+        return str(x)
+    if x == 0:
+        return "0"
+    exponent = math.floor(math.log10(abs(x)))
+    if exponent < -4:
+        return f"{x:.{digits - 1}e}"
+    return f"{x:.{max(0, digits - 1 - exponent)}f}"  # 1234.5 -> "1234": no exponent
+
+
+def text_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+    """Lines of a left-aligned table: the header, a rule, one line per row (cells as given)."""
+    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h)
+              for i, h in enumerate(header)]  # fmt: skip
+    lines = ["  ".join(h.ljust(w) for h, w in zip(header, widths, strict=True)).rstrip()]
+    lines.append("  ".join("-" * w for w in widths))
+    for r in rows:
+        lines.append("  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)).rstrip())
+    return lines
+
+
+_MPC_HEADER = ["controller", "steps", "solves", "step ms median", "p99", "max", "iterations",
+               "fallbacks", "QP failures", "slack steps", "errors"]  # fmt: skip
+
+
+def _count(value: Any) -> str:
+    if isinstance(value, Mapping):  # e.g. qp_failures = {status: count}
+        return str(sum(int(v) for v in value.values()))
+    return "n/a" if value is None else str(int(value))
+
+
+def _whole(value: Any) -> str:
+    """A count that may be a half (the median of an even number of counts)."""
+    return "n/a" if value is None else f"{float(value):g}"
+
+
+def controller_stats_lines(stats: Mapping[str, Mapping[str, Any]]) -> list[str]:
+    """The run statistics of the controllers that have some (``{label: stats}``, the MPC's
+    :meth:`~lcc_synth.mpc.controller.MPCController.stats`) as a short table.
+
+    MPC statistics give one row each: samples (``steps``), QP solves (all batch members),
+    controller step time per batch member (median / p99 / max, ms), OSQP iterations
+    (median / max), fallbacks, QP failures (every non-solved status), steps that used the
+    safety slack, and errors (then the first error message). Other controllers' statistics
+    follow as ``label: key = value``.
+    Empty when no controller has statistics.
+    """
+    rows, other = [], []
+    for label, st in stats.items():
+        if not st:
+            continue
+        if "step_time_ms" not in st:
+            other.append(
+                f"{label}: " + ", ".join(
+                    f"{k} = {sig(v) if isinstance(v, float) else v}" for k, v in st.items()
+                )
+            )  # fmt: skip
+            continue
+        t = st["step_time_ms"]
+        it = st.get("iterations", {})
+        rows.append([
+            label, _count(st.get("steps")), _count(st.get("solves")), sig(t.get("median")),
+            sig(t.get("p99")), sig(t.get("max")),
+            f"{_whole(it.get('median'))} / {_count(it.get('max'))}", _count(st.get("fallbacks")),
+            _count(st.get("qp_failures")), _count(st.get("slack_steps")),
+            _count(st.get("errors")),
+        ])  # fmt: skip
+        if st.get("error_messages"):
+            other.append(f"{label}: solver errors, the first: {st['error_messages'][0]}")
+    lines = []
+    if rows:
+        lines.append("MPC solver (step time per batch member, ms; iterations median / max):")
+        lines += text_table(_MPC_HEADER, rows)
+    return lines + other

@@ -1,0 +1,85 @@
+"""Every script under ``examples/`` writes under one ``--out`` directory and prints each path.
+
+Each script runs as a user would (a subprocess, from an empty working directory) with
+``--out`` set to a temporary directory; the test checks that every ``wrote PATH`` line names an
+existing file inside it, that every file inside it was printed, and that nothing was written
+anywhere else (the working directory, the repository). All of them take under 30 s here
+(3-6 s each); ``fig7_fig8_regions.py`` runs with ``--step 0.5`` (its default, the paper's grid
+of 1001 x 1001 points per map, is far longer).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "examples"
+
+#: Each example with the arguments of the run tested here (besides ``--out``).
+RUNS = {
+    "fig5_control_energy.py": [],
+    "fig7_fig8_regions.py": ["--step", "0.5"],
+    "fig9_frequency_response.py": [],
+    "fig10_fig12_sec5a_profiles.py": [],
+    "fig11_snapshots.py": [],
+    "fig11_snapshots.py --appendix-c": ["--appendix-c"],
+    "mpc_head_brake.py": [],
+    "showcase.py": [],
+    "sparsity_pareto.py": [],
+    "synthesis_vs_paper.py": [],
+    "synthesis_vs_paper.py --json": ["--json"],
+    "table2.py": [],
+    "paper_walkthrough.py": [],
+}
+
+
+def _repository_files() -> set[Path]:
+    skip = {".git", "__pycache__", ".pytest_cache", ".ruff_cache"}
+    return {
+        p for p in ROOT.rglob("*")
+        if p.is_file() and not skip.intersection(p.relative_to(ROOT).parts)
+    }  # fmt: skip
+
+
+def test_every_example_is_run_here():
+    scripts = {p.name for p in EXAMPLES.glob("*.py")}
+    listed = {key.split()[0] for key in RUNS}
+    assert scripts <= listed, f"add {sorted(scripts - listed)} to RUNS"
+
+
+@pytest.mark.parametrize("key", list(RUNS))
+def test_example_writes_only_under_out_and_prints_each_path(key, tmp_path):
+    script = EXAMPLES / key.split()[0]
+    if not script.is_file():
+        pytest.skip(f"{script.name} is not in this checkout")
+    cwd, out = tmp_path / "cwd", tmp_path / "out"
+    cwd.mkdir()
+    before = _repository_files()
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg", "RERUN_ANALYTICS": "0",
+           "PYTHONDONTWRITEBYTECODE": "1"}  # fmt: skip
+    proc = subprocess.run(
+        [sys.executable, str(script), *RUNS[key], "--out", str(out)],
+        cwd=cwd, env=env, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    if "--json" in RUNS[key]:
+        json.loads(proc.stdout)  # stdout holds the JSON object alone
+    printed = [
+        Path(line.removeprefix("wrote ").strip())
+        for line in (proc.stdout + proc.stderr).splitlines()
+        if line.startswith("wrote ")
+    ]
+    assert printed, proc.stdout[-2000:]
+    for path in printed:
+        assert path.is_file() and path.stat().st_size > 0, path
+        assert path.resolve().is_relative_to(out.resolve()), path
+    written = {p.resolve() for p in out.rglob("*") if p.is_file()}
+    assert written == {p.resolve() for p in printed}  # each file it wrote, printed
+    assert list(cwd.iterdir()) == []
+    assert _repository_files() == before
