@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
+from lcc_synth.models.records import Record
 from lcc_synth.problem import System, check_keys, get_number_list, get_str, get_table
 from lcc_synth.simulation.perturbations import vehicle_column
 
@@ -73,8 +74,8 @@ JERK_WINDOW = 1.0
 _ISO_JERK = ((5.0, 20.0), (5.0, 2.5))
 
 
-@dataclass(frozen=True)
-class MetricsConfig:
+@dataclass(frozen=True, repr=False)
+class MetricsConfig(Record):
     """Window and vehicle set of AAVE and fuel, and an optional baseline controller name."""
 
     window: tuple[float, float] = (20.0, 40.0)
@@ -90,6 +91,12 @@ class MetricsConfig:
                 "metrics.vehicles",
                 f"must be one of {list(VEHICLE_SETS)} or a list of indices, got {self.vehicles!r}",
             )
+
+    def toml_table(self) -> dict[str, Any]:
+        """The ``[metrics]`` table (what :func:`metrics_from` reads)."""
+        vehicles = self.vehicles if isinstance(self.vehicles, str) else list(self.vehicles)
+        return {"window": [float(t) for t in self.window], "vehicles": vehicles,
+                "baseline": self.baseline}  # fmt: skip
 
 
 def vehicle_columns(result, vehicles: str | Sequence[int | str] = "cav_and_behind") -> np.ndarray:

@@ -52,6 +52,7 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import MetricsConfig
+from lcc_synth.models.records import Record
 from lcc_synth.problem import (
     Problem,
     System,
@@ -97,8 +98,8 @@ SWEEP_COUNTS = ("collisions", "aeb_activations", "fallbacks")
 _EFFICIENCY = ("aave", "fuel_ml")
 MAX_COUNT = 10_000_000
 _MAX_BATCH = 100_000
-@dataclass(frozen=True)
-class SweepSpec:
+@dataclass(frozen=True, repr=False)
+class SweepSpec(Record):
     """A parsed sweep problem (see the module docstring)."""
 
     name: str

@@ -572,6 +572,10 @@ class MPCController:
         d["solver"]["name"] = "osqp"
         return d
 
+    def toml_table(self) -> dict[str, Any]:
+        """The ``[controllers.NAME]`` table that builds this MPC."""
+        return self.settings.toml_table()
+
     def stats(self) -> dict[str, Any]:
         """Solve-time distribution, fallbacks, QP failures, slack use and measured violations.
 
