@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.records import Record
+from lcc_synth.models.records import Record, callable_module
 from lcc_synth.problem import System, check_keys, get_number_list, get_str, get_table
 from lcc_synth.simulation.perturbations import vehicle_column
 
@@ -61,6 +61,7 @@ __all__ = [
     "aeb_activations",
     "collisions",
     "summary",
+    "evaluate",
     "per_scenario",
     "concatenate",
     "aggregate",
@@ -408,3 +409,15 @@ def metrics_from(
     if baseline is not None and controllers and baseline not in controllers:
         raise ConfigError(f"{f}.baseline", f"must name a controller, one of {list(controllers)}")
     return MetricsConfig(window, vehicles, baseline)
+
+
+def evaluate(
+    result, *, window: tuple[float, float], vehicles: str | Sequence[int | str] = "cav_and_behind"
+) -> dict[str, Any]:
+    """:func:`summary` of ``result`` over an explicit metric ``window`` (s) and vehicle set
+    (``lcc.metrics(...)``; calling this module calls it). Table II: ``window=(20, 40)``."""
+    vehicles = vehicles if isinstance(vehicles, str) else tuple(vehicles)
+    return summary(result, MetricsConfig(tuple(float(t) for t in window), vehicles))
+
+
+callable_module(__name__, evaluate)

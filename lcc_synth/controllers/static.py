@@ -179,6 +179,10 @@ class HDVController(_LinearController):
         """The ``[controllers.NAME]`` table that builds this controller."""
         return {"type": "hdv", "sample_time": self.sample_time}
 
+    def as_dict(self) -> dict[str, Any]:
+        """Name and :meth:`describe`."""
+        return {"name": self.name, **self.describe()}
+
 
 class StaticGainController(_LinearController):
     """Static state feedback of eq. (23) on the CAV's observation.
@@ -305,3 +309,7 @@ class StaticGainController(_LinearController):
         if out["measurement_filter"] == 0.0:
             del out["measurement_filter"]  # the default: off
         return out
+
+    def as_dict(self) -> dict[str, Any]:
+        """Name, :meth:`describe` and the model's layout."""
+        return {"name": self.name, "m": self.model.m, "n": self.model.n, **self.describe()}

@@ -14,23 +14,29 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
+import types
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["REPR_ITEMS", "Record", "plain", "short", "toml_text", "drop_none", "system_tables"]
+__all__ = [
+    "REPR_ITEMS", "Record", "plain", "short", "toml_text", "drop_none", "system_tables",
+    "callable_module",
+]  # fmt: skip
 
 #: Arrays and lists with more entries than this are shown by shape / length in ``repr``.
 REPR_ITEMS = 8
 
 
 def plain(x: Any) -> Any:
-    """``x`` as plain Python values: dataclasses and mappings -> dict, sequences and arrays ->
-    list, numpy scalars -> Python scalars, paths -> str."""
-    if isinstance(x, Record):
-        return x.as_dict()
+    """``x`` as plain Python values: objects with ``as_dict()`` (records, controllers),
+    dataclasses and mappings -> dict, sequences and arrays -> list, numpy scalars -> Python
+    scalars, paths -> str."""
+    if isinstance(x, Record) or callable(getattr(x, "as_dict", None)):
+        return plain(x.as_dict())
     if dataclasses.is_dataclass(x) and not isinstance(x, type):
         return {f.name: plain(getattr(x, f.name)) for f in dataclasses.fields(x)}
     if isinstance(x, Mapping):
@@ -109,3 +115,22 @@ def system_tables(system: Any) -> dict[str, Any]:
         "system": {"kind": system.kind, "m": int(system.m), "n": int(system.n),
                    "v_star": float(system.v_star)},
     }  # fmt: skip
+
+
+def callable_module(module_name: str, fn: Any) -> None:
+    """Make the module ``module_name`` callable as ``fn``.
+
+    The flat API's ``lcc.metrics(...)`` and ``lcc.mpc(...)`` share their names with the
+    module ``lcc_synth.metrics`` and the package ``lcc_synth.mpc``, which Python binds on
+    ``lcc_synth`` as soon as they are imported: calling the module calls ``fn``, so the name
+    means the same thing whichever was bound first.
+    """
+    module = sys.modules[module_name]
+
+    class CallableModule(types.ModuleType):
+        __doc__ = module.__doc__
+
+        def __call__(self, *args: Any, **kwargs: Any) -> Any:
+            return fn(*args, **kwargs)
+
+    module.__class__ = CallableModule

@@ -576,6 +576,9 @@ class MPCController:
         """The ``[controllers.NAME]`` table that builds this MPC."""
         return self.settings.toml_table()
 
+    def as_dict(self) -> dict[str, Any]:
+        return {**self.describe(), "fallback": dict(self.fallback.gains)}
+
     def stats(self) -> dict[str, Any]:
         """Solve-time distribution, fallbacks, QP failures, slack use and measured violations.
 
