@@ -52,7 +52,7 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import MetricsConfig
-from lcc_synth.models.records import Record, system_tables, toml_text
+from lcc_synth.models.records import Record, system_tables
 from lcc_synth.problem import (
     Problem,
     System,
@@ -117,20 +117,11 @@ class SweepSpec(Record):
         return self.scenario.seed
 
     def toml_tables(self) -> dict[str, Any]:
-        """``name``, ``[hdv]``, ``[system]``, ``[scenario]``, ``[metrics]``, ``[sweep]`` and the
-        controller tables: what :func:`load_sweep` reads back into an equal spec."""
-        return {
-            "name": self.name,
-            **system_tables(self.system),
-            "scenario": self.scenario.toml_table(),
-            "metrics": self.metrics.toml_table(),
-            "sweep": {"count": self.count, "batch_size": self.batch_size},
-            "controllers": {k: dict(t) for k, t in self.controllers.items()},
-        }
-
-    def to_toml(self) -> str:
-        """This spec as a problem file (:meth:`toml_tables`)."""
-        return toml_text(self.toml_tables())
+        """The tables :func:`load_sweep` reads back into an equal spec."""
+        tables = {"scenario": self.scenario.toml_table(), "metrics": self.metrics.toml_table(),
+                  "sweep": {"count": self.count, "batch_size": self.batch_size}}  # fmt: skip
+        ctrls = {k: dict(t) for k, t in self.controllers.items()}
+        return {"name": self.name, **system_tables(self.system), **tables, "controllers": ctrls}
 
 
 def _count(value, field_name: str, hi: int) -> int:
