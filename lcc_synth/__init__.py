@@ -34,6 +34,10 @@ __all__ = ["ConfigError", *_API]
 
 
 def __getattr__(name: str):
+    if name == "api":
+        import lcc_synth.api
+
+        return lcc_synth.api
     if name == "metrics":  # the module, callable as api.metrics (it is bound here once imported)
         import lcc_synth.metrics
 
