@@ -362,8 +362,8 @@ class ProblemObjects(Record):
     analysis : lcc_synth.analysis.cases.AnalysisOptions or None
         ``[analysis]`` of ``lcc-synth analyze``; ``cases`` its ``[cases.*]`` gains.
     regions : tuple or None
-        ``(specs, omega)`` of ``[regions]`` / ``[maps.*]`` (``lcc-synth regions``): read only,
-        they have no ``to_toml`` form yet.
+        ``(specs, omega)`` of ``[regions]`` / ``[maps.*]`` (``lcc-synth regions``); written
+        back with every map's grid explicit (only the default frequency grid has a TOML form).
     source : str or None
     """
 
@@ -402,8 +402,6 @@ class ProblemObjects(Record):
 
     def toml_tables(self) -> dict[str, Any]:
         """The file's tables, as each object writes them (``to_toml_table`` of each)."""
-        if self.regions is not None:
-            raise ConfigError("regions", "region maps have no TOML form yet (read only)")
         out: dict[str, Any] = {"name": self.name}
         if self.description:
             out["description"] = self.description
@@ -416,6 +414,10 @@ class ProblemObjects(Record):
             out["analysis"] = self.analysis.toml_table()
         if self.cases:
             out["cases"] = {k: c.toml_table() for k, c in self.cases.items()}
+        if self.regions is not None:
+            from lcc_synth.analysis.region_specs import regions_tables
+
+            out.update(regions_tables(*self.regions))
         return out
 
     def to_toml(self) -> str:

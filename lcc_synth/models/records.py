@@ -105,7 +105,7 @@ def toml_text(tables: Mapping[str, Any]) -> str:
     """The TOML text of ``tables`` (``None`` values left out)."""
     import tomli_w
 
-    return tomli_w.dumps(drop_none(plain(tables)))
+    return tomli_w.dumps(drop_none(plain(tables)), multiline_strings=True)
 
 
 def system_tables(system: Any) -> dict[str, Any]:
