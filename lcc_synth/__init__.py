@@ -27,7 +27,7 @@ _API = (
     "system", "model", "controllability", "observability", "control_energy", "gains",
     "string_stability", "region_map", "synthesize_h2", "hdv_controller", "static_controller",
     "mpc", "scenario", "simulate", "metrics", "aave", "fuel", "record",
-    "ProblemObjects", "load_problem", "TABLE2_WINDOW",
+    "ProblemObjects", "build_problem", "load_problem", "TABLE2_WINDOW",
 )  # fmt: skip
 
 __all__ = ["ConfigError", *_API]

@@ -23,7 +23,8 @@ Sec. V, eq. (29)          :func:`scenario`, :class:`Brake`, :class:`Sine`, :clas
 Table II metrics          :func:`metrics` (AAVE, fuel, spacing, TTC, jerk...; ``window``
                           explicit), :func:`aave`, :func:`fuel`
 recordings                :func:`record` (a Rerun ``.rrd`` file)
-problem files             :func:`load_problem` -> :class:`ProblemObjects` (``to_toml()``)
+problem files             :func:`load_problem` / :func:`build_problem` -> :class:`ProblemObjects`
+                          (``to_toml()``)
 ========================  ====================================================================
 
 Results are small dataclasses with ``as_dict()`` and a one-line ``repr``
@@ -60,7 +61,7 @@ __all__ = [
     "system", "model", "controllability", "observability", "control_energy", "gains",
     "string_stability", "region_map", "synthesize_h2", "hdv_controller", "static_controller",
     "mpc", "scenario", "simulate", "metrics", "aave", "fuel", "record",
-    "ProblemObjects", "load_problem", "TABLE2_WINDOW",
+    "ProblemObjects", "build_problem", "load_problem", "TABLE2_WINDOW",
 ]  # fmt: skip
 
 #: Table II's metric window (s): AAVE and fuel over 20 <= t <= 40.
@@ -427,6 +428,29 @@ class ProblemObjects(Record):
     def comparable(self) -> dict[str, Any]:
         """``as_dict()`` without where the file was (for comparing two loads)."""
         return _without_source(plain(self))
+
+
+def build_problem(
+    name: str,
+    system: System,
+    scenario: Scenario | None = None,
+    controllers: Mapping[str, Any] | None = None,
+    metrics: MetricsConfig | None = None,
+    description: str = "",
+) -> ProblemObjects:
+    """The problem file of objects built in Python: ``build_problem(...).to_toml()`` is a file
+    ``lcc-synth simulate`` runs (with ``scenario`` and ``controllers``; ``metrics`` default
+    :class:`MetricsConfig` (), i.e. Table II's window) and :func:`load_problem` reads back
+    equal. Without a scenario it holds ``[hdv]`` + ``[system]`` only."""
+    sim = None
+    if scenario is not None or controllers:
+        from lcc_synth.experiments.spec import SimulationSpec
+
+        if scenario is None or not controllers:
+            raise ConfigError("controllers", "a simulation needs a scenario and a controller")
+        sim = SimulationSpec(name, system, scenario, dict(controllers), metrics or
+                             MetricsConfig(), "python")  # fmt: skip
+    return ProblemObjects(name, description, system, simulation=sim)
 
 
 def _without_source(x: Any) -> Any:

@@ -201,3 +201,18 @@ def test_import_is_lazy():
     assert set(lcc.__all__) <= set(dir(lcc))
     with pytest.raises(AttributeError):
         lcc.no_such_name  # noqa: B018
+
+
+def test_no_api_name_is_shadowed_by_a_module():
+    import importlib
+    import pkgutil
+    import types
+
+    from lcc_synth import api
+
+    for info in pkgutil.iter_modules(lcc.__path__):  # Python binds each on the package
+        importlib.import_module(f"lcc_synth.{info.name}")
+    for name in api.__all__:
+        obj = getattr(lcc, name)
+        module = isinstance(obj, types.ModuleType)
+        assert obj is getattr(api, name) or (module and callable(obj)), name

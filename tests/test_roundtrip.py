@@ -102,8 +102,6 @@ def test_the_written_file_simulates_bit_for_bit(tmp_path):
 
 
 def test_objects_built_in_python_round_trip(tmp_path):
-    from lcc_synth.experiments.spec import SimulationSpec
-
     system = lcc.system("lcc", m=1, n=2, v_star=12.0, hdv=lcc.OVM(alpha=0.5))
     nv = system.m + system.n + 2
     scenario = lcc.scenario(
@@ -122,8 +120,7 @@ def test_objects_built_in_python_round_trip(tmp_path):
                                       measurement_filter=0.2),  # fmt: skip
     }
     metrics = lcc.MetricsConfig((10.0, 35.0), "all")
-    spec = SimulationSpec("built", system, scenario, controllers, metrics, "python")
-    objs = lcc.ProblemObjects("built", "made in Python", system, simulation=spec)
+    objs = lcc.build_problem("built", system, scenario, controllers, metrics, "made in Python")
     path = tmp_path / "built.toml"
     path.write_text(objs.to_toml())
     back = lcc.load_problem(path)
