@@ -216,3 +216,25 @@ def test_no_api_name_is_shadowed_by_a_module():
         obj = getattr(lcc, name)
         module = isinstance(obj, types.ModuleType)
         assert obj is getattr(api, name) or (module and callable(obj)), name
+
+
+def test_paper_walkthrough_uses_only_the_top_level_api_and_prints_what_it_wrote(tmp_path):
+    import ast
+
+    script = ROOT / "examples/paper_walkthrough.py"
+    for node in ast.walk(ast.parse(script.read_text())):
+        if isinstance(node, ast.ImportFrom):
+            assert not (node.module or "").startswith("lcc_synth"), node.module
+        if isinstance(node, ast.Import):
+            assert all(a.name == "lcc_synth" or "lcc_synth" not in a.name for a in node.names)
+    env = {**__import__("os").environ, "PYTHONPATH": str(ROOT), "MPLBACKEND": "Agg"}
+    out = subprocess.run([sys.executable, str(script), "--out", str(tmp_path)], env=env,
+                         capture_output=True, text=True, check=True).stdout  # fmt: skip
+    wrote = [Path(line.split("wrote ", 1)[1]) for line in out.splitlines() if "wrote " in line]
+    assert sorted(p.name for p in wrote) == ["walkthrough.json", "walkthrough.rrd",
+                                             "walkthrough.toml"]  # fmt: skip
+    assert all(p.is_file() and p.parent == tmp_path for p in wrote)
+    assert "cf_lcc: AAVE 0.8129 m/s, fuel 340.56 mL" in out  # Table II, CF-LCC
+    assert " all_hdv: AAVE 0.8928 m/s, fuel 392.86 mL" in out  # Table II, all HDVs
+    objs = lcc.load_problem(tmp_path / "walkthrough.toml")  # a file the CLI runs
+    assert list(objs.controllers) == ["all_hdv", "cf_lcc", "h2", "mpc"]
