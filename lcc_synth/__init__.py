@@ -25,7 +25,8 @@ _API = (
     "OVM", "IDM", "System", "Scenario", "V2V", "StaticGains", "MetricsConfig",
     "Brake", "Sine", "BrakeProfile", "Profile",
     "system", "model", "controllability", "observability", "control_energy", "gains",
-    "string_stability", "region_map", "synthesize_h2", "hdv_controller", "static_controller",
+    "string_stability", "region_map", "h2_problem", "synthesize_h2", "hdv_controller",
+    "static_controller",
     "mpc", "scenario", "simulate", "metrics", "aave", "fuel", "record",
     "ProblemObjects", "build_problem", "load_problem", "TABLE2_WINDOW",
 )  # fmt: skip

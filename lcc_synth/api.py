@@ -16,7 +16,7 @@ Sec. III, Thm. 1-3        :func:`controllability`, :func:`observability`
 Sec. III-C, Fig. 5        :func:`control_energy` (Gramian metrics at a horizon)
 Sec. IV, eq. (23)-(27)    :func:`gains`, :func:`string_stability` (head-to-tail ``Gamma``)
 Sec. IV-B, Fig. 7-8       :func:`region_map`
-H2 / LMI synthesis        :func:`synthesize_h2` (``[synthesis]``)
+H2 / LMI synthesis        :func:`h2_problem` (``[synthesis]``), :func:`synthesize_h2`
 Sec. V, eq. (29)          :func:`scenario`, :class:`Brake`, :class:`Sine`, :class:`BrakeProfile`,
                           :class:`Profile`, :func:`hdv_controller`, :func:`static_controller`,
                           :func:`mpc`, :func:`simulate`
@@ -59,7 +59,8 @@ __all__ = [
     "OVM", "IDM", "System", "Scenario", "V2V", "StaticGains", "MetricsConfig",
     "Brake", "Sine", "BrakeProfile", "Profile",
     "system", "model", "controllability", "observability", "control_energy", "gains",
-    "string_stability", "region_map", "synthesize_h2", "hdv_controller", "static_controller",
+    "string_stability", "region_map", "h2_problem", "synthesize_h2", "hdv_controller",
+    "static_controller",
     "mpc", "scenario", "simulate", "metrics", "aave", "fuel", "record",
     "ProblemObjects", "build_problem", "load_problem", "TABLE2_WINDOW",
 ]  # fmt: skip
@@ -166,7 +167,7 @@ def region_map(model, vehicle: int, mu, k, gain=None, omega=None, name: str = ""
                        name)  # fmt: skip
 
 
-def synthesize_h2(
+def h2_problem(
     system: System,
     design: str = "structured",
     pattern: Sequence[int] | str = "all",
@@ -174,7 +175,9 @@ def synthesize_h2(
     name: str = "python",
     **options: Any,
 ):
-    """Synthesise a static H2 gain for ``system`` (``lcc-synth synthesize``).
+    """The ``[synthesis]`` problem of ``lcc-synth synthesize`` for ``system``: a
+    :class:`~lcc_synth.synthesis.config.SynthesisSpec` (``build_problem(..., synthesis=spec)``
+    writes it as a problem file).
 
     Parameters
     ----------
@@ -187,24 +190,45 @@ def synthesize_h2(
         The ``[synthesis.weights]`` keys (``q_s`` = 1, ``q_v`` = 1, ``q_a`` = 0, ``r`` = 1,
         ``accel`` = 1, ``head`` = 0 ... when absent; see :class:`lcc_synth.synthesis.h2.Weights`).
     **options
-        Any other ``[synthesis]`` key (``semantics``, ``method``, ``tol``, ``sparsity``...).
+        Any other ``[synthesis]`` key (``semantics``, ``method``, ``tol``, ``string = {...}``,
+        ``sparsity = {...}``, ``baseline = {...}``, ``as_run = {...}``).
 
-    Returns
-    -------
-    lcc_synth.synthesis.report.SynthesisReport
-        ``gains`` (state name -> gain), ``check.h2`` (true H2 norm), string-stability checks.
-        ``StaticGains(report.gains, report.semantics)`` drives :func:`static_controller`.
-
-    The tables are validated by :func:`lcc_synth.synthesis.config.spec_from_problem` and solved
-    by :func:`lcc_synth.synthesis.design.synthesize` (cvxpy + Clarabel for LMI designs).
+    Validated by :func:`lcc_synth.synthesis.config.spec_from_problem`, as a problem file (errors
+    name ``<python>`` and the dotted field).
     """
     from lcc_synth.synthesis.config import spec_from_problem
-    from lcc_synth.synthesis.design import synthesize
 
     table = {"design": design, "pattern": pattern if isinstance(pattern, str) else list(pattern),
              "weights": dict(weights or {}), **options}  # fmt: skip
     data = {"name": name, **system_tables(system), "synthesis": table}
-    return synthesize(spec_from_problem(Problem(Path(f"{name}.toml"), data)))
+    return spec_from_problem(Problem(Path("<python>"), data))
+
+
+def synthesize_h2(system, *args: Any, **kwargs: Any):
+    """Synthesise a static H2 gain (``lcc-synth synthesize``).
+
+    ``system``: a :class:`System` (then the other arguments are those of :func:`h2_problem`)
+    or a spec from :func:`h2_problem` / :func:`load_problem` (``.synthesis``).
+
+    Returns
+    -------
+    lcc_synth.synthesis.report.SynthesisReport
+        ``gains`` (state name -> gain), ``check.h2`` (true H2 norm), string-stability checks;
+        ``lcc.static_controller(string, report.gains, semantics=report.semantics, kind=...)``
+        drives it in :func:`simulate`.
+
+    Solved by :func:`lcc_synth.synthesis.design.synthesize` (cvxpy + Clarabel for the LMI
+    designs; the showcase's structured CF-LCC gain, 22 states, takes about 1 s here).
+    """
+    from lcc_synth.synthesis.design import synthesize
+
+    if isinstance(system, System):
+        spec = h2_problem(system, *args, **kwargs)
+    elif args or kwargs:
+        raise ConfigError("synthesis", "give a System and options, or a spec alone")
+    else:
+        spec = system
+    return synthesize(spec)
 
 
 def hdv_controller(name: str = "all_hdv", sample_time: float | None = None):
@@ -437,11 +461,13 @@ def build_problem(
     controllers: Mapping[str, Any] | None = None,
     metrics: MetricsConfig | None = None,
     description: str = "",
+    synthesis: Any = None,
 ) -> ProblemObjects:
     """The problem file of objects built in Python: ``build_problem(...).to_toml()`` is a file
     ``lcc-synth simulate`` runs (with ``scenario`` and ``controllers``; ``metrics`` default
-    :class:`MetricsConfig` (), i.e. Table II's window) and :func:`load_problem` reads back
-    equal. Without a scenario it holds ``[hdv]`` + ``[system]`` only."""
+    :class:`MetricsConfig` (), i.e. Table II's window) and / or ``lcc-synth synthesize`` runs
+    (with ``synthesis``, from :func:`h2_problem`), which :func:`load_problem` reads back equal.
+    With neither it holds ``[hdv]`` + ``[system]`` only."""
     sim = None
     if scenario is not None or controllers:
         from lcc_synth.experiments.spec import SimulationSpec
@@ -450,7 +476,9 @@ def build_problem(
             raise ConfigError("controllers", "a simulation needs a scenario and a controller")
         sim = SimulationSpec(name, system, scenario, dict(controllers), metrics or
                              MetricsConfig(), "python")  # fmt: skip
-    return ProblemObjects(name, description, system, simulation=sim)
+    if synthesis is not None and synthesis.system != system:
+        raise ConfigError("synthesis", "is for another system than the problem's")
+    return ProblemObjects(name, description, system, simulation=sim, synthesis=synthesis)
 
 
 def _without_source(x: Any) -> Any:

@@ -132,6 +132,23 @@ def test_objects_built_in_python_round_trip(tmp_path):
     assert lcc.load_problem(path).comparable() != objs.comparable()
 
 
+def test_a_synthesis_built_in_python_round_trips(tmp_path):
+    system = lcc.system("lcc", m=1, n=1, v_star=15.0)
+    spec = lcc.h2_problem(
+        system, design="string_stable", pattern=[-1, 1], weights={"head": 1.0, "q_s0": 2.0},
+        semantics="added", string={"gamma": 1.0, "polish_steps": 20},
+        baseline={"name": "hdv", "gains": {}},
+        as_run={"equilibrium": "estimated", "equilibrium_tau": 1.5, "sample_time": 0.1},
+    )  # fmt: skip
+    path = tmp_path / "synth.toml"
+    path.write_text(lcc.build_problem("synth", system, synthesis=spec).to_toml())
+    back = lcc.load_problem(path)
+    assert back.synthesis.as_dict() | {"source": None} == spec.as_dict() | {"source": None}
+    assert back.synthesis.as_run.equilibrium_tau == 1.5 and back.synthesis.pattern == (-1, 1)
+    with pytest.raises(ConfigError, match=r"<python>: synthesis\.weights\.q_s"):
+        lcc.h2_problem(system, weights={"q_s": 0.0})
+
+
 def test_what_has_no_table_form_says_so():
     system = lcc.system("fd_lcc", n=2)
     per_draw = lcc.scenario(system, hdv_values={"alpha": np.full((2, 4), 0.6)}, batch=2)
