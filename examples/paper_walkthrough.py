@@ -5,7 +5,7 @@ and its regions (Sec. IV, Table I, Fig. 7) -> H2 synthesis -> MPC -> simulation 
 brake (Sec. V-B) -> metrics -> a Rerun recording. Writes under ``--out`` (default ``results/``):
 ``walkthrough.toml`` (the simulated problem, which ``lcc-synth simulate`` runs),
 ``walkthrough.json`` (every result's ``as_dict()``) and ``walkthrough.rrd``
-(``lcc-synth review``), and prints what it wrote. About 5 s.
+(``lcc-synth review``), and prints what it wrote. About 7 s on 2 cores.
 
 Usage: python examples/paper_walkthrough.py [--out DIR]
 """
