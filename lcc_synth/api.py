@@ -408,6 +408,11 @@ class ProblemObjects(Record):
     source: str | None = None
 
     @property
+    def model(self):
+        """The linearised model of :attr:`system` (``None`` without one)."""
+        return None if self.system is None else self.system.linear_model(warn=False)
+
+    @property
     def scenario(self) -> Scenario | None:
         """The simulated scenario (simulate or sweep files)."""
         spec = self.simulation or self.sweep

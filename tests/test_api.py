@@ -168,6 +168,9 @@ def test_results_are_records_with_as_dict_and_a_short_repr(runs):
     assert repr(ss).startswith("StringStabilityReport(plant_stable=")
     assert json.dumps(ss.as_dict())
     assert repr(lcc.OVM()) == "OVM(alpha=0.6, beta=0.9, s_st=5, s_go=35, v_max=30, name='ovm')"
+    assert repr(lcc.model("lcc", 2, 2)).startswith(
+        "LCCModel(kind='lcc', m=2, n=2, A=array(shape=(10, 10), dtype=float64)"
+    )
 
 
 def test_record_writes_every_run(tmp_path, runs):
