@@ -172,7 +172,8 @@ def _slice(result, arr, window, vehicles):
 def aave(result, window=(20.0, 40.0), vehicles="cav_and_behind") -> np.ndarray:
     """Average absolute velocity error (m/s): ``sum_i int |v_i - v*| dt / (t1 - t0) / count``.
 
-    NaN for a scenario with a collision (see the module docstring).
+    ``window`` ``(t0, t1)`` (s) defaults to Table II's (20, 40); the flat API's ``lcc.aave`` and
+    ``lcc.metrics`` require it. NaN for a scenario with a collision (see the module docstring).
     """
     v, _, cols = _slice(result, result.velocity, window, vehicles)
     err = np.abs(v - result.v_star[:, None, None])
@@ -183,7 +184,8 @@ def aave(result, window=(20.0, 40.0), vehicles="cav_and_behind") -> np.ndarray:
 def fuel(result, window=(20.0, 40.0), vehicles="cav_and_behind") -> np.ndarray:
     """Total fuel (mL) of the vehicle set over the window (Bowyer model, rectangle rule).
 
-    NaN for a scenario with a collision (see the module docstring).
+    ``window`` ``(t0, t1)`` (s) defaults to Table II's (20, 40); the flat API's ``lcc.fuel`` and
+    ``lcc.metrics`` require it. NaN for a scenario with a collision (see the module docstring).
     """
     v, mask, cols = _slice(result, result.velocity, window, vehicles)
     a = result.acceleration[:, mask][:, :, cols]
