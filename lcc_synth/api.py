@@ -123,8 +123,9 @@ def controllability(model, tol: float | None = None):
 
 
 def observability(model, outputs: Sequence[str] | None = None, tol: float | None = None):
-    """Observability from the measured ``outputs`` (state names; default the CAV's own states
-    and the HDVs' velocities, :func:`~lcc_synth.analysis.controllability.default_outputs`)."""
+    """Observability from the measured ``outputs`` (state names; default the paper's set, eq.
+    19 / 21: the tail HDV's velocity ``v_n``, plus the CAV's ``s_0, v_0`` for LCC and CCC;
+    :func:`~lcc_synth.analysis.controllability.default_outputs`)."""
     from lcc_synth.analysis.controllability import default_outputs, observability_report
 
     return observability_report(model, outputs or default_outputs(model), tol)
