@@ -112,7 +112,7 @@ def main() -> int:
     json_path = out / "walkthrough.json"
     json_path.write_text(json.dumps(_json(saved), indent=1))
     rrd = lcc.record(out / "walkthrough.rrd", results, name="walkthrough",
-                     window=lcc.TABLE2_WINDOW)  # fmt: skip
+                     window=lcc.TABLE2_WINDOW, controllers=controllers)  # fmt: skip
     for path in (toml_path, json_path, rrd):
         print(f"9. wrote {path}")
     return 0

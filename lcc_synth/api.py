@@ -339,10 +339,12 @@ def record(
     results: Mapping[str, Any],
     name: str = "python",
     window: tuple[float, float] | None = None,
+    controllers: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write the runs ``results`` (``{controller name: SimResult}``) side by side into one
     Rerun recording ``path`` (``lcc-synth review PATH`` opens it), with the CLI's layout; with
-    ``window`` each run's :func:`metrics` too. Returns ``path``.
+    ``window`` each run's :func:`metrics` too; with ``controllers`` (``{name: controller}``)
+    the MPCs' solve times and plans of their last run. Returns ``path``.
     :func:`lcc_synth.recording.open_recording`, :func:`~lcc_synth.recording.record_simulation`.
     """
     from lcc_synth.recording import (
@@ -356,11 +358,14 @@ def record(
     if not results:
         raise ConfigError("results", "needs at least one {name: SimResult}")
     path = Path(path)
+    histories = {k: c.history() for k, c in (controllers or {}).items()
+                 if k in results and callable(getattr(c, "history", None))}  # fmt: skip
     ranges = merge_ranges(*(plot_ranges(r) for r in results.values()))
-    blueprint = simulation_blueprint(name, list(results), (), ranges)
+    blueprint = simulation_blueprint(name, list(results), list(histories), ranges)
     with open_recording(path, name, blueprint) as rec:
         for cname, result in results.items():
-            record_simulation(rec, result, name, controller=cname)
+            record_simulation(rec, result, name, controller=cname,
+                              mpc_history=histories.get(cname) or None)  # fmt: skip
             if window is not None:
                 record_metrics(rec, name, cname, metrics(result, window=window))
     return path

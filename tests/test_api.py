@@ -176,11 +176,18 @@ def test_results_are_records_with_as_dict_and_a_short_repr(runs):
 def test_record_writes_every_run(tmp_path, runs):
     from lcc_synth.recording import summarize_recording
 
-    path = lcc.record(tmp_path / "t2.rrd", {k: runs[k] for k in ("all_hdv", "cf_lcc")},
-                      name="table2", window=(20, 40))  # fmt: skip
+    string = table2_system()
+    mpc = lcc.mpc(string, n_model=4)
+    short = lcc.scenario(string, [lcc.Brake(vehicle=1)], duration=22.0)
+    results = {"all_hdv": runs["all_hdv"], "cf_lcc": runs["cf_lcc"],
+               "mpc": lcc.simulate(short, mpc)}  # fmt: skip
+    path = lcc.record(tmp_path / "t2.rrd", results, name="table2", window=(20, 22),
+                      controllers={"mpc": mpc})  # fmt: skip
     entities = set(summarize_recording(path).entities)
-    assert "/table2/cf_lcc/velocity" in entities and "/table2/all_hdv/velocity" in entities
-    assert "/table2/cf_lcc/metrics" in entities
+    for name in results:
+        assert f"/table2/{name}/velocity" in entities and f"/table2/{name}/metrics" in entities
+    assert "/table2/mpc/mpc/solve_time_ms" in entities  # the MPC's own history
+    assert not any(e.startswith("/table2/cf_lcc/mpc") for e in entities)
 
 
 def _fresh(code: str) -> list[str]:
