@@ -440,7 +440,7 @@ class ProblemObjects(Record):
         return {k: c.settings for k, c in self.controllers.items() if hasattr(c, "settings")}
 
     def toml_tables(self) -> dict[str, Any]:
-        """The file's tables, as each object writes them (``to_toml_table`` of each)."""
+        """The file's tables, as each object writes them (its ``toml_table(s)``)."""
         out: dict[str, Any] = {"name": self.name}
         if self.description:
             out["description"] = self.description
