@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
+from lcc_synth.models.records import Record, callable_module
 from lcc_synth.problem import System
 from lcc_synth.schema import declared
 from lcc_synth.simulation.perturbations import vehicle_column
@@ -61,6 +62,7 @@ __all__ = [
     "aeb_activations",
     "collisions",
     "summary",
+    "evaluate",
     "per_scenario",
     "concatenate",
     "aggregate",
@@ -74,8 +76,8 @@ JERK_WINDOW = 1.0
 _ISO_JERK = ((5.0, 20.0), (5.0, 2.5))
 
 
-@dataclass(frozen=True)
-class MetricsConfig:
+@dataclass(frozen=True, repr=False)
+class MetricsConfig(Record):
     """Window and vehicle set of AAVE and fuel, and an optional baseline controller name."""
 
     window: tuple[float, float] = (20.0, 40.0)
@@ -91,6 +93,12 @@ class MetricsConfig:
                 "metrics.vehicles",
                 f"must be one of {list(VEHICLE_SETS)} or a list of indices, got {self.vehicles!r}",
             )
+
+    def toml_table(self) -> dict[str, Any]:
+        """The ``[metrics]`` table (what :func:`metrics_from` reads)."""
+        vehicles = self.vehicles if isinstance(self.vehicles, str) else list(self.vehicles)
+        return {"window": [float(t) for t in self.window], "vehicles": vehicles,
+                "baseline": self.baseline}  # fmt: skip
 
 
 def vehicle_columns(result, vehicles: str | Sequence[int | str] = "cav_and_behind") -> np.ndarray:
@@ -165,7 +173,8 @@ def _slice(result, arr, window, vehicles):
 def aave(result, window=(20.0, 40.0), vehicles="cav_and_behind") -> np.ndarray:
     """Average absolute velocity error (m/s): ``sum_i int |v_i - v*| dt / (t1 - t0) / count``.
 
-    NaN for a scenario with a collision (see the module docstring).
+    ``window`` ``(t0, t1)`` (s) defaults to Table II's (20, 40); the flat API's ``lcc.aave`` and
+    ``lcc.metrics`` require it. NaN for a scenario with a collision (see the module docstring).
     """
     v, _, cols = _slice(result, result.velocity, window, vehicles)
     err = np.abs(v - result.v_star[:, None, None])
@@ -176,7 +185,8 @@ def aave(result, window=(20.0, 40.0), vehicles="cav_and_behind") -> np.ndarray:
 def fuel(result, window=(20.0, 40.0), vehicles="cav_and_behind") -> np.ndarray:
     """Total fuel (mL) of the vehicle set over the window (Bowyer model, rectangle rule).
 
-    NaN for a scenario with a collision (see the module docstring).
+    ``window`` ``(t0, t1)`` (s) defaults to Table II's (20, 40); the flat API's ``lcc.fuel`` and
+    ``lcc.metrics`` require it. NaN for a scenario with a collision (see the module docstring).
     """
     v, mask, cols = _slice(result, result.velocity, window, vehicles)
     a = result.acceleration[:, mask][:, :, cols]
@@ -403,3 +413,15 @@ def metrics_from(
     if baseline is not None and controllers and baseline not in controllers:
         raise ConfigError(f"{f}.baseline", f"must name a controller, one of {list(controllers)}")
     return MetricsConfig(window, vehicles, baseline)
+
+
+def evaluate(
+    result, *, window: tuple[float, float], vehicles: str | Sequence[int | str] = "cav_and_behind"
+) -> dict[str, Any]:
+    """:func:`summary` of ``result`` over an explicit metric ``window`` (s) and vehicle set
+    (``lcc.metrics(...)``; calling this module calls it). Table II: ``window=(20, 40)``."""
+    vehicles = vehicles if isinstance(vehicles, str) else tuple(vehicles)
+    return summary(result, MetricsConfig(tuple(float(t) for t in window), vehicles))
+
+
+callable_module(__name__, evaluate)

@@ -15,12 +15,13 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.linear import LCCModel
+from lcc_synth.models.records import Record
 
 __all__ = ["AnalysisOptions", "analysis_options_from", "GainCase", "cases_from"]
 
 
-@dataclass(frozen=True)
-class AnalysisOptions:
+@dataclass(frozen=True, repr=False)
+class AnalysisOptions(Record):
     """The ``[analysis]`` table: observability outputs, peak-search method, plot grid."""
 
     outputs: tuple[str, ...] | None = None
@@ -28,6 +29,12 @@ class AnalysisOptions:
     omega_min: float = 1e-3
     omega_max: float = 10.0
     points: int = 400
+
+    def toml_table(self) -> dict:
+        """The ``[analysis]`` table (what :func:`analysis_options_from` reads)."""
+        outputs = None if self.outputs is None else list(self.outputs)
+        return {"outputs": outputs, "method": self.method, "omega_min": self.omega_min,
+                "omega_max": self.omega_max, "points": self.points}  # fmt: skip
 
     def omega(self) -> np.ndarray:
         """Logarithmic frequency grid for plotted responses (Fig. 9)."""
@@ -59,13 +66,18 @@ def analysis_options_from(data: Mapping, source: str | None = None) -> AnalysisO
         raise err.with_source(source) if source and not err.source else err from None
 
 
-@dataclass(frozen=True)
-class GainCase:
+@dataclass(frozen=True, repr=False)
+class GainCase(Record):
     """One ``[cases.NAME]`` table: a named static gain (eq. 23) to analyse."""
 
     name: str
     gains: object  # StaticGains
     label: str
+
+    def toml_table(self) -> dict:
+        """The ``[cases.NAME]`` table (what :func:`cases_from` reads)."""
+        return {"semantics": self.gains.semantics, "gains": dict(self.gains.gains),
+                "label": self.label}  # fmt: skip
 
 
 def cases_from(data: Mapping, model: LCCModel, source: str | None = None) -> dict[str, GainCase]:

@@ -29,6 +29,7 @@ from lcc_synth.analysis.staircase import (
 )
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.linear import LCCModel
+from lcc_synth.models.records import Record
 
 __all__ = [
     "SubspaceReport",
@@ -45,8 +46,8 @@ __all__ = [
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class SubspaceReport:
+@dataclass(frozen=True, repr=False)
+class SubspaceReport(Record):
     """Common part of the controllability / observability reports.
 
     Attributes
@@ -139,7 +140,7 @@ class SubspaceReport:
         return bool(np.linalg.norm(res) <= self.membership_tol)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class ControllabilityReport(SubspaceReport):
     """Controllable subspace of ``(A, B)``; ``controllable`` iff ``rank == n_states`` for sure.
 
@@ -182,7 +183,7 @@ class ControllabilityReport(SubspaceReport):
         }
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class ObservabilityReport(SubspaceReport):
     """Observable subspace of ``(A, C)`` for the named state outputs; ``verdict`` is
     ``"observable"``, ``"unobservable"`` or ``"undecided"``."""

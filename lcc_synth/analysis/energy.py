@@ -34,6 +34,7 @@ import scipy.linalg as sla
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.linear import LCCModel
+from lcc_synth.models.records import Record
 
 __all__ = [
     "COND_LIMIT",
@@ -142,8 +143,8 @@ def condition_limit(nx: int) -> float:
     return COND_LIMIT
 
 
-@dataclass(frozen=True)
-class EnergyReport:
+@dataclass(frozen=True, repr=False)
+class EnergyReport(Record):
     """Energy metrics of Fig. 5 at one horizon.
 
     Attributes
@@ -272,8 +273,8 @@ def min_energy_input(model: LCCModel, t: float, x0, x_target) -> Callable[[np.nd
     return u
 
 
-@dataclass(frozen=True)
-class EnergySweep:
+@dataclass(frozen=True, repr=False)
+class EnergySweep(Record):
     """Energy metrics against the system size (Fig. 5).
 
     Attributes

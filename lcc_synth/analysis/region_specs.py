@@ -23,7 +23,10 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains
 from lcc_synth.models.linear import LCCModel
 
-__all__ = ["grid_axis", "RegionSpec", "region_specs_from", "run_region_specs", "expansion"]
+__all__ = [
+    "grid_axis", "RegionSpec", "region_specs_from", "regions_tables", "run_region_specs",
+    "expansion",
+]  # fmt: skip
 
 
 def grid_axis(
@@ -57,6 +60,27 @@ class RegionSpec:
     gains: StaticGains
     baseline: str | None = None
     title: str = ""
+
+    def toml_table(self) -> dict:
+        """The ``[maps.NAME]`` table of this map, its grid explicit (``mu``, ``k``, ``step``);
+        a grid that :func:`grid_axis` does not rebuild bit for bit is a ConfigError."""
+        (mu, st), (k, st_k) = (_axis_table(a, f"maps.{self.name}.{n}")
+                               for a, n in ((self.mu, "mu"), (self.k, "k")))  # fmt: skip
+        if st != st_k:
+            raise ConfigError(f"maps.{self.name}.step", "mu and k have different steps")
+        return {"title": self.title, "vehicle": int(self.vehicle), "semantics":
+                self.gains.semantics, "gains": dict(self.gains.gains), "baseline": self.baseline,
+                "mu": mu, "k": k, "step": st}  # fmt: skip
+
+
+def _axis_table(axis: np.ndarray, field_name: str) -> tuple[list[float], float]:
+    """``([lo, hi], step)`` that :func:`grid_axis` turns into ``axis`` exactly."""
+    if axis.size >= 2:
+        step = float(f"{(axis[-1] - axis[0]) / (axis.size - 1):.12g}")
+        hi = float(f"{axis[-1]:.12g}")
+        if np.array_equal(grid_axis(float(axis[0]), hi, step), axis):
+            return [float(axis[0]), hi], step
+    raise ConfigError(field_name, "this grid is not lo, lo + step, ..., hi: no TOML form")
 
 
 def region_specs_from(
@@ -158,6 +182,15 @@ def region_specs_from(
         return specs, omega
     except ConfigError as err:
         raise err.with_source(source) if source and not err.source else err from None
+
+
+def regions_tables(specs: Mapping[str, RegionSpec], omega: np.ndarray) -> dict:
+    """The ``[maps.*]`` tables of ``specs`` (:meth:`RegionSpec.toml_table`); the frequency
+    grid must be the default one (:func:`region_frequency_grid`), which ``[regions]`` then
+    leaves out: other grids have no TOML form (ConfigError)."""
+    if not np.array_equal(omega, region_frequency_grid()):
+        raise ConfigError("regions", "only the default frequency grid has a TOML form")
+    return {"maps": {name: spec.toml_table() for name, spec in specs.items()}}
 
 
 def run_region_specs(

@@ -98,6 +98,7 @@ from lcc_synth.analysis.transfer import closed_form_gains, gamma_polynomials
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains, input_feedback
 from lcc_synth.models.linear import LCCModel
+from lcc_synth.models.records import Record
 
 __all__ = [
     "UNSTABLE",
@@ -123,8 +124,8 @@ _AFFINE_STEP = 1024.0
 _LABEL_NAMES = {UNSTABLE: "unstable", STABLE: "stable", STRING_STABLE: "string_stable"}
 
 
-@dataclass(frozen=True)
-class RegionMap:
+@dataclass(frozen=True, repr=False)
+class RegionMap(Record):
     """Classification of a ``(mu_i, k_i)`` grid for one vehicle.
 
     Attributes

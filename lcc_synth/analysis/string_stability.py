@@ -99,6 +99,7 @@ from lcc_synth.analysis.transfer import (
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import closed_loop
 from lcc_synth.models.linear import LCCModel
+from lcc_synth.models.records import Record
 
 __all__ = [
     "StringStabilityReport",
@@ -125,8 +126,8 @@ _EPS = float(np.finfo(float).eps)
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class StringStabilityReport:
+@dataclass(frozen=True, repr=False)
+class StringStabilityReport(Record):
     """Closed-loop plant stability and head-to-tail string stability of one loop.
 
     Attributes

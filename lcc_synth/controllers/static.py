@@ -175,6 +175,14 @@ class HDVController(_LinearController):
     def describe(self) -> dict[str, Any]:
         return {"type": "hdv", "sample_time": self.sample_time}
 
+    def toml_table(self) -> dict[str, Any]:
+        """The ``[controllers.NAME]`` table that builds this controller."""
+        return {"type": "hdv", "sample_time": self.sample_time}
+
+    def as_dict(self) -> dict[str, Any]:
+        """Name and :meth:`describe`."""
+        return {"name": self.name, **self.describe()}
+
 
 class StaticGainController(_LinearController):
     """Static state feedback of eq. (23) on the CAV's observation.
@@ -293,3 +301,15 @@ class StaticGainController(_LinearController):
         if self.equilibrium == "estimated":
             out["equilibrium_tau"] = self.equilibrium_tau
         return out
+
+    def toml_table(self) -> dict[str, Any]:
+        """The ``[controllers.NAME]`` table that builds this controller (``type = "static"``,
+        the gains inline: a ``gains_file`` controller is written with the gains it read)."""
+        out = self.describe()
+        if out["measurement_filter"] == 0.0:
+            del out["measurement_filter"]  # the default: off
+        return out
+
+    def as_dict(self) -> dict[str, Any]:
+        """Name, :meth:`describe` and the model's layout."""
+        return {"name": self.name, "m": self.model.m, "n": self.model.n, **self.describe()}

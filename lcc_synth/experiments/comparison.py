@@ -37,6 +37,7 @@ from lcc_synth.controllers.registry import CONTROLLER_TYPES, STATIC_RUN_KEYS, bu
 from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.tables import SUITE_METRICS, rank_failed_last
 from lcc_synth.metrics import MetricsConfig, metrics_from
+from lcc_synth.models.records import Record, system_tables, toml_text
 from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
 from lcc_synth.schema import declared
 from lcc_synth.simulation.results import SimResult
@@ -68,8 +69,8 @@ SUITE_TYPES = (*CONTROLLER_TYPES, "h2")
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class SuiteScenario:
+@dataclass(frozen=True, repr=False)
+class SuiteScenario(Record):
     """One scenario of a suite: its layout, simulator scenario and metric settings."""
 
     name: str
@@ -79,8 +80,8 @@ class SuiteScenario:
     title: str = ""
 
 
-@dataclass(frozen=True)
-class Suite:
+@dataclass(frozen=True, repr=False)
+class Suite(Record):
     """A parsed suite problem file (see the module docstring)."""
 
     name: str
@@ -90,6 +91,28 @@ class Suite:
     controllers: dict[str, dict[str, Any]]
     hdv_table: dict[str, Any] = field(default_factory=dict)
     source: str | None = None
+
+    def toml_tables(self) -> dict[str, Any]:
+        """``name``, ``description``, ``[hdv]``, ``[layouts.*]``, ``[scenarios.*]`` (each with
+        its whole ``metrics`` table) and the controller tables: what :func:`load_suite` reads
+        back into an equal suite."""
+        hdv = next(iter(self.layouts.values())).hdv.toml_table()
+        return {
+            "name": self.name,
+            "description": self.description,
+            "hdv": hdv,
+            "layouts": {k: system_tables(s)["system"] for k, s in self.layouts.items()},
+            "scenarios": {
+                k: {"layout": s.layout, "title": s.title, **s.scenario.toml_table(),
+                    "metrics": s.metrics.toml_table()}
+                for k, s in self.scenarios.items()
+            },  # fmt: skip
+            "controllers": {k: dict(t) for k, t in self.controllers.items()},
+        }
+
+    def to_toml(self) -> str:
+        """This suite as a problem file (:meth:`toml_tables`)."""
+        return toml_text(self.toml_tables())
 
     def layouts_used(self) -> list[str]:
         """Layouts of the selected scenarios, in file order."""

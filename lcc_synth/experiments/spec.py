@@ -12,6 +12,7 @@ from lcc_synth.controllers.base import Controller
 from lcc_synth.controllers.registry import build_controller
 from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import MetricsConfig, metrics_from
+from lcc_synth.models.records import Record, system_tables, toml_text
 from lcc_synth.problem import Problem, System, load_problem, system_from
 from lcc_synth.schema import declared
 from lcc_synth.simulation.scenario import Scenario, scenario_from
@@ -20,8 +21,8 @@ from lcc_synth.simulation.timestep import check_time_step
 __all__ = ["SimulationSpec", "controllers_from", "load_spec"]
 
 
-@dataclass(frozen=True)
-class SimulationSpec:
+@dataclass(frozen=True, repr=False)
+class SimulationSpec(Record):
     """Everything ``lcc-synth simulate`` needs from a problem file."""
 
     name: str
@@ -30,6 +31,21 @@ class SimulationSpec:
     controllers: dict[str, Controller]
     metrics: MetricsConfig
     source: str
+
+    def toml_tables(self) -> dict[str, Any]:
+        """``name``, ``[hdv]``, ``[system]``, ``[scenario]``, ``[controllers.*]`` and
+        ``[metrics]``: the tables :func:`load_spec` reads back into equal objects."""
+        return {
+            "name": self.name,
+            **system_tables(self.system),
+            "scenario": self.scenario.toml_table(),
+            "controllers": {k: c.toml_table() for k, c in self.controllers.items()},
+            "metrics": self.metrics.toml_table(),
+        }
+
+    def to_toml(self) -> str:
+        """This spec as a problem file (:meth:`toml_tables`)."""
+        return toml_text(self.toml_tables())
 
 
 def controllers_from(data: Mapping[str, Any], system: System, source: str | None = None):

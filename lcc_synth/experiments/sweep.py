@@ -52,6 +52,7 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import MetricsConfig
+from lcc_synth.models.records import Record, system_tables
 from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
 from lcc_synth.schema import declared
 from lcc_synth.simulation.scenario import Scenario
@@ -90,8 +91,8 @@ _EFFICIENCY = ("aave", "fuel_ml")
 #: Largest ``[sweep].count`` and ``batch_size`` (declared in :mod:`lcc_synth.schema`).
 MAX_COUNT = int(declared("sweep").key("count").hi)
 _MAX_BATCH = int(declared("sweep").key("batch_size").hi)
-@dataclass(frozen=True)
-class SweepSpec:
+@dataclass(frozen=True, repr=False)
+class SweepSpec(Record):
     """A parsed sweep problem (see the module docstring)."""
 
     name: str
@@ -107,6 +108,13 @@ class SweepSpec:
     @property
     def seed(self) -> int:
         return self.scenario.seed
+
+    def toml_tables(self) -> dict[str, Any]:
+        """The tables :func:`load_sweep` reads back into an equal spec."""
+        tables = {"scenario": self.scenario.toml_table(), "metrics": self.metrics.toml_table(),
+                  "sweep": {"count": self.count, "batch_size": self.batch_size}}  # fmt: skip
+        ctrls = {k: dict(t) for k, t in self.controllers.items()}
+        return {"name": self.name, **system_tables(self.system), **tables, "controllers": ctrls}
 
 
 def _count(value, field_name: str, hi: int) -> int:

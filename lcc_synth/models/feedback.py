@@ -28,6 +28,7 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.linear import LCCModel
+from lcc_synth.models.records import Record
 
 __all__ = ["SEMANTICS", "StaticGains", "hdv_law", "cav_feedback", "input_feedback", "closed_loop"]
 
@@ -35,8 +36,8 @@ SEMANTICS = ("added", "replace")
 _STATE_RE = re.compile(r"^(-p_0|[sv]_-?\d+)$")
 
 
-@dataclass(frozen=True)
-class StaticGains:
+@dataclass(frozen=True, repr=False)
+class StaticGains(Record):
     """Static feedback gains of the CAV (eq. 23).
 
     Parameters

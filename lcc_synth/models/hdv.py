@@ -22,6 +22,7 @@ from typing import Protocol
 import numpy as np
 
 from lcc_synth.errors import ConfigError
+from lcc_synth.models.records import Record
 
 __all__ = [
     "CarFollowingModel",
@@ -81,8 +82,8 @@ def _check_nonneg(name: str, value, strictly: bool = False) -> None:
         raise ConfigError(name, f"must be {rel}, got {value!r}")
 
 
-@dataclass(frozen=True)
-class OVM:
+@dataclass(frozen=True, repr=False)
+class OVM(Record):
     """Optimal velocity model, eq. (2)-(4). Defaults are the paper's parameters.
 
     Parameters
@@ -123,6 +124,12 @@ class OVM:
                 f"must satisfy 0 < v* < v_max = {self.v_max} m/s for the OVM, got {v_star!r}",
             )
 
+    def toml_table(self) -> dict:
+        """The ``[hdv]`` table of this model (what :func:`model_from_dict` reads)."""
+        out = {"model": self.name}
+        out.update({f.name: float(getattr(self, f.name)) for f in fields(self) if f.name != "name"})
+        return out
+
     def equilibrium_spacing(self, v_star):
         """s* = V^-1(v*) (inverse of eq. 4)."""
         self._check_v_star(v_star)
@@ -156,8 +163,8 @@ def idm_accel(s, ds, v, v0, T, s0, a, b, delta):
     return a * (1.0 - (v_pos / v0) ** delta - (s_des / np.maximum(s, 1e-3)) ** 2)
 
 
-@dataclass(frozen=True)
-class IDM:
+@dataclass(frozen=True, repr=False)
+class IDM(Record):
     """Intelligent driver model.
 
     Parameters
@@ -193,6 +200,12 @@ class IDM:
     def accel(self, s, ds, v):
         """Acceleration F(s, ds, v)."""
         return idm_accel(s, ds, v, self.v0, self.T, self.s0, self.a, self.b, self.delta)
+
+    def toml_table(self) -> dict:
+        """The ``[hdv]`` table of this model (what :func:`model_from_dict` reads)."""
+        out = {"model": self.name}
+        out.update({f.name: float(getattr(self, f.name)) for f in fields(self) if f.name != "name"})
+        return out
 
     def equilibrium_spacing(self, v_star):
         """s* = (s0 + v* T) / sqrt(1 - (v*/v0)^delta)."""

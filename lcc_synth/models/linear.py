@@ -27,6 +27,7 @@ import scipy.linalg as sla
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import CarFollowingModel, LinearCoefficients, linear_coefficients
+from lcc_synth.models.records import Record
 
 __all__ = [
     "KINDS",
@@ -45,8 +46,8 @@ KINDS = ("lcc", "cf_lcc", "fd_lcc", "ccc")
 CoefArg = LinearCoefficients | Sequence[LinearCoefficients]
 
 
-@dataclass(frozen=True, eq=False)
-class LCCModel:
+@dataclass(frozen=True, eq=False, repr=False)
+class LCCModel(Record):
     """A linearised LCC system ``dx = A x + B u + H v_h``.
 
     Attributes

@@ -8,15 +8,19 @@
 - :mod:`lcc_synth.mpc.report`: its step record and statistics, the safety summary of runs.
 """
 
-from lcc_synth.mpc.build import mpc_controller_from_table
+from lcc_synth.models.records import callable_module
+from lcc_synth.mpc.build import build_mpc, mpc_controller_from_table
 from lcc_synth.mpc.controller import STATUS_CODES, MPCController
 from lcc_synth.mpc.settings import MPCSettings, paper_fallback_gains, settings_from_table
 
 __all__ = [
     "MPCController",
     "MPCSettings",
+    "build_mpc",
     "STATUS_CODES",
     "mpc_controller_from_table",
     "paper_fallback_gains",
     "settings_from_table",
 ]
+
+callable_module(__name__, build_mpc)  # lcc.mpc(system, ...) builds an MPC

@@ -11,7 +11,7 @@ from lcc_synth.models.feedback import StaticGains
 from lcc_synth.mpc.controller import MPCController
 from lcc_synth.mpc.settings import settings_from_table
 
-__all__ = ["mpc_controller_from_table"]
+__all__ = ["mpc_controller_from_table", "build_mpc"]
 
 
 def _load_gains_file(path: Path, system, field_name: str) -> StaticGains:
@@ -71,3 +71,11 @@ def mpc_controller_from_table(name: str, table, system, source: str | None = Non
             raise ConfigError(f"{field_name}.{err.field}", err.message) from None
     except ConfigError as err:
         raise err.with_source(source) if source and not err.source else err from None
+
+
+def build_mpc(system, name: str = "mpc", **settings):
+    """The MPC of ``system`` with the keys of a ``type = "mpc"`` table as keyword arguments
+    (``lcc.mpc(...)``; calling :mod:`lcc_synth.mpc` calls it): ``sample_time``, ``horizon``,
+    ``n_model``, ``weights = {...}``, ``constraints = {...}``, ``prediction``, ``solver``."""
+    table = {k: v for k, v in settings.items() if v is not None}
+    return mpc_controller_from_table(name, {"type": "mpc", **table}, system)

@@ -572,6 +572,13 @@ class MPCController:
         d["solver"]["name"] = "osqp"
         return d
 
+    def toml_table(self) -> dict[str, Any]:
+        """The ``[controllers.NAME]`` table that builds this MPC."""
+        return self.settings.toml_table()
+
+    def as_dict(self) -> dict[str, Any]:
+        return {**self.describe(), "fallback": dict(self.fallback.gains)}
+
     def stats(self) -> dict[str, Any]:
         """Solve-time distribution, fallbacks, QP failures, slack use and measured violations.
 

@@ -62,6 +62,7 @@ from typing import Any
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.records import Record
 from lcc_synth.schema import declared
 
 __all__ = [
@@ -79,8 +80,8 @@ INPUT_ON = ("total", "model")
 EQUILIBRIA = ("moving_average", "fixed")
 
 
-@dataclass(frozen=True)
-class Weights:
+@dataclass(frozen=True, repr=False)
+class Weights(Record):
     """Cost weights (all >= 0; ``input`` > 0 so the QP is strictly convex)."""
 
     velocity: float = 1.0
@@ -99,8 +100,8 @@ class Weights:
         return self.spacing if self.spacing_cav is None else self.spacing_cav
 
 
-@dataclass(frozen=True)
-class Constraints:
+@dataclass(frozen=True, repr=False)
+class Constraints(Record):
     """Hard input bounds and soft absolute spacing bounds."""
 
     a_min: float = -5.0
@@ -116,8 +117,8 @@ class Constraints:
     jerk_window: float = 1.0
 
 
-@dataclass(frozen=True)
-class Prediction:
+@dataclass(frozen=True, repr=False)
+class Prediction(Record):
     """Head-vehicle prediction and equilibrium estimation."""
 
     head: str = "constant"
@@ -134,8 +135,8 @@ class Prediction:
         return "fixed" if kind == "fd_lcc" else "moving_average"
 
 
-@dataclass(frozen=True)
-class SolverSettings:
+@dataclass(frozen=True, repr=False)
+class SolverSettings(Record):
     """OSQP settings (tight by default: the applied input must match an exact QP solution)."""
 
     eps_abs: float = 1.0e-6
@@ -161,8 +162,8 @@ class SolverSettings:
         return out
 
 
-@dataclass(frozen=True)
-class MPCSettings:
+@dataclass(frozen=True, repr=False)
+class MPCSettings(Record):
     """Everything that defines the MPC (see the module docstring for the meaning)."""
 
     sample_time: float = 0.1
@@ -182,6 +183,11 @@ class MPCSettings:
         out = asdict(self)
         out["constraints"]["behind"] = list(self.constraints.behind)
         return out
+
+    def toml_table(self) -> dict[str, Any]:
+        """The ``[controllers.NAME]`` table of an MPC with these settings (``None`` values are
+        the loader's defaults and are left out)."""
+        return {"type": "mpc", **self.as_dict()}
 
 
 def _pos(value: float, name: str, strict: bool = False) -> None:

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
+from lcc_synth.models.records import Record
 from lcc_synth.schema import declared
 
 __all__ = [
@@ -73,8 +74,8 @@ def _check_sign(name: str, value: float, meaning: str, example: float) -> None:
         )
 
 
-@dataclass(frozen=True)
-class Sine:
+@dataclass(frozen=True, repr=False)
+class Sine(Record):
     """``a = amplitude cos(2 pi (t - start) / period)`` for ``start < t < end``.
 
     Section V-A: ``Sine(0.2, 12.0, 20.0)`` on the head vehicle.
@@ -87,14 +88,20 @@ class Sine:
     vehicle: Vehicle = "head"
     target = "accel"
 
+    def toml_table(self) -> dict[str, Any]:
+        """The ``[[scenario.perturbations]]`` entry of this perturbation."""
+        end = self.start + self.period if self.end is None else self.end
+        return {"type": "sine", "vehicle": self.vehicle, "amplitude": self.amplitude,
+                "period": self.period, "start": self.start, "end": end}  # fmt: skip
+
     def values(self, t: np.ndarray, dt: float) -> np.ndarray:
         end = self.start + self.period if self.end is None else self.end
         out = self.amplitude * np.cos(2.0 * np.pi / self.period * (t - self.start))
         return np.where(_window(t, self.start, end, dt), out, np.nan)
 
 
-@dataclass(frozen=True)
-class Brake:
+@dataclass(frozen=True, repr=False)
+class Brake(Record):
     """``a = decel`` for ``start < t < start + duration`` (Section V-B: vehicle 1, -5, 1 s)."""
 
     vehicle: Vehicle
@@ -106,13 +113,18 @@ class Brake:
     def __post_init__(self) -> None:
         _check_sign("decel", self.decel, "the braking acceleration", -5.0)
 
+    def toml_table(self) -> dict[str, Any]:
+        """The ``[[scenario.perturbations]]`` entry of this perturbation."""
+        return {"type": "brake", "vehicle": self.vehicle, "start": self.start,
+                "duration": self.duration, "decel": self.decel}  # fmt: skip
+
     def values(self, t: np.ndarray, dt: float) -> np.ndarray:
         active = _window(t, self.start, self.start + self.duration, dt)
         return np.where(active, self.decel, np.nan)
 
 
-@dataclass(frozen=True)
-class BrakeProfile:
+@dataclass(frozen=True, repr=False)
+class BrakeProfile(Record):
     """Brake at ``decel`` for ``decel_time``, hold (a = 0) for ``hold_time``, accelerate at
     ``accel`` for ``accel_time``, then cruise; each phase an open window from ``start`` on."""
 
@@ -129,6 +141,11 @@ class BrakeProfile:
         _check_sign("decel", self.decel, "the braking acceleration", -5.0)
         _check_sign("accel", self.accel, "the recovery acceleration", 2.0)
 
+    def toml_table(self) -> dict[str, Any]:
+        """The ``[[scenario.perturbations]]`` entry of this perturbation."""
+        keys = ("vehicle", "start", "decel", "decel_time", "hold_time", "accel", "accel_time")
+        return {"type": "brake_profile", **{k: getattr(self, k) for k in keys}}
+
     def values(self, t: np.ndarray, dt: float) -> np.ndarray:
         t1 = self.start + self.decel_time
         t2 = t1 + self.hold_time
@@ -142,8 +159,8 @@ class BrakeProfile:
         return out
 
 
-@dataclass(frozen=True)
-class Profile:
+@dataclass(frozen=True, repr=False)
+class Profile(Record):
     """Piecewise acceleration (``target="accel"``) or speed (``target="speed"``) profile.
 
     Active for ``times[0] <= t < times[-1]``. ``interpolation="step"`` holds ``values[i]`` on
@@ -176,6 +193,12 @@ class Profile:
             )
         if self.target == "speed" and min(self.values_) < 0:
             raise ConfigError("values", "speeds must be >= 0")
+
+    def toml_table(self) -> dict[str, Any]:
+        """The ``[[scenario.perturbations]]`` entry of this profile (a CSV's samples inline)."""
+        return {"type": f"{self.target}_profile", "vehicle": self.vehicle,
+                "times": list(self.times), "values": list(self.values_),
+                "interpolation": self.interpolation}  # fmt: skip
 
     def _eval(self, t: np.ndarray) -> np.ndarray:
         times = np.asarray(self.times)

@@ -7,13 +7,14 @@ from typing import Any
 
 import numpy as np
 
+from lcc_synth.models.records import Record
 from lcc_synth.simulation.scenario import Draws, Scenario
 
 __all__ = ["SimResult"]
 
 
-@dataclass
-class SimResult:
+@dataclass(repr=False)
+class SimResult(Record):
     """Trajectories of a batch of runs with one controller.
 
     Attributes

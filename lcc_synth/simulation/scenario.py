@@ -16,6 +16,7 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import IDM, MODELS, OVM
+from lcc_synth.models.records import Record
 from lcc_synth.problem import System, check_range
 from lcc_synth.schema import declared
 from lcc_synth.simulation.perturbations import Perturbation, perturbation_from_table
@@ -37,8 +38,8 @@ def _num(name: str, value, lo=None, hi=None, lo_open=False) -> float:
     return check_range(name, x, lo, hi, lo_open, shown=value)
 
 
-@dataclass(frozen=True)
-class V2V:
+@dataclass(frozen=True, repr=False)
+class V2V(Record):
     """What the CAV receives from the other vehicles.
 
     Parameters
@@ -68,6 +69,14 @@ class V2V:
         for key in ("spacing_noise", "velocity_noise", "position_noise"):
             _num(f"scenario.v2v.{key}", getattr(self, key), lo=0.0)
 
+    def toml_table(self) -> dict[str, Any]:
+        """The ``[scenario.v2v]`` table."""
+        rates = np.atleast_1d(np.asarray(self.loss_rate, dtype=float))
+        loss = float(rates[0]) if np.ndim(self.loss_rate) == 0 else rates.tolist()
+        return {"loss_rate": loss, "latency": float(self.latency),
+                **{k: float(getattr(self, k))
+                   for k in ("spacing_noise", "velocity_noise", "position_noise")}}  # fmt: skip
+
     def rates(self, nv: int) -> np.ndarray:
         """Per-column loss rates ``(nv,)``."""
         rates = np.atleast_1d(np.asarray(self.loss_rate, dtype=float))
@@ -81,8 +90,8 @@ class V2V:
         return rates.copy()
 
 
-@dataclass(frozen=True)
-class Scenario:
+@dataclass(frozen=True, repr=False)
+class Scenario(Record):
     """A mixed-traffic scenario (or a batch of ``batch`` scenarios differing in random draws).
 
     Parameters
@@ -216,6 +225,38 @@ class Scenario:
                     f"scenario.hdv_values.{key}",
                     f"not a parameter of the {self.hdv.name} model; allowed: {list(allowed)}",
                 )
+
+    def toml_table(self) -> dict[str, Any]:
+        """The ``[scenario]`` table of this scenario (what :func:`scenario_from` reads; ``m``,
+        ``n``, ``hdv`` and ``v_star`` belong to ``[hdv]`` / ``[system]``, ``first_index`` and
+        ``name`` to the study that runs it). Per-vehicle ``hdv_values`` are written for the
+        HDV columns, head..tail; a ``(batch, nv)`` array or a per-vehicle delay has no table
+        form (ConfigError)."""
+        out: dict[str, Any] = {
+            k: getattr(self, k)
+            for k in ("dt", "duration", "t_start", "a_min", "a_max", "cav_aeb", "hdv_aeb",
+                      "seed", "batch", "record_every", "spacing_reference", "hdv_accel_noise")
+        }  # fmt: skip
+        if np.ndim(self.delay) != 0:
+            raise ConfigError("scenario.delay", "a per-vehicle delay has no problem-file form")
+        out["delay"] = {"mean": float(self.delay), "spread": float(self.delay_spread),
+                        "model": self.delay_model}  # fmt: skip
+        out["heterogeneity"] = {k: float(w) for k, w in self.heterogeneity.items()}
+        out["v2v"] = self.v2v.toml_table()
+        if self.hdv_values:
+            hdv = self.is_hdv()
+            out["hdv_values"] = {}
+            for key, arr in self.hdv_values.items():
+                arr = np.asarray(arr, dtype=float)
+                if arr.shape != (self.n_vehicles,):
+                    raise ConfigError(
+                        f"scenario.hdv_values.{key}",
+                        f"only one value per vehicle (shape ({self.n_vehicles},)) has a "
+                        f"problem-file form, got shape {arr.shape}",
+                    )
+                out["hdv_values"][key] = arr[hdv].tolist()
+        out["perturbations"] = [p.toml_table() for p in self.perturbations]
+        return out
 
     @property
     def steps(self) -> int:

@@ -61,11 +61,12 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.records import Record, system_tables, toml_text
 from lcc_synth.problem import Problem, System, check_top_level, system_from, warn_large_gains
 from lcc_synth.schema import declared
 from lcc_synth.synthesis.h2 import Weights
@@ -76,8 +77,8 @@ __all__ = ["DESIGNS", "SynthesisSpec", "spec_from_problem"]
 DESIGNS = declared("synthesis").key("design").choices
 
 
-@dataclass(frozen=True)
-class SynthesisSpec:
+@dataclass(frozen=True, repr=False)
+class SynthesisSpec(Record):
     """A parsed synthesis problem."""
 
     name: str
@@ -98,6 +99,37 @@ class SynthesisSpec:
     baseline: tuple[str, StaticGains] | None = None
     source: str | None = None
     as_run: Any = None  # lcc_synth.synthesis.as_run.AsRunSettings
+
+    def toml_tables(self) -> dict[str, Any]:
+        """``name``, ``[hdv]``, ``[system]`` and ``[synthesis]``: the tables
+        :func:`spec_from_problem` reads back into an equal spec (``None``: the default)."""
+        t: dict[str, Any] = {
+            "design": self.design,
+            "semantics": self.semantics,
+            "pattern": "all" if self.pattern is None else list(self.pattern),
+            "method": self.method,
+            "cross_check": self.cross_check,
+            "tol": self.tol,
+            "max_iter": self.max_iter,
+            "band": self.band,
+            "weights": asdict(self.weights),
+            "sparsity": dict(self.sparsity),
+            "string": {"gamma": self.string_gamma, "polish_steps": self.polish_steps,
+                       "margin": self.string_margin},  # fmt: skip
+        }
+        if self.baseline is not None:
+            bname, gains = self.baseline
+            t["baseline"] = {"name": bname, "semantics": gains.semantics, "gains": gains.gains}
+        if self.as_run is not None:
+            t["as_run"] = {
+                "equilibrium": "fixed" if self.as_run.equilibrium_tau is None else "estimated",
+                **asdict(self.as_run),
+            }
+        return {"name": self.name, **system_tables(self.system), "synthesis": t}
+
+    def to_toml(self) -> str:
+        """This spec as a problem file (:meth:`toml_tables`)."""
+        return toml_text(self.toml_tables())
 
 
 def _pattern(table: dict, system: System) -> tuple[int, ...] | None:

@@ -52,6 +52,7 @@ import scipy.linalg as sla
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import SEMANTICS, StaticGains, input_feedback
 from lcc_synth.models.linear import LCCModel
+from lcc_synth.models.records import Record
 from lcc_synth.synthesis.lyapunov import closed_loop_schur
 
 __all__ = [
@@ -106,8 +107,8 @@ class SynthesisError(RuntimeError):
         super().__init__(message)
 
 
-@dataclass(frozen=True)
-class Weights:
+@dataclass(frozen=True, repr=False)
+class Weights(Record):
     """Performance and disturbance weights of the H2 problem.
 
     Attributes

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.analysis.string_stability import verdict_text
+from lcc_synth.models.records import Record
 from lcc_synth.synthesis.h2 import (
     STABILITY_TOL,
     H2Plant,
@@ -28,8 +29,8 @@ from lcc_synth.synthesis.h2 import (
 __all__ = ["GainCheck", "evaluate_gain", "check_gain", "SynthesisReport", "format_report"]
 
 
-@dataclass
-class GainCheck:
+@dataclass(repr=False)
+class GainCheck(Record):
     """Everything computed from one gain."""
 
     h2: float
@@ -84,8 +85,8 @@ def check_gain(plant: H2Plant, g: np.ndarray, what: str, details: dict | None = 
     return chk
 
 
-@dataclass
-class SynthesisReport:
+@dataclass(repr=False)
+class SynthesisReport(Record):
     """Result of ``lcc-synth synthesize``: the gain, how it was found and its checks."""
 
     problem: str

@@ -1,0 +1,554 @@
+"""The flat Python API: ``import lcc_synth as lcc``, then the paper in order.
+
+Every function is a documented entry point over the package function that does the work (named
+in its docstring); none re-implements it. The objects are those the problem files build, so a
+problem file and a script are two faces of one thing: :func:`load_problem` gives the CLI's
+objects, and every object here is written back to TOML by ``to_toml()`` (a round trip gives
+equal objects: tests/test_roundtrip.py checks every file under ``problems/``).
+
+========================  ====================================================================
+paper                     API
+========================  ====================================================================
+eq. (1)-(4), HDV models   :class:`OVM`, :class:`IDM`
+Sec. II, eq. (8)-(14)     :func:`system` (``[hdv]`` + ``[system]``), :func:`model` (the
+                          linearised LCC / CF-LCC / FD-LCC / CCC state space)
+Sec. III, Thm. 1-3        :func:`controllability`, :func:`observability`
+Sec. III-C, Fig. 5        :func:`control_energy` (Gramian metrics at a horizon)
+Sec. IV, eq. (23)-(27)    :func:`gains`, :func:`string_stability` (head-to-tail ``Gamma``)
+Sec. IV-B, Fig. 7-8       :func:`region_map`
+H2 / LMI synthesis        :func:`h2_problem` (``[synthesis]``), :func:`synthesize_h2`
+Sec. V, eq. (29)          :func:`scenario`, :class:`Brake`, :class:`Sine`, :class:`BrakeProfile`,
+                          :class:`Profile`, :func:`hdv_controller`, :func:`static_controller`,
+                          :func:`mpc`, :func:`simulate`
+Table II metrics          :func:`metrics` (AAVE, fuel, spacing, TTC, jerk...; ``window``
+                          explicit), :func:`aave`, :func:`fuel`
+recordings                :func:`record` (a Rerun ``.rrd`` file)
+problem files             :func:`load_problem` / :func:`build_problem` -> :class:`ProblemObjects`
+                          (``to_toml()``)
+========================  ====================================================================
+
+Results are small dataclasses with ``as_dict()`` and a one-line ``repr``
+(:class:`lcc_synth.models.records.Record`). Bad input raises
+:class:`~lcc_synth.errors.ConfigError` naming the dotted field, as a problem file would.
+Importing this module imports numpy and scipy.linalg; cvxpy, CasADi/OSQP and Rerun are imported
+by the functions that need them (:func:`synthesize_h2`, :func:`mpc`, :func:`record`). Measured on
+this 2-core machine: ``import lcc_synth`` 2-10 ms (``lcc_synth.errors`` only), the first API
+name 0.7-0.8 s; README's snippet (Table II's CF-LCC row, 100 s simulated, and the structured
+H2 gain) about 5 s, of which the synthesis about 1 s; ``examples/paper_walkthrough.py`` 7 s.
+``lcc.metrics`` and ``lcc.mpc`` share their names with :mod:`lcc_synth.metrics` and
+:mod:`lcc_synth.mpc`, which are callable as these functions
+(:func:`lcc_synth.models.records.callable_module`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lcc_synth.errors import ConfigError
+from lcc_synth.metrics import MetricsConfig
+from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.hdv import IDM, OVM
+from lcc_synth.models.records import Record, plain, system_tables, toml_text
+from lcc_synth.problem import Problem, System, system_from
+from lcc_synth.simulation.perturbations import Brake, BrakeProfile, Profile, Sine
+from lcc_synth.simulation.scenario import V2V, Scenario
+
+__all__ = [
+    "OVM", "IDM", "System", "Scenario", "V2V", "StaticGains", "MetricsConfig",
+    "Brake", "Sine", "BrakeProfile", "Profile",
+    "system", "model", "controllability", "observability", "control_energy", "gains",
+    "string_stability", "region_map", "h2_problem", "synthesize_h2", "hdv_controller",
+    "static_controller",
+    "mpc", "scenario", "simulate", "metrics", "aave", "fuel", "record",
+    "ProblemObjects", "build_problem", "load_problem", "TABLE2_WINDOW",
+]  # fmt: skip
+
+#: Table II's metric window (s): AAVE and fuel over 20 <= t <= 40.
+TABLE2_WINDOW = (20.0, 40.0)
+
+
+def system(
+    kind: str = "lcc",
+    m: int = 0,
+    n: int = 0,
+    v_star: float = 15.0,
+    hdv: OVM | IDM | None = None,
+) -> System:
+    """The ``[hdv]`` + ``[system]`` tables: layout, equilibrium velocity and HDV model.
+
+    Parameters
+    ----------
+    kind : {"lcc", "cf_lcc", "fd_lcc", "ccc"}
+        General LCC (Sec. II), car-following LCC, free-driving LCC, or CCC (no HDV behind).
+    m, n : int
+        HDVs ahead of / behind the CAV (``m = 0`` for CF-/FD-LCC, ``n = 0`` for CCC).
+    v_star : float
+        Equilibrium velocity (m/s).
+    hdv : OVM or IDM, optional
+        HDV car-following model; default the paper's OVM (``OVM()``).
+
+    Validated by :func:`lcc_synth.problem.system_from`, exactly as a problem file.
+    """
+    hdv = OVM() if hdv is None else hdv
+    table = {"kind": kind, "m": m, "n": n, "v_star": v_star}
+    return system_from({"hdv": hdv.toml_table(), "system": table})
+
+
+def model(
+    kind: str = "lcc",
+    m: int = 0,
+    n: int = 0,
+    v_star: float = 15.0,
+    hdv: OVM | IDM | None = None,
+):
+    """The linearised state-space model of eq. (8)-(14) (an
+    :class:`~lcc_synth.models.linear.LCCModel`: ``A``, ``B``, ``H``, ``state_names``).
+
+    Same parameters as :func:`system`; ``system(...).linear_model()``."""
+    return system(kind, m, n, v_star, hdv).linear_model()
+
+
+def controllability(model, tol: float | None = None):
+    """Controllability of ``(A, B)`` (Sec. III, Theorems 1-3): a
+    :class:`~lcc_synth.analysis.controllability.ControllabilityReport` (rank, verdict,
+    uncontrollable modes). :func:`lcc_synth.analysis.controllability.controllability_report`."""
+    from lcc_synth.analysis.controllability import controllability_report
+
+    return controllability_report(model, tol)
+
+
+def observability(model, outputs: Sequence[str] | None = None, tol: float | None = None):
+    """Observability from the measured ``outputs`` (state names; default the paper's set, eq.
+    19 / 21: the tail HDV's velocity ``v_n``, plus the CAV's ``s_0, v_0`` for LCC and CCC;
+    :func:`~lcc_synth.analysis.controllability.default_outputs`)."""
+    from lcc_synth.analysis.controllability import default_outputs, observability_report
+
+    return observability_report(model, outputs or default_outputs(model), tol)
+
+
+def control_energy(model, horizon: float):
+    """Gramian energy metrics at ``horizon`` seconds (Sec. III-C, Fig. 5): an
+    :class:`~lcc_synth.analysis.energy.EnergyReport` (``lambda_min``, ``trace_inv``...).
+    :func:`lcc_synth.analysis.energy.energy_report`; a numerically singular Gramian raises
+    :class:`~lcc_synth.analysis.energy.NumericallySingularError`."""
+    from lcc_synth.analysis.energy import energy_report
+
+    return energy_report(model, horizon)
+
+
+def gains(values: Mapping[str, float] | StaticGains, semantics: str = "added") -> StaticGains:
+    """Static CAV gains of eq. (23), keyed by state name (``{"s_1": -1.0, "v_1": -1.0}``):
+    ``"added"`` to the CAV's HDV law, or ``"replace"`` (the whole command)."""
+    if isinstance(values, StaticGains):
+        return values
+    return StaticGains(dict(values), semantics)
+
+
+def string_stability(model, gain: Mapping[str, float] | StaticGains, method: str = "grid"):
+    """Head-to-tail string stability of the closed loop with static gains (Sec. IV, eq.
+    (24)-(27)): a :class:`~lcc_synth.analysis.string_stability.StringStabilityReport`
+    (``plant_stable``, ``string_stable``, ``gamma_peak`` and its frequency, ``verdict``).
+    A mapping is read as ``"added"`` gains (:func:`gains`).
+    :func:`lcc_synth.analysis.string_stability.gains_string_stability`."""
+    from lcc_synth.analysis.string_stability import gains_string_stability
+
+    return gains_string_stability(model, gains(gain), method=method)
+
+
+def region_map(model, vehicle: int, mu, k, gain=None, omega=None, name: str = ""):
+    """Stability / string-stability map over the gains ``(mu, k)`` of one HDV's spacing and
+    velocity (Sec. IV-B, Fig. 7-8): a :class:`~lcc_synth.analysis.regions.RegionMap`.
+    :func:`lcc_synth.analysis.regions.region_map`."""
+    from lcc_synth.analysis.regions import region_map as _region_map
+
+    g = None if gain is None else gains(gain)
+    return _region_map(model, vehicle, np.asarray(mu, float), np.asarray(k, float), g, omega,
+                       name)  # fmt: skip
+
+
+def h2_problem(
+    system: System,
+    design: str = "structured",
+    pattern: Sequence[int] | str = "all",
+    weights: Mapping[str, Any] | None = None,
+    name: str = "python",
+    **options: Any,
+):
+    """The ``[synthesis]`` problem of ``lcc-synth synthesize`` for ``system``: a
+    :class:`~lcc_synth.synthesis.config.SynthesisSpec` (``build_problem(..., synthesis=spec)``
+    writes it as a problem file).
+
+    Parameters
+    ----------
+    system : System
+        From :func:`system`.
+    design : {"full_state", "structured", "sparsity", "string_stable"}
+    pattern : list of int or "all"
+        Vehicles the CAV hears besides itself (structured designs), e.g. ``[1, 2]``.
+    weights : mapping, optional
+        The ``[synthesis.weights]`` keys (``q_s`` = 1, ``q_v`` = 1, ``q_a`` = 0, ``r`` = 1,
+        ``accel`` = 1, ``head`` = 0 ... when absent; see :class:`lcc_synth.synthesis.h2.Weights`).
+    **options
+        Any other ``[synthesis]`` key (``semantics``, ``method``, ``tol``, ``string = {...}``,
+        ``sparsity = {...}``, ``baseline = {...}``, ``as_run = {...}``).
+
+    Validated by :func:`lcc_synth.synthesis.config.spec_from_problem`, as a problem file (errors
+    name ``<python>`` and the dotted field).
+    """
+    from lcc_synth.synthesis.config import spec_from_problem
+
+    table = {"design": design, "pattern": pattern if isinstance(pattern, str) else list(pattern),
+             "weights": dict(weights or {}), **options}  # fmt: skip
+    data = {"name": name, **system_tables(system), "synthesis": table}
+    return spec_from_problem(Problem(Path("<python>"), data))
+
+
+def synthesize_h2(system, *args: Any, **kwargs: Any):
+    """Synthesise a static H2 gain (``lcc-synth synthesize``).
+
+    ``system``: a :class:`System` (then the other arguments are those of :func:`h2_problem`)
+    or a spec from :func:`h2_problem` / :func:`load_problem` (``.synthesis``).
+
+    Returns
+    -------
+    lcc_synth.synthesis.report.SynthesisReport
+        ``gains`` (state name -> gain), ``check.h2`` (true H2 norm), string-stability checks;
+        ``lcc.static_controller(string, report.gains, semantics=report.semantics, kind=...)``
+        drives it in :func:`simulate`.
+
+    Solved by :func:`lcc_synth.synthesis.design.synthesize` (cvxpy + Clarabel for the LMI
+    designs; the showcase's structured CF-LCC gain, 22 states, takes about 1 s here).
+    """
+    from lcc_synth.synthesis.design import synthesize
+
+    if isinstance(system, System):
+        spec = h2_problem(system, *args, **kwargs)
+    elif args or kwargs:
+        raise ConfigError("synthesis", "give a System and options, or a spec alone")
+    else:
+        spec = system
+    return synthesize(spec)
+
+
+def hdv_controller(name: str = "all_hdv", sample_time: float | None = None):
+    """The CAV driving exactly like an HDV (Table II's "all HDVs" row, ``type = "hdv"``)."""
+    from lcc_synth.controllers.static import HDVController
+
+    return HDVController(name, sample_time)
+
+
+def _controller(name: str, table: dict[str, Any], system: System):
+    from lcc_synth.controllers.registry import build_controller
+
+    return build_controller(name, {k: v for k, v in table.items() if v is not None}, system)
+
+
+def static_controller(
+    system: System,
+    gain: Mapping[str, float] | StaticGains,
+    name: str = "static",
+    semantics: str | None = None,
+    kind: str | None = None,
+    **run: Any,
+):
+    """A static-gain controller (``type = "static"``, eq. 23) on ``system``.
+
+    ``gain``: a mapping (with ``semantics``, default ``"added"``) or :class:`StaticGains`;
+    ``kind``: the model the gains are written for (default ``system.kind``; e.g. ``"cf_lcc"``
+    gains on an ``fd_lcc`` string with a head vehicle, as in Table II); ``**run``:
+    ``sample_time``, ``equilibrium``, ``equilibrium_tau``, ``measurement_filter``.
+    :func:`lcc_synth.controllers.registry.build_controller`."""
+    g = gain if isinstance(gain, StaticGains) else gains(gain, semantics or "added")
+    if semantics is not None and semantics != g.semantics:
+        raise ConfigError("semantics", f"{semantics!r} contradicts the gains' {g.semantics!r}")
+    table = {"type": "static", "kind": kind or system.kind, "semantics": g.semantics,
+             "gains": dict(g.gains), **run}  # fmt: skip
+    return _controller(name, table, system)
+
+
+def mpc(system: System, name: str = "mpc", **settings: Any):
+    """The safety-constrained MPC (``type = "mpc"``) on ``system``.
+
+    ``**settings``: the keys of a ``[controllers.NAME]`` MPC table (``sample_time`` = 0.1,
+    ``horizon`` = 50, ``n_model``, ``weights = {...}``, ``constraints = {...}``,
+    ``prediction = {...}``, ``solver = {...}``; :mod:`lcc_synth.mpc.settings`). Builds the
+    CasADi/OSQP problem once. :func:`lcc_synth.mpc.build.build_mpc`."""
+    from lcc_synth.mpc.build import build_mpc
+
+    return build_mpc(system, name, **settings)
+
+
+def scenario(system: System, perturbations: Sequence[Any] = (), **keys: Any) -> Scenario:
+    """A :class:`Scenario` on ``system``: ``perturbations`` (:class:`Brake`, :class:`Sine`...)
+    and any ``[scenario]`` field (``dt`` = 0.01, ``duration`` = 100, ``t_start``, ``a_min`` =
+    -5, ``a_max`` = 2, ``cav_aeb`` = True, ``batch``, ``seed``, ``heterogeneity``, ``v2v``...)."""
+    return Scenario(m=system.m, n=system.n, hdv=system.hdv, v_star=system.v_star,
+                    perturbations=tuple(perturbations), **keys)  # fmt: skip
+
+
+def simulate(scenario: Scenario, controller):
+    """Run the nonlinear mixed-traffic simulation: a
+    :class:`~lcc_synth.simulation.results.SimResult` (trajectories ``(batch, T, vehicles)``).
+    :func:`lcc_synth.simulation.engine.simulate`."""
+    from lcc_synth.simulation.engine import simulate as _simulate
+
+    return _simulate(scenario, controller)
+
+
+def metrics(
+    result, *, window: tuple[float, float], vehicles: str | Sequence[int] = "cav_and_behind"
+) -> dict[str, Any]:
+    """Every metric of a run (:func:`lcc_synth.metrics.summary`): ``aave`` (m/s), ``fuel_ml``,
+    ``min_spacing``, ``min_ttc``, jerk, AEB steps, collisions...
+
+    ``window`` (s) is required: AAVE and fuel depend on it (Table II uses
+    :data:`TABLE2_WINDOW` = (20, 40)); ``vehicles``: ``"cav_and_behind"`` (Table II), ``"all"``,
+    ``"hdvs"`` or a list of paper indices."""
+    from lcc_synth.metrics import evaluate
+
+    return evaluate(result, window=window, vehicles=vehicles)
+
+
+def _vehicles(vehicles):
+    return vehicles if isinstance(vehicles, str) else tuple(vehicles)
+
+
+def aave(result, *, window: tuple[float, float], vehicles="cav_and_behind") -> np.ndarray:
+    """Average absolute velocity error (m/s) per scenario over ``window`` (required).
+    :func:`lcc_synth.metrics.aave`."""
+    from lcc_synth.metrics import aave as _aave
+
+    return _aave(result, MetricsConfig(tuple(window), _vehicles(vehicles)).window, vehicles)
+
+
+def fuel(result, *, window: tuple[float, float], vehicles="cav_and_behind") -> np.ndarray:
+    """Fuel (mL, Bowyer model) per scenario over ``window`` (required).
+    :func:`lcc_synth.metrics.fuel`."""
+    from lcc_synth.metrics import fuel as _fuel
+
+    return _fuel(result, MetricsConfig(tuple(window), _vehicles(vehicles)).window, vehicles)
+
+
+def record(
+    path: str | Path,
+    results: Mapping[str, Any],
+    name: str = "python",
+    window: tuple[float, float] | None = None,
+    controllers: Mapping[str, Any] | None = None,
+) -> Path:
+    """Write the runs ``results`` (``{controller name: SimResult}``) side by side into one
+    Rerun recording ``path`` (``lcc-synth review PATH`` opens it), with the CLI's layout; with
+    ``window`` each run's :func:`metrics` too; with ``controllers`` (``{name: controller}``)
+    the MPCs' solve times and plans of their last run. Returns ``path``.
+    :func:`lcc_synth.recording.open_recording`, :func:`~lcc_synth.recording.record_simulation`.
+    """
+    from lcc_synth.recording import (
+        open_recording,
+        record_metrics,
+        record_simulation,
+        simulation_blueprint,
+    )
+    from lcc_synth.recording.layout import merge_ranges, plot_ranges
+
+    if not results:
+        raise ConfigError("results", "needs at least one {name: SimResult}")
+    path = Path(path)
+    histories = {k: c.history() for k, c in (controllers or {}).items()
+                 if k in results and callable(getattr(c, "history", None))}  # fmt: skip
+    ranges = merge_ranges(*(plot_ranges(r) for r in results.values()))
+    blueprint = simulation_blueprint(name, list(results), list(histories), ranges)
+    with open_recording(path, name, blueprint) as rec:
+        for cname, result in results.items():
+            record_simulation(rec, result, name, controller=cname,
+                              mpc_history=histories.get(cname) or None)  # fmt: skip
+            if window is not None:
+                record_metrics(rec, name, cname, metrics(result, window=window))
+    return path
+
+
+# --------------------------------------------------------------------------------------------
+# Problem files
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, repr=False)
+class ProblemObjects(Record):
+    """The objects a problem file holds, as the CLI builds them (``None``: not in the file).
+
+    Attributes
+    ----------
+    name, description : str
+    system : System or None
+        ``[hdv]`` + ``[system]``.
+    simulation : lcc_synth.experiments.spec.SimulationSpec or None
+        ``[scenario]``, ``[controllers.*]``, ``[metrics]`` of ``lcc-synth simulate``.
+    synthesis : lcc_synth.synthesis.config.SynthesisSpec or None
+        ``[synthesis]`` of ``lcc-synth synthesize``.
+    sweep : lcc_synth.experiments.sweep.SweepSpec or None
+        ``[sweep]`` (with scenario, metrics, controller tables) of ``lcc-synth sweep``.
+    suite : lcc_synth.experiments.comparison.Suite or None
+        ``[layouts]``, ``[scenarios]``, ``[controllers]`` of ``lcc-synth run``.
+    analysis : lcc_synth.analysis.cases.AnalysisOptions or None
+        ``[analysis]`` of ``lcc-synth analyze``; ``cases`` its ``[cases.*]`` gains.
+    regions : tuple or None
+        ``(specs, omega)`` of ``[regions]`` / ``[maps.*]`` (``lcc-synth regions``); written
+        back with every map's grid explicit (only the default frequency grid has a TOML form).
+    source : str or None
+    """
+
+    name: str
+    description: str = ""
+    system: System | None = None
+    simulation: Any = None
+    synthesis: Any = None
+    sweep: Any = None
+    suite: Any = None
+    analysis: Any = None
+    cases: dict[str, Any] = field(default_factory=dict)
+    regions: Any = None
+    source: str | None = None
+
+    @property
+    def model(self):
+        """The linearised model of :attr:`system` (``None`` without one)."""
+        return None if self.system is None else self.system.linear_model(warn=False)
+
+    @property
+    def scenario(self) -> Scenario | None:
+        """The simulated scenario (simulate or sweep files)."""
+        spec = self.simulation or self.sweep
+        return None if spec is None else spec.scenario
+
+    @property
+    def controllers(self) -> dict[str, Any]:
+        """The built controllers of a simulate file (sweep / suite files keep tables)."""
+        return {} if self.simulation is None else dict(self.simulation.controllers)
+
+    @property
+    def metrics(self) -> MetricsConfig | None:
+        spec = self.simulation or self.sweep
+        return None if spec is None else spec.metrics
+
+    @property
+    def mpc(self) -> dict[str, Any]:
+        """``{name: MPCSettings}`` of the MPC controllers of a simulate file."""
+        return {k: c.settings for k, c in self.controllers.items() if hasattr(c, "settings")}
+
+    def toml_tables(self) -> dict[str, Any]:
+        """The file's tables, as each object writes them (its ``toml_table(s)``)."""
+        out: dict[str, Any] = {"name": self.name}
+        if self.description:
+            out["description"] = self.description
+        if self.system is not None:
+            out.update(system_tables(self.system))
+        for part in (self.simulation, self.synthesis, self.sweep, self.suite):
+            if part is not None:
+                out.update(part.toml_tables())
+        if self.analysis is not None:
+            out["analysis"] = self.analysis.toml_table()
+        if self.cases:
+            out["cases"] = {k: c.toml_table() for k, c in self.cases.items()}
+        if self.regions is not None:
+            from lcc_synth.analysis.region_specs import regions_tables
+
+            out.update(regions_tables(*self.regions))
+        return out
+
+    def to_toml(self) -> str:
+        """The problem file of these objects; :func:`load_problem` reads it back equal."""
+        return toml_text(self.toml_tables())
+
+    def comparable(self) -> dict[str, Any]:
+        """``as_dict()`` without where the file was (for comparing two loads)."""
+        return _without_source(plain(self))
+
+
+def build_problem(
+    name: str,
+    system: System,
+    scenario: Scenario | None = None,
+    controllers: Mapping[str, Any] | None = None,
+    metrics: MetricsConfig | None = None,
+    description: str = "",
+    synthesis: Any = None,
+) -> ProblemObjects:
+    """The problem file of objects built in Python: ``build_problem(...).to_toml()`` is a file
+    ``lcc-synth simulate`` runs (with ``scenario`` and ``controllers``; ``metrics`` default
+    :class:`MetricsConfig` (), i.e. Table II's window) and / or ``lcc-synth synthesize`` runs
+    (with ``synthesis``, from :func:`h2_problem`), which :func:`load_problem` reads back equal.
+    With neither it holds ``[hdv]`` + ``[system]`` only."""
+    sim = None
+    if scenario is not None or controllers:
+        from lcc_synth.experiments.spec import SimulationSpec
+
+        if scenario is None or not controllers:
+            raise ConfigError("controllers", "a simulation needs a scenario and a controller")
+        sim = SimulationSpec(name, system, scenario, dict(controllers), metrics or
+                             MetricsConfig(), "python")  # fmt: skip
+    if synthesis is not None and synthesis.system != system:
+        raise ConfigError("synthesis", "is for another system than the problem's")
+    return ProblemObjects(name, description, system, simulation=sim, synthesis=synthesis)
+
+
+def _without_source(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {k: _without_source(v) for k, v in x.items() if k != "source"}
+    if isinstance(x, list):
+        return [_without_source(v) for v in x]
+    return x
+
+
+def load_problem(path: str | Path) -> ProblemObjects:
+    """Read a problem file into the objects each command builds from it (the CLI's loaders:
+    :func:`~lcc_synth.experiments.spec.load_spec`, :func:`~lcc_synth.synthesis.config.
+    spec_from_problem`, :func:`~lcc_synth.experiments.sweep.load_sweep`,
+    :func:`~lcc_synth.experiments.comparison.load_suite`, the analyze / regions readers).
+    Errors are :class:`ConfigError` naming the file and the dotted field."""
+    from lcc_synth.problem import load_problem as _load
+
+    prob = _load(path)
+    src = str(prob.path)
+    data = prob.data
+    kw: dict[str, Any] = {"source": src}
+    desc = data.get("description", "")
+    if not isinstance(desc, str):
+        raise ConfigError("description", f"must be a string, got {desc!r}", src)
+    if "layouts" in data or "scenarios" in data:
+        from lcc_synth.experiments.comparison import load_suite
+
+        kw["suite"] = load_suite(prob)
+    if "system" in data:
+        kw["system"] = system_from(data, src)
+    if "sweep" in data:
+        from lcc_synth.experiments.sweep import load_sweep
+
+        kw["sweep"] = load_sweep(prob)
+    elif "scenario" in data or ("controllers" in data and "suite" not in kw):
+        from lcc_synth.experiments.spec import load_spec
+
+        kw["simulation"] = load_spec(prob)
+    if "synthesis" in data:
+        from lcc_synth.synthesis.config import spec_from_problem
+
+        kw["synthesis"] = spec_from_problem(prob)
+    if "analysis" in data or "cases" in data:
+        from lcc_synth.analysis.cases import analysis_options_from, cases_from
+
+        kw["analysis"] = analysis_options_from(data, src)
+        lin = kw["system"].linear_model(warn=False) if "system" in kw else None
+        if lin is None:
+            raise ConfigError("system", "table is required by [cases]", src)
+        kw["cases"] = cases_from(data, lin, src)
+    if "maps" in data or "regions" in data:
+        from lcc_synth.analysis.region_specs import region_specs_from
+
+        lin = kw["system"].linear_model(warn=False) if "system" in kw else None
+        if lin is None:
+            raise ConfigError("system", "table is required by [maps]", src)
+        kw["regions"] = region_specs_from(data, lin, src)
+    return ProblemObjects(prob.name, desc, **kw)

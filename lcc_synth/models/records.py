@@ -1,0 +1,136 @@
+"""Small result records: ``as_dict()`` and a readable ``__repr__`` for the package's dataclasses,
+and the TOML text of problem-file tables.
+
+:class:`Record` is a mixin for frozen dataclasses (declare them with ``repr=False`` so that the
+mixin's ``__repr__`` is used): ``as_dict()`` gives plain Python values (dicts, lists, floats,
+strings; numpy arrays become nested lists, tuples lists), ``repr()`` one line with numbers to
+6 significant digits and arrays larger than :data:`REPR_ITEMS` entries shown by shape only.
+:func:`toml_text` writes nested tables (``None`` values left out: a missing key is the loader's
+default) with ``tomli_w``; floats are written with Python's shortest round-trip ``repr``, so a
+number read back is bit for bit the number written.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+import types
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "REPR_ITEMS", "Record", "plain", "short", "toml_text", "drop_none", "system_tables",
+    "callable_module",
+]  # fmt: skip
+
+#: Arrays and lists with more entries than this are shown by shape / length in ``repr``.
+REPR_ITEMS = 8
+
+
+def plain(x: Any) -> Any:
+    """``x`` as plain Python values: objects with ``as_dict()`` (records, controllers),
+    dataclasses and mappings -> dict, sequences and arrays -> list, numpy scalars -> Python
+    scalars, paths -> str."""
+    if isinstance(x, Record) or callable(getattr(x, "as_dict", None)):
+        return plain(x.as_dict())
+    if dataclasses.is_dataclass(x) and not isinstance(x, type):
+        return {f.name: plain(getattr(x, f.name)) for f in dataclasses.fields(x)}
+    if isinstance(x, Mapping):
+        return {str(k): plain(v) for k, v in x.items()}
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, list | tuple):
+        return [plain(v) for v in x]
+    if isinstance(x, Path):
+        return str(x)
+    return x
+
+
+def short(x: Any) -> str:
+    """A compact text of ``x`` for ``repr``: 6 significant digits, long arrays by shape."""
+    if isinstance(x, bool) or x is None:
+        return repr(x)
+    if isinstance(x, float | np.floating):
+        return f"{float(x):.6g}" if math.isfinite(x) else repr(float(x))
+    if isinstance(x, np.ndarray):
+        if x.size > REPR_ITEMS:
+            return f"array(shape={x.shape}, dtype={x.dtype})"
+        return short(x.tolist())
+    if isinstance(x, list | tuple):
+        if len(x) > REPR_ITEMS:
+            return f"[{len(x)} items]"
+        inner = ", ".join(short(v) for v in x)
+        return f"({inner}{',' if len(x) == 1 else ''})" if isinstance(x, tuple) else f"[{inner}]"
+    if isinstance(x, Mapping):
+        if len(x) > REPR_ITEMS:
+            return f"{{{len(x)} entries}}"
+        return "{" + ", ".join(f"{k!r}: {short(v)}" for k, v in x.items()) + "}"
+    return repr(x)
+
+
+class Record:
+    """Mixin for result dataclasses: :meth:`as_dict` and a one-line ``__repr__``."""
+
+    __slots__ = ()
+
+    def as_dict(self) -> dict[str, Any]:
+        """Every field as plain Python values (see :func:`plain`)."""
+        return {f.name: plain(getattr(self, f.name)) for f in dataclasses.fields(self)}
+
+    def __repr__(self) -> str:
+        parts = (
+            f"{f.name}={short(getattr(self, f.name))}"
+            for f in dataclasses.fields(self)
+            if f.repr
+        )
+        return f"{type(self).__name__}({', '.join(parts)})"
+
+
+def drop_none(x: Any) -> Any:
+    """``x`` (plain values) without ``None`` entries in its tables, recursively."""
+    if isinstance(x, Mapping):
+        return {k: drop_none(v) for k, v in x.items() if v is not None}
+    if isinstance(x, list):
+        return [drop_none(v) for v in x]
+    return x
+
+
+def toml_text(tables: Mapping[str, Any]) -> str:
+    """The TOML text of ``tables`` (``None`` values left out)."""
+    import tomli_w
+
+    return tomli_w.dumps(drop_none(plain(tables)), multiline_strings=True)
+
+
+def system_tables(system: Any) -> dict[str, Any]:
+    """The ``[hdv]`` and ``[system]`` tables of a :class:`lcc_synth.problem.System`."""
+    return {
+        "hdv": system.hdv.toml_table(),
+        "system": {"kind": system.kind, "m": int(system.m), "n": int(system.n),
+                   "v_star": float(system.v_star)},
+    }  # fmt: skip
+
+
+def callable_module(module_name: str, fn: Any) -> None:
+    """Make the module ``module_name`` callable as ``fn``.
+
+    The flat API's ``lcc.metrics(...)`` and ``lcc.mpc(...)`` share their names with the
+    module ``lcc_synth.metrics`` and the package ``lcc_synth.mpc``, which Python binds on
+    ``lcc_synth`` as soon as they are imported: calling the module calls ``fn``, so the name
+    means the same thing whichever was bound first.
+    """
+    module = sys.modules[module_name]
+
+    class CallableModule(types.ModuleType):
+        __doc__ = module.__doc__
+
+        def __call__(self, *args: Any, **kwargs: Any) -> Any:
+            return fn(*args, **kwargs)
+
+    module.__class__ = CallableModule
