@@ -114,7 +114,7 @@ def main() -> int:
     rrd = lcc.record(out / "walkthrough.rrd", results, name="walkthrough",
                      window=lcc.TABLE2_WINDOW, controllers=controllers)  # fmt: skip
     for path in (toml_path, json_path, rrd):
-        print(f"9. wrote {path}")
+        print(f"wrote {path}")
     return 0
 
 

@@ -115,7 +115,6 @@ def run(args: argparse.Namespace) -> int:
     stamp = now.strftime("%Y%m%dT%H%M%SZ")
     rrd = recording_path(args, suite.name, now=now)
     every = recording_decimation(args)
-    out_dir = run_directory(args.out, suite.name, stamp)  # fail early on an unwritable --out
     ctrl_names = list(suite.controllers)
     layouts = suite.layouts_used()
     settings = gamma_settings(suite)  # {layout: [(suffix, dt, latency, scenarios)]}
@@ -129,6 +128,8 @@ def run(args: argparse.Namespace) -> int:
     ]
     log = sys.stderr if args.json else sys.stdout
     progress = not args.no_progress
+    # after every input check, before the long work: fail early on an unwritable --out
+    out_dir = run_directory(args.out, suite.name, stamp)
 
     if rrd is not None:
         bp = _blueprint(suite, ctrl_names, gamma_cases, design_names)
@@ -151,6 +152,8 @@ def run(args: argparse.Namespace) -> int:
             result = run_suite(suite, progress=progress, on_result=on_result)
         except SynthesisError as err:
             print(f"lcc-synth run: synthesis failed: {err}", file=sys.stderr)
+            if not any(out_dir.iterdir()):
+                out_dir.rmdir()  # nothing was written: leave no empty results directory
             return 1
 
         import time

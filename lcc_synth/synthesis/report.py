@@ -151,7 +151,7 @@ def format_report(rep: SynthesisReport) -> str:
     lines = [
         f"synthesis: {rep.problem}  ({rep.design}, {rep.kind} m={rep.m} n={rep.n}, "
         f"v*={rep.v_star:g}, semantics={rep.semantics})",
-        "weights: " + ", ".join(f"{k}={v}" for k, v in rep.weights.items()),
+        "weights: " + ", ".join(f"{k}={v}" for k, v in rep.weights.items() if v is not None),
         f"disturbances: {', '.join(rep.disturbances)}",
         f"pattern (vehicles heard): {rep.pattern}",
         "gain (u = +K x, "
