@@ -38,11 +38,25 @@ def add_recording_arguments(parser: argparse.ArgumentParser) -> None:
     excl.add_argument("--no-record", action="store_true", help="do not write a recording")
     group.add_argument(
         "--record-every",
-        type=int,
+        type=_record_every,
         default=1,
-        metavar="N",
-        help="record every N-th simulation step (decimation; default 1 = every step)",
+        metavar="N|minmax",
+        help="record every N-th simulation step (1 = every step), or 'minmax': a 0.2 s grid "
+        "keeping every visible peak and dip, the exact extremes and full rate around events "
+        "(default 1; `lcc-synth run`: minmax)",
     )
+
+
+def _record_every(text: str) -> int | str:
+    """``--record-every``: a positive integer or ``minmax``."""
+    if text.strip().lower() == "minmax":
+        return "minmax"
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected an integer >= 1 or 'minmax', got {text!r}"
+        ) from None
 
 
 def recording_path(
@@ -65,11 +79,13 @@ def recording_path(
     return Path("logs") / f"{entity_name(problem_name)}-{stamp}.rrd"
 
 
-def recording_decimation(args: argparse.Namespace) -> int:
-    """The validated ``--record-every`` value (>= 1)."""
+def recording_decimation(args: argparse.Namespace) -> int | str:
+    """The validated ``--record-every`` value (an integer >= 1 or ``"minmax"``)."""
     every = getattr(args, "record_every", 1)
+    if every == "minmax":
+        return every
     if isinstance(every, bool) or not isinstance(every, int) or every < 1:
-        raise ConfigError("--record-every", f"must be an integer >= 1, got {every!r}")
+        raise ConfigError("--record-every", f"must be an integer >= 1 or 'minmax', got {every!r}")
     return every
 
 
