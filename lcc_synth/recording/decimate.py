@@ -9,10 +9,11 @@ rows. :func:`minmax_rows` keeps, per entity (all its series share the rows):
 * a grid of one row per ``bucket`` steps (0.1 s) and the last row;
 * every series' global minimum and maximum (so the minimum spacing, the maximum ``|u|``... of
   the recording equal the simulated ones exactly);
-* in every grid bucket and for every series, the rows of its largest deviations above and
-  below the straight line between the bucket's grid rows, whenever they deviate by more than
-  ``tolerance`` (0.2 %) of the entity's whole span (about a pixel of a plot): a peak or a dip
-  inside a bucket is never cut off, unlike naive striding;
+* in every grid bucket and for every series, the rows of its minimum and maximum (M4, Jugel
+  et al. 2014: first, last, min and max of every pixel column draw a line chart exactly),
+  unless the bucket's grid rows come within ``tolerance`` (0.2 %) of the entity's whole span
+  (about a pixel of a plot): a peak or a dip inside a bucket is never cut off, unlike naive
+  striding, and every bucket's recorded min and max are within that tolerance of the true ones;
 * the rows on both sides of every NaN gap (a collided vehicle) and the ``forced`` rows:
   :func:`event_rows` forces full rate during emergency braking (eq. 29), half a second around
   every AEB edge and collision, and the rows of the CAV's largest step and 1 s jerk.
@@ -55,8 +56,8 @@ def minmax_rows(
     bucket : int
         Grid spacing in rows (>= 1; 1 keeps every row).
     tolerance : float
-        Deviations from the grid's straight lines up to ``tolerance`` x the span of ``values``
-        (max - min over every finite sample) are dropped.
+        A bucket's interior minimum / maximum is dropped when a grid row of the bucket is
+        within ``tolerance`` x the span of ``values`` (max - min over every finite sample).
     forced : numpy.ndarray, optional
         ``(T,)`` bool: rows always kept.
 
@@ -90,21 +91,19 @@ def minmax_rows(
     keep[edges] = True  # both sides of a NaN gap
     keep[edges + 1] = True
     tol = float(tolerance) * float(np.nanmax(v) - np.nanmin(v))
-    # Deviations from the straight lines between the grid rows (not the extra rows).
+    # M4 (first, last, min, max of every bucket): a bucket's interior minimum / maximum is
+    # kept unless its grid rows already come within ``tol`` of it.
     grid = np.arange(0, T, bucket)
     if grid[-1] != T - 1:
         grid = np.append(grid, T - 1)
-    rows = np.arange(T)
-    seg = np.clip(np.searchsorted(grid, rows, side="right") - 1, 0, len(grid) - 2)
-    a, b = grid[seg], grid[seg + 1]
-    w = ((rows - a) / np.maximum(b - a, 1))[:, None]
+    seg = np.clip(np.searchsorted(grid, np.arange(T), side="right") - 1, 0, len(grid) - 2)
+    ends = np.stack([v[grid[seg]], v[grid[seg + 1]]])  # (2, T, k) the bucket's grid rows
     with np.errstate(invalid="ignore"):
-        dev = v - (v[a] * (1.0 - w) + v[b] * w)
-    dev = np.where(np.isfinite(dev), dev, 0.0)
-    for sign in (1.0, -1.0):
-        d = sign * dev
-        peak = np.maximum.reduceat(d, grid[:-1], axis=0)  # (segments, k)
-        keep |= ((d >= peak[seg]) & (d > tol)).any(axis=1)
+        for x, e in ((v, np.fmax(ends[0], ends[1])), (-v, -np.fmin(ends[0], ends[1]))):
+            x = np.where(np.isfinite(x), x, -np.inf)
+            e = np.where(np.isfinite(e), e, -np.inf)
+            peak = np.maximum.reduceat(x, grid[:-1], axis=0)[seg]  # (T, k)
+            keep |= ((x == peak) & (x > e + tol)).any(axis=1)
     return np.flatnonzero(keep)
 
 
