@@ -325,7 +325,9 @@ def prepare_controllers(
             )
             designs[name] = rep
         tables[name] = table
-    return tables, designs
+    from lcc_synth.experiments.spec import resolve_fallbacks
+
+    return resolve_fallbacks(tables, system, source), designs
 
 
 def build_controllers(
