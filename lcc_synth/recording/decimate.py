@@ -3,7 +3,7 @@
 A simulation holds one sample every ``dt = 0.01`` s; the viewer draws a 60-70 s run in a
 few hundred pixels (one plot per controller, side by side), about 0.2 s per pixel. Recording
 every step made the default ``lcc-synth run`` (16 runs x 12 vehicles x 6000-7000 steps) a
-40.5 MB file, 91 % of it the per-step velocity, spacing, acceleration, road, command and AEB
+40.5 MB file, 96 % of it the per-step velocity, spacing, acceleration, road, command and AEB
 rows. :func:`minmax_rows` keeps, per entity (all its series share the rows):
 
 * a grid of one row per ``bucket`` steps (0.1 s) and the last row;
@@ -18,10 +18,11 @@ rows. :func:`minmax_rows` keeps, per entity (all its series share the rows):
   :func:`event_rows` forces full rate during emergency braking (eq. 29), half a second around
   every AEB edge and collision, and the rows of the CAV's largest step and 1 s jerk.
 
-Measured on the default ``lcc-synth run`` (``problems/showcase.toml``): 40.5 MB -> 7.6 MB
-(README, "Reviewing a recording"). Smooth series (velocities, spacings) keep about one row in
-ten; the noisy accelerations of the ``heterogeneous`` scenario (HDV acceleration noise, noisy
-V2V data) keep nearly every row, since every bucket has a peak above the tolerance.
+Measured on the default ``lcc-synth run`` (``problems/showcase.toml``): the file 40.5 MB ->
+8.6 MB, its 16 simulations 39.2 -> 7.2 MB (``benchmarks/bench_recording.py``). Smooth series
+(velocities, spacings) keep about one row in nineteen; the noisy accelerations of the
+``heterogeneous`` scenario (HDV acceleration noise, noisy V2V data) keep about two rows in
+three, since most buckets hold a peak above the tolerance.
 """
 
 from __future__ import annotations

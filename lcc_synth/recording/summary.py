@@ -1,7 +1,7 @@
 """The text of ``lcc-synth review --summary``: one screen by default, everything with ``--full``.
 
 :func:`summary_lines` (the default) fits a recording of the default ``lcc-synth run`` (200
-entities, 16 runs, 13 |Γ| reports, 2 synthesis reports; 1318 lines in full) in 47 lines: the
+entities, 16 runs, 13 |Γ| reports, 2 synthesis reports; 1318 lines in full) in 46 lines: the
 file, its status, one line per top-level entity group, the comparison metrics as one table
 (a row per scenario and controller) and one line of key facts per report; every section is
 capped (``... N more``) so that no recording exceeds :data:`MAX_LINES`. :func:`full_lines`
