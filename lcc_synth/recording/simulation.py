@@ -200,7 +200,7 @@ def record_simulation(
     stats = dict(getattr(result, "controller_stats", {}) or {})
     s_star = float(np.asarray(result.s_star).reshape(-1)[run])
     how = (
-        f"min/max-preserving, {min(kept)}-{max(kept)} rows per series"
+        f"min/max-preserving, {min(kept)}-{max(kept)} rows per entity"
         if minmax
         else f"every {decimate}"
     )
