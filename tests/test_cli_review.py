@@ -37,7 +37,7 @@ def rrd(tmp_path_factory):
 
 
 def test_summary_prints_entities_time_range_samples_and_metrics(rrd, capsys):
-    assert main(["review", "--summary", str(rrd)]) == 0
+    assert main(["review", "--summary", "--full", str(rrd)]) == 0
     out = capsys.readouterr().out
     assert "time range   0 .. 2.99 s" in out
     assert re.search(r"/demo/all_hdv/velocity\s+Scalars/SeriesLines: 300 samples, 4 series", out)

@@ -40,7 +40,7 @@ def check_options(args: argparse.Namespace) -> None:
     from lcc_synth.errors import ConfigError
 
     if getattr(args, "no_record", False):
-        if getattr(args, "record_every", 1) != 1:
+        if getattr(args, "record_every", None) is not None:
             raise ConfigError("--record-every", "does not apply with --no-record")
         if getattr(args, "record_seeds", None) is not None:
             raise ConfigError("--record-seeds", "does not apply with --no-record")

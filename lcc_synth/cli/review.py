@@ -6,8 +6,9 @@
 * Without a display (or with ``--web``) the web viewer is served on 127.0.0.1 only (Rerun binds
   0.0.0.0 by default) and the address to open is printed.
 * In both modes the viewer's gRPC server is bound to 127.0.0.1 too.
-* ``--summary`` prints what the recording holds (entities, time range, samples, the metrics
-  and reports) without a viewer; with ``--json`` as one JSON object.
+* ``--summary`` prints what the recording holds without a viewer, on one screen (at most 60
+  lines: entity groups, time range, the comparison metrics, one line per report); ``--full``
+  lists every entity and document; ``--json`` gives everything as one JSON object.
 
 The viewer is the ``rerun`` executable of the ``rerun-sdk`` wheel, started directly (not via the
 Python wrapper script, which would leave the real viewer running when stopped) in its own
@@ -39,6 +40,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--summary", action="store_true", help="print what the recording holds; no viewer"
     )
+    parser.add_argument(
+        "--full", action="store_true",
+        help="with --summary: every entity and every metrics, status and report document "
+        "(default: one screen, at most 60 lines)",
+    )  # fmt: skip
     parser.add_argument("--json", action="store_true", help="with --summary: one JSON object")
     parser.add_argument(
         "--web",
@@ -108,33 +114,13 @@ def _stop(proc: subprocess.Popen, timeout: float = 3.0) -> None:
             continue
 
 
-def _print_summary(summary, as_json: bool) -> None:
+def _print_summary(summary, as_json: bool, full: bool = False) -> None:
     if as_json:
         print(json.dumps(summary.to_json()))
         return
-    tr = summary.time_range
-    print(f"recording    {summary.path} ({summary.size_bytes / 1e6:.2f} MB)")
-    print(f"application  {summary.application_id}; recording id {', '.join(summary.recording_ids)}")
-    views = f" ({len(summary.views)} views)" if summary.views else ""
-    print(f"blueprint    {'yes' if summary.has_blueprint else 'no'}{views}")
-    if not summary.finalized:
-        print("file         not finalised (the writing process was killed); data up to then")
-    print(f"time range   {f'{tr[0]:g} .. {tr[1]:g} s' if tr else 'none (static data only)'}")
-    print(f"entities     {len(summary.entities)}")
-    width = max((len(p) for p in summary.entities), default=10)
-    for path, ent in sorted(summary.entities.items()):
-        kinds = sorted({c.split(":")[0] for c in ent.components})
-        if ent.static:
-            what = "static"
-        else:
-            series = f", {ent.series} series" if ent.series > 1 else ""
-            what = f"{ent.samples} samples{series}, t {ent.t_min:g}..{ent.t_max:g} s"
-        print(f"  {path:<{width}}  {'/'.join(kinds)}: {what}")
-    metrics = {
-        p: t for p, t in summary.texts.items() if p.endswith(("/metrics", "/status", "/report"))
-    }
-    for path, text in sorted(metrics.items()):
-        print(f"\n--- {path}\n{text.rstrip()}")
+    from lcc_synth.recording.summary import full_lines, summary_lines
+
+    print("\n".join(full_lines(summary) if full else summary_lines(summary)))
 
 
 def _interrupt(signum, frame):  # SIGTERM / SIGHUP: stop like Ctrl-C
@@ -250,8 +236,10 @@ def run(args: argparse.Namespace) -> int:
     path = Path(args.path)
     if args.json and not args.summary:
         raise ConfigError("--json", "only applies with --summary")
+    if args.full and not args.summary:
+        raise ConfigError("--full", "only applies with --summary")
     summary = summarize_recording(path)  # validates: ConfigError for a missing/invalid file
     if args.summary:
-        _print_summary(summary, args.json)
+        _print_summary(summary, args.json, args.full)
         return 0
     return _serve(rerun_binary(), path, args, viewer_environment())

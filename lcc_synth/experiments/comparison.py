@@ -53,6 +53,7 @@ __all__ = [
     "controller_table",
     "synthesize_table",
     "prepare_controllers",
+    "fallback_names",
     "build_controllers",
     "metrics_row",
     "run_suite",
@@ -91,6 +92,9 @@ class Suite(Record):
     controllers: dict[str, dict[str, Any]]
     hdv_table: dict[str, Any] = field(default_factory=dict)
     source: str | None = None
+    #: controllers left out by ``--controllers`` that a selected MPC falls back to
+    #: (``fallback = "NAME"``): designed for it, not run (:func:`fallback_names`)
+    fallbacks: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def toml_tables(self) -> dict[str, Any]:
         """``name``, ``description``, ``[hdv]``, ``[layouts.*]``, ``[scenarios.*]`` (each with
@@ -107,7 +111,7 @@ class Suite(Record):
                     "metrics": s.metrics.toml_table()}
                 for k, s in self.scenarios.items()
             },  # fmt: skip
-            "controllers": {k: dict(t) for k, t in self.controllers.items()},
+            "controllers": {k: dict(t) for k, t in {**self.controllers, **self.fallbacks}.items()},
         }
 
     def to_toml(self) -> str:
@@ -131,6 +135,31 @@ def select_names(available: Sequence[str], wanted: Sequence[str] | None, field: 
     if unknown:
         raise ConfigError(field, f"unknown name(s) {unknown}; available: {list(available)}")
     return [a for a in available if a in wanted]
+
+
+def fallback_names(tables: Mapping[str, Any], names: Sequence[str]) -> list[str]:
+    """The controllers that the MPCs among ``names`` fall back to (``fallback = "NAME"``) but
+    that ``names`` leaves out: they are designed for the MPC, not run.
+
+    Raises
+    ------
+    ConfigError
+        ``controllers.MPC.fallback`` is not the name of another controller of the file.
+    """
+    out: list[str] = []
+    for name in names:
+        t = tables.get(name)
+        if not isinstance(t, Mapping) or t.get("type") != "mpc" or t.get("fallback") is None:
+            continue
+        target = declared("controllers.NAME:mpc").get(t, "fallback", f"controllers.{name}")
+        if target not in tables or target == name:
+            others = [n for n in tables if n != name]
+            raise ConfigError(f"controllers.{name}.fallback",
+                              f"must name another controller of the file {others}, got "
+                              f"{target!r}")  # fmt: skip
+        if target not in names and target not in out:
+            out.append(target)
+    return out
 
 
 def _system_data(system: System) -> dict[str, Any]:
@@ -206,8 +235,9 @@ def load_suite(
         if not ctrl_t:
             raise ConfigError("controllers", "needs at least one [controllers.NAME] table")
         names = select_names(list(ctrl_t), controllers, "--controllers")
+        extra = fallback_names(ctrl_t, names)
         ctrls: dict[str, dict[str, Any]] = {}
-        for cname in names:
+        for cname in names + extra:
             table = ctrl_t[cname]
             f = f"controllers.{cname}"
             if not isinstance(table, dict):
@@ -229,9 +259,10 @@ def load_suite(
             description=str(top.raw(data, "description")),
             layouts=layouts,
             scenarios=suite_scenarios,
-            controllers=ctrls,
+            controllers={k: ctrls[k] for k in names},
             hdv_table=dict(hdv_table),
             source=src,
+            fallbacks={k: ctrls[k] for k in extra},
         )
     except ConfigError as err:
         raise err.with_source(src) if not err.source else err from None
@@ -326,16 +357,20 @@ def prepare_controllers(
     source: str | None = None,
     label: str = "suite",
     on_step: Callable[[str], None] | None = None,
+    fallbacks: Mapping[str, Mapping[str, Any]] | None = None,
 ):
-    """Controller tables of one layout, ``h2`` entries replaced by their synthesised gains.
+    """Controller tables of one layout, ``h2`` entries replaced by their synthesised gains and
+    the MPCs' ``fallback = "NAME"`` by NAME's gain.
 
     Returns ``(tables, designs)``: ``{name: table}`` with only the types of
-    :data:`lcc_synth.controllers.registry.CONTROLLER_TYPES`, and ``{name: SynthesisReport}``.
+    :data:`lcc_synth.controllers.registry.CONTROLLER_TYPES`, and ``{name: SynthesisReport}``,
+    for the names of ``controllers`` (``fallbacks``: more tables, designed only to resolve
+    the MPCs' fallbacks, :attr:`Suite.fallbacks`).
     """
     tables: dict[str, dict[str, Any]] = {}
     designs: dict[str, Any] = {}
-    for name, raw in controllers.items():
-        if on_step is not None:
+    for name, raw in {**controllers, **(fallbacks or {})}.items():
+        if on_step is not None and name in controllers:
             on_step(name)
         table = controller_table(raw, layout)
         if table.get("type") == "h2":
@@ -344,7 +379,11 @@ def prepare_controllers(
             )
             designs[name] = rep
         tables[name] = table
-    return tables, designs
+    from lcc_synth.experiments.spec import resolve_fallbacks
+
+    resolved = resolve_fallbacks(tables, system, source)
+    return {k: resolved[k] for k in controllers}, {k: designs[k] for k in designs
+                                                    if k in controllers}
 
 
 def build_controllers(
@@ -454,7 +493,7 @@ def run_suite(
 
             tables[lname], designs[lname] = prepare_controllers(
                 suite.controllers, system, lname, suite.hdv_table, suite.source, suite.name,
-                on_step=starting,
+                on_step=starting, fallbacks=suite.fallbacks,
             )
             built[lname] = {}
             for cname, table in tables[lname].items():

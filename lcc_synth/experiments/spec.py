@@ -18,7 +18,7 @@ from lcc_synth.schema import declared
 from lcc_synth.simulation.scenario import Scenario, scenario_from
 from lcc_synth.simulation.timestep import check_time_step
 
-__all__ = ["SimulationSpec", "controllers_from", "load_spec"]
+__all__ = ["SimulationSpec", "controllers_from", "load_spec", "resolve_fallbacks"]
 
 
 @dataclass(frozen=True, repr=False)
@@ -48,11 +48,62 @@ class SimulationSpec(Record):
         return toml_text(self.toml_tables())
 
 
+def resolve_fallbacks(
+    tables: Mapping[str, Mapping[str, Any]], system: System, source: str | None = None
+) -> dict[str, dict[str, Any]]:
+    """Controller tables with every MPC's ``fallback = "NAME"`` replaced by NAME's static gain.
+
+    NAME is a ``static`` controller of the same file, or an ``h2`` one once synthesised (``run``
+    and ``sweep`` replace it by a static table first). The gain becomes plain data in the MPC's
+    table (``{"controller", "kind", "semantics", "gains"}``, zero gains dropped; Dask workers
+    need no other table) and :mod:`lcc_synth.mpc.build` makes it the MPC's static fallback:
+    applied to the MPC's own error state when the QP fails and no previous plan is left.
+
+    Raises
+    ------
+    ConfigError
+        ``controllers.MPC.fallback`` names no controller, or one without a static gain, or a
+        gain for another kind of string, or is given with ``fallback_gains_file``.
+    """
+    out = {name: dict(t) for name, t in tables.items()}
+    for name, table in out.items():
+        if table.get("type") != "mpc" or table.get("fallback") is None:
+            continue
+        field = f"controllers.{name}.fallback"
+        try:
+            target = declared("controllers.NAME:mpc").get(table, "fallback", f"controllers.{name}")
+        except ConfigError as err:
+            raise err.with_source(source) if source and not err.source else err from None
+        if target not in tables or target == name:
+            others = [n for n in tables if n != name]
+            raise ConfigError(field, f"must name another controller of the file {others}, "
+                              f"got {target!r}", source)  # fmt: skip
+        if "fallback_gains_file" in table:
+            raise ConfigError(field, "give fallback or fallback_gains_file, not both", source)
+        gain = tables[target]
+        if gain.get("type") != "static" or not isinstance(gain.get("gains"), Mapping):
+            raise ConfigError(field, f"{target!r} is a {gain.get('type')!r} controller; the "
+                              "fallback must be a static or h2 controller", source)  # fmt: skip
+        kind = gain.get("kind", system.kind)
+        if kind != system.kind:
+            raise ConfigError(field, f"{target!r} is a {kind} gain; the MPC controls "
+                              f"{system.kind}", source)  # fmt: skip
+        table["fallback"] = {
+            "controller": target,
+            "kind": kind,
+            "semantics": gain.get("semantics", "added"),
+            "gains": {k: float(v) for k, v in gain["gains"].items() if float(v) != 0.0},
+        }
+    return out
+
+
 def controllers_from(data: Mapping[str, Any], system: System, source: str | None = None):
-    """Every ``[controllers.NAME]`` table, built in file order."""
+    """Every ``[controllers.NAME]`` table, built in file order (MPC fallbacks resolved)."""
     tables = declared("").get(data, "controllers", "")
     if not tables:
         raise ConfigError("controllers", "needs at least one [controllers.NAME] table")
+    if all(isinstance(t, Mapping) for t in tables.values()):
+        tables = resolve_fallbacks(tables, system, source)
     return {name: build_controller(name, t, system, source) for name, t in tables.items()}
 
 

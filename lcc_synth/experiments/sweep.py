@@ -11,7 +11,10 @@ What is random
 Every scenario ``i`` (``0 <= i < count``) draws, from ``(seed, i)`` only, its heterogeneous HDV
 parameters (``[scenario.heterogeneity]``), its reaction delays (``[scenario.delay]``), and the
 realisations of the HDV acceleration noise (``hdv_accel_noise``) and of the V2V packet losses
-and measurement noise (``[scenario.v2v]``; latency is a fixed setting of the file). This is the
+and measurement noise (``[scenario.v2v]``). ``hdv_accel_noise`` and the ``[scenario.v2v]``
+``loss_rate``, ``latency`` and ``*_noise`` may be ranges ``[lo, hi]``: each scenario draws its
+own value U[lo, hi] from ``(seed, i)`` (:func:`~lcc_synth.simulation.scenario.split_ranges`;
+such scenarios are simulated one by one); a number stays fixed. This is the
 simulator's own draw (:attr:`lcc_synth.simulation.scenario.Scenario.first_index`), so a scenario's
 result does not depend on how scenarios are grouped into tasks, nor on the worker running it.
 
@@ -26,15 +29,8 @@ controllers are read there; workers receive plain controller tables and build (a
 process and thread) the controllers themselves (an MPC's ``fallback_gains_file`` is read on
 the worker: give it a path the workers can read).
 
-Problem file
-------------
-``[hdv]``, ``[system]``, ``[scenario]`` (as ``lcc-synth simulate``; ``batch`` is ignored),
-``[metrics]``, ``[controllers.NAME]`` (as ``lcc-synth run``: ``hdv``, ``static``,
-``gains_file``, ``mpc`` or a synthesised ``h2``) and::
-
-    [sweep]
-    count = 1000        # scenarios, >= 1
-    batch_size = 50     # scenarios per Dask task, >= 1
+The problem file's tables (``[sweep]`` ``count`` and ``batch_size``, the ``[lo, hi]`` ranges)
+are in ``problems/REFERENCE.md``.
 """
 
 from __future__ import annotations
@@ -58,20 +54,10 @@ from lcc_synth.schema import declared
 from lcc_synth.simulation.scenario import Scenario
 
 __all__ = [
-    "SWEEP_METRICS",
-    "SWEEP_COUNTS",
-    "MAX_COUNT",
-    "SweepSpec",
-    "SweepResult",
-    "load_sweep",
-    "chunks",
-    "scenario_metrics",
-    "run_chunk",
-    "aggregate",
-    "run_sweep",
-    "local_cluster",
+    "SWEEP_METRICS", "SWEEP_COUNTS", "MAX_COUNT", "SweepSpec", "SweepResult", "load_sweep",
+    "chunks", "scenario_metrics", "run_chunk", "aggregate", "run_sweep", "local_cluster",
     "format_summary",
-]
+]  # fmt: skip
 
 #: Per-scenario metrics of a sweep -> label (distributions: mean, p5, p95).
 SWEEP_METRICS: dict[str, str] = {
@@ -104,6 +90,9 @@ class SweepSpec(Record):
     batch_size: int
     hdv_table: dict[str, Any] = field(default_factory=dict)
     source: str | None = None
+    #: ``{"v2v.loss_rate": (lo, hi), ...}``: settings drawn per scenario.
+    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+    fallbacks: dict[str, dict[str, Any]] = field(default_factory=dict)  # as Suite.fallbacks
 
     @property
     def seed(self) -> int:
@@ -113,7 +102,13 @@ class SweepSpec(Record):
         """The tables :func:`load_sweep` reads back into an equal spec."""
         tables = {"scenario": self.scenario.toml_table(), "metrics": self.metrics.toml_table(),
                   "sweep": {"count": self.count, "batch_size": self.batch_size}}  # fmt: skip
-        ctrls = {k: dict(t) for k, t in self.controllers.items()}
+        for key, (lo, hi) in self.ranges.items():  # settings drawn per scenario: [lo, hi]
+            *parent, leaf = key.split(".")
+            t = tables["scenario"]
+            for p in parent:
+                t = t.setdefault(p, {})
+            t[leaf] = [lo, hi]
+        ctrls = {k: dict(t) for k, t in {**self.controllers, **self.fallbacks}.items()}
         return {"name": self.name, **system_tables(self.system), **tables, "controllers": ctrls}
 
 
@@ -124,12 +119,9 @@ def _count(value, field_name: str, hi: int) -> int:
 
 
 def load_sweep(
-    path: str | Path | Problem,
-    count: int | None = None,
-    batch_size: int | None = None,
-    seed: int | None = None,
-    controllers: Sequence[str] | None = None,
-) -> SweepSpec:
+    path: str | Path | Problem, count: int | None = None, batch_size: int | None = None,
+    seed: int | None = None, controllers: Sequence[str] | None = None,
+) -> SweepSpec:  # fmt: skip
     """Read a sweep problem file; ``count``, ``batch_size``, ``seed`` override the file.
 
     Raises
@@ -137,9 +129,9 @@ def load_sweep(
     ConfigError
         A bad table or value, an unknown controller name, counts out of range.
     """
-    from lcc_synth.experiments.comparison import select_names
+    from lcc_synth.experiments.comparison import fallback_names, select_names
     from lcc_synth.metrics import metrics_from
-    from lcc_synth.simulation.scenario import scenario_from
+    from lcc_synth.simulation.scenario import scenario_from, split_ranges
 
     problem = path if isinstance(path, Problem) else load_problem(path)
     src = str(problem.path)
@@ -147,7 +139,9 @@ def load_sweep(
         data = problem.data
         check_top_level(data)
         system = system_from(data, src)
-        scenario = scenario_from(data, system, problem.path.parent)
+        nv = system.m + system.n + 2  # [lo, hi] settings drawn per scenario:
+        sc_table, ranges = split_ranges(declared("").get(data, "scenario", ""), nv)
+        scenario = scenario_from({**data, "scenario": sc_table}, system, problem.path.parent)
         metrics = metrics_from(data, system, scenario=scenario)
         SW = declared("sweep")
         sw = declared("").get(data, "sweep", "")
@@ -167,8 +161,9 @@ def load_sweep(
         if not tables:
             raise ConfigError("controllers", "needs at least one [controllers.NAME] table")
         names = select_names(list(tables), controllers, "--controllers")
+        extra = fallback_names(tables, names)
         ctrls = {}
-        for name in names:
+        for name in names + extra:
             t = tables[name]
             if not isinstance(t, dict):
                 raise ConfigError(f"controllers.{name}", "must be a table")
@@ -181,11 +176,13 @@ def load_sweep(
             system=system,
             scenario=scenario,
             metrics=metrics,
-            controllers=ctrls,
+            controllers={k: ctrls[k] for k in names},
+            fallbacks={k: ctrls[k] for k in extra},
             count=n,
             batch_size=min(bs, n),
             hdv_table=dict(declared("").get(data, "hdv", "")),
             source=src,
+            ranges=ranges,
         )
     except ConfigError as err:
         raise err.with_source(src) if not err.source else err from None
@@ -281,25 +278,34 @@ def run_chunk(
     source: str | None,
     start: int,
     stop: int,
+    ranges: Mapping[str, tuple[float, float]] | None = None,
 ) -> dict[str, Any]:
-    """Simulate scenarios ``start .. stop - 1`` with every controller (one batch each).
+    """Simulate scenarios ``start .. stop - 1`` with every controller (one batch each; with
+    ``ranges``, :attr:`SweepSpec.ranges`, each scenario alone with its drawn settings).
 
     Returns ``{"start", "stop", "metrics": {controller: {metric: (stop - start,) array}},
     "fallbacks": {controller: int}, "sim_time": {controller: s}, "wall_time": s}``.
     """
     from lcc_synth.simulation.engine import simulate
+    from lcc_synth.simulation.scenario import scenario_variant
 
     t0 = time.perf_counter()
     ctrls = _controllers(tables, system, source)
-    sc = replace(scenario, batch=stop - start, first_index=start)
-    draws = sc.draw()
+    if ranges:
+        runs = [scenario_variant(scenario, ranges, i) for i in range(start, stop)]
+    else:
+        runs = [replace(scenario, batch=stop - start, first_index=start)]
+    draws = [sc.draw() for sc in runs]
     metrics, fallbacks, times = {}, {}, {}
     for name, ctrl in ctrls.items():
         t1 = time.perf_counter()
-        res = simulate(sc, ctrl, draws)
+        per, fallbacks[name] = [], 0
+        for sc, dr in zip(runs, draws, strict=True):
+            res = simulate(sc, ctrl, dr)
+            per.append(scenario_metrics(res, config))
+            fallbacks[name] += int((res.controller_stats or {}).get("fallbacks", 0) or 0)
         times[name] = time.perf_counter() - t1
-        metrics[name] = scenario_metrics(res, config)
-        fallbacks[name] = int((res.controller_stats or {}).get("fallbacks", 0) or 0)
+        metrics[name] = {k: np.concatenate([p[k] for p in per]) for k in per[0]}
     return {
         "start": start,
         "stop": stop,
@@ -481,7 +487,7 @@ def run_sweep(
 
         tables, designs = prepare_controllers(
             spec.controllers, spec.system, "sweep", spec.hdv_table, spec.source, spec.name,
-            on_step=step,
+            on_step=step, fallbacks=spec.fallbacks,
         )
     t_design = time.perf_counter() - t_all
     tables = {name: _inline_gains_file(name, t, spec) for name, t in tables.items()}
@@ -521,15 +527,15 @@ def run_sweep(
         bar.unit = "scenario"
         if client is None:
             for s, e in parts:
-                store(run_chunk(*args, s, e))
+                store(run_chunk(*args, s, e, spec.ranges))
                 bar.update(e - s)
         else:
             from dask.distributed import as_completed
 
-            token = _token(args)[:16]
+            token = _token(args, spec.ranges)[:16]
             futures = [
                 client.submit(
-                    run_chunk, *args, s, e, retries=retries, pure=False,
+                    run_chunk, *args, s, e, spec.ranges, retries=retries, pure=False,
                     key=f"lcc-sweep-{token}-{s}-{e}",
                 )
                 for s, e in parts

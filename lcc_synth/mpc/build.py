@@ -1,5 +1,6 @@
 """The MPC of a ``[controllers.NAME]`` problem table (``type = "mpc"``): its settings
-(:mod:`lcc_synth.mpc.settings`) and its fallback gain, from a gains file or the paper's."""
+(:mod:`lcc_synth.mpc.settings`) and its fallback gain: another controller of the file
+(``fallback = "NAME"``), a gains file (``fallback_gains_file``) or the paper's."""
 
 from __future__ import annotations
 
@@ -39,6 +40,20 @@ def _load_gains_file(path: Path, system, field_name: str) -> StaticGains:
         raise ConfigError(f"{field_name}.{err.field}", err.message) from None
 
 
+def _named_fallback(named, field_name: str) -> tuple[StaticGains, str]:
+    """The gain of ``fallback = "NAME"`` (as :func:`lcc_synth.experiments.spec.resolve_fallbacks`
+    inlines it) and its source label ``controller NAME``."""
+    if not isinstance(named, dict) or not isinstance(named.get("gains"), dict):
+        raise ConfigError(
+            field_name, f"names controller {named!r}, which is not a static or h2 controller"
+        )
+    try:
+        gains = StaticGains(named["gains"], named.get("semantics", "added"))
+    except ConfigError as err:
+        raise ConfigError(f"{field_name}.{err.field}", err.message) from None
+    return gains, f"controller {named.get('controller', '?')}"
+
+
 def mpc_controller_from_table(name: str, table, system, source: str | None = None):
     """Build an :class:`MPCController` from a ``[controllers.NAME]`` table (``type = "mpc"``).
 
@@ -54,9 +69,13 @@ def mpc_controller_from_table(name: str, table, system, source: str | None = Non
     """
     field_name = f"controllers.{name}"
     try:
+        table = dict(table)
+        named = table.pop("fallback", None)  # resolved by experiments.spec.resolve_fallbacks
         settings = settings_from_table(table, field_name)
         fallback = None
         fb_source = "paper"
+        if named is not None:
+            fallback, fb_source = _named_fallback(named, f"{field_name}.fallback")
         if settings.fallback_gains_file:
             path = Path(settings.fallback_gains_file)
             if not path.is_absolute() and source:

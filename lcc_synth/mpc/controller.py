@@ -30,8 +30,9 @@ At every sample (``sample_time``, default 0.1 s; the simulator holds the command
    predicted from the measured spacing, the vehicle ahead moving with the head prediction).
 6. **Fallback chain** when the QP is not solved (status other than ``solved``, non-finite
    data, any exception): the previous plan shifted by one step (while it lasts), else a static
-   gain (``fallback_gains_file`` if configured, else the paper's Section V-B gain for FD-/CF-LCC
-   and the CAV's HDV law for LCC/CCC) on the same error state, clipped to the acceleration
+   gain (another controller of the file, ``fallback = "h2"`` in ``problems/showcase.toml``; or
+   ``fallback_gains_file``; else the paper's Section V-B gain for FD-/CF-LCC and the CAV's HDV
+   law for LCC/CCC) on the same error state, clipped to the acceleration
    limits; the simulator's emergency braking is the last layer. Nothing raises inside the loop.
 7. **Comfort** (``constraints.jerk_scale``): the QP bounds the 1 s average jerk by a fraction of
    ISO 15622's limit at the CAV's speed, and yields to the safe spacing (:mod:`~lcc_synth.mpc.
@@ -164,8 +165,9 @@ class MPCController:
         try:
             cav_feedback(model, self.fallback)
         except ConfigError as err:
+            from_file = fallback_source != "paper" and not fallback_source.startswith("controller")
             raise ConfigError(
-                "fallback_gains_file" if fallback_source != "paper" else "fallback",
+                "fallback_gains_file" if from_file else "fallback",
                 f"{err.field}: {err.message} (the MPC models m={self.m}, n={n_model})",
             ) from None
         self._cache: dict[float, tuple[Linearization, Any, np.ndarray, float]] = {}

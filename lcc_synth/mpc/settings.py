@@ -8,6 +8,7 @@ A problem file selects the MPC with a controller table (every key optional)::
     horizon = 50               # prediction steps N (horizon N * sample_time seconds)
     n_model = 10               # HDVs behind that the MPC predicts (default: all of [system].n)
     fallback_gains_file = "gains.json"   # static fallback gain (default: the paper's gain)
+    fallback = "h2"            # or: another controller's static gain (experiments.spec)
 
     [controllers.mpc.weights]  # stage cost x'Qx + w_input u^2 + w_jerk (du)^2
     velocity = 1.0             # velocity error of every vehicle, (m/s)^-2

@@ -3,7 +3,9 @@
 Submodules: :mod:`~lcc_synth.recording.core` (opening a recording, names, colours),
 :mod:`~lcc_synth.recording.layout` (blueprints), :mod:`~lcc_synth.recording.simulation`,
 :mod:`~lcc_synth.recording.analysis` (what gets recorded), :mod:`~lcc_synth.recording.cli`
-(command flags and the recorder), :mod:`~lcc_synth.recording.reader` (summaries, viewer).
+(command flags and the recorder), :mod:`~lcc_synth.recording.reader` (reading back, viewer),
+:mod:`~lcc_synth.recording.summary` (the text of ``review --summary``),
+:mod:`~lcc_synth.recording.decimate` (min/max-preserving decimation, ``decimate="minmax"``).
 Everything public is importable from ``lcc_synth.recording``.
 
 Every recording command writes one file, by default ``logs/<problem>-<UTC timestamp>.rrd``

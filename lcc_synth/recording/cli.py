@@ -41,11 +41,25 @@ def add_recording_arguments(parser: argparse.ArgumentParser, steps: bool = True)
         return
     group.add_argument(
         "--record-every",
-        type=int,
-        default=1,
-        metavar="N",
-        help="record every N-th simulation step (decimation; default 1 = every step)",
+        type=_record_every,
+        default=None,  # not given: the command's default (record_every_default, else 1)
+        metavar="N|minmax",
+        help="record every N-th simulation step (1 = every step), or 'minmax': a 0.2 s grid "
+        "keeping every visible peak and dip, the exact extremes and full rate around events "
+        "(default 1; `lcc-synth run`: minmax)",
     )
+
+
+def _record_every(text: str) -> int | str:
+    """``--record-every``: a positive integer or ``minmax``."""
+    if text.strip().lower() == "minmax":
+        return "minmax"
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected an integer >= 1 or 'minmax', got {text!r}"
+        ) from None
 
 
 def recording_path(
@@ -68,11 +82,16 @@ def recording_path(
     return Path("logs") / f"{entity_name(problem_name)}-{stamp}.rrd"
 
 
-def recording_decimation(args: argparse.Namespace) -> int:
-    """The validated ``--record-every`` value (>= 1)."""
-    every = getattr(args, "record_every", 1)
+def recording_decimation(args: argparse.Namespace) -> int | str:
+    """The validated ``--record-every`` value (an integer >= 1 or ``"minmax"``); when it is
+    not given, the command's default (``record_every_default``: ``run`` records ``minmax``)."""
+    every = getattr(args, "record_every", None)
+    if every is None:
+        every = getattr(args, "record_every_default", 1)
+    if every == "minmax":
+        return every
     if isinstance(every, bool) or not isinstance(every, int) or every < 1:
-        raise ConfigError("--record-every", f"must be an integer >= 1, got {every!r}")
+        raise ConfigError("--record-every", f"must be an integer >= 1 or 'minmax', got {every!r}")
     return every
 
 

@@ -29,6 +29,12 @@ from lcc_synth.recording.core import (
     vehicle_names,
     vehicle_widths,
 )
+from lcc_synth.recording.decimate import (
+    ROAD_BUCKET_S,
+    VIEWER_BUCKET_S,
+    event_rows,
+    minmax_rows,
+)
 
 
 def _record_events(rec, entity, t, aeb_on, collided, ctime, names, limit: int = 1000) -> None:
@@ -84,8 +90,12 @@ def record_simulation(
     metrics : mapping, optional
         The run's metrics (e.g. the ``--json`` shape of ``lcc-synth simulate``): scalars go into
         the per-controller and comparison tables, per-vehicle lists into a vehicle table.
-    decimate : int
-        Record every ``decimate``-th step (the last step is always recorded).
+    decimate : int or "minmax"
+        Record every ``decimate``-th step (the last step is always recorded), or ``"minmax"``:
+        each entity keeps its own rows of :func:`~lcc_synth.recording.decimate.minmax_rows`
+        (a 0.1 s grid, every visible peak and dip, the exact extremes) and full rate around
+        emergency braking, collisions and the CAV's jerk peaks
+        (:func:`~lcc_synth.recording.decimate.event_rows`).
     run : int
         Which batch member to record.
     mpc_history : optional
@@ -96,8 +106,11 @@ def record_simulation(
     str
         The entity prefix ``/<scenario>/<controller>``.
     """
-    if isinstance(decimate, bool) or not isinstance(decimate, int | np.integer) or decimate < 1:
-        raise ConfigError("decimate", f"must be an integer >= 1, got {decimate!r}")
+    minmax = decimate == "minmax"
+    if not minmax and (
+        isinstance(decimate, bool) or not isinstance(decimate, int | np.integer) or decimate < 1
+    ):
+        raise ConfigError("decimate", f"must be an integer >= 1 or 'minmax', got {decimate!r}")
     rr = _rr()
     t_all = np.asarray(result.t, dtype=np.float64)
     velocity = np.asarray(result.velocity)
@@ -113,40 +126,54 @@ def record_simulation(
     s = entity_name(scenario)
     c = entity_name(controller if controller is not None else result.controller)
     base = f"/{s}/{c}"
-    idx = _sample_indices(T, int(decimate))
-    t = t_all[idx]
-    tcol = _time_column(t)
     names = vehicle_names(m, n)
     colors = vehicle_colors(m, n)
     widths = vehicle_widths(m, n)
     label = [f"{c} {v}" for v in names]
+    vel_all = velocity[run]
+    acc_all = np.asarray(result.acceleration)[run]
+    aeb_on = np.asarray(result.aeb_active)[run].astype(bool)
+    collided = np.asarray(result.collided)[run]
+    ctime = np.asarray(result.collision_time)[run]
+    stride = _sample_indices(T, 1 if minmax else int(decimate))
+    dt_rec, forced = (float(t_all[1] - t_all[0]) if T > 1 else 1.0), None
+    if minmax and T > 1:
+        forced = event_rows(t_all, aeb_on, np.where(collided, ctime, np.nan), acc_all[:, cav])
+    kept: list[int] = []
 
-    vel = velocity[run, idx]
+    def rows(values: np.ndarray, bucket_s: float = VIEWER_BUCKET_S):
+        """``(rows, TimeColumn)`` of one entity (its own min/max rows, or the stride)."""
+        bucket = max(1, int(round(bucket_s / dt_rec)))
+        idx = minmax_rows(values, bucket, forced=forced) if minmax else stride
+        kept.append(len(idx))
+        return idx, _time_column(t_all[idx])
+
+    idx, tcol = rows(vel_all)
+    vel = vel_all[idx]
     _send_series(rec, f"{base}/velocity", tcol, vel, label, colors, widths)
-    _send_series(
-        rec,
-        f"{base}/spacing",
-        tcol,
-        np.asarray(result.spacing)[run, idx, 1:],
-        label[1:],
-        colors[1:],
-        widths[1:],
-    )
-    acc = np.asarray(result.acceleration)[run, idx]
-    _send_series(rec, f"{base}/acceleration", tcol, acc, label, colors, widths)
+    spacing = np.asarray(result.spacing)[run, :, 1:]
+    idx, tcol = rows(spacing)
+    _send_series(rec, f"{base}/spacing", tcol, spacing[idx], label[1:], colors[1:], widths[1:])
+    idx, tcol = rows(acc_all)
+    _send_series(rec, f"{base}/acceleration", tcol, acc_all[idx], label, colors, widths)
     state = _state(rec)
     u_color = state.color(base)  # one color per controller: u_cmd of all controllers overlaid
-    u_cmd = np.asarray(result.u_cmd)[run, idx, None]
-    _send_series(rec, f"{base}/cav/u_cmd", tcol, u_cmd, [f"{c} u_cmd"], [u_color], [2.0])
-    aeb = np.asarray(result.aeb_active)[run, idx].astype(np.float64)[:, None]
-    _send_series(rec, f"{base}/cav/aeb_active", tcol, aeb, [f"{c} AEB active"], [(214, 39, 40)])
+    u_all = np.asarray(result.u_cmd)[run, :, None]
+    idx, tcol = rows(u_all)
+    _send_series(rec, f"{base}/cav/u_cmd", tcol, u_all[idx], [f"{c} u_cmd"], [u_color], [2.0])
+    aeb = aeb_on.astype(np.float64)[:, None]
+    idx, tcol = rows(aeb)
+    red = [(214, 39, 40)]
+    _send_series(rec, f"{base}/cav/aeb_active", tcol, aeb[idx], [f"{c} AEB active"], red)
 
     # Road view (Fig. 11): x = position relative to the CAV, y = scaled velocity error.
-    pos = np.asarray(result.position)[run, idx]
+    pos = np.asarray(result.position)[run]
     v_star = float(np.asarray(result.v_star).reshape(-1)[run])
-    xy = np.empty((len(idx), nv, 2), dtype=np.float32)
-    xy[..., 0] = pos - pos[:, cav : cav + 1]
-    xy[..., 1] = ROAD_Y_SCALE * (vel - v_star)
+    xy_all = np.empty((T, nv, 2), dtype=np.float32)
+    xy_all[..., 0] = pos - pos[:, cav : cav + 1]
+    xy_all[..., 1] = ROAD_Y_SCALE * (vel_all - v_star)
+    idx, tcol = rows(xy_all.reshape(T, -1), ROAD_BUCKET_S)  # scrubbing / playback: 10 frames/s
+    xy = xy_all[idx]
     rec.log(
         f"{base}/road",
         rr.Points2D.from_fields(colors=colors, radii=[1.5] * nv, labels=names, show_labels=False),
@@ -172,9 +199,14 @@ def record_simulation(
     info = dict(getattr(result, "controller_info", {}) or {})
     stats = dict(getattr(result, "controller_stats", {}) or {})
     s_star = float(np.asarray(result.s_star).reshape(-1)[run])
+    how = (
+        f"min/max-preserving, {min(kept)}-{max(kept)} rows per entity"
+        if minmax
+        else f"every {decimate}"
+    )
     header = (
         f"# {c}\n\nscenario `{scenario}`, run {run} of {batch}; m = {m} ahead, n = {n} behind; "
-        f"v* = {_fmt(v_star)} m/s, s* = {_fmt(s_star)} m; {T} steps recorded every {decimate}.\n\n"
+        f"v* = {_fmt(v_star)} m/s, s* = {_fmt(s_star)} m; {T} steps recorded {how}.\n\n"
     )
     record_text(
         rec,
@@ -184,10 +216,7 @@ def record_simulation(
         + "\n"
         + _mapping_markdown("run statistics", stats),
     )
-    collided = np.asarray(result.collided)[run]
-    ctime = np.asarray(result.collision_time)[run]
     crash = [f"{names[i]} at t = {_fmt(float(ctime[i]))} s" for i in np.flatnonzero(collided)]
-    aeb_on = np.asarray(result.aeb_active)[run].astype(bool)
     episodes = int(np.count_nonzero(aeb_on[1:] & ~aeb_on[:-1]) + bool(aeb_on[0])) if T else 0
     _record_events(rec, f"{base}/events", t_all, aeb_on, collided, ctime, names)
     state.runs[(s, c)] = _RunFacts(

@@ -83,6 +83,8 @@ MPC = Table(
          None, lo=0),
      Key("fallback_gains_file", "any", "Static fallback gain file (a path); absent: the "
          "paper's gain.", None),
+     Key("fallback", "string", "Another controller of the file (static, or h2 once "
+         "synthesised) whose gain is the static fallback; not with fallback_gains_file.", None),
      Key("weights", "table", "Stage cost: [controllers.NAME.weights].", {}),
      Key("constraints", "table", "Bounds: [controllers.NAME.constraints].", {}),
      Key("prediction", "table", "Prediction model: [controllers.NAME.prediction].", {}),

@@ -9,6 +9,9 @@ from dataclasses import fields
 from lcc_synth.models.hdv import IDM, OVM
 from lcc_synth.schema.spec import REQUIRED, Derived, Key, Table
 
+#: appended to the meaning of the settings a sweep may draw per scenario
+_SWEEP_RANGE = " A sweep may give [lo, hi]: each scenario draws U[lo, hi]."
+
 __all__ = ["TABLES"]
 
 _SIM = ("simulate", "sweep")
@@ -119,7 +122,8 @@ SCENARIO = Table(
         Key("spacing_reference", "string", "Spacing errors the controllers see: s* for "
             "everyone, or each HDV's own equilibrium spacing.", "nominal",
             choices=("nominal", "own_equilibrium")),
-        Key("hdv_accel_noise", "number", "Std of white acceleration noise on every HDV.", 0.0,
+        Key("hdv_accel_noise", "number",
+            "Std of white acceleration noise on every HDV." + _SWEEP_RANGE, 0.0,
             lo=0.0, unit="m/s²"),
         Key("heterogeneity", "table", "Per-HDV parameter draws: [scenario.heterogeneity].", {}),
         Key("delay", "table", "HDV reaction delay: [scenario.delay].", {}),
@@ -167,16 +171,16 @@ V2V = Table(
     _SIM,
     (
         Key("loss_rate", "number", "Per-link packet-loss probability, or a number list with one "
-            "entry per vehicle head..tail (m + n + 2; the CAV's is ignored).", 0.0,
-            lo=0.0, hi=1.0),
-        Key("latency", "number", "Age of received values (rounded to steps).", 0.0, lo=0.0,
-            unit="s"),
-        Key("spacing_noise", "number", "Std of noise on received spacings.", 0.0, lo=0.0,
-            unit="m"),
-        Key("velocity_noise", "number", "Std of noise on received velocities.", 0.0, lo=0.0,
-            unit="m/s"),
-        Key("position_noise", "number", "Std of noise on received positions.", 0.0, lo=0.0,
-            unit="m"),
+            "entry per vehicle head..tail (m + n + 2; the CAV's is ignored)." + _SWEEP_RANGE,
+            0.0, lo=0.0, hi=1.0),
+        Key("latency", "number", "Age of received values (rounded to steps)." + _SWEEP_RANGE,
+            0.0, lo=0.0, unit="s"),
+        Key("spacing_noise", "number", "Std of noise on received spacings." + _SWEEP_RANGE,
+            0.0, lo=0.0, unit="m"),
+        Key("velocity_noise", "number", "Std of noise on received velocities." + _SWEEP_RANGE,
+            0.0, lo=0.0, unit="m/s"),
+        Key("position_noise", "number", "Std of noise on received positions." + _SWEEP_RANGE,
+            0.0, lo=0.0, unit="m"),
     ),
 )
 

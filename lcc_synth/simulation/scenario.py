@@ -21,7 +21,10 @@ from lcc_synth.problem import System, check_range
 from lcc_synth.schema import declared
 from lcc_synth.simulation.perturbations import Perturbation, perturbation_from_table
 
-__all__ = ["MODEL_PARAMS", "V2V", "Scenario", "Draws", "scenario_from"]
+__all__ = [
+    "MODEL_PARAMS", "RANGE_FIELDS", "V2V", "Scenario", "Draws", "draw_ranges", "scenario_from",
+    "scenario_variant", "split_ranges",
+]  # fmt: skip
 
 #: Parameter order of each HDV model inside the compiled loop.
 MODEL_PARAMS = {
@@ -349,6 +352,80 @@ class Draws:
     hdv_values: dict[str, np.ndarray]
     delay: np.ndarray
     initial_spacing: np.ndarray
+
+
+#: Settings a sweep may draw per scenario (``[lo, hi]`` in ``[scenario]``: U[lo, hi]), with
+#: their allowed ranges; each has its own random stream ``(seed, i, tag)``.
+def _bounds(key, tag: int) -> tuple[float, float, int]:
+    return (float(key.lo), np.inf if key.hi is None else float(key.hi), tag)
+
+
+_SC, _V2V = declared("scenario"), declared("scenario.v2v")
+RANGE_FIELDS = {  # bounds from the schema (lcc_synth.schema), random-stream tags
+    "hdv_accel_noise": _bounds(_SC.key("hdv_accel_noise"), 1),
+    "v2v.loss_rate": _bounds(_V2V.key("loss_rate"), 2),
+    "v2v.latency": _bounds(_V2V.key("latency"), 3),
+    "v2v.spacing_noise": _bounds(_V2V.key("spacing_noise"), 4),
+    "v2v.velocity_noise": _bounds(_V2V.key("velocity_noise"), 5),
+    "v2v.position_noise": _bounds(_V2V.key("position_noise"), 6),
+}
+
+
+def split_ranges(
+    table: Mapping[str, Any], n_vehicles: int
+) -> tuple[dict[str, Any], dict[str, tuple[float, float]]]:
+    """A ``[scenario]`` table with every ``[lo, hi]`` of :data:`RANGE_FIELDS` replaced by
+    ``lo`` (so the table validates as usual), and those ranges ``{dotted key: (lo, hi)}``.
+
+    A list of ``n_vehicles`` loss rates stays a per-vehicle list (not a range)."""
+    out = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in dict(table).items()}
+    ranges: dict[str, tuple[float, float]] = {}
+    for key, (lo, hi, _) in RANGE_FIELDS.items():
+        parent, _, leaf = key.rpartition(".")
+        t = out.get(parent) if parent else out
+        if not isinstance(t, dict) or not isinstance(t.get(leaf), list):
+            continue
+        value = t[leaf]
+        if key == "v2v.loss_rate" and len(value) == n_vehicles and n_vehicles != 2:
+            continue
+        field_name = f"scenario.{key}"
+        if len(value) != 2 or not all(
+            isinstance(x, int | float) and not isinstance(x, bool) for x in value
+        ):
+            raise ConfigError(field_name, f"a range is [lo, hi] (two numbers), got {value!r}")
+        a, b = (float(x) for x in value)
+        if not (np.isfinite(a) and np.isfinite(b) and lo <= a <= b <= hi):
+            raise ConfigError(
+                field_name, f"range [lo, hi] needs {lo:g} <= lo <= hi <= {hi:g}, got {value!r}"
+            )
+        ranges[key] = (a, b)
+        t[leaf] = a
+    return out, ranges
+
+
+def draw_ranges(ranges: Mapping[str, tuple[float, float]], seed: int, index: int):
+    """Scenario ``index``'s value of every range, U[lo, hi], from ``(seed, index)`` only."""
+    out = {}
+    for key, (a, b) in ranges.items():
+        rng = np.random.default_rng([int(seed), int(index), RANGE_FIELDS[key][2]])
+        out[key] = float(rng.uniform(a, b)) if b > a else a
+    return out
+
+
+def scenario_variant(sc: Scenario, ranges: Mapping[str, tuple[float, float]], index: int):
+    """Study scenario ``index`` alone (``batch = 1``, ``first_index = index``) with its drawn
+    :func:`draw_ranges` values (the V2V latency is then rounded to steps by the simulator)."""
+    from dataclasses import replace
+
+    drawn = draw_ranges(ranges, sc.seed, index)
+    v2v = {k.split(".", 1)[1]: v for k, v in drawn.items() if k.startswith("v2v.")}
+    return replace(
+        sc,
+        batch=1,
+        first_index=int(index),
+        hdv_accel_noise=drawn.get("hdv_accel_noise", sc.hdv_accel_noise),
+        v2v=replace(sc.v2v, **v2v),
+    )
 
 
 # --------------------------------------------------------------------------------------------
