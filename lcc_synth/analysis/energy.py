@@ -22,6 +22,30 @@ method and an adaptive quadrature of eq. (15) (``scipy.integrate.quad_vec``) agr
 ``lambda_min`` to 1e-5 relative at n = 5, t = 20 s (cond 3.5e13, just inside the limit); at
 n = 5, t = 10 s (cond 1.3e16, refused) they differ by 2 %, and from n = 7 the computed
 ``lambda_min`` of both is negative.
+
+Beyond float64 (Fig. 5 to n = 30)
+---------------------------------
+The paper stops at small n for this reason. :func:`energy_reports_mp` (and
+``energy_vs_size(method="mp")``) compute the same Gramian in multiprecision (mpmath): the
+float64 ``A``, ``B`` taken exactly, the Taylor series of ``e^{Ah}`` and of ``W(h)`` on a short
+step (Paterson-Stockmeyer; the Krylov vectors ``A^i B``), exact doublings and sums of positive
+semidefinite terms as above, eigenvalues by ``mpmath.eigsy``, all at ``dps`` working digits.
+Round-off in ``W`` is then ``10^-dps ||W||`` and ``lambda_min`` keeps about
+``dps - log10(cond)`` digits, so the working precision is raised until it exceeds
+``log10(cond) + digits + MP_GUARD``; the report states ``digits = dps - log10(cond) - 1``.
+A square-root (Cholesky-factor) Gramian in float64 would keep ``W`` positive definite but not
+``lambda_min`` below ``eps * lambda_max``, which is the whole difficulty here.
+Measured on FD-LCC, paper's parameters, t = 10 / 20 / 30 s (``benchmarks/bench_fig5_digits.py``):
+cond(W) grows ~1e5 per HDV, to 3.0e153 at n = 30, t = 10 s (``lambda_min`` 1.4e-151); the
+working precision reaches 176 digits. Against a second computation at 50 more digits, every
+``lambda_min`` and ``tr(W^-1)`` for n = 1..30 agrees to >= 24 significant digits (the stated
+estimate is 1.6-6.1 digits conservative), so every float64 value returned is correct to the
+last digit. At a fixed 50 digits the agreement is ``50 - log10(cond) + 3`` (15.7 digits at
+n = 10, t = 10 s; none from n = 14). The float64 values agree with these to 13 digits at n = 1
+and 4.6 at n = 5 (t = 20 s, cond 3.5e13), i.e. ``-log10(eps * cond)``. Cost: the whole sweep
+n = 1..30, three horizons (which share one step), about 2 min of CPU here (n = 30 alone
+~20 s). A ``lambda_min`` still at round-off at ``MP_MAX_DPS = 600`` digits is refused as
+singular (an uncontrollable model).
 """
 
 from __future__ import annotations
@@ -48,6 +72,7 @@ __all__ = [
     "min_energy_input",
     "gramians_mp",
     "energy_reports_mp",
+    "MP_MAX_DPS",
 ]
 
 COND_LIMIT = 0.01 / float(np.finfo(float).eps)
@@ -68,13 +93,23 @@ class NumericallySingularError(ValueError):
         Horizon (s).
     """
 
-    def __init__(self, condition: float, limit: float, n_states: int, n: int, t: float):
+    def __init__(
+        self, condition: float, limit: float, n_states: int, n: int, t: float,
+        dps: int | None = None,
+    ):  # fmt: skip
         self.condition = condition
         self.limit = limit
         self.n_states = n_states
         self.n = n
         self.t = t
         size = f"n = {n} ({n_states} states)" if n >= 0 else f"{n_states} states"
+        if dps is not None:  # multiprecision (energy_reports_mp)
+            super().__init__(
+                f"controllability Gramian W(t = {t:g} s) is singular at {size}: its smallest "
+                f"eigenvalue stays at the round-off of {dps} digits (the system is "
+                "uncontrollable)"
+            )
+            return
         super().__init__(
             f"controllability Gramian W(t = {t:g} s) is numerically singular at {size}: "
             f"cond(W) = {condition:.3g} exceeds the limit {limit:.3g} = 0.01 / eps; "
@@ -239,6 +274,7 @@ def energy_report(model: LCCModel, t: float) -> EnergyReport:
 
 
 MP_GUARD = 10  # working digits kept beyond log10(cond) + the digits asked for
+MP_MAX_DPS = 600  # a lambda_min still at round-off at this precision (cond > ~1e595): singular
 
 
 def _mp_taylor_step(Am, Bm, norm: float, t: float, dps: int):
@@ -254,10 +290,10 @@ def _mp_taylor_step(Am, Bm, norm: float, t: float, dps: int):
     nx, nu = Bm.rows, Bm.cols
     k = max(0, int(np.ceil(np.log2(max(norm * t, 1.0))))) + 4
     h = mp.mpf(t) / 2**k
-    theta, term, N = norm * t / 2**k, 1.0, 0
-    while term >= 10.0 ** (-dps - 2):  # truncation below the working precision
+    theta, log_term, N = norm * t / 2**k, 0.0, 0
+    while log_term >= -dps - 2 and theta > 0:  # truncation below the working precision
         N += 1
-        term *= theta / N
+        log_term += np.log10(theta / N)
     X = Am * h
     q = max(1, int(np.ceil(np.sqrt(N + 1))))
     powers = [mp.eye(nx), X]
@@ -359,7 +395,8 @@ def energy_reports_mp(model: LCCModel, horizons, digits: int = 10, dps: int | No
     Raises
     ------
     NumericallySingularError
-        When ``W`` stays singular at 2000 digits (an uncontrollable model: general LCC, CCC).
+        When ``lambda_min`` is still round-off at ``MP_MAX_DPS = 600`` digits (an uncontrollable
+        model: general LCC with m > 0, CCC; a controllable one would need cond(W) > 1e595).
     """
     import mpmath as mp
 
@@ -371,9 +408,11 @@ def energy_reports_mp(model: LCCModel, horizons, digits: int = 10, dps: int | No
         with mp.workdps(work):
             eig = [sorted(mp.eigsy(W, eigvals_only=True)) for W in Ws]
             bad = any(lam[0] <= 0 for lam in eig)
-            need = 0 if bad else max(
-                float(mp.log10(lam[-1] / lam[0])) for lam in eig
-            ) + digits + MP_GUARD  # fmt: skip
+            logc = np.inf if bad else max(float(mp.log10(lam[-1] / lam[0])) for lam in eig)
+            need = logc + digits + MP_GUARD
+            if logc > work - 5 and work >= MP_MAX_DPS:  # lambda_min at round-off level
+                raise NumericallySingularError(np.inf, np.inf, model.nx, model.n,
+                                               float(horizons[0]), dps=work)  # fmt: skip
             if not bad and work >= need:
                 reports = []
                 for t, lam in zip(horizons, eig, strict=True):
@@ -386,9 +425,7 @@ def energy_reports_mp(model: LCCModel, horizons, digits: int = 10, dps: int | No
                         digits=float(work - mp.log10(cond) - 1),
                     ))  # fmt: skip
                 return reports
-        if work >= 2000:
-            raise NumericallySingularError(np.inf, np.inf, model.nx, model.n, float(horizons[0]))
-        work = min(2000, max(2 * work if bad else int(np.ceil(need)), work + 10))
+        work = min(MP_MAX_DPS, max(2 * work if bad else int(np.ceil(min(need, 1e9))), work + 10))
 
 
 def _state(model: LCCModel, x, name: str) -> np.ndarray:
