@@ -94,14 +94,18 @@ def plot_gamma_curves(curves, omega, path: str | Path, title: str | None = None)
     plt = _pyplot()
     path = Path(path)
     fig, ax = plt.subplots(figsize=(6.5, 4.2 + 0.18 * len(curves)), constrained_layout=True)
-    colors = controller_colors(curves)
+    # "name @ setting" labels (e.g. a V2V latency) keep the colour of "name", dotted
+    base = {label: label.split(" @ ")[0] for label in curves}
+    colors = controller_colors(dict.fromkeys(base.values()))
     for label, (mag, rep) in curves.items():
         verdict = verdict_text(rep.verdict)
-        text = f"{display_name(label)}: peak {rep.gamma_peak:.3f} ({verdict})"
+        name = " @ ".join([display_name(base[label]), *label.split(" @ ")[1:]])
+        text = f"{name}: peak {rep.gamma_peak:.3f} ({verdict})"
+        kw = {"color": colors[base[label]], "label": text, "ls": ":" if " @ " in label else "-"}
         if hasattr(rep, "ratio"):  # measured in the simulator (not linear): points
-            ax.semilogx(rep.omega, rep.ratio, "o--", ms=4, color=colors[label], label=text)
+            ax.semilogx(rep.omega, rep.ratio, marker="o", ms=4, **kw)
         else:
-            ax.semilogx(omega, mag, color=colors[label], label=text)
+            ax.semilogx(omega, mag, lw=1.6, **kw)
     ax.axhline(1.0, color="k", lw=0.8, ls="--")
     ax.set_xlabel("ω (rad/s)")
     ax.set_ylabel("|Γ(jω)|, tail / head velocity (m/s per m/s)")
@@ -176,6 +180,7 @@ def plot_region_maps(maps, path: str | Path, baselines=None, titles=None, ncols:
                      fontsize=9)
         ax.axhline(0, color="k", lw=0.4)
         ax.axvline(0, color="k", lw=0.4)
+        ax.grid(False)
     for ax in list(axes.flat)[len(names):]:
         ax.axis("off")
     handles = [
