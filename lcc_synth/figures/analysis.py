@@ -232,7 +232,7 @@ def plot_pareto_front(pareto, h2_full: float, path: str | Path, title: str | Non
     ax.set_xlabel("vehicles heard besides the CAV (count)")
     ax.set_ylabel("true closed-loop H2 norm, weighted (–)")
     ax.xaxis.get_major_locator().set_params(integer=True)
-    ax.margins(y=0.12)  # room for the annotations above the points
+    ax.margins(x=0.08, y=0.2)  # room for the annotations above and right of the points
     _legend_below(fig, [ax], ncols=3)
     ax.set_title(title or "Sparsity-promoting H2 design")
     return _save(fig, path, dpi=120)
