@@ -101,8 +101,10 @@ def plot_gamma_curves(curves, omega, path: str | Path, title: str | None = None)
         verdict = verdict_text(rep.verdict)
         name = " @ ".join([display_name(base[label]), *label.split(" @ ")[1:]])
         text = f"{name}: peak {rep.gamma_peak:.3f} ({verdict})"
-        kw = {"color": colors[base[label]], "label": text, "ls": ":" if " @ " in label else "-"}
-        if hasattr(rep, "ratio"):  # measured in the simulator (not linear): points
+        measured = hasattr(rep, "ratio")  # measured in the simulator (not linear): points
+        ls = ":" if " @ " in label else ("--" if measured else "-")
+        kw = {"color": colors[base[label]], "label": text, "ls": ls}
+        if measured:
             ax.semilogx(rep.omega, rep.ratio, marker="o", ms=4, **kw)
         else:
             ax.semilogx(omega, mag, lw=1.6, **kw)
