@@ -288,10 +288,10 @@ def plot_sweep_distributions(samples, path: str | Path, metrics=None, title: str
         for c in names:
             x = np.asarray(samples[c][key], dtype=float)
             data.append(x[np.isfinite(x)])
-        ax.boxplot(data, whis=(5, 95), showfliers=False,
+        ax.boxplot(data, whis=(5, 95), showfliers=False, medianprops={"color": "k"},
                    tick_labels=[display_name(c) for c in names])  # fmt: skip
         means = [d.mean() if d.size else np.nan for d in data]
-        ax.plot(np.arange(1, len(names) + 1), means, "o", color="k", ms=4)
+        ax.plot(np.arange(1, len(names) + 1), means, "o", color=PALETTE.bound, ms=4)
         ax.set_title(metrics[key], fontsize=9)
         ax.grid(False, axis="x")
         ax.tick_params(axis="x", labelrotation=20, labelsize=8)
