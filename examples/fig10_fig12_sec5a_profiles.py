@@ -34,9 +34,9 @@ def main() -> int:
         print(f"{name:<20} {row}")
     cases = {k: v for k, v in res.items() if k.startswith("case_")}
     a = plot_case_grid(cases, out / "sec5a_fig10_velocity.png", "velocity",
-                       title="Fig. 10: velocity, head sine 0.2 m/s^2 from t = 20 s")  # fmt: skip
+                       title="Fig. 10: velocity, head sine 0.2 m/s² from t = 20 s")  # fmt: skip
     b = plot_case_grid(cases, out / "sec5a_fig12_spacing.png", "spacing",
-                       title="Fig. 12: spacing")  # fmt: skip
+                       title="Fig. 12: spacing, head sine 0.2 m/s² from t = 20 s")  # fmt: skip
     print(f"wrote {a}\nwrote {b}")
     return 0
 

@@ -22,6 +22,30 @@ method and an adaptive quadrature of eq. (15) (``scipy.integrate.quad_vec``) agr
 ``lambda_min`` to 1e-5 relative at n = 5, t = 20 s (cond 3.5e13, just inside the limit); at
 n = 5, t = 10 s (cond 1.3e16, refused) they differ by 2 %, and from n = 7 the computed
 ``lambda_min`` of both is negative.
+
+Beyond float64 (Fig. 5 to n = 30)
+---------------------------------
+The paper stops at small n for this reason. :func:`energy_reports_mp` (and
+``energy_vs_size(method="mp")``) compute the same Gramian in multiprecision (mpmath): the
+float64 ``A``, ``B`` taken exactly, the Taylor series of ``e^{Ah}`` and of ``W(h)`` on a short
+step (Paterson-Stockmeyer; the Krylov vectors ``A^i B``), exact doublings and sums of positive
+semidefinite terms as above, eigenvalues by ``mpmath.eigsy``, all at ``dps`` working digits.
+Round-off in ``W`` is then ``10^-dps ||W||`` and ``lambda_min`` keeps about
+``dps - log10(cond)`` digits, so the working precision is raised until it exceeds
+``log10(cond) + digits + MP_GUARD``; the report states ``digits = dps - log10(cond) - 1``.
+A square-root (Cholesky-factor) Gramian in float64 would keep ``W`` positive definite but not
+``lambda_min`` below ``eps * lambda_max``, which is the whole difficulty here.
+Measured on FD-LCC, paper's parameters, t = 10 / 20 / 30 s (``benchmarks/bench_fig5_digits.py``):
+cond(W) grows ~1e5 per HDV, to 3.0e153 at n = 30, t = 10 s (``lambda_min`` 1.4e-151); the
+working precision reaches 176 digits. Against a second computation at 50 more digits, every
+``lambda_min`` and ``tr(W^-1)`` for n = 1..30 agrees to >= 24 significant digits (the stated
+estimate is 1.6-6.1 digits conservative), so every float64 value returned is correct to the
+last digit. At a fixed 50 digits the agreement is ``50 - log10(cond) + 3`` (15.7 digits at
+n = 10, t = 10 s; none from n = 14). The float64 values agree with these to 13 digits at n = 1
+and 4.6 at n = 5 (t = 20 s, cond 3.5e13), i.e. ``-log10(eps * cond)``. Cost: the whole sweep
+n = 1..30, three horizons (which share one step), about 2 min of CPU here (n = 30 alone
+~20 s). A ``lambda_min`` still at round-off at ``MP_MAX_DPS = 600`` digits is refused as
+singular (an uncontrollable model).
 """
 
 from __future__ import annotations
@@ -47,6 +71,9 @@ __all__ = [
     "energy_report",
     "min_energy",
     "min_energy_input",
+    "gramians_mp",
+    "energy_reports_mp",
+    "MP_MAX_DPS",
 ]
 
 COND_LIMIT = 0.01 / float(np.finfo(float).eps)
@@ -67,13 +94,23 @@ class NumericallySingularError(ValueError):
         Horizon (s).
     """
 
-    def __init__(self, condition: float, limit: float, n_states: int, n: int, t: float):
+    def __init__(
+        self, condition: float, limit: float, n_states: int, n: int, t: float,
+        dps: int | None = None,
+    ):  # fmt: skip
         self.condition = condition
         self.limit = limit
         self.n_states = n_states
         self.n = n
         self.t = t
         size = f"n = {n} ({n_states} states)" if n >= 0 else f"{n_states} states"
+        if dps is not None:  # multiprecision (energy_reports_mp)
+            super().__init__(
+                f"controllability Gramian W(t = {t:g} s) is singular at {size}: its smallest "
+                f"eigenvalue stays at the round-off of {dps} digits (the system is "
+                "uncontrollable)"
+            )
+            return
         super().__init__(
             f"controllability Gramian W(t = {t:g} s) is numerically singular at {size}: "
             f"cond(W) = {condition:.3g} exceeds the limit {limit:.3g} = 0.01 / eps; "
@@ -163,6 +200,12 @@ class EnergyReport(Record):
         ``lambda_max / lambda_min``.
     condition_limit : float
         The limit beyond which the report would have been refused.
+    method : {"double", "mp"}
+        float64 (:func:`energy_report`) or multiprecision (:func:`energy_reports_mp`).
+    digits : float
+        Estimated correct significant digits of ``lambda_min`` (and so of ``tr(W^{-1})``,
+        dominated by ``1 / lambda_min``): ``-log10(eps * cond)`` in float64,
+        ``dps - log10(cond) - 1`` at ``dps`` working digits (module docstring).
     """
 
     kind: str
@@ -174,6 +217,8 @@ class EnergyReport(Record):
     trace_inv: float
     condition: float
     condition_limit: float
+    method: str = "double"
+    digits: float = float("nan")
 
     def as_dict(self) -> dict:
         """JSON-serialisable dict."""
@@ -187,6 +232,8 @@ class EnergyReport(Record):
             "trace_inv": float(self.trace_inv),
             "condition": float(self.condition),
             "condition_limit": float(self.condition_limit),
+            "method": self.method,
+            "digits": float(self.digits),
         }
 
 
@@ -223,7 +270,163 @@ def energy_report(model: LCCModel, t: float) -> EnergyReport:
         trace_inv=float(np.sum(1.0 / lam)),
         condition=float(lam[-1] / lam[0]),
         condition_limit=condition_limit(model.nx),
+        digits=float(-np.log10(np.finfo(float).eps * lam[-1] / lam[0])),
     )
+
+
+MP_GUARD = 10  # working digits kept beyond log10(cond) + the digits asked for
+MP_MAX_DPS = 600  # a lambda_min still at round-off at this precision (cond > ~1e595): singular
+
+
+def _mp_taylor_step(Am, Bm, norm: float, t: float, dps: int):
+    """``(W(t), e^{At})`` in mpmath at ``dps`` digits (call inside ``mp.workdps``).
+
+    ``h = t / 2^k`` with ``||A h||_1 <= 2^-4``; ``e^{Ah}`` by its Taylor series evaluated with
+    Paterson-Stockmeyer (about ``2 sqrt(N)`` products for ``N`` terms); ``W(h)`` exactly from the
+    same series, ``W(h) = sum_ij A^i B B^T A^T^j h^(i+j+1) / (i! j! (i+j+1))`` on the Krylov
+    vectors ``A^i B``; then ``k`` exact doublings as in :func:`gramian`.
+    """
+    import mpmath as mp
+
+    nx, nu = Bm.rows, Bm.cols
+    k = max(0, int(np.ceil(np.log2(max(norm * t, 1.0))))) + 4
+    h = mp.mpf(t) / 2**k
+    theta, log_term, N = norm * t / 2**k, 0.0, 0
+    while log_term >= -dps - 2 and theta > 0:  # truncation below the working precision
+        N += 1
+        log_term += np.log10(theta / N)
+    X = Am * h
+    q = max(1, int(np.ceil(np.sqrt(N + 1))))
+    powers = [mp.eye(nx), X]
+    for _ in range(q - 1):
+        powers.append(powers[-1] * X)
+    inv_fact = [1 / mp.factorial(i) for i in range(N + 1)]
+    E = mp.zeros(nx, nx)
+    for start in reversed(range(0, N + 1, q)):  # Horner in X^q over blocks of q terms
+        block = mp.zeros(nx, nx)
+        for i in range(start, min(start + q, N + 1)):
+            block += powers[i - start] * inv_fact[i]
+        E = block if start == N // q * q else block + E * powers[q]
+    K = mp.zeros(nx, (N + 1) * nu)
+    v = Bm
+    for i in range(N + 1):
+        for r in range(nx):
+            for c in range(nu):
+                K[r, i * nu + c] = v[r, c] * h**i * inv_fact[i]
+        v = Am * v
+    C = mp.zeros((N + 1) * nu, (N + 1) * nu)
+    for i in range(N + 1):
+        for j in range(N + 1):
+            for c in range(nu):
+                C[i * nu + c, j * nu + c] = h / (i + j + 1)
+    W = K * C * K.T
+    for _ in range(k):
+        W = W + E * W * E.T
+        E = E * E
+    return W, E
+
+
+def gramians_mp(A: np.ndarray, B: np.ndarray, horizons, dps: int) -> list:
+    """``W(t)`` of eq. (15) in multiprecision (mpmath) at every horizon, ``dps`` digits.
+
+    ``A`` and ``B`` are taken as exact binary numbers (the float64 model), so the result is the
+    Gramian of the same matrices that :func:`gramian` uses, without its round-off. The smallest
+    horizon is computed as in :func:`gramian` (series on a short step, then exact doublings); a
+    later horizon adds ``W(t_2) = W(t_1) + e^{A t_1} W(t_2 - t_1) e^{A^T t_1}`` (positive
+    semidefinite terms only; an increment already computed is reused).
+
+    Parameters
+    ----------
+    A : (nx, nx) array
+    B : (nx, nu) array
+    horizons : sequence of float
+        Horizons (s), > 0.
+    dps : int
+        Working decimal digits (>= 15).
+
+    Returns
+    -------
+    list of mpmath.matrix, in the order of ``horizons``.
+    """
+    import mpmath as mp
+
+    if isinstance(dps, bool) or not isinstance(dps, int) or dps < 15:
+        raise ConfigError("dps", f"must be an integer >= 15 (decimal digits), got {dps!r}")
+    ts = [_check_t(t) for t in horizons]
+    A = np.asarray(A, dtype=float)
+    B = np.asarray(B, dtype=float).reshape(A.shape[0], -1)
+    norm = float(np.linalg.norm(A, 1))
+    out: dict[float, object] = {}
+    with mp.workdps(dps):
+        Am, Bm = mp.matrix(A.tolist()), mp.matrix(B.tolist())
+        steps: dict[float, tuple] = {}
+        prev_t, W, E = 0.0, None, None
+        for t in sorted(set(ts)):
+            d = t - prev_t
+            if d not in steps:
+                steps[d] = _mp_taylor_step(Am, Bm, norm, d, dps)
+            Wd, Ed = steps[d]
+            W, E = (Wd, Ed) if W is None else (W + E * Wd * E.T, E * Ed)
+            out[t], prev_t = W, t
+    return [out[t] for t in ts]
+
+
+def energy_reports_mp(model: LCCModel, horizons, digits: int = 10, dps: int | None = None):
+    """:func:`energy_report` in multiprecision: Fig. 5 beyond the float64 limit.
+
+    Works at ``dps`` digits (default ``30 + digits`` to start), raised until every horizon has
+    ``dps >= log10(cond(W)) + digits + MP_GUARD``; eigenvalues by ``mpmath.eigsy`` at the same
+    precision. Never refuses: a controllable model only needs more digits.
+
+    Parameters
+    ----------
+    model : LCCModel
+    horizons : sequence of float
+        Horizons ``t`` (s).
+    digits : int
+        Correct significant digits wanted for ``lambda_min`` and ``tr(W^{-1})`` (1..100).
+    dps : int, optional
+        First working precision to try (e.g. from a smaller system).
+
+    Returns
+    -------
+    list of EnergyReport (``method = "mp"``; ``digits`` the estimate ``dps - log10(cond) - 1``),
+    in the order of ``horizons``.
+
+    Raises
+    ------
+    NumericallySingularError
+        When ``lambda_min`` is still round-off at ``MP_MAX_DPS = 600`` digits (an uncontrollable
+        model: general LCC with m > 0, CCC; a controllable one would need cond(W) > 1e595).
+    """
+    import mpmath as mp
+
+    if isinstance(digits, bool) or not isinstance(digits, int) or not 1 <= digits <= 100:
+        raise ConfigError("digits", f"must be an integer in 1..100, got {digits!r}")
+    work = 30 + digits if dps is None else max(int(dps), 15)
+    while True:
+        Ws = gramians_mp(model.A, model.B, horizons, work)
+        with mp.workdps(work):
+            eig = [sorted(mp.eigsy(W, eigvals_only=True)) for W in Ws]
+            bad = any(lam[0] <= 0 for lam in eig)
+            logc = np.inf if bad else max(float(mp.log10(lam[-1] / lam[0])) for lam in eig)
+            need = logc + digits + MP_GUARD
+            if logc > work - 5 and work >= MP_MAX_DPS:  # lambda_min at round-off level
+                raise NumericallySingularError(np.inf, np.inf, model.nx, model.n,
+                                               float(horizons[0]), dps=work)  # fmt: skip
+            if not bad and work >= need:
+                reports = []
+                for t, lam in zip(horizons, eig, strict=True):
+                    cond = lam[-1] / lam[0]
+                    reports.append(EnergyReport(
+                        kind=model.kind, n=model.n, n_states=model.nx, t=float(t),
+                        lambda_min=float(lam[0]), lambda_max=float(lam[-1]),
+                        trace_inv=float(mp.fsum(1 / x for x in lam)), condition=float(cond),
+                        condition_limit=float("inf"), method="mp",
+                        digits=float(work - mp.log10(cond) - 1),
+                    ))  # fmt: skip
+                return reports
+        work = min(MP_MAX_DPS, max(2 * work if bad else int(np.ceil(min(need, 1e9))), work + 10))
 
 
 def _state(model: LCCModel, x, name: str) -> np.ndarray:
@@ -313,6 +516,8 @@ def energy_vs_size(
     horizons=(10.0, 20.0, 30.0),
     n_max: int = 30,
     kind: str = "fd_lcc",
+    method: str = "double",
+    digits: int = 10,
 ) -> EnergySweep:
     """Fig. 5: ``lambda_min(W(t))`` and ``tr(W(t)^{-1})`` for ``n = 1..n_max`` HDVs behind.
 
@@ -329,6 +534,11 @@ def energy_vs_size(
         Largest size tried.
     kind : {"fd_lcc", "cf_lcc"}
         Model family (the paper uses FD-LCC).
+    method : {"double", "mp"}
+        float64 (:func:`energy_report`, stops at the first singular size, as in the paper) or
+        multiprecision (:func:`energy_reports_mp`, every size to ``n_max``).
+    digits : int
+        Significant digits wanted with ``method = "mp"``.
     """
     from lcc_synth.models.linear import build_model
 
@@ -336,8 +546,25 @@ def energy_vs_size(
         raise ConfigError("kind", f"must be 'fd_lcc' or 'cf_lcc' (controllable), got {kind!r}")
     if isinstance(n_max, bool) or not isinstance(n_max, int) or n_max < 1:
         raise ConfigError("n_max", f"must be an integer >= 1, got {n_max!r}")
+    if method not in ("double", "mp"):
+        raise ConfigError("method", f"must be 'double' or 'mp', got {method!r}")
     reports: dict[float, list[EnergyReport]] = {}
     singular: dict[float, NumericallySingularError | None] = {}
+    if method == "mp":
+        ts = [_check_t(t) for t in horizons]
+        reports = {t: [] for t in ts}
+        singular = dict.fromkeys(ts)
+        logc: list[float] = []
+        for n in range(1, n_max + 1):
+            # start from the precision the last sizes needed, extrapolated (log10 cond ~ linear)
+            guess = None
+            if len(logc) >= 2:
+                guess = int(np.ceil(2 * logc[-1] - logc[-2])) + digits + MP_GUARD + 2
+            batch = energy_reports_mp(build_model(kind, 0, n, coefficients), ts, digits, guess)
+            for t, rep in zip(ts, batch, strict=True):
+                reports[t].append(rep)
+            logc.append(max(np.log10(r.condition) for r in batch))
+        return EnergySweep(reports, singular)
     for t in horizons:
         t = _check_t(t)
         reports[t], singular[t] = [], None

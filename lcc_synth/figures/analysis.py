@@ -1,0 +1,240 @@
+"""Figures of the linear analysis and synthesis: control energy (Fig. 5), |Gamma| curves
+(Fig. 9), string-stable regions (Figs. 7, 8) and the sparsity Pareto front (house style:
+:mod:`.style`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from lcc_synth.figures.style import (
+    PALETTE,
+    _legend_below,
+    _pyplot,
+    _save,
+    _styled,
+    controller_colors,
+    display_name,
+)
+
+
+@_styled
+def plot_control_energy(sweep, path: str | Path, reference=None) -> Path:
+    """Fig. 5: ``lambda_min(W(t))`` and ``tr(W(t)^{-1})`` against the number of HDVs ``n``.
+
+    Parameters
+    ----------
+    sweep : lcc_synth.analysis.energy.EnergySweep
+        Result of :func:`lcc_synth.analysis.energy.energy_vs_size`; one line per horizon. A
+        float64 sweep ends at the last size before ``W(t)`` became numerically singular (marked
+        in the legend); a multiprecision one (``method = "mp"``) goes to ``n_max``.
+    path : str or Path
+        Output PNG.
+    reference : EnergySweep, optional
+        A second sweep drawn as open circles on the same axes (e.g. the float64 values next to
+        the multiprecision lines: where both exist they coincide).
+
+    The y-axes have no unit: ``W`` mixes the units of the states (m, m/s).
+
+    Returns
+    -------
+    Path of the written file.
+    """
+    plt = _pyplot()
+    path = Path(path)
+    fig, (ax_l, ax_t) = plt.subplots(1, 2, figsize=(10, 4.4), sharex=True,
+                                     constrained_layout=True)  # fmt: skip
+    colors = dict(zip(sweep.reports, PALETTE.controllers, strict=False))
+    method = {"double": "float64", "mp": "multiprecision"}
+    for label_of, sw, fmt in ((None, sweep, ".-"), ("ref", reference, "o")):
+        if sw is None:
+            continue
+        for t, reports in sw.reports.items():
+            n = [r.n for r in reports]
+            label = f"t = {t:g} s, {method.get(reports[0].method, '')}" if reports else ""
+            stop = sw.singular_n(t)
+            if stop is not None:
+                label += f" (singular from n = {stop})"
+            kw = {"color": colors.get(t, "k"), "label": label}
+            if label_of == "ref":
+                kw.update(mfc="none", ms=7, ls="none")
+            ax_l.semilogy(n, [r.lambda_min for r in reports], fmt, **kw)
+            ax_t.semilogy(n, [r.trace_inv for r in reports], fmt, **kw)
+    ax_l.set_title(r"(a) $\lambda_{\min}(W(t))$")
+    ax_t.set_title(r"(b) $\mathrm{tr}(W(t)^{-1})$")
+    ax_l.set_ylabel(r"$\lambda_{\min}(W(t))$")
+    ax_t.set_ylabel(r"$\mathrm{tr}(W(t)^{-1})$")
+    for ax in (ax_l, ax_t):
+        ax.set_xlabel("number of HDVs behind the CAV, n")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.xaxis.get_major_locator().set_params(integer=True)
+    _legend_below(fig, [ax_l], ncols=3)
+    kinds = {r.kind for reports in sweep.reports.values() for r in reports}
+    fig.suptitle(f"Control energy of {', '.join(display_name(k) for k in sorted(kinds))} (Fig. 5)")
+    return _save(fig, path, dpi=120)
+
+
+@_styled
+def plot_gamma_curves(curves, omega, path: str | Path, title: str | None = None) -> Path:
+    """``|Gamma(j omega)|`` (head-to-tail velocity transfer) of several linear designs.
+
+    Parameters
+    ----------
+    curves : mapping of str to (magnitude, report)
+        ``{label: (|Gamma| on omega, StringStabilityReport)}``, e.g. from
+        :func:`lcc_synth.experiments.comparison.gamma_curves`; the legend gives each peak and
+        verdict. A report with measured points (``omega``, ``ratio``: a controller that is not
+        linear) is drawn as markers.
+    omega : array_like
+        Frequencies (rad/s).
+    path : str or Path
+        Output PNG.
+    """
+    from lcc_synth.analysis.string_stability import verdict_text
+
+    plt = _pyplot()
+    path = Path(path)
+    fig, ax = plt.subplots(figsize=(6.5, 4.2 + 0.18 * len(curves)), constrained_layout=True)
+    # "name @ setting" labels (e.g. a V2V latency) keep the colour of "name", dotted
+    base = {label: label.split(" @ ")[0] for label in curves}
+    colors = controller_colors(dict.fromkeys(base.values()))
+    for label, (mag, rep) in curves.items():
+        verdict = verdict_text(rep.verdict)
+        name = " @ ".join([display_name(base[label]), *label.split(" @ ")[1:]])
+        text = f"{name}: peak {rep.gamma_peak:.3f} ({verdict})"
+        measured = hasattr(rep, "ratio")  # measured in the simulator (not linear): points
+        ls = ":" if " @ " in label else ("--" if measured else "-")
+        kw = {"color": colors[base[label]], "label": text, "ls": ls}
+        if measured:
+            ax.semilogx(rep.omega, rep.ratio, marker="o", ms=4, **kw)
+        else:
+            ax.semilogx(omega, mag, lw=1.6, **kw)
+    ax.axhline(1.0, color="k", lw=0.8, ls="--")
+    ax.set_xlabel("ω (rad/s)")
+    ax.set_ylabel("|Γ(jω)|, tail / head velocity (m/s per m/s)")
+    ax.grid(True, which="both", alpha=0.3)
+    _legend_below(fig, [ax], ncols=1 if len(curves) > 3 else 2)
+    ax.set_title(title or "Head-to-tail transfer")
+    return _save(fig, path, dpi=120)
+
+
+
+@_styled
+def plot_region_maps(maps, path: str | Path, baselines=None, titles=None, ncols: int = 2) -> Path:
+    """Figs. 7-8: string-stable regions of one vehicle's gains ``(mu_i, k_i)``.
+
+    Blue: head-to-tail string stable; white: plant stable only; hatched grey: asymptotically
+    unstable. With a baseline map (same grid), the part of the string-stable region that the
+    baseline already had is blue and the expansion red (Fig. 7(c)-(f)).
+
+    Parameters
+    ----------
+    maps : mapping of str to lcc_synth.analysis.regions.RegionMap
+        One panel per map, in order.
+    path : str or Path
+        Output PNG.
+    baselines : mapping of str to RegionMap, optional
+        ``{map name: baseline map}``.
+    titles : mapping of str to str, optional
+        Panel titles (default: the map names).
+    ncols : int
+        Panels per row.
+    """
+    import numpy as np
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    plt = _pyplot()
+    path = Path(path)
+    baselines = dict(baselines or {})
+    titles = dict(titles or {})
+    names = list(maps)
+    ncols = max(1, min(ncols, len(names)))
+    nrows = (len(names) + ncols - 1) // ncols
+    fig, axes = plt.subplots(
+        nrows, ncols, figsize=(4.2 * ncols, 3.8 * nrows), squeeze=False, constrained_layout=True
+    )
+    # 0 unstable, 1 stable, 2 string stable (kept), 3 string stable (expansion)
+    cmap = ListedColormap(["#d9d9d9", "#ffffff", "#3b6fb6", "#d62728"])
+    for ax, name in zip(axes.flat, names, strict=False):
+        rm = maps[name]
+        img = rm.labels.astype(int)
+        base = baselines.get(name)
+        if base is not None:
+            img = np.where((img == 2) & (base.labels != 2), 3, img)
+        dmu = (rm.mu[-1] - rm.mu[0]) / max(len(rm.mu) - 1, 1)
+        dk = (rm.k[-1] - rm.k[0]) / max(len(rm.k) - 1, 1)
+        extent = [rm.mu[0] - dmu / 2, rm.mu[-1] + dmu / 2, rm.k[0] - dk / 2, rm.k[-1] + dk / 2]
+        ax.imshow(
+            img.T, origin="lower", extent=extent, cmap=cmap, vmin=-0.5, vmax=3.5,
+            interpolation="nearest", aspect="auto",
+        )
+        if np.any(rm.labels == 0):
+            ax.contourf(
+                rm.mu, rm.k, (rm.labels == 0).T.astype(float), levels=[0.5, 1.5],
+                colors="none", hatches=["///"],
+            )
+        i = rm.vehicle
+        ax.set_xlabel(f"$\\mu_{{{i}}}$ (1/s²)")
+        ax.set_ylabel(f"$k_{{{i}}}$ (1/s)")
+        fixed = ", ".join(f"{k}={v:g}" for k, v in rm.fixed.items())
+        sub = f"string stable {100 * rm.string_stable_fraction:.1f}% of grid"
+        ax.set_title(f"{titles.get(name, name)}\n{sub}" + (f"; {fixed}" if fixed else ""),
+                     fontsize=9)
+        ax.axhline(0, color="k", lw=0.4)
+        ax.axvline(0, color="k", lw=0.4)
+        ax.grid(False)
+    for ax in list(axes.flat)[len(names):]:
+        ax.axis("off")
+    handles = [
+        Patch(facecolor="#3b6fb6", label="string stable"),
+        Patch(facecolor="#d62728", label="string stable: expansion over baseline"),
+        Patch(facecolor="#ffffff", edgecolor="k", label="stable, not string stable"),
+        Patch(facecolor="#d9d9d9", hatch="///", label="unstable"),
+    ]
+    _legend_below(fig, handles, [h.get_label() for h in handles])
+    return _save(fig, path, dpi=120)
+
+
+
+@_styled
+def plot_pareto_front(pareto, h2_full: float, path: str | Path, title: str | None = None) -> Path:
+    """Sparsity Pareto front: vehicles the CAV hears (besides itself) vs true H2 norm.
+
+    Parameters
+    ----------
+    pareto : list of dict
+        The ``pareto`` entries of a synthesis report (``count``, ``h2``, ``on_front``,
+        ``vehicles``), from :func:`lcc_synth.synthesis.sparsity.sparsity_sweep`.
+    h2_full : float
+        Unstructured optimum (every vehicle heard), drawn as a reference line.
+    path : str or Path
+        Output PNG.
+    """
+    plt = _pyplot()
+    path = Path(path)
+    fig, ax = plt.subplots(figsize=(6.5, 4), constrained_layout=True)
+    off = [p for p in pareto if not p["on_front"]]
+    front = sorted((p for p in pareto if p["on_front"]), key=lambda p: p["count"])
+    if off:
+        ax.plot([p["count"] for p in off], [p["h2"] for p in off], "x", color=PALETTE.hdv,
+                label="other patterns found")
+    ax.plot([p["count"] for p in front], [p["h2"] for p in front], "o-",
+            color=PALETTE.controllers[0], label="Pareto front")
+    def label(vs):
+        if not vs:
+            return "CAV only"
+        if len(vs) > 2 and list(vs) == list(range(vs[0], vs[0] + len(vs))):
+            return f"{vs[0]}..{vs[-1]}"
+        return ",".join(str(v) for v in vs)
+
+    for p in front:
+        ax.annotate(label(p["vehicles"]), (p["count"], p["h2"]), textcoords="offset points",
+                    xytext=(3, 5), fontsize=7, rotation=30)
+    ax.axhline(h2_full, ls="--", color="k", lw=0.8, label="unstructured optimum")
+    ax.set_xlabel("vehicles heard besides the CAV (count)")
+    ax.set_ylabel("true closed-loop H2 norm, weighted (–)")
+    ax.xaxis.get_major_locator().set_params(integer=True)
+    ax.margins(x=0.08, y=0.2)  # room for the annotations above and right of the points
+    _legend_below(fig, [ax], ncols=3)
+    ax.set_title(title or "Sparsity-promoting H2 design")
+    return _save(fig, path, dpi=120)

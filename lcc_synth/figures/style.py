@@ -1,0 +1,130 @@
+"""The house style of every figure: one palette, names as in the paper, rc settings, legends.
+
+Head vehicle yellow, CAV blue, HDVs grey (the colours of the Rerun recordings,
+:mod:`lcc_synth.recording.core`), HDVs ahead of the CAV darker and dashed; controllers in
+:data:`PALETTE`'s ``controllers`` colours, which are never blue or yellow, baselines grey.
+"""
+
+from __future__ import annotations
+
+import functools
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+from lcc_synth.recording.core import COLOR_CAV, COLOR_HDV, COLOR_HEAD
+
+__all__ = [
+    "PALETTE",
+    "Palette",
+    "display_name",
+    "controller_colors",
+    "vehicle_style",
+]
+
+
+@dataclass(frozen=True)
+class Palette:
+    """Colours (RGB in [0, 1]) of every figure."""
+
+    head: tuple = tuple(c / 255 for c in COLOR_HEAD)
+    cav: tuple = tuple(c / 255 for c in COLOR_CAV)
+    hdv: tuple = tuple(c / 255 for c in COLOR_HDV)
+    hdv_ahead: tuple = (0.35, 0.35, 0.35)
+    baseline: tuple = (0.45, 0.45, 0.45)
+    bound: tuple = (0.84, 0.15, 0.16)
+    controllers: tuple = ("#2ca02c", "#d62728", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2",
+                          "#17becf")  # fmt: skip
+
+
+PALETTE = Palette()
+_STYLE = {
+    "axes.grid": True, "grid.alpha": 0.3, "axes.titlesize": 10, "axes.labelsize": 9,
+    "xtick.labelsize": 8, "ytick.labelsize": 8, "legend.fontsize": 8, "legend.frameon": False,
+    "figure.titlesize": 11,
+}  # fmt: skip
+_BASELINES = {"all_hdv", "hdv_only", "all HDVs", "HDV only", "looking ahead only"}
+_NAMES = {"all_hdv": "all HDVs", "hdv_only": "HDV only", "fd_lcc": "FD-LCC", "cf_lcc": "CF-LCC",
+          "h2": "H2", "mpc": "MPC"}  # fmt: skip
+
+
+def display_name(name: str) -> str:
+    """A controller or case name as the paper writes it: ``case_a`` -> ``Case A``, ``fd_lcc``
+    -> ``FD-LCC``, ``all_hdv`` -> ``all HDVs``; other names unchanged."""
+    if name in _NAMES:
+        return _NAMES[name]
+    m = re.fullmatch(r"case[_ ]?([a-z])", name, flags=re.IGNORECASE)
+    return f"Case {m.group(1).upper()}" if m else name
+
+
+def controller_colors(names) -> dict:
+    """``{name: colour}``: baselines (all HDVs, HDV only) grey, the others the palette's
+    controller colours in order."""
+    out, i = {}, 0
+    for name in names:
+        if name in _BASELINES or display_name(name) in _BASELINES:
+            out[name] = PALETTE.baseline
+        else:
+            out[name] = PALETTE.controllers[i % len(PALETTE.controllers)]
+            i += 1
+    return out
+
+
+def vehicle_style(j: int, cav: int) -> dict:
+    """Line style of vehicle column ``j`` (0 head, ``cav`` the CAV): colour, width, dash, layer
+    and legend label (one label per group: head, HDVs ahead, CAV, HDVs behind)."""
+    if j == 0:
+        return {"color": PALETTE.head, "lw": 1.8, "ls": "-", "zorder": 3, "label": "head vehicle"}
+    if j == cav:
+        return {"color": PALETTE.cav, "lw": 2.0, "ls": "-", "zorder": 4, "label": "CAV"}
+    if j < cav:
+        return {"color": PALETTE.hdv_ahead, "lw": 1.0, "ls": "--", "zorder": 2,
+                "label": "HDVs ahead" if j == 1 else None}  # fmt: skip
+    return {"color": PALETTE.hdv, "lw": 0.9, "ls": "-", "zorder": 2,
+            "label": "HDVs behind" if j == cav + 1 else None}  # fmt: skip
+
+
+def _styled(func):
+    """Run a figure writer inside the house style (matplotlib rc settings, restored after)."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        import matplotlib
+
+        matplotlib.use("Agg")
+        with matplotlib.rc_context(_STYLE):
+            return func(*args, **kwargs)
+
+    return wrapper
+
+
+def _pyplot():
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _legend_below(fig, axes_or_handles, labels=None, ncols: int = 4):
+    """One figure legend outside the axes, under them (unique labels, in drawing order)."""
+    if labels is None:
+        seen: dict = {}
+        for ax in axes_or_handles:
+            for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+                seen.setdefault(lab, h)
+        handles, labels = list(seen.values()), list(seen)
+    else:
+        handles = axes_or_handles
+    if handles:
+        fig.legend(handles, labels, loc="outside lower center", ncols=min(ncols, len(handles)))
+
+
+def _save(fig, path: Path, title: str | None = None, dpi: int = 110) -> Path:
+    """Add the optional suptitle, write ``fig`` to ``path`` (creating folders), close it."""
+    import matplotlib.pyplot as plt
+
+    if title:
+        fig.suptitle(title)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return path

@@ -1,0 +1,200 @@
+"""The house style of every PNG writer: shared y-scales across controller rows, the CAV blue and
+the head yellow (the Rerun recordings' colours), names as in the paper, units on the axes, and
+legends outside every axes (bounding boxes in display coordinates), on small synthetic data."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import matplotlib
+import numpy as np
+import pytest
+from matplotlib.colors import to_rgb
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+from lcc_synth import figures  # noqa: E402
+from lcc_synth.recording.core import COLOR_CAV, COLOR_HEAD  # noqa: E402
+
+CAV_BLUE = tuple(c / 255 for c in COLOR_CAV)
+HEAD_YELLOW = tuple(c / 255 for c in COLOR_HEAD)
+
+
+@pytest.fixture
+def capture(monkeypatch):
+    """Keep the figures the writers close, so that the test can inspect them."""
+    plt.close("all")
+    monkeypatch.setattr(plt, "close", lambda *a, **k: None)
+    yield lambda: [plt.figure(n) for n in plt.get_fignums()]
+    monkeypatch.undo()
+    plt.close("all")
+
+
+def _run(amplitude: float, m: int = 1, n: int = 2, collided: bool = False):
+    """A fake SimResult: head, m HDVs ahead, CAV, n HDVs behind, sinusoids of ``amplitude``."""
+    t = np.linspace(0.0, 60.0, 301)
+    nv = m + n + 2
+    lag = np.arange(nv)[None, :]
+    vel = 15.0 + amplitude * np.sin(0.3 * (t[:, None] - lag))
+    spacing = 20.0 + 2 * amplitude * np.cos(0.3 * (t[:, None] - lag))
+    pos = -20.0 * lag + 15.0 * t[:, None]
+    return SimpleNamespace(
+        t=t, velocity=vel[None], spacing=spacing[None], position=pos[None], m=m, n=n,
+        cav=m + 1, n_vehicles=nv, v_star=np.array([15.0]), s_star=np.array([20.0]),
+        collided=np.array([[collided] * nv]),
+    )  # fmt: skip
+
+
+def _legends(fig):
+    return [*fig.legends, *(ax.get_legend() for ax in fig.axes if ax.get_legend())]
+
+
+def assert_legends_outside(fig):
+    """Every legend box lies outside every (visible) axes box, so it covers no data."""
+    fig.canvas.draw()
+    r = fig.canvas.get_renderer()
+    legs = _legends(fig)
+    assert legs, "figure has no legend"
+    for leg in legs:
+        box = leg.get_window_extent(r)
+        for ax in fig.axes:
+            if ax.get_visible() and ax.axison:
+                assert not box.overlaps(ax.get_window_extent(r)), (leg, ax)
+
+
+def _line_colors(ax):
+    return [to_rgb(line.get_color()) for line in ax.get_lines()]
+
+
+def test_palette_is_the_recordings_and_controller_colours_avoid_cav_and_head():
+    assert figures.PALETTE.cav == CAV_BLUE and figures.PALETTE.head == HEAD_YELLOW
+    r, g, b = CAV_BLUE
+    assert b > r and b > g  # blue
+    for c in figures.PALETTE.controllers:
+        assert np.abs(np.subtract(to_rgb(c), CAV_BLUE)).max() > 0.2
+        assert np.abs(np.subtract(to_rgb(c), HEAD_YELLOW)).max() > 0.2
+    cols = figures.controller_colors(["all_hdv", "paper", "h2", "mpc"])
+    assert cols["all_hdv"] == figures.PALETTE.baseline and len(set(cols.values())) == 4
+
+
+def test_display_names_read_as_in_the_paper():
+    assert figures.display_name("case_a") == "Case A"
+    assert figures.display_name("case_D") == "Case D"
+    assert figures.display_name("fd_lcc") == "FD-LCC"
+    assert figures.display_name("all_hdv") == "all HDVs"
+    assert figures.display_name("my_gain") == "my_gain"
+
+
+def test_profiles_rows_share_y_scales_cav_blue_head_yellow_units(tmp_path, capture):
+    runs = {"all_hdv": _run(0.5), "h2": _run(4.0)}
+    figures.plot_profiles(runs, tmp_path / "p.png", title="t")
+    (fig,) = capture()
+    axes = np.array(fig.axes).reshape(2, 2)
+    for col in range(2):
+        lims = {axes[row, col].get_ylim() for row in range(2)}
+        assert len(lims) == 1  # shared
+    lo, hi = axes[0, 0].get_ylim()
+    assert lo < 15.0 - 4.0 and hi > 15.0 + 4.0  # the big run fits in the small run's row too
+    for ax in axes[:, 0]:
+        cols = _line_colors(ax)
+        assert CAV_BLUE in cols and HEAD_YELLOW in cols
+        assert "(m/s)" in ax.get_ylabel()
+    assert "all HDVs" in axes[0, 0].get_ylabel() and "H2" in axes[1, 0].get_ylabel()
+    assert "(m)" in axes[0, 1].get_ylabel() and "(s)" in axes[1, 0].get_xlabel()
+    assert_legends_outside(fig)
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert labels == ["head vehicle", "HDVs ahead", "CAV", "HDVs behind"]
+
+
+@pytest.mark.parametrize("quantity", ["velocity", "spacing"])
+def test_case_grid_titles_colours_shared_axes(tmp_path, capture, quantity):
+    runs = {f"case_{c}": _run(a) for c, a in zip("abcd", (0.2, 0.4, 1.0, 3.0), strict=True)}
+    figures.plot_case_grid(runs, tmp_path / "g.png", quantity)
+    (fig,) = capture()
+    assert [ax.get_title() for ax in fig.axes] == ["Case A", "Case B", "Case C", "Case D"]
+    assert len({ax.get_ylim() for ax in fig.axes}) == 1
+    for ax in fig.axes:
+        cols = _line_colors(ax)
+        assert CAV_BLUE in cols and (HEAD_YELLOW in cols) == (quantity == "velocity")
+    unit = "(m/s)" if quantity == "velocity" else "(m)"
+    assert unit in fig.axes[0].get_ylabel() and "(s)" in fig.axes[-1].get_xlabel()
+    assert_legends_outside(fig)
+
+
+def test_snapshots_share_y_and_mark_the_cav_blue(tmp_path, capture):
+    figures.plot_snapshots(_run(1.0, m=0), _run(0.5, m=0), (10.0, 20.0), tmp_path / "s.png")
+    (fig,) = capture()
+    assert len({ax.get_ylim() for ax in fig.axes}) == 1
+    for ax in fig.axes:
+        colors = [tuple(to_rgb(c)) for col in ax.collections for c in col.get_facecolors()]
+        assert CAV_BLUE in colors and HEAD_YELLOW in colors
+    assert "(m/s)" in fig.axes[0].get_ylabel() and "(m)" in fig.axes[-1].get_xlabel()
+    assert_legends_outside(fig)
+
+
+def test_mpc_predictions_colours_and_legend(tmp_path, capture):
+    res = _run(1.0, m=0, n=2)
+    steps = np.arange(0.0, 60.0, 1.0)
+    history = {
+        "t": steps, "pred_time": np.linspace(0.0, 5.0, 11),
+        "predicted_velocity": np.full((1, steps.size, 11, 3), 15.0),
+        "predicted_spacing": np.full((1, steps.size, 11, 3), 20.0),
+    }  # fmt: skip
+    figures.plot_mpc_predictions(res, history, tmp_path / "m.png", window=(10.0, 50.0))
+    (fig,) = capture()
+    assert CAV_BLUE in _line_colors(fig.axes[0]) and HEAD_YELLOW in _line_colors(fig.axes[0])
+    assert "(m/s)" in fig.axes[0].get_ylabel() and "(m)" in fig.axes[1].get_ylabel()
+    assert_legends_outside(fig)
+
+
+def test_gamma_curves_units_names_and_legend(tmp_path, capture):
+    omega = np.logspace(-2, 1, 50)
+    rep = SimpleNamespace(verdict="string_stable", gamma_peak=1.0)
+    curves = {name: (1 / (1 + omega**2), rep) for name in
+              ("all_hdv", "case_a", "h2", "h2 @ 0.1 s latency")}  # fmt: skip
+    figures.plot_gamma_curves(curves, omega, tmp_path / "g.png")
+    (fig,) = capture()
+    (ax,) = fig.axes
+    assert "(rad/s)" in ax.get_xlabel() and "m/s per m/s" in ax.get_ylabel()
+    texts = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert texts[0].startswith("all HDVs:") and texts[1].startswith("Case A:")
+    lines = ax.get_lines()
+    assert lines[2].get_color() == lines[3].get_color() and lines[3].get_linestyle() == ":"
+    assert_legends_outside(fig)
+
+
+def test_control_energy_and_pareto_and_region_legends_outside(tmp_path, capture):
+    from lcc_synth.analysis.energy import energy_vs_size
+    from lcc_synth.models.hdv import OVM
+
+    coef = OVM(alpha=0.6, beta=0.9, v_max=30.0, s_st=5.0, s_go=35.0).linear_coefficients(15.0)
+    dbl = energy_vs_size(coef, horizons=(10.0, 30.0), n_max=6)
+    mpw = energy_vs_size(coef, horizons=(10.0, 30.0), n_max=6, method="mp")
+    figures.plot_control_energy(mpw, tmp_path / "e.png", reference=dbl)
+    pareto = [{"count": c, "h2": 2.0 - 0.1 * c, "on_front": True, "vehicles": list(range(c))}
+              for c in range(4)]  # fmt: skip
+    figures.plot_pareto_front(pareto, 1.5, tmp_path / "f.png")
+    mu = k = np.linspace(-1.0, 1.0, 5)
+    labels = np.array([[0, 1, 2, 2, 1]] * 5, dtype=np.int8)
+    rm = SimpleNamespace(mu=mu, k=k, labels=labels, vehicle=1, fixed={},
+                         string_stable_fraction=0.4)  # fmt: skip
+    figures.plot_region_maps({"a": rm}, tmp_path / "r.png")
+    fig_e, fig_f, fig_r = capture()
+    texts = [t.get_text() for t in fig_e.legends[0].get_texts()]
+    assert any("multiprecision" in s for s in texts) and any("singular from n = 5" in s
+                                                             for s in texts)  # fmt: skip
+    # the multiprecision lines go to n = 6; float64 stops before
+    assert max(max(line.get_xdata()) for line in fig_e.axes[0].get_lines()) == 6
+    assert "(1/s²)" in fig_r.axes[0].get_xlabel() and "(1/s)" in fig_r.axes[0].get_ylabel()
+    for fig in (fig_e, fig_f, fig_r):
+        assert_legends_outside(fig)
+
+
+def test_the_legend_check_can_fail(tmp_path, capture):
+    """A legend drawn inside the axes is caught (the check is not vacuous)."""
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1], label="x")
+    ax.legend(loc="upper left")
+    with pytest.raises(AssertionError):
+        assert_legends_outside(fig)
