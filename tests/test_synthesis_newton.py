@@ -128,3 +128,21 @@ def test_newton_direction_descends_where_the_hessian_is_indefinite():
         idx = np.flatnonzero(mask)
         H = h2_hessian(p, g, L, P, S, mask)
         assert np.allclose(d[idx], -np.linalg.solve(H, grad[idx]), rtol=1e-8)
+
+
+def test_riccati_solution_is_reused_per_plant_and_returned_as_copies(monkeypatch):
+    from lcc_synth.synthesis import h2
+
+    p = _plant()
+    calls = []
+    solve = h2._riccati
+    monkeypatch.setattr(h2, "_riccati", lambda plant: calls.append(plant) or solve(plant))
+    g1, P1 = h2.riccati_gain(p)
+    g1[:] = 0.0  # the caller's copy: must not reach the cache
+    g2, P2 = h2.riccati_gain(p)
+    assert len(calls) == 1 and np.any(g2 != 0.0)
+    # the CARE itself: A'P + PA - P B r^-1 B' P + Q = 0
+    res = p.A.T @ P2 + P2 @ p.A - P2 @ p.B @ p.B.T @ P2 / p.r + p.Q
+    assert np.max(np.abs(res)) <= 1e-9 * np.max(np.abs(P2))
+    h2.riccati_gain(_plant())  # another plant: solved again
+    assert len(calls) == 2

@@ -58,7 +58,6 @@ __all__ = [
     "hinf_norm_hamiltonian",
 ]
 
-_SMALL_BATCH = 16
 _GOLDEN_ITERS = 45
 _EPS = float(np.finfo(float).eps)
 MERGE_RTOL = 1e-7
@@ -247,81 +246,43 @@ def gamma_polynomials(
 # --------------------------------------------------------------------------------------------
 
 
-def hessenberg_solver(A: np.ndarray, b: np.ndarray, c: np.ndarray, chunk: int = 512):
+def hessenberg_solver(A: np.ndarray, b: np.ndarray, c: np.ndarray):
     """A function ``s -> c (s I - A)^-1 b`` (see :func:`transfer_response`), reduction done once.
 
     ``b`` may hold several right-hand sides as columns ``(nx, k)`` with ``k > 1``; the
     function then returns an array of shape ``s.shape + (k,)`` (one elimination per ``s``
     serves all columns). A vector or an ``(nx, 1)`` column gives ``s.shape``.
     """
+    from lcc_synth.analysis.hessenberg_kernel import hessenberg_responses
+
     A = np.asarray(A, dtype=float)
     b = np.asarray(b, dtype=float)
     single = b.ndim == 1 or b.shape[-1] == 1
     b = b.reshape(A.shape[0], -1)
     c = np.asarray(c, dtype=float).reshape(-1)
-    nx, nb = b.shape
     Hs, Q = sla.hessenberg(A, calc_q=True)
-    bh = Q.T @ b
-    ch = c @ Q
-    diag = np.arange(nx)
+    Hs = np.ascontiguousarray(Hs)
+    bh = np.ascontiguousarray(Q.T @ b)
+    ch = np.ascontiguousarray(c @ Q)
 
     def solve(s):
         s = np.asarray(s, dtype=complex)
-        out = np.empty(s.shape + (nb,), dtype=complex)
-        flat = s.reshape(-1)
-        res = out.reshape(-1, nb)
-        for start in range(0, flat.size, chunk):
-            z = flat[start : start + chunk]
-            N = z.size
-            M = np.broadcast_to(-Hs, (N, nx, nx)).astype(complex)
-            M[:, diag, diag] += z[:, None]
-            r = np.broadcast_to(bh, (N, nx, nb)).astype(complex)
-            if N < _SMALL_BATCH:  # a few frequencies: one batched LAPACK LU (partial pivoting)
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    try:
-                        y = np.linalg.solve(M, r)
-                    except np.linalg.LinAlgError:
-                        y = np.full((N, nx, nb), np.inf + 0j)
-                res[start : start + N] = np.einsum("j,ijk->ik", ch, y)
-                continue
-            for j in range(nx - 1):
-                swap = np.abs(M[:, j + 1, j]) > np.abs(M[:, j, j])
-                if swap.any():
-                    idx = np.nonzero(swap)[0]
-                    top = M[idx, j, j:].copy()
-                    M[idx, j, j:] = M[idx, j + 1, j:]
-                    M[idx, j + 1, j:] = top
-                    rt = r[idx, j].copy()
-                    r[idx, j] = r[idx, j + 1]
-                    r[idx, j + 1] = rt
-                piv = M[:, j, j]
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    lam = np.where(piv != 0, M[:, j + 1, j] / piv, 0.0)
-                M[:, j + 1, j + 1 :] -= lam[:, None] * M[:, j, j + 1 :]
-                r[:, j + 1] -= lam[:, None] * r[:, j]
-            y = np.empty((N, nx, nb), dtype=complex)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                for j in range(nx - 1, -1, -1):
-                    acc = r[:, j] - np.einsum("ij,ijk->ik", M[:, j, j + 1 :], y[:, j + 1 :])
-                    y[:, j] = acc / M[:, j, j][:, None]
-            res[start : start + N] = np.einsum("j,ijk->ik", ch, y)
+        out = hessenberg_responses(Hs, bh, ch, np.ascontiguousarray(s.reshape(-1)))
+        out = out.reshape(s.shape + (bh.shape[1],))
         return out[..., 0] if single else out
 
     return solve
 
 
-def transfer_response(
-    A: np.ndarray, b: np.ndarray, c: np.ndarray, s, chunk: int = 512
-) -> np.ndarray:
-    """``c (s I - A)^-1 b`` for every complex ``s`` (SISO), numerically stable and vectorised.
+def transfer_response(A: np.ndarray, b: np.ndarray, c: np.ndarray, s) -> np.ndarray:
+    """``c (s I - A)^-1 b`` for every complex ``s`` (SISO), numerically stable.
 
     ``A`` is reduced once to upper Hessenberg form ``A = Q Hs Q^T`` (orthogonal); each
     ``(s I - Hs) y = Q^T b`` is then solved by Gaussian elimination of the single subdiagonal
-    with row pivoting between the two candidate rows (backward stable, O(nx^2) per ``s``),
-    vectorised over ``s`` in chunks; batches of fewer than 16 values use one batched LAPACK LU
-    solve with partial pivoting (also backward stable, less Python overhead).
+    with row pivoting between the two candidate rows (backward stable, O(nx^2) per ``s``), in
+    a compiled loop (:mod:`lcc_synth.analysis.hessenberg_kernel`).
     """
-    return hessenberg_solver(A, b, c, chunk)(np.atleast_1d(np.asarray(s, dtype=complex)))
+    return hessenberg_solver(A, b, c)(np.atleast_1d(np.asarray(s, dtype=complex)))
 
 
 def tail_output(model: LCCModel) -> np.ndarray:

@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import functools
 import math
+import weakref
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -382,9 +383,24 @@ def h2_norm(plant: H2Plant, g: np.ndarray) -> float:
     return math.sqrt(J) if math.isfinite(J) else math.inf
 
 
-@single_thread_blas
+#: Riccati solutions of the plants already solved (an H2Plant is immutable; a design asks for
+#: the same plant's optimum two or three times, each with a stabilisability check).
+_RICCATI_CACHE: weakref.WeakKeyDictionary[H2Plant, tuple[np.ndarray, np.ndarray]] = (
+    weakref.WeakKeyDictionary()
+)
+
+
 def riccati_gain(plant: H2Plant) -> tuple[np.ndarray, np.ndarray]:
-    """Unstructured H2-optimal gain ``g = -R^-1 B' P`` from the CARE; returns ``(g, P)``."""
+    """Unstructured H2-optimal gain ``g = -R^-1 B' P`` from the CARE; returns ``(g, P)``
+    (solved once per plant; copies are returned)."""
+    if plant not in _RICCATI_CACHE:
+        _RICCATI_CACHE[plant] = _riccati(plant)
+    g, P = _RICCATI_CACHE[plant]
+    return g.copy(), P.copy()
+
+
+@single_thread_blas
+def _riccati(plant: H2Plant) -> tuple[np.ndarray, np.ndarray]:
     check_stabilisable(plant)
     try:
         P = sla.solve_continuous_are(plant.A, plant.B, plant.Q, np.array([[plant.r]]))
