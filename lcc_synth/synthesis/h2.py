@@ -401,13 +401,17 @@ def riccati_gain(plant: H2Plant) -> tuple[np.ndarray, np.ndarray]:
 
 @single_thread_blas
 def _riccati(plant: H2Plant) -> tuple[np.ndarray, np.ndarray]:
-    check_stabilisable(plant)
+    # A stabilising Riccati gain proves the plant stabilisable; the Kalman-decomposition check
+    # (7.4 s of the 11 s at 402 states) only runs to name the mode when the CARE fails.
     try:
         P = sla.solve_continuous_are(plant.A, plant.B, plant.Q, np.array([[plant.r]]))
     except (np.linalg.LinAlgError, ValueError) as err:
+        check_stabilisable(plant)
         raise SynthesisError(f"Riccati solver failed: {err}") from None
     g = -(plant.B.T @ P) / plant.r
-    if max_real_eig(closed_loop_matrix(plant, g)) >= -STABILITY_TOL:
+    if not (np.all(np.isfinite(g))
+            and max_real_eig(closed_loop_matrix(plant, g)) < -STABILITY_TOL):
+        check_stabilisable(plant)
         raise SynthesisError("Riccati gain does not stabilise the plant")
     return g.ravel(), P
 
