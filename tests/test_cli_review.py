@@ -56,6 +56,13 @@ def test_summary_json_is_one_object(rrd, capsys):
     assert any(v["space_origin"] == "/demo/all_hdv/road" for v in data["views"])
 
 
+@pytest.mark.parametrize("flags", [["--web"], ["--web-port", "9090"], ["--port", "9876"]])
+def test_viewer_options_do_not_apply_with_summary(rrd, capsys, flags):
+    assert main(["review", "--summary", *flags, str(rrd)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and flags[0] in err[0] and "does not apply with --summary" in err[0]
+
+
 @pytest.mark.parametrize("content", [None, b"", b"definitely not an rrd file\n" * 20])
 def test_missing_or_invalid_file_exits_2(tmp_path, capsys, content):
     path = tmp_path / "x.rrd"

@@ -238,6 +238,11 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--json", "only applies with --summary")
     if args.full and not args.summary:
         raise ConfigError("--full", "only applies with --summary")
+    if args.summary:
+        for flag, given in (("--web", args.web), ("--web-port", args.web_port),
+                            ("--port", args.port)):
+            if given:
+                raise ConfigError(flag, "opens the viewer; it does not apply with --summary")
     summary = summarize_recording(path)  # validates: ConfigError for a missing/invalid file
     if args.summary:
         _print_summary(summary, args.json, args.full)
