@@ -1,7 +1,7 @@
 """Head-to-tail transfer function Gamma(s), Section IV (eq. 24) and Appendix A.
 
 ``Gamma(s) = V_t(s) / V_h(s)``: the velocity error of the tail vehicle over the velocity error
-of the head vehicle, for the CAV law (eq. 23)
+of the head vehicle, for the CAV law (eq. 23)::
 
     u = a1 s_0 - a2 v_0 + a3 v_-1 + sum_i (mu_i s_i + k_i v_i).
 
