@@ -40,10 +40,26 @@ extensions = [
 ]
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
-exclude_patterns = ["_build", "README.md", "_generated/readme", "gallery/*.ipynb",
-                    "gallery/*.py", "gallery/*.zip", "gallery/*.md5", "gallery/*.json"]
+exclude_patterns = [
+    "_build",
+    "README.md",
+    "_generated/readme",
+    "gallery/*.ipynb",
+    "gallery/*.py",
+    "gallery/*.zip",
+    "gallery/*.md5",
+    "gallery/*.json",
+]
 root_doc = "index"
-nitpicky = False
+nitpicky = True  # with -W: every unresolved cross-reference fails the build
+# other packages' objects (no intersphinx: the build fetches nothing from the internet)
+nitpick_ignore_regex = [
+    (
+        r"py:.*",
+        r"(numpy|scipy|control|cvxpy|casadi|osqp|rerun|dask|"
+        r"distributed|matplotlib|mpmath|numba|tomllib)(\..*)?",
+    )
+]
 
 # -- autodoc / numpydoc -------------------------------------------------------------------------
 autodoc_default_options = {"member-order": "bysource"}
@@ -88,3 +104,4 @@ html_show_sourcelink = False
 def setup(app):
     """Docstring hooks of ``docs/_ext/lcc_docs.py``."""
     app.connect("autodoc-process-docstring", lcc_docs.escape_bars)
+    app.connect("missing-reference", lcc_docs.resolve_short_names)

@@ -23,9 +23,11 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pkgutil
 import re
 import shutil
+import types
 from pathlib import Path
 
 DOCS = Path(__file__).resolve().parents[1]
@@ -109,26 +111,31 @@ def public_modules(package: str = "lcc_synth") -> dict[str, list[str]]:
 
 
 def _automodule(name: str) -> list[str]:
-    """``automodule`` of one module: the names of its ``__all__`` defined there (or, without
-    ``__all__``, autodoc's public members), and a line linking the names it re-exports."""
+    """``automodule`` of one module: the functions and classes of its ``__all__`` defined there
+    (or, without ``__all__``, autodoc's public members), an ``autodata`` per constant, and a
+    line linking the names it re-exports."""
     mod = importlib.import_module(name)
     lines = [f".. automodule:: {name}"]
     names = getattr(mod, "__all__", None)
     if names is None:
         return [*lines, "   :members:", ""]
-    own, other = [], []
+    own, data, other = [], [], []
     for attr in names:
         obj = getattr(mod, attr, None)
-        home = getattr(obj, "__module__", name) if callable(obj) else name
-        (own if home == name else other).append((attr, obj))
-    lines += [f"   :members: {', '.join(a for a, _ in own)}" if own else "   :no-members:", ""]
-    if other:
-        refs = []
-        for attr, obj in other:
-            target = f"{obj.__module__}.{getattr(obj, '__qualname__', attr)}"
+        if isinstance(obj, types.ModuleType):
+            other.append(f":mod:`{attr} <{obj.__name__}>`")
+        elif not callable(obj):
+            data.append(attr)
+        elif obj.__module__ == name:
+            own.append(attr)
+        else:
             role = "class" if isinstance(obj, type) else "func"
-            refs.append(f":{role}:`{attr} <{target}>`")
-        lines += [f"Also here (defined elsewhere): {', '.join(refs)}.", ""]
+            other.append(f":{role}:`{attr} <{obj.__module__}.{obj.__qualname__}>`")
+    lines += [f"   :members: {', '.join(own)}" if own else "   :no-members:", ""]
+    for attr in data:
+        lines += [f".. autodata:: {name}.{attr}", "   :no-value:", ""]
+    if other:
+        lines += [f"Also here (defined elsewhere): {', '.join(other)}.", ""]
     return lines
 
 
@@ -173,9 +180,9 @@ def _parser_rst(parser, title: str, level: str) -> list[str]:
     return lines
 
 
-def cli_page() -> None:
-    """``cli.rst``: every command of ``lcc-synth`` and every flag, from the argument parser
-    (:func:`lcc_synth.cli.main.build_parser`), its help texts shown verbatim."""
+def cli_rst() -> str:
+    """The text of ``cli.rst``: every command of ``lcc-synth`` and every flag, from the argument
+    parser (:func:`lcc_synth.cli.main.build_parser`), its help texts shown verbatim."""
     from lcc_synth.cli.main import build_parser
 
     parser = build_parser()
@@ -188,7 +195,12 @@ def cli_page() -> None:
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     for name, command in sub.choices.items():
         lines += _parser_rst(command, f"lcc-synth {name}", "-")
-    _write(GENERATED / "cli.rst", "\n".join(lines))
+    return "\n".join(lines)
+
+
+def cli_page() -> None:
+    """Write ``cli.rst`` (:func:`cli_rst`)."""
+    _write(GENERATED / "cli.rst", cli_rst())
 
 
 def generate() -> None:
@@ -295,3 +307,51 @@ def escape_bars(app, what, name, obj, options, lines: list[str]) -> None:
             lines[i] = "".join(p if j % 2 else p.replace("|", r"\|") for j, p in enumerate(parts))
         if line.rstrip().endswith("::") or stripped.startswith((".. code-block::", ".. math::")):
             literal_block, block_indent = True, indent
+
+
+_ROLE_TYPES = {
+    "func": ("function",), "class": ("class", "exception"), "exc": ("exception", "class"),
+    "meth": ("method", "classmethod", "staticmethod"), "attr": ("attribute", "property"),
+    "data": ("data",), "mod": ("module",), "obj": (),
+}  # fmt: skip
+
+
+def resolve_short_names(app, env, node, contnode):
+    """``missing-reference``: a Python cross-reference by a short or partial name
+    (``:class:`ConfigError``` in a module that imports it) links to the one documented object
+    whose full name ends with it. Ambiguous or unknown names stay unresolved (a warning: the
+    build runs nitpicky with ``-W``)."""
+    from sphinx.util.nodes import make_refnode
+
+    if node.get("refdomain") != "py":
+        return None
+    target = re.sub(r"\s+", "", node.get("reftarget", "")).lstrip("~.")  # wrapped lines
+    if not target:
+        return None
+    objects = env.get_domain("py").objects
+    here = node.get("py:module") or ""
+    cls = node.get("py:class")
+    candidates = [f"{here}.{cls}.{target}"] if cls else []
+    candidates += [target]
+    if node.get("reftype") in ("attr", "meth") and "." in target:
+        candidates.append(target.rsplit(".", 1)[0])  # a dataclass field: its class
+    for wanted in candidates:
+        hits = [name for name in objects if name == wanted or name.endswith("." + wanted)]
+        if not hits and "." in wanted:  # package.name re-exported from package.module.name
+            prefix, last = wanted.rsplit(".", 1)
+            hits = [n for n in objects if n.startswith(prefix + ".") and n.endswith("." + last)]
+        kinds = _ROLE_TYPES.get(node.get("reftype"), ())
+        if len(hits) > 1 and any(objects[n].objtype in kinds for n in hits):
+            hits = [n for n in hits if objects[n].objtype in kinds]  # :func: -> a function
+        if len(hits) > 1:  # prefer the objects nearest the referring module
+
+            def shared(n):
+                return len(os.path.commonprefix([n.split("."), here.split(".")]))
+
+            best = max(shared(n) for n in hits)
+            hits = [n for n in hits if shared(n) == best]
+        if len(hits) == 1:
+            entry = objects[hits[0]]
+            return make_refnode(app.builder, node["refdoc"], entry.docname, entry.node_id,
+                                contnode, hits[0])  # fmt: skip
+    return None

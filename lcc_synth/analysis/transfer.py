@@ -325,12 +325,14 @@ def transfer_response(
 
 
 def tail_output(model: LCCModel) -> np.ndarray:
+    """Output row ``c`` that picks the tail vehicle's velocity error from the state."""
     c = np.zeros(model.nx)
     c[model.tail_velocity_index] = 1.0
     return c
 
 
 def check_head(model: LCCModel) -> None:
+    """Raise :class:`~lcc_synth.errors.ConfigError` for FD-LCC, which has no head vehicle."""
     if model.kind == "fd_lcc":
         raise ConfigError(
             "system.kind", "fd_lcc has no head vehicle: the head-to-tail transfer is undefined"
@@ -413,6 +415,8 @@ def golden_max(f, lo: np.ndarray, hi: np.ndarray):
 
 
 def hamiltonian_matrix(A: np.ndarray, b: np.ndarray, c: np.ndarray, level: float) -> np.ndarray:
+    """Hamiltonian ``[[A, b b'/level], [-c' c/level, -A']]``: its imaginary eigenvalues ``jw``
+    are the frequencies where ``|c (jwI - A)^-1 b| = level``."""
     b = b.reshape(-1, 1)
     c = c.reshape(1, -1)
     return np.block([[A, b @ b.T / level], [-c.T @ c / level, -A.T]])
