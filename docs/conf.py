@@ -51,6 +51,7 @@ exclude_patterns = [
     "gallery/*.json",
 ]
 root_doc = "index"
+smartquotes = False  # keep "--out" and "it's" as written (CLI flags, code in prose)
 nitpicky = True  # with -W: every unresolved cross-reference fails the build
 # other packages' objects (no intersphinx: the build fetches nothing from the internet)
 nitpick_ignore_regex = [
@@ -91,7 +92,10 @@ sphinx_gallery_conf = {
 # -- HTML ----------------------------------------------------------------------------------------
 html_theme = "pydata_sphinx_theme"
 html_title = "lcc_synth"
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+html_css_files = ["lcc.css"]
+# the left sidebar lists a section's pages: only the API reference and the gallery have sections
+html_sidebars = {"index": [], "guide/*": [], "_generated/*": []}
 html_theme_options = {
     "navigation_depth": 3,
     "show_toc_level": 2,
