@@ -146,7 +146,8 @@ def api_pages() -> None:
         lines = [f"``{package}``", "=" * (len(package) + 4), "", *_automodule(package)]
         for mod in modules:
             title = f"``{mod}``"
-            lines += [title, "-" * len(title), "", *_automodule(mod)]
+            # "~", not "-": the module docstrings' own "-" sections nest under the module
+            lines += [title, "~" * len(title), "", *_automodule(mod)]
         _write(GENERATED / "api" / f"{package}.rst", "\n".join(lines))
     index = ["API reference", "=============", "",
              "Every public module, from its numpydoc docstrings (each module's ``__all__``).",
