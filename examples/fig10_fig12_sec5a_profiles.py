@@ -1,4 +1,7 @@
-"""Figs. 10 and 12 of the paper (Section V-A, Appendix B): velocity and spacing profiles of the
+"""Figs. 10 and 12: velocity and spacing profiles of Section V-A
+=============================================================
+
+Figs. 10 and 12 of the paper (Section V-A, Appendix B): velocity and spacing profiles of the
 m = n = 2 string when the head vehicle oscillates, for Table I's cases A-D (and HDV only).
 
 Runs ``problems/paper_sec5a.toml`` through the package's API, prints the peak velocity

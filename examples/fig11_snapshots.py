@@ -1,4 +1,7 @@
-"""Fig. 11 of the paper (Section V-B): snapshots of the string after vehicle 1 brakes, looking
+"""Fig. 11: snapshots of the string after vehicle 1 brakes
+=======================================================
+
+Fig. 11 of the paper (Section V-B): snapshots of the string after vehicle 1 brakes, looking
 ahead only (upper rows) versus FD-LCC and CF-LCC (lower rows).
 
 Runs ``problems/paper_table2.toml`` through the package's API and writes one PNG per LCC

@@ -1,4 +1,7 @@
-"""Fig. 5 of the paper: control energy of FD-LCC against the number of HDVs behind the CAV.
+"""Fig. 5: control energy against the number of HDVs
+=================================================
+
+Fig. 5 of the paper: control energy of FD-LCC against the number of HDVs behind the CAV.
 
 lambda_min(W(t)) and tr(W(t)^-1) for t = 10, 20, 30 s with the paper's OVM parameters
 (alpha 0.6, beta 0.9, v_max 30, s_st 5, s_go 35, v* 15), for n = 1..30: the paper stops at small

@@ -1,4 +1,7 @@
-"""Figs. 7 and 8 of the paper: head-to-tail string-stable regions of one vehicle's gains.
+"""Figs. 7 and 8: string-stable regions of one vehicle's gains
+===========================================================
+
+Figs. 7 and 8 of the paper: head-to-tail string-stable regions of one vehicle's gains.
 
 Reads ``problems/paper_fig7_fig8_regions.toml`` (m = n = 2, OVM at v* = 15 m/s, the paper's
 grid mu, k in [-10, 10] step 0.02: 1001 x 1001 points per map, eight maps), prints the fraction

@@ -1,8 +1,11 @@
-"""Fig. 9 of the paper: head-to-tail |Gamma(jw)| of the Table I gain cases (m = n = 2).
+"""Fig. 9: head-to-tail frequency response of Table I's cases
+==========================================================
+
+Fig. 9 of the paper: the head-to-tail magnitude of Gamma(jw) for Table I's gain cases (m = n = 2).
 
 Reads ``problems/paper_fig9_cases.toml`` (OVM alpha 0.6, beta 0.9, v_max 30, s_st 5, s_go 35,
 v* 15; the CAV's HDV law plus the added gains of Table I), prints each case's plant stability,
-string-stability verdict and peak |Gamma| (global search), and writes the frequency response.
+string-stability verdict and peak ``|Gamma|`` (global search), and writes the frequency response.
 
 Usage: python examples/fig9_frequency_response.py [--out DIR] [--problem PROBLEM.toml]
        (writes DIR/fig9_frequency_response.png, default results; problems/paper_fig9_cases.toml)

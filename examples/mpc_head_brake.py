@@ -1,4 +1,7 @@
-"""The safety-constrained MPC in the head-vehicle brake scenario, next to the paper's gains.
+"""The safety-constrained MPC in the head-vehicle brake scenario
+=============================================================
+
+The safety-constrained MPC in the head-vehicle brake scenario, next to the paper's gains.
 
 Runs ``problems/mpc_head_brake.toml`` (or the heterogeneous / noisy / lossy variant, or one of
 the Table II MPC problems) through the package's API, prints per controller: AAVE, fuel, minimum

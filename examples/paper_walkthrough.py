@@ -1,4 +1,7 @@
-"""The paper in order, with the flat API only (``import lcc_synth as lcc``).
+"""The paper in order, with the flat API
+=====================================
+
+The paper in order, with the flat API only (``import lcc_synth as lcc``).
 
 Model (Sec. II) -> controllability (Sec. III) -> control energy (Fig. 5) -> string stability
 and its regions (Sec. IV, Table I, Fig. 7) -> H2 synthesis -> MPC -> simulation of Table II's

@@ -1,4 +1,7 @@
-"""The showcase comparison from Python: one scenario of ``problems/showcase.toml``, every
+"""The showcase comparison from Python
+===================================
+
+The showcase comparison from Python: one scenario of ``problems/showcase.toml``, every
 controller, the metrics table and the velocity / spacing profiles.
 
 ``lcc-synth run`` does the same for every scenario (plus files, figures and a recording); this

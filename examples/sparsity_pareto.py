@@ -1,4 +1,7 @@
-"""Which HDVs should the CAV listen to? Group-sparse H2 Pareto front (vehicles heard vs H2).
+"""Which HDVs should the CAV listen to? The sparsity Pareto front
+==============================================================
+
+Which HDVs should the CAV listen to? Group-sparse H2 Pareto front (vehicles heard vs H2).
 
 Runs the ``problems/synth_sparsity_pareto.toml`` design through the package's API, prints the
 table of every pattern found by the penalty sweep (true H2 after re-polishing on the pattern,

@@ -1,4 +1,7 @@
-"""Synthesised structured H2 gains vs the paper's Section V-B gains (FD-LCC and CF-LCC).
+"""Synthesised structured H2 gains against the paper's gains
+=========================================================
+
+Synthesised structured H2 gains vs the paper's Section V-B gains (FD-LCC and CF-LCC).
 
 For each of ``problems/synth_fd_lcc_pattern.toml`` and ``problems/synth_cf_lcc_pattern.toml``:
 synthesise the structured gain on the paper's pattern (CAV + HDVs 1, 2), write the gains file

@@ -1,4 +1,7 @@
-"""Table II of the paper (Section V-B): AAVE and fuel of "looking ahead only", FD-LCC, CF-LCC.
+"""Table II: AAVE and fuel of looking ahead only, FD-LCC and CF-LCC
+================================================================
+
+Table II of the paper (Section V-B): AAVE and fuel of "looking ahead only", FD-LCC, CF-LCC.
 
 Runs ``problems/paper_table2.toml`` through the package's API, prints the table with the paper's
 numbers beside ours and writes a bar chart under ``--out``. With ``--appendix-c N`` it also runs the

@@ -276,7 +276,7 @@ def as_run_loop(
     measurement_filter : float
         Time constant (s) of the filter on each received value; 0 = off.
     actuator_lag : float
-        The CAV's actuator time constant (s); 0 = none (see :func:`_physical_plant`).
+        The CAV's actuator time constant (s); 0 = none (see ``_physical_plant``).
 
     Raises
     ------

@@ -1,7 +1,7 @@
 """Head-to-tail transfer function Gamma(s), Section IV (eq. 24) and Appendix A.
 
 ``Gamma(s) = V_t(s) / V_h(s)``: the velocity error of the tail vehicle over the velocity error
-of the head vehicle, for the CAV law (eq. 23)
+of the head vehicle, for the CAV law (eq. 23)::
 
     u = a1 s_0 - a2 v_0 + a3 v_-1 + sum_i (mu_i s_i + k_i v_i).
 
@@ -286,12 +286,14 @@ def transfer_response(A: np.ndarray, b: np.ndarray, c: np.ndarray, s) -> np.ndar
 
 
 def tail_output(model: LCCModel) -> np.ndarray:
+    """Output row ``c`` that picks the tail vehicle's velocity error from the state."""
     c = np.zeros(model.nx)
     c[model.tail_velocity_index] = 1.0
     return c
 
 
 def check_head(model: LCCModel) -> None:
+    """Raise :class:`~lcc_synth.errors.ConfigError` for FD-LCC, which has no head vehicle."""
     if model.kind == "fd_lcc":
         raise ConfigError(
             "system.kind", "fd_lcc has no head vehicle: the head-to-tail transfer is undefined"
@@ -374,6 +376,8 @@ def golden_max(f, lo: np.ndarray, hi: np.ndarray):
 
 
 def hamiltonian_matrix(A: np.ndarray, b: np.ndarray, c: np.ndarray, level: float) -> np.ndarray:
+    """Hamiltonian ``[[A, b b'/level], [-c' c/level, -A']]``: its imaginary eigenvalues ``jw``
+    are the frequencies where ``|c (jwI - A)^-1 b| = level``."""
     b = b.reshape(-1, 1)
     c = c.reshape(1, -1)
     return np.block([[A, b @ b.T / level], [-c.T @ c / level, -A.T]])

@@ -50,6 +50,7 @@ class _CommandParser(_Parser):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``lcc-synth`` argument parser: one subcommand per module of ``COMMANDS``."""
     from lcc_synth import __version__
 
     parser = _Parser(prog="lcc-synth", description="Design and test LCC controllers for a CAV.")

@@ -4,7 +4,7 @@ Every model is a validated frozen dataclass ``F(s, ds, v)`` (eq. 1): the acceler
 vehicle given its spacing ``s`` to the vehicle ahead, the relative speed ``ds = v_ahead - v``
 and its own speed ``v``. ``accel`` accepts numpy arrays and broadcasts, so a batch of
 heterogeneous vehicles is one call: build a parameter object whose fields are arrays
-(:func:`stack_params`) or call the module-level kernels directly.
+or call the module-level kernels (:func:`ovm_accel`, :func:`idm_accel`) directly.
 
 Linearisation (eq. 8): :func:`linear_coefficients` gives ``alpha1 = dF/ds``,
 ``alpha2 = dF/d(ds) - dF/dv``, ``alpha3 = dF/d(ds)`` at the equilibrium ``(s*, v*)``;

@@ -2,12 +2,16 @@
 
 One dataclass, :class:`LCCModel`, holds every variant:
 
-``"lcc"``     general LCC, m HDVs ahead, CAV, n HDVs behind (eq. 9); the CAV row is
-              ``ds0 = v_{-1} - v_0, dv0 = u``.
-``"cf_lcc"``  car-following LCC (eq. 11): m = 0, the CAV follows the head vehicle with the HDV
-              law and ``u`` is the *additional* input ``u_hat``.
-``"fd_lcc"``  free-driving LCC (eq. 12): m = 0, no head vehicle, first state ``-p_0``.
-``"ccc"``     connected cruise control (eq. 14): the general model with n = 0.
+``"lcc"``
+    general LCC, m HDVs ahead, CAV, n HDVs behind (eq. 9); the CAV row is
+    ``ds0 = v_{-1} - v_0, dv0 = u``.
+``"cf_lcc"``
+    car-following LCC (eq. 11): m = 0, the CAV follows the head vehicle with the HDV law and
+    ``u`` is the *additional* input ``u_hat``.
+``"fd_lcc"``
+    free-driving LCC (eq. 12): m = 0, no head vehicle, first state ``-p_0``.
+``"ccc"``
+    connected cruise control (eq. 14): the general model with n = 0.
 
 States are ordered from the front of the string to the tail, two per vehicle
 (spacing error, velocity error): ``s_-m, v_-m, ..., s_0, v_0, ..., s_n, v_n`` (FD-LCC: ``-p_0``

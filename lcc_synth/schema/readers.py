@@ -57,6 +57,7 @@ def _lookup(table: Mapping[str, Any], key: str, field: str, default: Any, requir
 
 
 def fmt_range(lo, hi, lo_open, hi_open) -> str:
+    """A range as error text, e.g. ``>= 0 and < 1`` (``a finite number`` without bounds)."""
     parts = []
     if lo is not None:
         parts.append(f"{'>' if lo_open else '>='} {lo}")

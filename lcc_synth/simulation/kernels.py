@@ -1,6 +1,6 @@
 """The simulator's compiled loops (numba): HDV laws, V2V observation, the stepping kernel.
 
-Random draws inside the loop are counter based (:func:`_u01`): the same value for
+Random draws inside the loop are counter based (``_u01``): the same value for
 ``(seed, scenario, vehicle, step, channel)`` on any thread and in any batch. The driver is
 :func:`lcc_synth.simulation.engine.simulate`.
 """

@@ -29,7 +29,7 @@
     position = "drop"         # FD-LCC position state: "drop" | "weight"
 
     [synthesis.sparsity]      # design = "sparsity"
-    gammas = [...]            # penalties >= 0 (default: n_gamma log-spaced values x J*)
+    gammas = [0.1, 1.0]       # penalties >= 0 (default: n_gamma log-spaced values x J*)
     n_gamma = 12              # 2..60
     reweight = true           # group weights from the unstructured optimum
     rho = 10.0                # ADMM penalty parameter, > 0

@@ -339,10 +339,12 @@ def check_stabilisable(plant: H2Plant, tol: float = 1e-9) -> None:
 
 
 def closed_loop_matrix(plant: H2Plant, g: np.ndarray) -> np.ndarray:
+    """``A_K = A + B g`` of the design plant under the gain row ``g``."""
     return plant.A + plant.B @ np.asarray(g, dtype=float).reshape(1, -1)
 
 
 def max_real_eig(M: np.ndarray) -> float:
+    """Largest real part of the eigenvalues of ``M`` (stable below 0)."""
     return float(np.max(np.linalg.eigvals(M).real))
 
 

@@ -1,6 +1,6 @@
 """String-stability-aware H2 design: H2 cost with an H-infinity bound on head -> tail.
 
-Convex step (mixed H2/H-infinity with a common Lyapunov matrix, Clarabel):
+Convex step (mixed H2/H-infinity with a common Lyapunov matrix, Clarabel)::
 
     minimise   tr(Q X) + R W
     subject to A X + X A' + B Z + Z' B' + B_w B_w' <= 0,          (H2, Gramian bound)

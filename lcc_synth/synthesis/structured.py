@@ -14,8 +14,8 @@ small numbers):
 2. :func:`polish` -- descent on the TRUE closed-loop H2 cost ``J(g)`` restricted to the pattern.
    Each step factorises the closed loop once (real Schur form) and solves the two Gramians'
    Lyapunov equations with it (:mod:`~lcc_synth.synthesis.lyapunov`). With at most
-   :data:`NEWTON_MAX_FREE` free entries the direction is Newton's, from the exact Hessian
-   (:func:`h2_hessian`, two more triangular solves per free entry; eigenvalues made positive
+   ``NEWTON_MAX_FREE`` free entries the direction is Newton's, from the exact Hessian
+   (``h2_hessian``, two more triangular solves per free entry; eigenvalues made positive
    far from the minimum); otherwise, or when it does not descend, the Anderson-Moore step (the
    minimiser of ``J`` for frozen Gramians on the pattern), then the projected gradient
    ``2 (R g + B' P) L``; an Armijo line search only accepts stabilising gains. Measured on
