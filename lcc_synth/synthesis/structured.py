@@ -57,6 +57,8 @@ __all__ = [
     "pattern_vehicles",
     "convex_restriction",
     "PolishResult",
+    "NEWTON_MAX_FREE",
+    "h2_hessian",
     "polish",
     "StructuredResult",
     "structured_h2",
