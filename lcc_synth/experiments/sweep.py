@@ -212,7 +212,7 @@ def _member(result, b: int):
 
 
 def _one(result, config: MetricsConfig) -> dict[str, float | int]:
-    from lcc_synth import metrics as mt
+    import lcc_synth.metrics as mt
 
     return {
         "aave": mt.aave(result, config.window, config.vehicles)[0],

@@ -18,7 +18,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from lcc_synth.schema import readers as rd
+import lcc_synth.schema.readers as rd
 from lcc_synth.schema.readers import REQUIRED
 
 __all__ = ["REQUIRED", "READS", "Derived", "Key", "Table", "UndeclaredKeyError", "TYPES"]
