@@ -146,18 +146,12 @@ def fallback_names(tables: Mapping[str, Any], names: Sequence[str]) -> list[str]
     ConfigError
         ``controllers.MPC.fallback`` is not the name of another controller of the file.
     """
+    from lcc_synth.experiments.spec import fallback_target
+
     out: list[str] = []
     for name in names:
-        t = tables.get(name)
-        if not isinstance(t, Mapping) or t.get("type") != "mpc" or t.get("fallback") is None:
-            continue
-        target = declared("controllers.NAME:mpc").get(t, "fallback", f"controllers.{name}")
-        if target not in tables or target == name:
-            others = [n for n in tables if n != name]
-            raise ConfigError(f"controllers.{name}.fallback",
-                              f"must name another controller of the file {others}, got "
-                              f"{target!r}")  # fmt: skip
-        if target not in names and target not in out:
+        target = fallback_target(tables, name)
+        if target is not None and target not in names and target not in out:
             out.append(target)
     return out
 

@@ -18,7 +18,8 @@ from lcc_synth.schema import declared
 from lcc_synth.simulation.scenario import Scenario, scenario_from
 from lcc_synth.simulation.timestep import check_time_step
 
-__all__ = ["SimulationSpec", "controllers_from", "load_spec", "resolve_fallbacks"]
+__all__ = ["SimulationSpec", "controllers_from", "fallback_target", "load_spec",
+           "resolve_fallbacks"]
 
 
 @dataclass(frozen=True, repr=False)
@@ -48,6 +49,33 @@ class SimulationSpec(Record):
         return toml_text(self.toml_tables())
 
 
+def fallback_target(
+    tables: Mapping[str, Any], name: str, source: str | None = None
+) -> str | None:
+    """The controller that MPC ``name`` falls back to (``fallback = "NAME"``), ``None`` when
+    ``name`` is no MPC or has no such key.
+
+    Raises
+    ------
+    ConfigError
+        ``controllers.NAME.fallback`` is not the name of another controller of ``tables``.
+    """
+    table = tables.get(name)
+    if not isinstance(table, Mapping) or table.get("type") != "mpc" or (
+        table.get("fallback") is None
+    ):
+        return None
+    try:
+        target = declared("controllers.NAME:mpc").get(table, "fallback", f"controllers.{name}")
+    except ConfigError as err:
+        raise err.with_source(source) if source and not err.source else err from None
+    if target not in tables or target == name:
+        others = [n for n in tables if n != name]
+        raise ConfigError(f"controllers.{name}.fallback", f"must name another controller of "
+                          f"the file {others}, got {target!r}", source)  # fmt: skip
+    return target
+
+
 def resolve_fallbacks(
     tables: Mapping[str, Mapping[str, Any]], system: System, source: str | None = None
 ) -> dict[str, dict[str, Any]]:
@@ -67,17 +95,10 @@ def resolve_fallbacks(
     """
     out = {name: dict(t) for name, t in tables.items()}
     for name, table in out.items():
-        if table.get("type") != "mpc" or table.get("fallback") is None:
+        target = fallback_target(tables, name, source)
+        if target is None:
             continue
         field = f"controllers.{name}.fallback"
-        try:
-            target = declared("controllers.NAME:mpc").get(table, "fallback", f"controllers.{name}")
-        except ConfigError as err:
-            raise err.with_source(source) if source and not err.source else err from None
-        if target not in tables or target == name:
-            others = [n for n in tables if n != name]
-            raise ConfigError(field, f"must name another controller of the file {others}, "
-                              f"got {target!r}", source)  # fmt: skip
         if "fallback_gains_file" in table:
             raise ConfigError(field, "give fallback or fallback_gains_file, not both", source)
         gain = tables[target]

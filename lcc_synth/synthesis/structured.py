@@ -284,16 +284,18 @@ def h2_hessian(plant: H2Plant, g, L, P, S, mask) -> np.ndarray:
     idx = np.flatnonzero(mask)
     b = plant.B[:, 0]
     g = np.asarray(g, float).ravel()
-    bP = b @ P
-    row = plant.r * g + bP
+    row = plant.r * g + b @ P
     Hs = np.empty((idx.size, idx.size))
+    Pb = P @ b
     for c, j in enumerate(idx):
-        BdL = np.outer(b, L[j])  # B d L for d = e_j
+        d = np.zeros(g.size)
+        d[j] = 1.0  # the unit direction of free entry j
+        BdL = np.outer(b, L[j])  # B d L
         dL = S.solve(BdL + BdL.T)
-        BdP = np.outer(P @ b, np.eye(1, g.size, j).ravel())  # P B d
-        rg = plant.r * np.outer(np.eye(1, g.size, j).ravel(), g)  # r d' g
+        BdP = np.outer(Pb, d)  # P B d
+        rg = plant.r * np.outer(d, g)  # r d' g
         dP = S.solve(BdP + BdP.T + rg + rg.T, transpose=True)
-        dG = 2.0 * ((plant.r * np.eye(1, g.size, j).ravel() + b @ dP) @ L + row @ dL)
+        dG = 2.0 * ((plant.r * d + b @ dP) @ L + row @ dL)
         Hs[:, c] = dG[idx]
     return 0.5 * (Hs + Hs.T)
 
