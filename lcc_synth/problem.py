@@ -36,13 +36,14 @@ import math
 import tomllib
 import warnings
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
 from lcc_synth.errors import ConfigError, ImplausibleValueWarning
 from lcc_synth.models.hdv import IDM, OVM, model_from_dict
 from lcc_synth.models.linear import LCCModel, model_from_hdv
+from lcc_synth.models.platoon import PLATOON_KINDS, Platoon, PlatoonModel, platoon_model
 from lcc_synth.schema import TOP_LEVEL, check_top_level, declared
 from lcc_synth.schema import readers as _readers
 from lcc_synth.schema.readers import (  # re-exported: the typed readers behind the schema
@@ -74,6 +75,7 @@ __all__ = [
     "get_number_list",
     "System",
     "REQUIRED_SIZES",
+    "PLATOON_KINDS",
     "system_from",
 ]
 
@@ -177,28 +179,39 @@ def warn_large_gains(gains: Mapping[str, Any], field: str, limit: float = GAIN_L
 
 @dataclass(frozen=True)
 class System:
-    """The ``[hdv]`` + ``[system]`` tables: nonlinear HDV model, layout and equilibrium."""
+    """The ``[hdv]`` + ``[system]`` tables: nonlinear HDV model, layout and equilibrium.
+
+    For ``kind = "platoon"`` / ``"ring"`` the layout is :attr:`platoon` (``size`` vehicles,
+    CAVs at ``cavs``, per-vehicle HDV models); ``m`` and ``n`` are then the vehicles ahead of
+    and behind the first CAV (``m = size``, ``n = 0`` without a CAV).
+    """
 
     kind: str
     m: int
     n: int
     v_star: float
     hdv: OVM | IDM
+    platoon: Platoon | None = None
 
     @property
     def s_star(self) -> float:
         """Equilibrium spacing of the HDV model at ``v_star``."""
         return float(self.hdv.equilibrium_spacing(self.v_star))
 
-    def linear_model(self, warn: bool = True) -> LCCModel:
-        """The homogeneous linearised model of this system."""
+    def linear_model(self, warn: bool = True) -> LCCModel | PlatoonModel:
+        """The linearised model of this system (homogeneous for the paper's kinds; each
+        vehicle at its own equilibrium for a platoon or ring)."""
+        if self.platoon is not None:
+            return platoon_model(self.platoon, warn=warn)
         return model_from_hdv(self.kind, self.m, self.n, self.hdv, self.v_star, warn=warn)
 
 
 #: The sizes each kind of system must state: a size the kind fixes (m = 0 for CF-/FD-LCC, n = 0
 #: for CCC) may be left out, a size it leaves free may not (it never silently becomes 0).
-REQUIRED_SIZES = {"lcc": ("m", "n"), "cf_lcc": ("n",), "fd_lcc": ("n",), "ccc": ("m",)}
-_SIZE_MEANING = {"m": "HDVs ahead of the CAV", "n": "HDVs behind the CAV"}
+REQUIRED_SIZES = {"lcc": ("m", "n"), "cf_lcc": ("n",), "fd_lcc": ("n",), "ccc": ("m",),
+                  "platoon": ("size",), "ring": ("size",)}
+_SIZE_MEANING = {"m": "HDVs ahead of the CAV", "n": "HDVs behind the CAV",
+                 "size": "vehicles (the head not counted)"}
 _TOP = declared("")
 _SYSTEM = declared("system")
 
@@ -219,6 +232,15 @@ def system_from(data: Mapping[str, Any], source: str | None = None) -> System:
                     f"is required for kind = {kind!r}{'' if 'kind' in sys_t else ' (the default)'}"
                     f": the number of {_SIZE_MEANING[key]}, an integer in [{size.lo}, {size.hi}]",
                 )
+        if kind in PLATOON_KINDS:
+            return _platoon_system(kind, sys_t, hdv)
+        for key in ("size", "cavs", "circumference", "hdv_values"):
+            if key in sys_t:
+                if key != "cavs":  # a value out of range: that error first
+                    _SYSTEM.get(sys_t, key, "system")
+                raise ConfigError(
+                    f"system.{key}", f"only kind = 'platoon' or 'ring' has one (kind = {kind!r})"
+                )
         m = _SYSTEM.get(sys_t, "m", "system")
         n = _SYSTEM.get(sys_t, "n", "system")
         v_star = _SYSTEM.get(sys_t, "v_star", "system")
@@ -235,3 +257,47 @@ def system_from(data: Mapping[str, Any], source: str | None = None) -> System:
         return System(kind, m, n, v_star, hdv)
     except ConfigError as err:
         raise err.with_source(source) if source and not err.source else err from None
+
+
+def _platoon_system(kind: str, sys_t: Mapping[str, Any], hdv: OVM | IDM) -> System:
+    """The :class:`System` of a ``platoon`` or ``ring`` table."""
+    for key in ("m", "n"):
+        if key in sys_t:
+            raise ConfigError(
+                f"system.{key}", f"is not used by kind = {kind!r}: give size and cavs instead"
+            )
+    size = _SYSTEM.get(sys_t, "size", "system")
+    cavs = _SYSTEM.raw(sys_t, "cavs")
+    if not isinstance(cavs, list) or any(
+        isinstance(c, bool) or not isinstance(c, int) for c in cavs
+    ):
+        raise ConfigError(
+            "system.cavs", f"must be a list of integer positions in [1, {size}], got {cavs!r}"
+        )
+    ring = kind == "ring"
+    circumference = _SYSTEM.get(sys_t, "circumference", "system")
+    v_star = _SYSTEM.get(sys_t, "v_star", "system")
+    if ring and circumference is not None:
+        if "v_star" in sys_t:
+            raise ConfigError(
+                "system.circumference",
+                "give system.v_star or system.circumference for a ring, not both",
+            )
+        v_star = None
+    hv_t = _SYSTEM.get(sys_t, "hdv_values", "system")
+    params = [f.name for f in fields(hdv) if f.name != "name"]
+    HV = declared("system.hdv_values")
+    HV.check(hv_t, "system.hdv_values", allowed=params)
+    each = HV.get_each(hv_t, "system.hdv_values", length=size)
+    models = []
+    for i in range(size):
+        kw = {key: float(vals[i]) for key, vals in each.items()}
+        try:
+            models.append(replace(hdv, **kw))
+        except ConfigError as err:
+            raise ConfigError(
+                f"system.hdv_values.{err.field}", f"vehicle {i + 1}: {err.message}"
+            ) from None
+    platoon = Platoon(tuple(models), tuple(cavs), v_star, ring, circumference)
+    first = platoon.cavs[0] if platoon.cavs else size + 1
+    return System(kind, first - 1, size + 1 - first, float(platoon.v_star), hdv, platoon)

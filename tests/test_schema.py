@@ -310,6 +310,10 @@ def _load_coverage_corpus(tmp: Path) -> None:
     model = system_from(prob.data).linear_model(warn=False)
     specs, _ = region_specs_from(prob.data, model)
     assert len(specs["a"].mu) == 5
+    platoon = {"kind": "platoon", "size": 3, "cavs": [2], "hdv_values": {"alpha": [0.5, 0.6, 0.7]}}
+    assert system_from({"system": platoon}).platoon.cavs == (2,)
+    ring = {"kind": "ring", "size": 4, "circumference": 80.0}
+    assert system_from({"system": ring}).platoon.length == 80.0
 
 
 def test_every_declared_key_is_read_by_a_loader(tmp_path):
@@ -412,8 +416,9 @@ def test_choices_are_the_code_constants():
     from lcc_synth.metrics import VEHICLE_SETS
     from lcc_synth.models.feedback import SEMANTICS
     from lcc_synth.models.linear import KINDS
+    from lcc_synth.models.platoon import PLATOON_KINDS
 
-    assert declared("system").key("kind").choices == KINDS
+    assert declared("system").key("kind").choices == (*KINDS, *PLATOON_KINDS)
     assert declared("controllers.NAME:static").key("kind").choices == KINDS
     assert set(declared("controllers.NAME").key("type").choices) == set(CONTROLLER_TYPES)
     assert set(declared("controllers.NAME:suite").key("type").choices) == set(SUITE_TYPES)

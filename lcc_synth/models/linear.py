@@ -27,10 +27,10 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
-import scipy.linalg as sla
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import CarFollowingModel, LinearCoefficients, linear_coefficients
+from lcc_synth.models.platoon import HEAD, chain_matrices, discretize
 from lcc_synth.models.records import Record
 
 __all__ = [
@@ -147,23 +147,6 @@ class LCCModel(Record):
         )
 
 
-# --------------------------------------------------------------------------------------------
-# Block helpers, Section II-B
-# --------------------------------------------------------------------------------------------
-
-
-def _P1(c: LinearCoefficients) -> np.ndarray:
-    return np.array([[0.0, -1.0], [c.alpha1, -c.alpha2]])
-
-
-def _P2(c: LinearCoefficients) -> np.ndarray:
-    return np.array([[0.0, 1.0], [0.0, c.alpha3]])
-
-
-_S1 = np.array([[0.0, -1.0], [0.0, 0.0]])
-_S2 = np.array([[0.0, 1.0], [0.0, 0.0]])
-
-
 def _coef_list(coef: CoefArg, count: int, what: str) -> list[LinearCoefficients]:
     if isinstance(coef, LinearCoefficients):
         return [coef] * count
@@ -216,33 +199,11 @@ def build_model(kind: str, m: int, n: int, hdv: CoefArg, cav: LinearCoefficients
     vehicles = tuple(range(-m, n + 1))
     per_vehicle = {i: c for i, c in zip([*range(-m, 0), *range(1, n + 1)], coefs, strict=True)}
     per_vehicle[0] = cav
-    nx = 2 * len(vehicles)
-    A = np.zeros((nx, nx))
-    B = np.zeros((nx, 1))
-    H = np.zeros((nx, 1))
-    for j, i in enumerate(vehicles):
-        r = slice(2 * j, 2 * j + 2)
-        prev = slice(2 * j - 2, 2 * j)
-        c = per_vehicle[i]
-        if i == 0:
-            B[2 * j + 1, 0] = 1.0
-            if kind == "fd_lcc":
-                A[r, r] = _S1
-            elif kind == "cf_lcc":
-                A[r, r] = _P1(c)
-                H[r, 0] = [1.0, c.alpha3]
-            else:
-                A[r, r] = _S1
-                if j == 0:  # m = 0 general LCC: the CAV follows the head vehicle directly
-                    H[r, 0] = [1.0, 0.0]
-                else:
-                    A[r, prev] = _S2
-        else:
-            A[r, r] = _P1(c)
-            if j == 0:
-                H[r, 0] = [1.0, c.alpha3]
-            else:
-                A[r, prev] = _P2(c)
+    cav_role = {"fd_lcc": "free", "cf_lcc": "cav_hdv"}.get(kind, "cav")
+    roles = [cav_role if i == 0 else "hdv" for i in vehicles]
+    follows = [None if (kind == "fd_lcc" and i == 0) else (HEAD if j == 0 else j - 1)
+               for j, i in enumerate(vehicles)]  # fmt: skip
+    A, B, H = chain_matrices(roles, [per_vehicle[i] for i in vehicles], follows)
     return LCCModel(kind, m, n, A, B, H, vehicles, per_vehicle)
 
 
@@ -285,19 +246,3 @@ def model_from_hdv(
         coefs = linear_coefficients(hdv, v_star, warn=warn)
         cav = coefs
     return build_model(kind, m, n, coefs, cav)
-
-
-def discretize(A: np.ndarray, B: np.ndarray, Ts: float) -> tuple[np.ndarray, np.ndarray]:
-    """Exact zero-order-hold discretisation ``(Ad, Bd)`` at sample time ``Ts``.
-
-    ``B`` may hold several input columns (e.g. ``[B, H]``). Uses one matrix exponential of the
-    augmented matrix ``[[A, B], [0, 0]]`` (valid for singular ``A``).
-    """
-    if not (np.isfinite(Ts) and Ts > 0):
-        raise ConfigError("sample_time", f"must be > 0 s, got {Ts!r}")
-    nx, nu = B.shape
-    M = np.zeros((nx + nu, nx + nu))
-    M[:nx, :nx] = A
-    M[:nx, nx:] = B
-    E = sla.expm(M * Ts)
-    return E[:nx, :nx], E[:nx, nx:]

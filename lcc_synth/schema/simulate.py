@@ -7,6 +7,8 @@ from __future__ import annotations
 from dataclasses import fields
 
 from lcc_synth.models.hdv import IDM, OVM
+from lcc_synth.models.linear import KINDS
+from lcc_synth.models.platoon import PLATOON_KINDS
 from lcc_synth.schema.spec import REQUIRED, Derived, Key, Table
 
 #: appended to the meaning of the settings a sweep may draw per scenario
@@ -86,15 +88,34 @@ SYSTEM = Table(
     "The linear model family, the string's layout and its equilibrium.",
     _SYSTEM_CMDS,
     (
-        Key("kind", "string", "Linear model family (Sec. II).", "lcc",
-            choices=("lcc", "cf_lcc", "fd_lcc", "ccc")),
+        Key("kind", "string", "Linear model family (Sec. II); platoon: a head and several "
+            "CAVs anywhere; ring: N vehicles on a ring road.", "lcc",
+            choices=(*KINDS, *PLATOON_KINDS)),
         Key("m", "integer", "HDVs ahead of the CAV (required for lcc and ccc; 0 for cf_lcc, "
             "fd_lcc).", 0, lo=0, hi=50),
         Key("n", "integer", "HDVs behind the CAV (required for lcc, cf_lcc, fd_lcc; 0 for ccc).",
             0, lo=0, hi=200),
-        Key("v_star", "number", "Equilibrium velocity; s* follows from the HDV model.", 15.0,
-            lo=0.0, lo_open=True, unit="m/s"),
+        Key("v_star", "number", "Equilibrium velocity; s* follows from the HDV model (a ring "
+            "with a circumference: derived from it).", 15.0, lo=0.0, lo_open=True, unit="m/s"),
+        Key("size", "integer", "Vehicles behind the head (platoon) or on the ring (required "
+            "for platoon and ring).", None, lo=1, hi=400),
+        Key("cavs", "any", "Positions (1..size) of the CAVs of a platoon or ring, front to "
+            "tail; [] for all HDVs.", []),
+        Key("circumference", "number", "Ring length; default the sum of the equilibrium "
+            "spacings at v_star (give one of the two).", None, lo=0.0, lo_open=True, unit="m"),
+        Key("hdv_values", "table", "Per-vehicle [hdv] parameters of a platoon or ring: "
+            "[system.hdv_values].", {}),
     ),
+)
+
+SYSTEM_HDV_VALUES = Table(
+    "system.hdv_values",
+    "Per-vehicle values of [hdv] model parameters in the model of a platoon or ring (each "
+    "HDV linearised at its own equilibrium; a CAV's entry is the HDV law it drives with as an "
+    "HDV).",
+    _SYSTEM_CMDS,
+    any_key=Key("PARAMETER", "number list", "One value per position 1..size, front to tail.",
+                REQUIRED, length=Derived("size")),
 )
 
 SCENARIO = Table(
@@ -293,5 +314,5 @@ SCENARIOS = Table(
     includes=("scenario",),
 )
 
-TABLES = (TOP, HDV, SYSTEM, SCENARIO, HETEROGENEITY, HDV_VALUES, DELAY, V2V, LOSS_RATE_LIST,
-          *PERTURBATIONS, METRICS, SWEEP, LAYOUTS, SCENARIOS)  # fmt: skip
+TABLES = (TOP, HDV, SYSTEM, SYSTEM_HDV_VALUES, SCENARIO, HETEROGENEITY, HDV_VALUES, DELAY, V2V,
+          LOSS_RATE_LIST, *PERTURBATIONS, METRICS, SWEEP, LAYOUTS, SCENARIOS)  # fmt: skip
