@@ -105,3 +105,31 @@ def test_bad_parameters_name_the_field(kind, params, field):
     with pytest.raises(ConfigError) as err:
         BASELINE_TYPES[kind](**params)
     assert err.value.field == field
+
+
+def test_problem_file_baselines_run_in_the_simulator_within_the_limits(tmp_path):
+    """Every baseline type builds from a problem file and runs the head-brake scenario: the
+    applied CAV acceleration stays in the limits, nothing collides, and FollowerStopper never
+    lets the gap fall below its first boundary's offset (it commands 0 m/s there)."""
+    from pathlib import Path
+
+    import numpy as np
+
+    from lcc_synth.experiments.spec import load_spec
+    from lcc_synth.simulation.engine import simulate_many
+
+    text = (Path(__file__).parents[1] / "problems" / "mpc_head_brake.toml").read_text()
+    text = text[: text.index("# Looking ahead only")] + "".join(
+        f'[controllers.{k}]\ntype = "{k}"\n{extra}\n'
+        for k, extra in (("follower_stopper", "U = 15.0"), ("pi_saturation", ""), ("acc", ""),
+                         ("cacc", "sample_time = 0.1"))
+    )  # fmt: skip
+    (tmp_path / "b.toml").write_text(text)
+    spec = load_spec(tmp_path / "b.toml")
+    res = simulate_many(spec.scenario, spec.controllers)
+    for name, r in res.items():
+        a = r.acceleration[0, :, r.cav]
+        assert np.nanmin(a) >= -5.0 - 1e-12 and np.nanmax(a) <= 2.0 + 1e-12, name
+        assert not r.collided.any(), name
+    fs = res["follower_stopper"]
+    assert np.nanmin(fs.spacing[0, :, fs.cav]) >= 4.5

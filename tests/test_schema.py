@@ -310,6 +310,17 @@ def _load_coverage_corpus(tmp: Path) -> None:
     model = system_from(prob.data).linear_model(warn=False)
     specs, _ = region_specs_from(prob.data, model)
     assert len(specs["a"].mu) == 5
+    from lcc_synth.controllers.baseline_tables import baseline_from_table
+
+    for kind, table in (
+        ("follower_stopper", {"U": 7.5, "dx0": [4.5, 5.25, 6.0], "d": [1.5, 1.0, 0.5]}),
+        ("pi_saturation", {"window": 38.0, "g_l": 7.0, "g_u": 30.0, "v_catch": 1.0,
+                           "gamma": 2.0, "dx_s_min": 4.0}),
+        ("acc", {"k_s": 0.23, "k_v": 0.07, "h": 1.1, "s0": 2.0}),
+        ("cacc", {"h": 0.7, "k_p": 0.2, "k_d": 0.7, "r": 2.0}),
+    ):
+        table = {"type": kind, "sample_time": 0.1, "length": 0.0, **table}
+        assert baseline_from_table("b", kind, table).kind == kind
     platoon = {"kind": "platoon", "size": 3, "cavs": [2], "hdv_values": {"alpha": [0.5, 0.6, 0.7]}}
     assert system_from({"system": platoon}).platoon.cavs == (2,)
     ring = {"kind": "ring", "size": 4, "circumference": 80.0}

@@ -314,3 +314,4 @@ class BaselineController:
     def stats(self) -> dict[str, Any]:
         """Number of controller samples of the last run."""
         return {"samples": self._calls}
+

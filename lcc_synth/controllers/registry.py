@@ -2,7 +2,9 @@
 
 ``type = "hdv"`` and ``"static"`` build the controllers of :mod:`lcc_synth.controllers.static`,
 ``"gains_file"`` a static-gain controller from a gains file written by ``lcc-synth synthesize``,
-``"mpc"`` the controller of :mod:`lcc_synth.mpc` (imported only then).
+``"mpc"`` the controller of :mod:`lcc_synth.mpc` (imported only then), ``"follower_stopper"``,
+``"pi_saturation"``, ``"acc"`` and ``"cacc"`` the field's baselines
+(:mod:`lcc_synth.controllers.baselines`).
 """
 
 from __future__ import annotations
@@ -11,6 +13,8 @@ import json
 from pathlib import Path
 
 from lcc_synth.controllers.base import Controller
+from lcc_synth.controllers.baseline_tables import baseline_from_table
+from lcc_synth.controllers.baselines import BASELINE_TYPES
 from lcc_synth.controllers.static import HDVController, StaticGainController
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains
@@ -20,7 +24,7 @@ from lcc_synth.schema import declared
 
 __all__ = ["CONTROLLER_TYPES", "STATIC_RUN_KEYS", "build_controller"]
 
-CONTROLLER_TYPES = ("hdv", "static", "gains_file", "mpc")
+CONTROLLER_TYPES = ("hdv", "static", "gains_file", "mpc", *BASELINE_TYPES)
 
 
 _EQ_KEYS = ("equilibrium", "equilibrium_tau", "measurement_filter")
@@ -62,6 +66,8 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
                     f"{field}.type", f"'mpc' controllers need lcc_synth.mpc, which failed: {err}"
                 ) from None
             return mpc_controller_from_table(name, table, system, source=source)
+        if ctype in BASELINE_TYPES:
+            return baseline_from_table(name, ctype, table)
         T = declared(f"controllers.NAME:{ctype}")
         T.check(table, field)
         if ctype == "hdv":

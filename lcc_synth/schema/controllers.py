@@ -5,6 +5,9 @@ compares them)."""
 
 from __future__ import annotations
 
+from dataclasses import MISSING, fields
+
+from lcc_synth.controllers.baselines import BASELINE_TYPES
 from lcc_synth.schema.spec import REQUIRED, Derived, Key, Table
 
 __all__ = ["TABLES"]
@@ -12,10 +15,10 @@ __all__ = ["TABLES"]
 _CMDS = ("simulate", "sweep", "run")
 _C = "controllers.NAME"
 
-_TYPE = Key("type", "string", "The controller.", REQUIRED,
-            choices=("hdv", "static", "gains_file", "mpc"))
+_TYPES = ("hdv", "static", "gains_file", "mpc", *BASELINE_TYPES)
+_TYPE = Key("type", "string", "The controller.", REQUIRED, choices=_TYPES)
 _SUITE_TYPE = Key("type", "string", "The controller; h2 is synthesised for each layout.",
-                  REQUIRED, choices=("hdv", "static", "gains_file", "mpc", "h2"))
+                  REQUIRED, choices=(*_TYPES, "h2"))
 _SAMPLE_TIME = Key("sample_time", "number", "Controller period (zero-order hold; a multiple of "
                    "[scenario].dt); absent: every step.", None, lo=0.0, lo_open=True, unit="s")
 _EQUILIBRIUM = Key("equilibrium", "string", "Errors from the nominal v*, s* (fixed) or from a "
@@ -161,5 +164,48 @@ MPC_SOLVER = Table(
     variant=_MPC,
 )
 
+#: Meaning and unit of every baseline parameter (defaults and sources: the dataclasses of
+#: lcc_synth.controllers.baselines, one source).
+_BASELINE_MEANING = {
+    "U": ("Target speed (Stern et al. 2018: the experiment's set speed).", "m/s"),
+    "dx0": ("Gap offsets of the three boundaries (Stern et al. 2018).", "m"),
+    "d": ("Decelerations of the three boundaries (Stern et al. 2018).", "m/s²"),
+    "window": ("Window of the AV's mean speed U (Stern et al. 2018).", "s"),
+    "g_l": ("Gap below which no catch-up speed is added.", "m"),
+    "g_u": ("Gap above which the full catch-up speed is added (> g_l).", "m"),
+    "v_catch": ("Catch-up speed.", "m/s"),
+    "gamma": ("Width of the blend between target and leader speed.", "m"),
+    "dx_s_min": ("Floor of the safe gap dx_s = max(2 dv, dx_s_min).", "m"),
+    "k_s": ("Gain on the gap error (Milanés & Shladover 2014).", "1/s²"),
+    "k_v": ("Gain on the speed difference (Milanés & Shladover 2014).", "1/s"),
+    "h": ("Time gap (> 0).", "s"),
+    "s0": ("Standstill gap.", "m"),
+    "k_p": ("Gain on the spacing error (Ploeg et al. 2011).", "1/s²"),
+    "k_d": ("Gain on its rate (Ploeg et al. 2011).", "1/s"),
+    "r": ("Standstill distance.", "m"),
+}
+_LENGTH = Key("length", "number", "Vehicle length subtracted from the spacing to get the gap.",
+              0.0, lo=0.0, unit="m")
+
+
+def _baseline_table(kind: str, cls) -> Table:
+    keys = []
+    for f in fields(cls):
+        meaning, unit = _BASELINE_MEANING[f.name]
+        default = REQUIRED if f.default is MISSING else f.default
+        if isinstance(default, tuple):
+            keys.append(Key(f.name, "number list", meaning, list(default), lo=0.0,
+                            length=len(default), unit=unit))
+        else:
+            keys.append(Key(f.name, "number", meaning, default, unit=unit))
+    return Table(
+        _C, f'type = "{kind}": {cls.__doc__.split(";")[0].split(":")[0]} (a baseline of '
+        "the field, lcc_synth.controllers.baselines).", _CMDS,
+        (_TYPE, *keys, _SAMPLE_TIME, _LENGTH), variant=kind,
+    )
+
+
+BASELINES = tuple(_baseline_table(k, c) for k, c in BASELINE_TYPES.items())
+
 TABLES = (GENERIC, SUITE, HDV, STATIC, GAINS_FILE, H2, LAYOUT_OVERRIDE, MPC, MPC_WEIGHTS,
-          MPC_CONSTRAINTS, MPC_PREDICTION, MPC_SOLVER)  # fmt: skip
+          MPC_CONSTRAINTS, MPC_PREDICTION, MPC_SOLVER, *BASELINES)  # fmt: skip
