@@ -180,7 +180,7 @@ class HDVController(_LinearController):
         return {"type": "hdv", "sample_time": self.sample_time}
 
     def as_dict(self) -> dict[str, Any]:
-        """Name and :meth:`describe`."""
+        """Name and :meth:`HDVController.describe`."""
         return {"name": self.name, **self.describe()}
 
 
@@ -311,5 +311,5 @@ class StaticGainController(_LinearController):
         return out
 
     def as_dict(self) -> dict[str, Any]:
-        """Name, :meth:`describe` and the model's layout."""
+        """Name, :meth:`StaticGainController.describe` and the model's layout."""
         return {"name": self.name, "m": self.model.m, "n": self.model.n, **self.describe()}
