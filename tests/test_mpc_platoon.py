@@ -150,7 +150,7 @@ def test_one_cav_joint_mpc_first_move_is_the_single_cav_mpcs(m, n):
     joint.reset(ctx)
     _, S, V, U = _euler(sys_p, joint, s0, np.full(size, 15.0), _brake, 8.0, dt=0.1)
     joint.reset(ctx)
-    diffs, active = [], 0
+    diffs = []
     for k in range(S.shape[0]):
         obs = _obs(0.1 * k, np.concatenate([[np.nan], S[k]]),
                    np.concatenate([[_brake(0.1 * k)], V[k]]))
@@ -159,10 +159,11 @@ def test_one_cav_joint_mpc_first_move_is_the_single_cav_mpcs(m, n):
         diffs.append(abs(a[0] - b[0]))
     hj, hs = joint.history(), single.history()
     assert (hj["status"] == 0).all() and (hs["status"] == 0).all()
-    active = int(np.count_nonzero(hs["slack"] > 1e-6)) + joint.stats()["slack_steps"]
-    assert max(diffs) <= 1e-6, max(diffs)
-    assert joint.stats()["polish"].get("failed", 0) == 0
-    assert active > 0 or np.any(np.abs(hs["u"]) >= 4.999)  # a constrained run
+    assert max(diffs) <= 1e-6, max(diffs)  # measured: 0.0 on all 80 samples
+    sj = joint.stats()
+    assert set(sj["polish"]) == {"success"} == set(single.stats()["polish"])
+    # a constrained run: spacing slack used, comfort rows yielding, the braking limit reached
+    assert sj["slack_steps"] > 0 and sj["jerk_relaxed"] > 0 and U.min() == -5.0
 
 
 # ------------------------------------------------------------------ independent dense QP (cvxpy)
