@@ -20,7 +20,7 @@ from lcc_synth.models.platoon import Platoon, PlatoonGains, platoon_model
 from lcc_synth.mpc import MPCController
 from lcc_synth.mpc.platoon import PlatoonMPCController
 from lcc_synth.mpc.platoon_qp import platoon_state_weights
-from lcc_synth.mpc.settings import Constraints, MPCSettings, SolverSettings, Weights
+from lcc_synth.mpc.settings import Constraints, MPCSettings, Prediction, SolverSettings, Weights
 from lcc_synth.problem import System, system_from
 
 HDV = OVM()
@@ -519,3 +519,34 @@ def test_scenario_layout_mismatch_is_a_config_error():
     ctrl = PlatoonMPCController("mpc", MPCSettings(horizon=10), system)
     with pytest.raises(ConfigError, match="CAV columns"):
         ctrl.reset(_ctx(_deeplcc(cavs=(3, 7))))
+
+
+def test_batch_members_are_independent_and_relinearisation_runs():
+    """Two batch members equal two single-member runs bit for bit (one OSQP workspace each),
+    also with re-linearisation on while the head brakes from 15 to 7.5 m/s."""
+    system = _deeplcc()
+    pl = system.platoon
+    settings = MPCSettings(horizon=20, prediction=Prediction(relinearize=True,
+                                                            equilibrium_window=1.0))
+    s0 = np.concatenate([[np.nan], pl.equilibrium_spacings])
+    runs = []
+    for shift in (0.0, 1.5):
+        ctrl = PlatoonMPCController("mpc", settings, system)
+        ctrl.reset(_ctx(system))
+        out = []
+        for k in range(60):
+            v = np.full(9, _brake(0.1 * k) + shift)
+            out.append(ctrl(_obs(0.1 * k, s0, v))[0])
+        runs.append(np.array(out))
+        assert ctrl.stats()["relinearizations"] >= 1
+    both = PlatoonMPCController("mpc", settings, system)
+    both.reset(_ctx(system, batch=2))
+    for k in range(60):
+        v = np.stack([np.full(9, _brake(0.1 * k) + sh) for sh in (0.0, 1.5)])
+        s = np.stack([s0, s0])
+        u = both(Observation(0.1 * k, s, v, np.zeros_like(s)))
+        assert u.shape == (2, 2)
+        assert np.array_equal(u[0], runs[0][k]) and np.array_equal(u[1], runs[1][k])
+    h = both.history()
+    assert h["u"].shape == (2, 60, 2) and h["plan"].shape == (2, 60, 20, 2)
+    assert h["predicted_states"].shape == (2, 60, 21, 16)
