@@ -550,3 +550,31 @@ def test_batch_members_are_independent_and_relinearisation_runs():
     h = both.history()
     assert h["u"].shape == (2, 60, 2) and h["plan"].shape == (2, 60, 20, 2)
     assert h["predicted_states"].shape == (2, 60, 21, 16)
+
+
+def test_fallback_gains_file_in_platoon_form(tmp_path):
+    import json
+
+    from lcc_synth.mpc import mpc_controller_from_table
+
+    system = _problem("platoon")
+    gains = {"kind": "platoon", "semantics": "replace",
+             "gains": {"u_2": {"v_2": -0.5, "s_2": 0.2}, "u_4": {"v_4": -0.6}}}
+    (tmp_path / "g.json").write_text(json.dumps(gains))
+    ctrl = mpc_controller_from_table(
+        "mpc", {"type": "mpc", "horizon": 10, "fallback_gains_file": "g.json",
+                "solver": {"max_iter": 1}},
+        system, source=str(tmp_path / "problem.toml"))
+    assert ctrl.describe()["fallback"]["gains"] == gains["gains"]
+    ctrl.reset(_ctx(system))
+    pl = system.platoon
+    s = np.concatenate([[np.nan], pl.equilibrium_spacings + 1.0])
+    v = np.full(6, 15.0)
+    v[4] = 16.0  # position 4 (a CAV) 1 m/s fast
+    u = ctrl(_obs(0.0, s, v))[0]  # the QP fails (max_iter = 1): the file's rows
+    assert u == pytest.approx([0.2 * 1.0, -0.6 * 1.0], abs=1e-12)
+    (tmp_path / "bad.json").write_text(json.dumps(dict(gains, kind="ring")))
+    with pytest.raises(ConfigError) as err:
+        mpc_controller_from_table("mpc", {"type": "mpc", "fallback_gains_file": "bad.json"},
+                                  system, source=str(tmp_path / "problem.toml"))
+    assert err.value.field == "controllers.mpc.fallback_gains_file"
