@@ -41,8 +41,13 @@ single-CAV MPC (:mod:`lcc_synth.mpc.solver`). Per sample:
 Not supported for platoons (a ConfigError naming the key): ``n_model`` (the joint MPC models
 every vehicle), ``constraints.behind`` (every CAV's own spacing is constrained),
 ``weights.position`` (FD-LCC only). The controller returns ``(batch,)`` with one CAV and
-``(batch, n_cav)`` with several (CAV order of the platoon). Measured solve times:
-``benchmarks/bench_mpc_platoon.py``.
+``(batch, n_cav)`` with several (CAV order of the platoon).
+
+Measured (``benchmarks/bench_mpc_platoon.py``, N = 50, Ts = 0.1 s, 2 shared cores): the
+two-CAV DeeP-LCC platoon in its brake scenario takes 1.5 ms per step (median; OSQP 1.3 ms)
+and 20-30 ms at p99: while both CAVs ride the acceleration limit behind the accelerating head
+(t = 12-14 s) OSQP needs up to 3600 iterations (other rho / scaling settings did not help);
+the 20-vehicle ring with one AV takes 0.6 ms (median) and 4.7 ms (p99).
 """
 
 from __future__ import annotations
