@@ -124,7 +124,8 @@ def test_one_cav_joint_mpc_first_move_is_the_single_cav_mpcs(m, n):
     same matrices to round-off), so OSQP's answers agree far below its tolerance; both are
     checked through a braking run in which the spacing bound and comfort rows become active.
 
-    Tolerance: the two QPs' data agree to ~1e-13 (asserted); OSQP runs the same iterations on
+    Tolerance: the two QPs' data agree to 1e-12 relative (asserted); OSQP runs the same
+    iterations on
     them and, when polishing succeeds (asserted), returns the KKT point of the identified
     active set, solved with iterative refinement: the first moves then agree to ~1e-10 and
     1e-6 m/s^2 is a bound with margin, not a fitted value."""
