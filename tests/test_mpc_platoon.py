@@ -125,10 +125,9 @@ def test_one_cav_joint_mpc_first_move_is_the_single_cav_mpcs(m, n):
     checked through a braking run in which the spacing bound and comfort rows become active.
 
     Tolerance: the two QPs' data agree to 1e-12 relative (asserted); OSQP runs the same
-    iterations on
-    them and, when polishing succeeds (asserted), returns the KKT point of the identified
-    active set, solved with iterative refinement: the first moves then agree to ~1e-10 and
-    1e-6 m/s^2 is a bound with margin, not a fitted value."""
+    iterations on them and, when polishing succeeds (asserted), returns the KKT point of the
+    identified active set, solved with iterative refinement: the first moves then agree to
+    ~1e-10 and 1e-6 m/s^2 is a bound with margin, not a fitted value."""
     size = m + n + 1
     pl = Platoon(tuple([HDV] * size), (m + 1,), 15.0)
     sys_p = System("platoon", m, n, 15.0, HDV, pl)
