@@ -203,6 +203,55 @@ def test_decentralised_two_cav_ring_is_stable_and_between_the_bounds():
     assert np.max(np.linalg.eigvals(plant.closed_loop(res.K)).real) < 0
 
 
+def test_penalty_continuation_stabilises_where_the_truncated_riccati_gain_does_not():
+    from lcc_synth.synthesis.platoon_polish import descend, h2_objective, initial_gain
+
+    alpha = [0.87, 0.9, 1.15, 0.78, 0.61, 1.0, 0.41]
+    beta = [0.38, 0.62, 0.89, 0.73, 0.31, 0.85, 0.24]
+    hdv = tuple(OVM(alpha=a, beta=b) for a, b in zip(alpha, beta, strict=True))
+    M = platoon_model(Platoon(hdv, (3,), 15.0, ring=True), warn=False)
+    plant = make_platoon_plant(M, "added", Weights(q_s=0.027, q_v=0.011, r=7.266))
+    mask = pattern_rows(plant, comm_range_pattern(M.platoon, 1))
+    K_ric = platoon_riccati(plant)[0]
+    V = plant.V
+    c, off = M.conserved, ~mask[0]
+    shift = -(c[off] @ K_ric[0, off]) / (c[off] @ c[off])  # least dropped part modulo c
+    Kt = np.where(mask, K_ric + shift * c, 0.0)
+    assert np.abs(Kt[0, off]).max() == 0 and np.abs((K_ric + shift * c)[0, off]).max() > 0.1
+    assert np.max(np.linalg.eigvals(V.T @ (plant.A + plant.B @ Kt) @ V).real) > 0
+    K0, how = initial_gain(plant, mask, K_ric)
+    assert how == "penalty_continuation" and np.all(K0[~mask] == 0.0)
+    assert np.max(np.linalg.eigvals(V.T @ (plant.A + plant.B @ K0) @ V).real) < 0
+    res = descend(h2_objective(plant), K0, mask)
+    assert res.converged and res.f <= platoon_cost(plant, K0).J and np.all(res.K[~mask] == 0)
+
+
+def test_bfgs_reaches_the_newton_optimum(monkeypatch):
+    import lcc_synth.synthesis.platoon_polish as pp
+
+    plant = make_platoon_plant(deeplcc_model(), "replace", Weights(q_s=0.5, head=1.0))
+    mask = pattern_rows(plant, {3: (2, 3, 4), 6: (5, 6, 7)})
+    K0, _ = pp.initial_gain(plant, mask)
+    newton = pp.descend(pp.h2_objective(plant), K0, mask, tol=1e-9)
+    monkeypatch.setattr(pp, "NEWTON_MAX_FREE", 0)
+    bfgs = pp.descend(pp.h2_objective(plant), K0, mask, tol=1e-9, max_iter=2000)
+    assert newton.method == "newton" and bfgs.method == "bfgs"
+    assert bfgs.iterations > newton.iterations
+    assert np.sqrt(bfgs.f) == pytest.approx(np.sqrt(newton.f), rel=1e-9)
+    assert np.abs(bfgs.K - newton.K).max() < 1e-4 * np.abs(newton.K).max()
+
+
+def test_ring_is_stabilisable_on_the_invariant_subspace_only():
+    from lcc_synth.analysis.staircase import uncontrollable_modes
+    from lcc_synth.synthesis.platoon_h2 import check_platoon_stabilisable
+
+    plant = make_platoon_plant(ring_model(8), "replace", RING_W)
+    full = uncontrollable_modes(plant.A, plant.B)
+    assert len(full) >= 1 and min(abs(lam) for lam in full) < 1e-9  # the conserved mode
+    assert all(lam.real < -1e-9 for lam in uncontrollable_modes(plant.Ar, plant.Br))
+    check_platoon_stabilisable(plant)  # no error: the conserved mode is not in the plant
+
+
 # --------------------------------------------------------------------------------------------
 # One CAV: the platoon code reproduces the single-CAV design
 # --------------------------------------------------------------------------------------------
