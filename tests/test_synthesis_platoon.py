@@ -23,9 +23,10 @@ from lcc_synth.synthesis.config import spec_from_problem
 from lcc_synth.synthesis.gains_file import read_platoon_gains
 from lcc_synth.synthesis.h2 import Weights, h2_norm, make_plant, riccati_gain
 from lcc_synth.synthesis.platoon_config import comm_range_pattern, robust_members
-from lcc_synth.synthesis.platoon_design import pattern_rows, synthesize_platoon
+from lcc_synth.synthesis.platoon_design import synthesize_platoon
 from lcc_synth.synthesis.platoon_h2 import (
     make_platoon_plant,
+    pattern_rows,
     platoon_cost,
     platoon_gradient,
     platoon_h2,
@@ -275,6 +276,31 @@ def test_one_cav_platoon_matches_the_single_cav_lcc_design(semantics):
     assert rep.check.h2 == pytest.approx(res.h2, rel=1e-9)
 
 
+def test_sparsity_range_front_per_cav():
+    from lcc_synth.synthesis.platoon_sparsity import range_pareto
+
+    M = ring_model(10)
+    plant = make_platoon_plant(M, "replace", RING_W)
+    h_star = np.sqrt(platoon_riccati(plant)[1])
+    points, K, chosen = range_pareto(plant, h_star, max_loss=0.003)
+    assert [p["ranges"]["u_10"] for p in points] == [0, 1, 2, 3, 4, 5]
+    h = [p["h2"] for p in points]
+    assert all(a >= b for a, b in zip(h, h[1:], strict=False))  # nested patterns
+    assert h[-1] == pytest.approx(h_star, rel=1e-9)  # every vehicle heard: the optimum
+    for p in points[1:4]:  # one CAV: each point is the structured design of its range
+        R = p["ranges"]["u_10"]
+        text = (PROBLEMS / "ring_n20_cr5.toml").read_text().replace("size = 20", "size = 10")
+        text = text.replace("cavs = [20]", "cavs = [10]").replace("comm_range = 5",
+                                                                     f"comm_range = {R}")
+        rep = synthesize_platoon(spec_from_problem(Problem(Path("r.toml"), _parse(text))))
+        assert p["h2"] == pytest.approx(rep.check.h2, rel=1e-9)
+    pick = next(p for p in points if p["h2"] <= 1.003 * h_star)
+    assert pick["chosen"] and sum(p["chosen"] for p in points) == 1
+    assert chosen == {10: tuple(sorted({(9 + d) % 10 + 1 for d in range(-pick["ranges"]["u_10"],
+                                                                     pick["ranges"]["u_10"] + 1)}))}
+    assert np.all(K[~pattern_rows(plant, chosen)] == 0.0)
+
+
 # --------------------------------------------------------------------------------------------
 # Robust multi-model design
 # --------------------------------------------------------------------------------------------
@@ -328,6 +354,7 @@ def test_robust_gain_is_stable_on_every_member_and_beats_the_nominal_on_its_obje
         ("band = 3\n", "synthesis.band"),
         ("[synthesis.robust]\nsamples = 3\n", "synthesis.robust"),
         ("[synthesis.robust]\nalpha = [0.9, 0.5]\n", "synthesis.robust.alpha"),
+        ("[synthesis.sparsity]\nn_gamma = 4\n", "synthesis.sparsity.n_gamma"),
     ],
 )
 def test_bad_input_is_a_named_field_error_and_exit_2(tmp_path, extra, field, capsys):

@@ -4,6 +4,7 @@
 
     [synthesis]
     design = "structured"     # "full_state" (Riccati) | "structured" (per-CAV row patterns)
+                              # | "sparsity" (greedy per-CAV range Pareto: platoon_sparsity)
     semantics = "replace"     # default "replace" (u = K x is the CAV's whole acceleration)
     comm_range = 5            # every CAV hears the R vehicles ahead and the R behind it
                               # (itself included; the ring wraps around); 0 = decentralised
@@ -14,6 +15,9 @@
     u_3 = [1, 2, 3, 4]        # the CAV itself is always heard)
 
     [synthesis.weights]       # q_s, q_s0 (the CAVs' own spacings), q_v, q_a, r, head, accel
+
+    [synthesis.sparsity]      # design = "sparsity": only max_loss applies
+    max_loss = 0.01           # chosen: fewest heard vehicles with H2 <= (1 + max_loss) H2*
 
     [synthesis.robust]        # one gain for a set of sampled HDV parameter sets
     samples = 20
@@ -52,9 +56,9 @@ __all__ = [
 ]
 
 #: The designs a platoon or ring accepts.
-PLATOON_DESIGNS = ("full_state", "structured")
+PLATOON_DESIGNS = ("full_state", "structured", "sparsity")
 
-_NOT_FOR_PLATOONS = ("cross_check", "band", "sparsity", "string", "baseline", "as_run")
+_NOT_FOR_PLATOONS = ("cross_check", "band", "string", "baseline", "as_run")
 
 
 @dataclass(frozen=True, repr=False)
@@ -98,6 +102,7 @@ class PlatoonSynthesisSpec(Record):
     max_iter: int = 500
     robust: RobustSettings | None = None
     source: str | None = None
+    max_loss: float = 0.01
 
 
 def comm_range_pattern(platoon: Platoon, R: int) -> dict[int, tuple[int, ...]]:
@@ -218,9 +223,17 @@ def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> Plat
     if not system.platoon.cavs:
         raise ConfigError("system.cavs", "synthesis needs at least one CAV")
     patterns, R = _patterns(t, system.platoon)
-    if design == "full_state" and patterns is not None:
-        raise ConfigError("synthesis.design", "full_state hears every vehicle: drop comm_range "
-                          "and [synthesis.patterns], or use design = 'structured'")  # fmt: skip
+    if design != "structured" and patterns is not None:
+        raise ConfigError("synthesis.design", f"{design} chooses whom each CAV hears: drop "
+                          "comm_range and [synthesis.patterns], or use design = 'structured'")
+    SP = declared("synthesis.sparsity")
+    sp = T.get(t, "sparsity", "synthesis")
+    SP.check(sp, "synthesis.sparsity")
+    for key in sp:
+        if key != "max_loss":
+            raise ConfigError(f"synthesis.sparsity.{key}", f"does not apply to kind = "
+                              f"{system.kind!r} (only max_loss)")  # fmt: skip
+    max_loss = SP.get(sp, "max_loss", "synthesis.sparsity")
     W = declared("synthesis.weights")
     w = T.get(t, "weights", "synthesis")
     W.check(w, "synthesis.weights")
@@ -238,4 +251,4 @@ def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> Plat
     max_iter = T.get(t, "max_iter", "synthesis")
     robust = _robust(t, system)
     return PlatoonSynthesisSpec(name, system, design, semantics, weights, patterns, R, tol,
-                                max_iter, robust, src)  # fmt: skip
+                                max_iter, robust, src, max_loss)  # fmt: skip

@@ -8,6 +8,8 @@ Stages (each reported with its true H2 norm and wall time):
 * ``start`` -- a stabilising gain with the patterns (truncated Riccati modulo ``c``, or the
   penalty continuation: :func:`~lcc_synth.synthesis.platoon_polish.initial_gain`);
 * ``polish`` -- Newton / BFGS descent on the true H2 with the patterns' mask;
+* ``sparsity`` -- ``design = "sparsity"``: the greedy per-CAV range front
+  (:mod:`~lcc_synth.synthesis.platoon_sparsity`) and its chosen point;
 * ``robust`` -- with ``[synthesis.robust]``: descent on the mean (or smooth worst) true H2 over
   the sampled members, from the nominal design, every accepted gain stable on every member.
 """
@@ -25,6 +27,7 @@ from lcc_synth.synthesis.platoon_config import PlatoonSynthesisSpec, robust_memb
 from lcc_synth.synthesis.platoon_h2 import (
     PlatoonPlant,
     make_platoon_plant,
+    pattern_rows,
     platoon_cost,
     platoon_h2,
     platoon_riccati,
@@ -37,23 +40,12 @@ from lcc_synth.synthesis.platoon_polish import (
     robust_objective,
 )
 from lcc_synth.synthesis.platoon_report import PlatoonReport, check_platoon_gain
+from lcc_synth.synthesis.platoon_sparsity import range_pareto
 
-__all__ = ["pattern_rows", "member_stats", "robust_design", "synthesize_platoon"]
+__all__ = ["member_stats", "robust_design", "synthesize_platoon"]
 
 #: relative disagreement between the Riccati value and the Lyapunov H2 of its gain that fails
 RICCATI_CHECK_TOL = 1e-8
-
-
-def pattern_rows(plant: PlatoonPlant, patterns: dict[int, tuple[int, ...]] | None) -> np.ndarray:
-    """``(n_cav, nx)`` boolean mask: row ``k`` True on the two states of every vehicle CAV
-    ``cavs[k]`` hears (``None``: every state)."""
-    m = plant.model
-    mask = np.zeros((plant.n_in, plant.nx), bool)
-    for k, i in enumerate(m.cavs):
-        heard = range(1, m.platoon.size + 1) if patterns is None else patterns[i]
-        for v in heard:
-            mask[k, m.block(v)] = True
-    return mask
 
 
 def member_stats(plants: list[PlatoonPlant], K: np.ndarray) -> dict:
@@ -161,7 +153,18 @@ def synthesize_platoon(spec: PlatoonSynthesisSpec) -> PlatoonReport:
     stages.append({"stage": "riccati", "h2": h2_star, "time": timings["riccati"]})
     mask = pattern_rows(plant, spec.patterns)
     pol: dict = {}
-    if spec.design == "full_state" or mask.all():
+    pareto = None
+    if spec.design == "sparsity":
+        t0 = time.perf_counter()
+        pareto, K, chosen = range_pareto(plant, h2_star, spec.max_loss, spec.tol, spec.max_iter)
+        timings["sparsity"] = time.perf_counter() - t0
+        mask = pattern_rows(plant, chosen)
+        stages.append({"stage": "sparsity (chosen)", "h2": platoon_h2(plant, K),
+                       "time": timings["sparsity"]})  # fmt: skip
+        notes.append(f"chosen ranges: fewest heard vehicles with H2 within "
+                     f"{100 * spec.max_loss:g}% of the full-information optimum (greedy "
+                     "per-CAV range front)")  # fmt: skip
+    elif spec.design == "full_state" or mask.all():
         K = K_ric
         h_lyap = platoon_h2(plant, K)
         rel = abs(h_lyap - h2_star) / h2_star
@@ -228,6 +231,7 @@ def synthesize_platoon(spec: PlatoonSynthesisSpec) -> PlatoonReport:
         stages=stages,
         polish=pol,
         robust=robust,
+        pareto=pareto,
         timings=timings,
         notes=notes,
     )

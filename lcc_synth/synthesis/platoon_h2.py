@@ -63,6 +63,7 @@ __all__ = [
     "platoon_h2",
     "platoon_riccati",
     "check_platoon_stabilisable",
+    "pattern_rows",
 ]
 
 
@@ -338,3 +339,15 @@ def platoon_riccati(plant: PlatoonPlant) -> tuple[np.ndarray, float, np.ndarray]
         raise SynthesisError("Riccati gain does not stabilise the plant", {"max_real_eig": mre})
     J = float(np.trace(plant.Bwr.T @ P @ plant.Bwr))
     return Kr @ plant.V.T, J, P
+
+
+def pattern_rows(plant: PlatoonPlant, patterns: dict[int, tuple[int, ...]] | None) -> np.ndarray:
+    """``(n_cav, nx)`` boolean mask: row ``k`` True on the two states of every vehicle CAV
+    ``cavs[k]`` hears (``None``: every state)."""
+    m = plant.model
+    mask = np.zeros((plant.n_in, plant.nx), bool)
+    for k, i in enumerate(m.cavs):
+        heard = range(1, m.platoon.size + 1) if patterns is None else patterns[i]
+        for v in heard:
+            mask[k, m.block(v)] = True
+    return mask

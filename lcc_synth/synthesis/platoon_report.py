@@ -80,7 +80,8 @@ class PlatoonReport(Record):
     ``K`` has one row per CAV (``cavs`` order) on ``state_names``; ``gains`` is the same in
     :meth:`~lcc_synth.models.platoon.PlatoonGains.as_table` form; ``input_K`` / ``input_kh``
     the CAVs' whole inputs ``u = input_K x + input_kh v_h`` under the semantics. ``stages``
-    lists each stage's true H2 and time; ``robust`` the per-member figures.
+    lists each stage's true H2 and time; ``robust`` the per-member figures; ``pareto`` the
+    range front of ``design = "sparsity"``.
     """
 
     problem: str
@@ -107,6 +108,7 @@ class PlatoonReport(Record):
     stages: list[dict[str, Any]] = field(default_factory=list)
     polish: dict[str, Any] = field(default_factory=dict)
     robust: dict[str, Any] | None = None
+    pareto: list[dict[str, Any]] | None = None
     timings: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
 
@@ -158,6 +160,11 @@ def format_platoon_report(rep: PlatoonReport) -> str:
                          f", best {_fmt(s['best_h2'])}, stable on {s['n_stable']}/{r['samples']}")
         lines.append(f"  robust gain on the nominal model: H2 {_fmt(c.h2)} (nominal design "
                      f"{_fmt(r['nominal_design']['h2_nominal'])})")  # fmt: skip
+    if rep.pareto:
+        lines.append("range front (greedy per CAV: ranges -> vehicles heard, true H2, loss):")
+        for p in rep.pareto:
+            lines.append(f"  {'*' if p['chosen'] else ' '} {p['ranges']}  heard {p['heard']:>3d}"
+                         f"  H2 {p['h2']:.6f}  loss {100 * p['loss']:.3f}%")
     if rep.timings:
         lines.append("time: " + ", ".join(f"{k} {v:.3f} s" for k, v in rep.timings.items()))
     lines += [f"note: {s}" for s in rep.notes]
