@@ -12,7 +12,8 @@ thread as ``synthesize`` runs):
                (model, plant, every stage, checks, report);
 
 with the true H2 norm after each stage. ``--lmi`` also times the plain full-state H2 LMI
-(Clarabel, one dense cone) on the reduced ring, the cost an LMI start would add. ``--robust``
+(Clarabel, one dense cone) on the reduced ring, the cost an LMI start would add.
+``--sparsity`` times ``design = "sparsity"`` (the greedy range front) per size. ``--robust``
 runs the robust mean design (N = 20, R = 5, 20 members, alpha 0.6 +- 0.15, beta 0.9 +- 0.2,
 s_go 35 +- 3) and prints the per-member summary. ``--cli`` times ``lcc-synth synthesize
 problems/ring_n20_cr5.toml --json`` (a fresh process: imports included).
@@ -20,7 +21,7 @@ problems/ring_n20_cr5.toml --json`` (a fresh process: imports included).
 Usage::
 
     python benchmarks/bench_synthesis_ring.py [--sizes 20 40] [--ranges 5 -1] [--repeat 3]
-        [--lmi] [--robust] [--cli]
+        [--lmi] [--sparsity] [--robust] [--cli]
 
 (``--ranges -1`` = full information.)
 """
@@ -39,13 +40,14 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _spec(N: int, R: int, robust: str = ""):
+def _spec(N: int, R: int, robust: str = "", design: str | None = None):
     import tomllib
 
     from lcc_synth.problem import Problem
     from lcc_synth.synthesis.config import spec_from_problem
 
-    design = 'design = "full_state"' if R < 0 else f'design = "structured"\ncomm_range = {R}'
+    design = design or ('design = "full_state"' if R < 0
+                        else f'design = "structured"\ncomm_range = {R}')  # fmt: skip
     text = (f'name = "ring"\n[hdv]\nmodel = "ovm"\n[system]\nkind = "ring"\nsize = {N}\n'
             f'cavs = [{N}]\nv_star = 15.0\n[synthesis]\n{design}\nsemantics = "replace"\n'
             '[synthesis.weights]\nq_s = 0.03\nq_v = 0.15\nr = 1.0\naccel = 1.0\n' + robust)
@@ -90,6 +92,7 @@ def main() -> None:
     ap.add_argument("--ranges", type=int, nargs="+", default=[5, -1])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--lmi", action="store_true")
+    ap.add_argument("--sparsity", action="store_true")
     ap.add_argument("--robust", action="store_true")
     ap.add_argument("--cli", action="store_true")
     args = ap.parse_args()
@@ -115,6 +118,18 @@ def main() -> None:
             dt, hl = time_lmi(N)
             print(f"full-state H2 LMI (Clarabel, dense) N = {N}: {dt:.2f} s, its gain's H2 "
                   f"{hl:.6f}")
+    if args.sparsity:
+        from lcc_synth.synthesis.platoon_design import synthesize_platoon
+
+        for N in args.sizes:
+            spec = _spec(N, 0, design='design = "sparsity"')
+            t0 = time.perf_counter()
+            rep = synthesize_platoon(spec)
+            dt = time.perf_counter() - t0
+            front = ", ".join(f"{p['ranges'][f'u_{N}']}:{p['h2']:.4f}" for p in rep.pareto)
+            pick = next(p for p in rep.pareto if p["chosen"])
+            print(f"sparsity front N = {N} ({len(rep.pareto)} points, {dt:.2f} s): R:H2 {front}; "
+                  f"chosen R = {pick['ranges'][f'u_{N}']} (loss {100 * pick['loss']:.3f}%)")
     if args.robust:
         from lcc_synth.synthesis.platoon_design import synthesize_platoon
 

@@ -404,6 +404,38 @@ def test_cli_json_reports_check_h2_and_writes_the_platoon_gains_file(tmp_path, c
     assert platoon_h2(plant, gains.K) == pytest.approx(doc["check"]["h2"], rel=1e-12)
 
 
+def test_platoon_gains_file_is_validated(tmp_path):
+    from lcc_synth.synthesis.gains_file import platoon_gains_document, read_gains
+
+    spec = spec_from_problem(Problem(Path("p.toml"), _parse(_deeplcc_toml("", comm_range=1))))
+    rep = synthesize_platoon(spec)
+    doc = platoon_gains_document(rep)
+    assert len(doc["K"]) == 2 and set(doc["gains"]) == {"u_3", "u_6"}
+    p = tmp_path / "g.json"
+    p.write_text(json.dumps(doc))
+    gains, _ = read_platoon_gains(p, deeplcc_model())
+    assert np.array_equal(gains.K, np.array(rep.K)) and gains.cavs == (3, 6)
+    with pytest.raises(ConfigError) as e:
+        read_gains(p)  # the single-CAV reader names the right one
+    assert e.value.field == "kind" and "read_platoon_gains" in e.value.message
+    for key, value, field in (("h2_true", None, "h2_true"), ("K", [[0.0]], "K")):
+        bad = dict(doc)
+        if value is None:
+            del bad[key]
+        else:
+            bad[key] = value
+        p.write_text(json.dumps(bad))
+        with pytest.raises(ConfigError) as e:
+            read_platoon_gains(p)
+        assert e.value.field == field
+    bad = json.loads(json.dumps(doc))
+    bad["gains"]["u_3"]["s_3"] += 1.0  # the table disagrees with K
+    p.write_text(json.dumps(bad))
+    with pytest.raises(ConfigError) as e:
+        read_platoon_gains(p, deeplcc_model())
+    assert e.value.field == "gains"
+
+
 # --------------------------------------------------------------------------------------------
 # helpers: problem texts
 # --------------------------------------------------------------------------------------------

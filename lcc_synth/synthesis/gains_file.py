@@ -180,6 +180,9 @@ def read_gains(path: str | Path) -> tuple[StaticGains, dict[str, Any]]:
         raise ConfigError("file", f"not valid JSON: {err}", src) from None
     if not isinstance(doc, dict):
         raise ConfigError("file", "must hold a JSON object", src)
+    if doc.get("kind") in ("platoon", "ring"):
+        raise ConfigError("kind", f"{doc['kind']!r}: a platoon gains file (one row per CAV); "
+                          "read it with read_platoon_gains", src)  # fmt: skip
     for key in REQUIRED_KEYS:
         if key not in doc:
             raise ConfigError(key, "missing key of a gains file", src)
