@@ -306,6 +306,34 @@ def test_sparsity_range_front_per_cav():
 # --------------------------------------------------------------------------------------------
 
 
+@pytest.mark.parametrize(("objective", "t"), [("mean", 0.0), ("worst", 0.05)])
+def test_robust_objective_derivatives_match_central_differences(objective, t):
+    from lcc_synth.synthesis.platoon_polish import robust_objective
+
+    rng = np.random.default_rng(0)
+    plants = []
+    for _ in range(4):
+        hdv = tuple(OVM(alpha=a, beta=b) for a, b in rng.uniform(0.5, 0.9, (8, 2)))
+        M = platoon_model(Platoon(hdv, (3, 6), 15.0), warn=False)
+        plants.append(make_platoon_plant(M, "replace", Weights(head=1.0)))
+    mask = pattern_rows(plants[0], {3: (2, 3, 4), 6: (5, 6, 7)})
+    K = np.where(mask, platoon_riccati(plants[0])[0], 0.0)
+    free = np.flatnonzero(mask.ravel())
+    fun = robust_objective(plants, objective, t)
+    f, g, hess = fun(K, 2)
+    H = hess(free)
+    d, e = rng.normal(size=free.size), 1e-6
+    Kp, Km = K.copy(), K.copy()
+    Kp.ravel()[free] += e * d
+    Km.ravel()[free] -= e * d
+    (fp, gp, _), (fm, gm, _) = fun(Kp, 1), fun(Km, 1)
+    assert (fp - fm) / (2 * e) == pytest.approx(g.ravel()[free] @ d, rel=1e-6)
+    assert np.abs((gp - gm).ravel()[free] / (2 * e) - H @ d).max() < 1e-7 * np.abs(H @ d).max()
+    h = [np.sqrt(platoon_cost(p, K).J) for p in plants]  # the value itself, independently
+    expect = np.mean(h) if objective == "mean" else t * np.log(np.mean(np.exp(np.array(h) / t)))
+    assert f == pytest.approx(expect, rel=1e-12)
+
+
 @pytest.mark.parametrize("objective", ["mean", "worst"])
 def test_robust_gain_is_stable_on_every_member_and_beats_the_nominal_on_its_objective(
     objective,
@@ -402,6 +430,14 @@ def test_cli_json_reports_check_h2_and_writes_the_platoon_gains_file(tmp_path, c
     assert fdoc["h2_true"] == doc["check"]["h2"] and fdoc["ring"] and fdoc["cavs"] == [20]
     plant = make_platoon_plant(model, "replace", RING_W)
     assert platoon_h2(plant, gains.K) == pytest.approx(doc["check"]["h2"], rel=1e-12)
+
+
+def test_api_synthesize_h2_runs_a_ring_problem():
+    from lcc_synth import api
+
+    rep = api.synthesize_h2(api.load_problem(PROBLEMS / "ring_n20_full.toml").synthesis)
+    plant = make_platoon_plant(ring_model(20), "replace", RING_W)
+    assert rep.check.h2 == pytest.approx(np.sqrt(platoon_riccati(plant)[1]), rel=1e-12)
 
 
 def test_platoon_gains_file_is_validated(tmp_path):
