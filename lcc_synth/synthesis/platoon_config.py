@@ -34,14 +34,14 @@ The single-CAV keys ``pattern`` (other than "all"), ``cross_check``, ``band``, `
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.platoon import Platoon
-from lcc_synth.models.records import Record
+from lcc_synth.models.records import Record, system_tables, toml_text
 from lcc_synth.problem import System
 from lcc_synth.schema import declared
 from lcc_synth.synthesis.h2 import Weights
@@ -103,6 +103,38 @@ class PlatoonSynthesisSpec(Record):
     robust: RobustSettings | None = None
     source: str | None = None
     max_loss: float = 0.01
+
+    def toml_tables(self) -> dict[str, Any]:
+        """``name``, ``[hdv]``, ``[system]`` and ``[synthesis]``: the tables
+        :func:`~lcc_synth.synthesis.config.spec_from_problem` reads back into an equal spec."""
+        t: dict[str, Any] = {
+            "design": self.design,
+            "semantics": self.semantics,
+            "method": "riccati" if self.design == "full_state" else "direct",
+            "tol": self.tol,
+            "max_iter": self.max_iter,
+            "weights": {k: v for k, v in asdict(self.weights).items()
+                        if k not in ("position", "q_p")},  # fmt: skip
+        }
+        if self.comm_range is not None:
+            t["comm_range"] = self.comm_range
+        if self.patterns is not None:
+            base = (comm_range_pattern(self.system.platoon, self.comm_range)
+                    if self.comm_range is not None else {})  # fmt: skip
+            own = {f"u_{i}": list(v) for i, v in self.patterns.items() if base.get(i) != v}
+            if own:
+                t["patterns"] = own
+        if self.design == "sparsity":
+            t["sparsity"] = {"max_loss": self.max_loss}
+        if self.robust is not None:
+            rb = self.robust
+            t["robust"] = {"samples": rb.samples, "seed": rb.seed, "objective": rb.objective,
+                           **{k: list(v) for k, v in rb.ranges.items()}}  # fmt: skip
+        return {"name": self.name, **system_tables(self.system), "synthesis": t}
+
+    def to_toml(self) -> str:
+        """This spec as a problem file (:meth:`toml_tables`)."""
+        return toml_text(self.toml_tables())
 
 
 def comm_range_pattern(platoon: Platoon, R: int) -> dict[int, tuple[int, ...]]:
