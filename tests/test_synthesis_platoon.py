@@ -432,6 +432,17 @@ def test_cli_json_reports_check_h2_and_writes_the_platoon_gains_file(tmp_path, c
     assert platoon_h2(plant, gains.K) == pytest.approx(doc["check"]["h2"], rel=1e-12)
 
 
+def test_platoon_spec_round_trips_through_its_toml():
+    robust = '[synthesis.robust]\nsamples = 4\nobjective = "worst"\nalpha = [0.5, 0.7]\n'
+    text = _deeplcc_toml("[synthesis.patterns]\nu_6 = [8]\n", comm_range=1) + robust
+    spec = spec_from_problem(Problem(Path("p.toml"), _parse(text)))
+    assert spec.patterns == {3: (2, 3, 4), 6: (6, 8)}  # comm_range, u_6 overridden
+    back = spec_from_problem(Problem(Path("q.toml"), _parse(spec.to_toml())))
+    assert back.toml_tables() == spec.toml_tables() and back.patterns == spec.patterns
+    assert back.robust == spec.robust and back.weights == spec.weights
+    assert [h.alpha for h in back.system.platoon.hdv] == DEEPLCC["alpha"]
+
+
 def test_api_synthesize_h2_runs_a_ring_problem():
     from lcc_synth import api
 
