@@ -325,6 +325,11 @@ def _load_coverage_corpus(tmp: Path) -> None:
     assert system_from({"system": platoon}).platoon.cavs == (2,)
     ring = {"kind": "ring", "size": 4, "circumference": 80.0}
     assert system_from({"system": ring}).platoon.length == 80.0
+    robust = {"samples": 3, "seed": 1, "objective": "worst", "alpha": [0.5, 0.7],
+              "beta": [0.8, 1.0], "s_go": [33.0, 37.0]}  # fmt: skip
+    syn = {"name": "cov", "system": {"kind": "platoon", "size": 4, "cavs": [2]},
+           "synthesis": {"patterns": {"u_2": [1, 3]}, "robust": robust}}  # fmt: skip
+    assert spec_from_problem(Problem(tmp / "p.toml", syn)).patterns == {2: (1, 2, 3)}
 
 
 def test_every_declared_key_is_read_by_a_loader(tmp_path):
