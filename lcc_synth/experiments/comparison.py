@@ -468,7 +468,7 @@ def run_suite(
     """
     import time
 
-    from lcc_synth.simulation.engine import simulate
+    from lcc_synth.simulation.backends import run_scenario
 
     timings: dict[str, float] = {}
     layouts = suite.layouts_used()
@@ -519,7 +519,7 @@ def run_suite(
             results[sname] = {}
             for cname, ctrl in built[ss.layout].items():
                 bar.set_postfix_str(f"{sname}/{cname}")
-                res = simulate(ss.scenario, ctrl, draws)
+                res = run_scenario(ss.scenario, ctrl, draws)
                 row = metrics_row(res, ss.metrics)
                 table[sname][cname] = row
                 results[sname][cname] = res

@@ -286,7 +286,7 @@ def run_chunk(
     Returns ``{"start", "stop", "metrics": {controller: {metric: (stop - start,) array}},
     "fallbacks": {controller: int}, "sim_time": {controller: s}, "wall_time": s}``.
     """
-    from lcc_synth.simulation.engine import simulate
+    from lcc_synth.simulation.backends import run_scenario
     from lcc_synth.simulation.scenario import scenario_variant
 
     t0 = time.perf_counter()
@@ -301,7 +301,7 @@ def run_chunk(
         t1 = time.perf_counter()
         per, fallbacks[name] = [], 0
         for sc, dr in zip(runs, draws, strict=True):
-            res = simulate(sc, ctrl, dr)
+            res = run_scenario(sc, ctrl, dr)
             per.append(scenario_metrics(res, config))
             fallbacks[name] += int((res.controller_stats or {}).get("fallbacks", 0) or 0)
         times[name] = time.perf_counter() - t1
