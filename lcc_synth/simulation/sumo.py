@@ -25,7 +25,7 @@ process):
   (loss, latency, noise; the built-in simulator's compiled observation routine and its random
   streams), at its sample time with zero-order hold;
 * collisions are SUMO's (``--collision.action warn``, ``collisionMinGapFactor = 0``:
-  :func:`libsumo.simulation.getCollisions`) and any spacing ``<= 0`` at a sample, whichever
+  ``libsumo.simulation.getCollisions``) and any spacing ``<= 0`` at a sample, whichever
   comes first; as in the built-in simulator the scenario stops there (later samples NaN).
 
 The recorded acceleration of a sample is ``(v_{k+1} - v_k) / dt`` of SUMO's speeds (what SUMO
