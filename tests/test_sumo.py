@@ -291,6 +291,37 @@ def test_missing_sumo_is_a_named_error(monkeypatch, capsys):
     assert 'scenario.backend' in capsys.readouterr().err
 
 
+def test_missing_sumo_fails_run_and_sweep_early(monkeypatch, tmp_path, capsys):
+    """``run`` and ``sweep`` check the simulator before any synthesis or task: exit 2 naming
+    the scenario's backend field."""
+    monkeypatch.setitem(sys.modules, "libsumo", None)
+    suite = tmp_path / "suite.toml"
+    suite.write_text(_SUITE.replace("BACKEND", "sumo"))
+    argv = ["run", str(suite), "--no-record", "--no-figures", "--no-progress",
+            "--out", str(tmp_path / "results")]  # fmt: skip
+    assert main(argv) == 2
+    assert "scenarios.brake.backend" in capsys.readouterr().err
+    sweep = tmp_path / "sweep.toml"
+    sweep.write_text(_SWEEP.replace("BACKEND", "sumo"))
+    from lcc_synth.experiments.sweep import load_sweep, run_sweep
+
+    with pytest.raises(ConfigError, match="scenario.backend"):
+        run_sweep(load_sweep(sweep), client=None, progress=False)
+
+
+def test_missing_netconvert_is_a_named_error(monkeypatch):
+    """No netconvert (neither sumolib's nor on PATH): ConfigError naming scenario.backend."""
+    import shutil
+
+    from lcc_synth.simulation.sumo_net import netconvert_binary
+
+    monkeypatch.setitem(sys.modules, "sumolib", None)
+    monkeypatch.setattr(shutil, "which", lambda name: None)
+    with pytest.raises(ConfigError, match="scenario.backend") as err:
+        netconvert_binary()
+    assert 'pip install -e ".[sumo]"' in err.value.message
+
+
 def test_bad_car_following_model_is_named(tmp_path):
     """An unknown SUMO model name is a ConfigError naming scenario.sumo.car_following."""
     bad = tmp_path / "bad.toml"

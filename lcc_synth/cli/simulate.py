@@ -48,10 +48,13 @@ def load(args):
     (+ ``--seeds``)."""
     from lcc_synth.errors import ConfigError
     from lcc_synth.experiments.spec import load_spec
+    from lcc_synth.simulation.backends import check_backend
 
     if args.seeds is not None and args.seeds < 1:
         raise ConfigError("--seeds", f"must be >= 1, got {args.seeds}")
-    return load_spec(args.problem, seeds=args.seeds)
+    spec = load_spec(args.problem, seeds=args.seeds)
+    check_backend(spec.scenario)  # SUMO missing: before any run
+    return spec
 
 
 def chunks(scenario, budget: float = MEMORY_BUDGET) -> list:

@@ -493,10 +493,12 @@ def run_sweep(
     tables = {name: _inline_gains_file(name, t, spec) for name, t in tables.items()}
     # fail early, in the client, on a controller that cannot be built
     from lcc_synth.experiments.comparison import build_controllers
+    from lcc_synth.simulation.backends import check_backend
     from lcc_synth.simulation.timestep import check_time_step
 
     built = build_controllers(tables, spec.system, spec.source)
-    try:  # a step too coarse for a loop: error / warning here, not on the workers
+    try:  # a step too coarse for a loop, SUMO missing: error / warning here, not on the workers
+        check_backend(spec.scenario)
         check_time_step(spec.scenario, built)
     except ConfigError as err:
         raise err.with_source(spec.source) if spec.source else err from None

@@ -11,7 +11,17 @@ from lcc_synth.controllers.base import Controller
 from lcc_synth.simulation.results import SimResult
 from lcc_synth.simulation.scenario import BACKENDS, Draws, Scenario
 
-__all__ = ["BACKENDS", "run_scenario"]
+__all__ = ["BACKENDS", "check_backend", "run_scenario"]
+
+
+def check_backend(scenario: Scenario) -> None:
+    """Fail early (before controllers are built or tasks sent) when the scenario's simulator
+    is not installed: :class:`~lcc_synth.errors.ConfigError` naming ``scenario.backend``."""
+    if scenario.backend == "sumo":
+        from lcc_synth.simulation.sumo_net import netconvert_binary, require_sumo
+
+        require_sumo()
+        netconvert_binary()
 
 
 def run_scenario(

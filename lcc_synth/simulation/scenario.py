@@ -183,7 +183,7 @@ class Scenario(Record):
     spacing_reference: str = "nominal"
     name: str = "scenario"
     backend: str = "builtin"
-    sumo: SumoSettings = field(default_factory=SumoSettings)
+    sumo: SumoSettings = field(default_factory=SumoSettings, repr=False)
 
     def __post_init__(self) -> None:
         for key, lo in (
