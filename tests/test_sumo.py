@@ -437,6 +437,9 @@ def test_run_suite_in_sumo(tmp_path, capfd):
                 "--out", str(tmp_path / "results")]  # fmt: skip
         assert main(argv) == 0
         rows[backend] = json.loads(capfd.readouterr().out)["results"]["brake"]["all_hdv"]
+        (details,) = (tmp_path / "results").glob("sumo_suite-*/details.json")
+        assert json.loads(details.read_text())["scenarios"]["brake"]["backend"] == backend
+        details.unlink()
     assert rows["sumo"]["aave"] != rows["builtin"]["aave"]  # a different simulator ran
     assert abs(rows["sumo"]["aave"] / rows["builtin"]["aave"] - 1) < TOL["euler"][2]
 
