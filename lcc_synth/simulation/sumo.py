@@ -245,9 +245,16 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
     u_hold = 0.0
     abs_min = abs(a_min)
 
+    var_pos, var_speed = sumo.constants.VAR_LANEPOSITION, sumo.constants.VAR_SPEED
+    shift = np.arange(nv) * L_veh - origin  # SUMO lane position -> built-in position
+    # the columns commanded at some step: head, CAV, every HDV a perturbation drives
+    ever = np.isfinite(acc_ovr) | np.isfinite(spd_ovr)
+    cols = sorted({0, cav} | set(np.flatnonzero(ever.any(axis=0)).tolist()))
+
     def read() -> tuple[np.ndarray, np.ndarray]:
-        x = np.array([sumo.vehicle.getLanePosition(i) for i in ids])
-        return x - origin + np.arange(nv) * L_veh, np.array([sumo.vehicle.getSpeed(i) for i in ids])
+        got = sumo.vehicle.getAllSubscriptionResults()
+        x = np.array([got[i][var_pos] for i in ids])
+        return x + shift, np.array([got[i][var_speed] for i in ids])
 
     sumo.start(_start_args(sc, net, routes, seed))
     try:
@@ -256,13 +263,16 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
             sumo.vehicle.setSpeedMode(ids[j], 0)
         for i in ids:
             sumo.vehicle.setLaneChangeMode(i, 0)
+            sumo.vehicle.subscribe(i, (var_pos, var_speed))
         p, v = read()
         hit_sumo: set[int] = set()
         for k in range(T):
             rec = k % stride == 0
             r = k // stride
             spacing = np.concatenate([[np.nan], p[:-1] - p[1:]])
-            hit = set(hit_sumo) | {j for j in range(1, nv) if spacing[j] <= 0.0}
+            hit = set(hit_sumo)
+            if np.any(spacing[1:] <= 0.0):
+                hit |= set((np.flatnonzero(spacing[1:] <= 0.0) + 1).tolist())
             if rec:
                 o_p[r], o_v[r], o_s[r] = p, v, spacing
             if hit:
@@ -291,9 +301,9 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
                     )
                 u_hold = float(u[0])
             aeb = False
-            for j in range(nv):
+            for j in cols:
                 ov, sv = acc_ovr[k, j], spd_ovr[k, j]
-                driven = ov == ov or sv == sv
+                driven = bool(ever[k, j])
                 if j == 0:
                     a = 0.0
                 elif j == cav:
