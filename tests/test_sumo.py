@@ -459,3 +459,44 @@ def test_sweep_in_sumo(tmp_path):
     assert out["sumo"].shape == (3,) and np.unique(out["sumo"]).size == 3
     assert not np.array_equal(out["sumo"], out["builtin"])
     np.testing.assert_allclose(out["sumo"], out["builtin"], rtol=TOL["euler"][2])
+
+
+def test_vehicle_type_mapping():
+    """The [hdv] IDM parameters as SUMO's vType attributes (module docstring of sumo_net)."""
+    from lcc_synth.simulation.sumo_net import vehicle_types
+
+    idm = {"v0": 30.0, "T": 1.5, "s0": 2.0, "a": 1.0, "b": 1.5, "delta": 4.0}
+    t = vehicle_types(SumoSettings(), idm, 0.01, -5.0)
+    assert t == {
+        "carFollowModel": "IDM", "length": 5.0, "minGap": 2.0, "maxSpeed": 30.0, "accel": 1.0,
+        "decel": 1.5, "emergencyDecel": 5.0, "tau": 1.5, "speedFactor": 1.0, "speedDev": 0.0,
+        "collisionMinGapFactor": 0.0, "delta": 4.0, "stepping": 0.01,
+    }  # fmt: skip
+    k = vehicle_types(SumoSettings(car_following="Krauss", sigma=0.3), idm, 0.01, -5.0)
+    assert k["carFollowModel"] == "Krauss" and k["sigma"] == 0.3 and "delta" not in k
+    e = vehicle_types(SumoSettings(car_following="EIDM"), idm, 0.01, -5.0)
+    assert e["carFollowModel"] == "EIDM" and e["delta"] == 4.0 and e["sigma"] == 0.0
+
+
+def test_route_file_and_head_travel(tmp_path):
+    """Every vehicle departs at time 0 at its given state without insertion checks; the road
+    covers the head's prescribed motion."""
+    import xml.etree.ElementTree as ET
+
+    from lcc_synth.simulation.sumo import head_travel
+    from lcc_synth.simulation.sumo_net import route_file
+
+    path = route_file(tmp_path / "r.rou.xml", [{"accel": 1.0}, {"accel": 2.0}],
+                      [(100.0, 15.0), (69.7, 15.0)])  # fmt: skip
+    root = ET.parse(path).getroot()
+    veh = root.findall("vehicle")
+    assert [v.get("id") for v in veh] == ["v0", "v1"]
+    assert veh[1].get("departPos") == "69.700000000000003" and veh[1].get("depart") == "0"
+    assert all(v.get("insertionChecks") == "none" for v in veh)
+    sc = _head_brake()
+    acc, spd = overrides(sc.perturbations, sc.times(), sc.dt, 0, 10)
+    # the head's own run in the built-in simulator (it starts at 0), one step further
+    head = run_scenario(replace(sc, backend="builtin"), HDVController("x"))
+    end = head.position[0, -1, 0] + sc.dt * head.velocity[0, -1, 0]
+    assert head_travel(acc, spd, 15.0, 0.01, -5.0, 2.0) == pytest.approx(end, abs=0.2)
+    assert 960.0 < end < 970.0  # 70 s at 15 m/s less about 85 m lost in the brake profile
