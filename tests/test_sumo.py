@@ -362,12 +362,14 @@ def test_sumo_settings_checks():
 
 
 def test_merge_stats():
-    """Per-scenario controller statistics of a batch: counts summed, maxima kept, other
-    numbers averaged, lists joined."""
+    """Per-scenario controller statistics of a batch: counts summed (samples counted once, as
+    in a batch run together), maxima kept, other numbers averaged, lists joined."""
     a = {"steps": 10, "max_slack_m": 0.5, "t": {"median": 1.0, "count": 3}, "msgs": ["x"]}
     b = {"steps": 5, "max_slack_m": 0.2, "t": {"median": 3.0, "count": 2}, "msgs": []}
+    a["solves"], b["solves"] = 10, 5
     assert merge_stats([a, b]) == {
-        "steps": 15, "max_slack_m": 0.5, "t": {"median": 2.0, "count": 5}, "msgs": ["x"]
+        "steps": 10, "max_slack_m": 0.5, "t": {"median": 2.0, "count": 5}, "msgs": ["x"],
+        "solves": 15,
     }
     assert merge_stats([{}, {}]) == {} and merge_stats([a]) == a
 

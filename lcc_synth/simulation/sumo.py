@@ -127,7 +127,8 @@ def _road(length: float, speed: float) -> Path:
 
 def merge_stats(stats: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """One statistics dict from the per-scenario ``controller.stats()`` of a batch run
-    scenario by scenario: integers summed, ``max*`` values the maximum, lists concatenated,
+    scenario by scenario: integers summed (``steps``, the controller's samples, counted once as
+    for a batch run together: the maximum), ``max*`` values the maximum, lists concatenated,
     other numbers averaged over the scenarios (e.g. a median time becomes the mean of the
     per-scenario medians); nested dicts alike."""
     stats = [s for s in stats if s]
@@ -150,7 +151,8 @@ def merge_stats(stats: Sequence[dict[str, Any]]) -> dict[str, Any]:
             out[key] = any(real)
         elif isinstance(first, int | np.integer) and all(isinstance(v, int | np.integer)
                                                         for v in real):  # fmt: skip
-            out[key] = max(real) if str(key).startswith("max") else int(sum(real))
+            keep_max = str(key).startswith("max") or key == "steps"
+            out[key] = max(real) if keep_max else int(sum(real))
         elif isinstance(first, float | int | np.floating):
             out[key] = (max(real) if str(key).startswith("max")
                         else float(np.mean(real)))  # fmt: skip
