@@ -502,3 +502,20 @@ def test_route_file_and_head_travel(tmp_path):
     end = head.position[0, -1, 0] + sc.dt * head.velocity[0, -1, 0]
     assert head_travel(acc, spd, 15.0, 0.01, -5.0, 2.0) == pytest.approx(end, abs=0.2)
     assert 960.0 < end < 970.0  # 70 s at 15 m/s less about 85 m lost in the brake profile
+
+
+@needs_sumo
+def test_sumo_run_is_recorded(tmp_path):
+    """A SUMO run goes into the usual Rerun recording: every controller's trajectories."""
+    from lcc_synth.recording.reader import summarize_recording
+
+    short = tmp_path / "short.toml"
+    short.write_text(PROBLEM.read_text().replace("duration = 70.0", "duration = 25.0")
+                     .replace("window = [20.0, 60.0]", "window = [20.0, 25.0]"))  # fmt: skip
+    rrd = tmp_path / "sumo.rrd"
+    assert main(["simulate", str(short), "--rrd", str(rrd)]) == 0
+    summary = summarize_recording(rrd)
+    assert summary.finalized
+    for name in ("all_hdv", "h2", "mpc"):
+        entity = summary.entities[f"/sumo_head_brake/{name}/velocity"]
+        assert entity.samples == 2500
