@@ -495,7 +495,6 @@ def run_sweep(
     from lcc_synth.experiments.comparison import build_controllers
     from lcc_synth.simulation.backends import check_backend
     from lcc_synth.simulation.timestep import check_time_step
-
     built = build_controllers(tables, spec.system, spec.source)
     try:  # a step too coarse for a loop, SUMO missing: error / warning here, not on the workers
         check_backend(spec.scenario)
