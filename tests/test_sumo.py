@@ -519,3 +519,16 @@ def test_sumo_run_is_recorded(tmp_path):
     for name in ("all_hdv", "h2", "mpc"):
         entity = summary.entities[f"/sumo_head_brake/{name}/velocity"]
         assert entity.samples == 2500
+
+
+@needs_sumo
+def test_readme_sumo_snippet(capsys):
+    """The python block of README.md's "Co-simulation in SUMO" section prints what it shows."""
+    import re
+
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    section = text.split("## Co-simulation in SUMO", 1)[1].split("\n## ", 1)[0]
+    code = re.search(r"```python\n(.*?)```", section, flags=re.S).group(1)
+    shown = re.search(r"```text\n(.*?)```", section, flags=re.S).group(1)
+    exec(compile(code, "README.md", "exec"), {"__name__": "readme"})
+    assert capsys.readouterr().out == shown
