@@ -532,3 +532,13 @@ def test_readme_sumo_snippet(capsys):
     shown = re.search(r"```text\n(.*?)```", section, flags=re.S).group(1)
     exec(compile(code, "README.md", "exec"), {"__name__": "readme"})
     assert capsys.readouterr().out == shown
+
+
+@needs_sumo
+def test_vehicle_length_changes_nothing():
+    """Spacings are SUMO's bumper-to-bumper gaps: a 0.5 m or a 5 m vehicle, the same run."""
+    ctrl = HDVController("all_hdv")
+    a = run_scenario(_head_brake(duration=30.0), ctrl)
+    b = run_scenario(_head_brake(duration=30.0, sumo=SumoSettings(vehicle_length=0.5)), ctrl)
+    dv, ds = _diff(a, b)
+    assert dv < 1e-9 and ds < 1e-8
