@@ -294,10 +294,11 @@ def scenario(system: System, perturbations: Sequence[Any] = (), **keys: Any) -> 
 def simulate(scenario: Scenario, controller):
     """Run the nonlinear mixed-traffic simulation: a
     :class:`~lcc_synth.simulation.results.SimResult` (trajectories ``(batch, T, vehicles)``).
-    :func:`lcc_synth.simulation.engine.simulate`."""
-    from lcc_synth.simulation.engine import simulate as _simulate
+    :func:`lcc_synth.simulation.engine.simulate`, or SUMO with ``backend = "sumo"``
+    (:func:`lcc_synth.simulation.backends.run_scenario`)."""
+    from lcc_synth.simulation.backends import run_scenario
 
-    return _simulate(scenario, controller)
+    return run_scenario(scenario, controller)
 
 
 def metrics(

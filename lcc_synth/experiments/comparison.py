@@ -468,8 +468,14 @@ def run_suite(
     """
     import time
 
-    from lcc_synth.simulation.engine import simulate
+    from lcc_synth.simulation.backends import check_backend, run_scenario
 
+    for sname, ss in suite.scenarios.items():  # the simulator is installed: before any design
+        try:
+            check_backend(ss.scenario)
+        except ConfigError as err:
+            err = ConfigError(f"scenarios.{sname}.backend", err.message, suite.source)
+            raise err from None
     timings: dict[str, float] = {}
     layouts = suite.layouts_used()
     n_ctrl = len(suite.controllers)
@@ -519,7 +525,7 @@ def run_suite(
             results[sname] = {}
             for cname, ctrl in built[ss.layout].items():
                 bar.set_postfix_str(f"{sname}/{cname}")
-                res = simulate(ss.scenario, ctrl, draws)
+                res = run_scenario(ss.scenario, ctrl, draws)
                 row = metrics_row(res, ss.metrics)
                 table[sname][cname] = row
                 results[sname][cname] = res

@@ -153,6 +153,29 @@ SCENARIO = Table(
             "[[scenario.perturbations]].", []),
         Key("hdv_values", "table", "Explicit per-HDV model parameters: [scenario.hdv_values].",
             {}),
+        Key("backend", "string", "The simulator: the built-in one, or SUMO (co-simulation "
+            'through libsumo; pip install -e ".[sumo]"; [scenario.sumo]).', "builtin",
+            choices=("builtin", "sumo")),
+        Key("sumo", "table", "SUMO's car-following model and integration (backend = "
+            '"sumo"): [scenario.sumo].', {}),
+    ),
+)
+
+SUMO = Table(
+    "scenario.sumo",
+    "How backend = \"sumo\" runs: the HDVs' SUMO car-following model (parameters from the "
+    "[hdv] IDM ones: v0 -> maxSpeed, T -> tau, s0 -> minGap, a -> accel, b -> decel, delta) "
+    "and SUMO's integration scheme.",
+    _SIM,
+    (
+        Key("car_following", "string", "SUMO's car-following model of the HDVs (needs [hdv] "
+            'model = "idm").', "IDM", choices=("IDM", "EIDM", "Krauss")),
+        Key("step_method", "string", "SUMO's position update: euler (semi-implicit, SUMO's "
+            "default) or ballistic (mean speed).", "euler", choices=("euler", "ballistic")),
+        Key("sigma", "number", "SUMO's driver imperfection (Krauss, EIDM; 0 for the IDM).",
+            0.0, lo=0.0, hi=1.0),
+        Key("vehicle_length", "number", "Vehicle length in SUMO (spacings are bumper-to-bumper "
+            "gaps: it only lengthens the road).", 5.0, lo=0.0, lo_open=True, unit="m"),
     ),
 )
 
@@ -314,5 +337,5 @@ SCENARIOS = Table(
     includes=("scenario",),
 )
 
-TABLES = (TOP, HDV, SYSTEM, SYSTEM_HDV_VALUES, SCENARIO, HETEROGENEITY, HDV_VALUES, DELAY, V2V,
-          LOSS_RATE_LIST, *PERTURBATIONS, METRICS, SWEEP, LAYOUTS, SCENARIOS)  # fmt: skip
+TABLES = (TOP, HDV, SYSTEM, SYSTEM_HDV_VALUES, SCENARIO, SUMO, HETEROGENEITY, HDV_VALUES, DELAY,
+          V2V, LOSS_RATE_LIST, *PERTURBATIONS, METRICS, SWEEP, LAYOUTS, SCENARIOS)  # fmt: skip

@@ -20,11 +20,15 @@ from lcc_synth.models.records import Record
 from lcc_synth.problem import System, check_range
 from lcc_synth.schema import declared
 from lcc_synth.simulation.perturbations import Perturbation, perturbation_from_table
+from lcc_synth.simulation.sumo_net import SumoSettings, check_sumo_scenario
 
 __all__ = [
-    "MODEL_PARAMS", "RANGE_FIELDS", "V2V", "Scenario", "Draws", "draw_ranges", "scenario_from",
-    "scenario_variant", "split_ranges",
+    "BACKENDS", "MODEL_PARAMS", "RANGE_FIELDS", "V2V", "Scenario", "Draws", "draw_ranges",
+    "scenario_from", "scenario_variant", "split_ranges",
 ]  # fmt: skip
+
+#: Simulators a scenario runs in (:func:`lcc_synth.simulation.backends.run_scenario`).
+BACKENDS = ("builtin", "sumo")
 
 #: Parameter order of each HDV model inside the compiled loop.
 MODEL_PARAMS = {
@@ -146,6 +150,11 @@ class Scenario(Record):
         Reference of the spacing errors the controllers see: the nominal ``s*`` for every
         vehicle, or each HDV's own equilibrium spacing at ``v*`` (the heterogeneous
         linearisation, eq. 8 around each vehicle's equilibrium). Same thing when homogeneous.
+    backend : {"builtin", "sumo"}
+        The simulator: the built-in one (:mod:`lcc_synth.simulation.engine`) or SUMO
+        (:mod:`lcc_synth.simulation.sumo`; checked here for what SUMO cannot reproduce).
+    sumo : SumoSettings
+        SUMO's car-following model and integration scheme (``backend = "sumo"`` only).
     """
 
     m: int
@@ -173,6 +182,8 @@ class Scenario(Record):
     record_every: int = 1
     spacing_reference: str = "nominal"
     name: str = "scenario"
+    backend: str = "builtin"
+    sumo: SumoSettings = field(default_factory=SumoSettings, repr=False)
 
     def __post_init__(self) -> None:
         for key, lo in (
@@ -190,6 +201,10 @@ class Scenario(Record):
             raise ConfigError(
                 "scenario.spacing_reference",
                 f'must be "nominal" or "own_equilibrium", got {self.spacing_reference!r}',
+            )
+        if self.backend not in BACKENDS:
+            raise ConfigError(
+                "scenario.backend", f"must be one of {list(BACKENDS)}, got {self.backend!r}"
             )
         _num("scenario.dt", self.dt, lo=0.0, lo_open=True)
         _num("scenario.duration", self.duration, lo=0.0, lo_open=True)
@@ -228,6 +243,8 @@ class Scenario(Record):
                     f"scenario.hdv_values.{key}",
                     f"not a parameter of the {self.hdv.name} model; allowed: {list(allowed)}",
                 )
+        if self.backend == "sumo":
+            check_sumo_scenario(self)
 
     def toml_table(self) -> dict[str, Any]:
         """The ``[scenario]`` table of this scenario (what :func:`scenario_from` reads; ``m``,
@@ -259,6 +276,9 @@ class Scenario(Record):
                     )
                 out["hdv_values"][key] = arr[hdv].tolist()
         out["perturbations"] = [p.toml_table() for p in self.perturbations]
+        if self.backend != "builtin":
+            out["backend"] = self.backend
+            out["sumo"] = self.sumo.toml_table()
         return out
 
     @property
@@ -506,4 +526,14 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
         seed=S.get(sc, "seed", f),
         record_every=S.get(sc, "record_every", f),
         spacing_reference=S.get(sc, "spacing_reference", f),
+        backend=S.get(sc, "backend", f),
+        sumo=_sumo_from(S.get(sc, "sumo", f), f"{f}.sumo"),
     )
+
+
+def _sumo_from(table: Mapping[str, Any], f: str) -> SumoSettings:
+    """The :class:`SumoSettings` of a ``[scenario.sumo]`` table."""
+    T = declared("scenario.sumo")
+    T.check(table, f)
+    return SumoSettings(**{k: T.get(table, k, f) for k in
+                           ("car_following", "step_method", "sigma", "vehicle_length")})
