@@ -377,3 +377,114 @@ def test_ring_has_no_head_to_tail_transfer():
     with pytest.raises(ConfigError) as err:
         platoon_string_stability(ring, PlatoonGains(np.zeros((1, 16)), (8,)))
     assert err.value.field == "system.kind"
+
+
+# --------------------------------------------------------------------------------------------
+# lcc-synth analyze on kind = "platoon" / "ring"
+# --------------------------------------------------------------------------------------------
+
+PLATOON_TOML = """
+[system]
+kind = "platoon"
+size = 8
+cavs = [3, 6]
+
+[system.hdv_values]
+alpha = [0.45, 0.75, 0.6, 0.70, 0.50, 0.6, 0.40, 0.80]
+beta = [0.60, 0.95, 0.9, 0.95, 0.75, 0.9, 0.80, 1.00]
+s_go = [38.0, 31.0, 35.0, 33.0, 37.0, 35.0, 39.0, 34.0]
+
+[cases.local]
+semantics = "replace"
+label = "local laws"
+
+[cases.local.gains.u_3]
+s_3 = 0.5
+v_3 = -1.2
+v_2 = 0.9
+
+[cases.local.gains.u_6]
+s_6 = 0.4
+v_6 = -1.5
+v_5 = 1.1
+
+[cases.hdv]
+semantics = "added"
+"""
+
+RING_TOML = """
+[system]
+kind = "ring"
+size = 20
+cavs = [20]
+
+[cases.damp]
+semantics = "added"
+[cases.damp.gains.u_20]
+s_20 = -0.5
+v_20 = -2.0
+v_19 = -0.5
+
+[cases.as_hdv]
+semantics = "added"
+"""
+
+
+def _analyze(tmp_path, capsys, text, *extra):
+    from lcc_synth.cli.main import main
+
+    path = tmp_path / "p.toml"
+    path.write_text(text)
+    code = main(["analyze", str(path), "--no-record", *extra])
+    out = capsys.readouterr()
+    return code, out
+
+
+def test_cli_analyze_platoon_json(tmp_path, capsys):
+    code, out = _analyze(tmp_path, capsys, PLATOON_TOML, "--json")
+    assert code == 0
+    doc = json.loads(out.out)
+    ct = doc["controllability"]
+    assert ct["rank"] == 12 and ct["reachable_verdict"] == "controllable"
+    assert ct["vehicles_outside"] == [1, 2] and doc["system"]["cavs"] == [3, 6]
+    assert doc["observability"]["verdict"] == "observable"
+    model = _deeplcc()
+    direct = platoon_string_stability(model, PlatoonGains.from_table(LOCAL, model))
+    assert doc["cases"]["local"]["verdict"] == direct.verdict == "string_unstable"
+    assert doc["cases"]["local"]["gamma_peak"] == direct.gamma_peak
+    assert doc["cases"]["local"]["gains"] == LOCAL
+    hdv = platoon_string_stability(model, PlatoonGains(np.zeros((2, 16)), (3, 6), "added"))
+    assert doc["cases"]["hdv"]["gamma_peak"] == hdv.gamma_peak
+    code, out = _analyze(tmp_path, capsys, PLATOON_TOML)
+    assert code == 0 and "reachable (first CAV and behind) 12: controllable" in out.out
+
+
+def test_cli_analyze_ring_json(tmp_path, capsys):
+    code, out = _analyze(tmp_path, capsys, RING_TOML, "--json")
+    assert code == 0
+    doc = json.loads(out.out)
+    ct = doc["controllability"]
+    assert ct["verdict"] == "controllable" and ct["stabilizable"] is True
+    assert ct["conserved_mode"].startswith("total spacing") and ct["n_states"] == 39
+    damp, as_hdv = doc["cases"]["damp"], doc["cases"]["as_hdv"]
+    assert damp["plant_verdict"] == "plant_stable" and damp["verdict"] is None
+    # zero added gain: the all-HDV ring, whose stop-and-go mode grows
+    hdv = platoon_controllability(platoon_model(Platoon((OVM(),) * 20, (), 15.0, ring=True)))
+    assert as_hdv["plant_verdict"] == "plant_unstable"
+    assert as_hdv["max_real_eig"] == pytest.approx(hdv.uncontrollable_max_real, rel=1e-9)
+    code, out = _analyze(tmp_path, capsys, RING_TOML, "--png", str(tmp_path / "g.png"))
+    assert code == 2 and "--png" in out.err
+
+
+@pytest.mark.parametrize(
+    ("table", "field"),
+    [
+        ('[cases.x.gains.u_4]\ns_4 = 1.0\n', "cases.x.gains.u_4"),
+        ('[cases.x.gains.u_3]\ns_9 = 1.0\n', "cases.x.gains.u_3.s_9"),
+        ('[cases.x.gains.u_3]\ns_3 = "a"\n', "cases.x.gains.u_3.s_3"),
+    ],
+)
+def test_cli_analyze_platoon_bad_gains_name_the_field(tmp_path, capsys, table, field):
+    text = PLATOON_TOML.split("[cases.local]")[0] + table
+    code, out = _analyze(tmp_path, capsys, text)
+    assert code == 2 and field in out.err and "Traceback" not in out.err

@@ -59,14 +59,21 @@ without one spacing ``s_k`` (``s_k = -sum_{i != k} s_i``): ``A_z = P A W``, ``B_
 (:func:`reduce_conserved`). With ``s_k`` a CAV's spacing (whose column of ``A`` is zero) this is
 ``A`` with row and column ``s_k`` deleted, exactly, so the staircase still sees the sparsity.
 The orthonormal Householder basis of :meth:`PlatoonModel.invariant_basis` gives the same
-verdict but makes ``A`` dense, where the staircase's decisions are tighter (measured below).
+verdicts (a test checks it) but makes ``A`` dense. The full ring state, conserved direction
+included, is not a good place to decide: decided at ``N = 20`` (39 of 40) but ``undecided`` at
+``N = 40`` (rank 65..80, margin 0.89), the probes' noise growing along the long cycle.
 The vehicle classification uses, on the ring, each state direction projected onto the
 hyperplane (a spacing ``e_{s_i}`` itself is not in it).
 
-Measured (2 shared cores): DeeP-LCC platoon (8 vehicles, CAVs 3 and 6) rank 12 of 16, decided,
-margin 2.0e5, 6 ms; rings of OVM cars with one AV: N = 20 controllable on the hyperplane (39
-of 39), margin 5.6e3, 31 ms; N = 40: 79 of 79, margin 1.3e3, 90 ms (Householder coordinates:
-margin 1.7e2 and 14 at N = 20, 40). Figures by ``python benchmarks/bench_platoon_analysis.py``.
+Measured (``python benchmarks/bench_platoon_analysis.py``, 2 shared cores under load):
+DeeP-LCC platoon (8 vehicles, CAVs 3 and 6): rank 12 of 16, vehicles 1, 2 outside, the 12
+reachable states controllable, decided with margin 2.3e10 (no coupling to drop), 2 ms; the
+closest pair of (S) is vehicle 7's own eq. (13), relative residual 0.11. OVM rings with one
+AV (the paper's alpha 0.6, beta 0.9, v* 15): N = 20 controllable on the hyperplane (39 of 39),
+margin 9.5e8, 45 ms; N = 40: 79 of 79, margin 2.2e8, 0.1-0.2 s (Householder basis: margins
+1.9e8 and 4.2e7). The all-HDV rings: rank 0, not stabilisable (their stop-and-go mode has
+real part +0.027). Under the Prescott, Sandybridge and SkylakeX OpenBLAS kernels the tests'
+verdicts are the same.
 """
 
 from __future__ import annotations
@@ -287,9 +294,6 @@ class PlatoonControllabilityReport(ControllabilityReport):
     conserved_residual : float or None
         ``max(|c A|, |c B|) / ||A||``: the conservation law in the data (0 exactly for the
         model; non-zero only for a perturbed matrix).
-    full_rank : int
-        Rank of the full ``(A, B)`` by the same staircase (ring: the analysed rank again, the
-        conserved direction is never reached).
     segments : tuple
         ``(cav, (hdv, ...))`` per CAV (:func:`segments`).
     cancellations : tuple of Cancellation
@@ -310,7 +314,6 @@ class PlatoonControllabilityReport(ControllabilityReport):
     subspace: str = "full state"
     conserved_mode: str | None = None
     conserved_residual: float | None = None
-    full_rank: int = -1
     segments: tuple = ()
     cancellations: tuple[Cancellation, ...] = field(default=(), repr=False)
     closest: Cancellation | None = field(default=None, repr=False)
@@ -337,7 +340,6 @@ class PlatoonControllabilityReport(ControllabilityReport):
             "subspace": self.subspace,
             "conserved_mode": self.conserved_mode,
             "conserved_residual": self.conserved_residual,
-            "full_rank": int(self.full_rank),
             "uncontrollable_eigenvalues": [
                 [float(e.real), float(e.imag)] for e in self.uncontrollable_eigenvalues
             ],
@@ -439,7 +441,6 @@ def platoon_controllability(
     )
     pairs = segment_cancellations(model)
     holds, theory_rank = _theory(model, pairs)
-    full = dec if W is None else kalman_decomposition(model.A, model.B, tol)
     resid = None
     if model.ring:
         c = model.conserved
@@ -462,7 +463,6 @@ def platoon_controllability(
         subspace="invariant hyperplane sum(s_i) = const" if model.ring else "full state",
         conserved_mode=model.conserved_mode,
         conserved_residual=resid,
-        full_rank=int(full.n_c),
         segments=tuple(segments(model)),
         cancellations=tuple(p for p in pairs if p.exact),
         closest=pairs[0] if pairs else None,
