@@ -488,3 +488,17 @@ def test_cli_analyze_platoon_bad_gains_name_the_field(tmp_path, capsys, table, f
     text = PLATOON_TOML.split("[cases.local]")[0] + table
     code, out = _analyze(tmp_path, capsys, text)
     assert code == 2 and field in out.err and "Traceback" not in out.err
+
+
+def test_api_dispatches_platoon_models():
+    import lcc_synth as lcc
+
+    ring = platoon_model(Platoon((OVM(),) * 20, (20,), 15.0, ring=True))
+    rep = lcc.controllability(ring)
+    assert rep.verdict == "controllable" and rep.conserved_mode == ring.conserved_mode
+    assert lcc.observability(ring).verdict == "observable"
+    model = _deeplcc()
+    table = {"u_3": {"s_3": 0.2, "v_3": -0.3}, "u_6": {"v_5": 0.1}}
+    ours = lcc.string_stability(model, table)
+    direct = platoon_string_stability(model, PlatoonGains.from_table(table, model, "added"))
+    assert ours.as_dict() == direct.as_dict()
