@@ -502,3 +502,48 @@ def test_api_dispatches_platoon_models():
     ours = lcc.string_stability(model, table)
     direct = platoon_string_stability(model, PlatoonGains.from_table(table, model, "added"))
     assert ours.as_dict() == direct.as_dict()
+
+
+def test_seeded_sweep_numerics_equal_exact_rational_ranks():
+    """60 seeded platoons and rings (3-6 vehicles, 0-3 CAVs anywhere), dyadic coefficients with
+    planted eq. (13) violations and zero/pole pairs: every decided rank is the exact one, the
+    theorem's (S) predicts it, and nothing here is undecided (exact data, exact structure)."""
+    rng = np.random.default_rng(2026)
+    pool = [*GEN, BOUND, ZERO_AT_M1, POLE_AT_M1]
+    violated = cross = 0
+    for trial in range(60):
+        N = int(rng.integers(3, 7))
+        ring = bool(trial % 3 == 0)
+        ncav = int(rng.integers(0 if ring else 1, min(3, N) + 1))
+        cavs = tuple(sorted(int(c) for c in rng.choice(np.arange(1, N + 1), ncav, replace=False)))
+        coefs = [pool[int(rng.integers(len(pool)))] for _ in range(N)]
+        model = _chain(coefs, cavs, ring)
+        rep = platoon_controllability(model)
+        if ring:
+            Az, Bz, _ = reduce_conserved(model.A, model.B, model.conserved)
+            exact = _kalman_rank(Az, Bz)
+        else:
+            exact = _kalman_rank(model.A, model.B)
+        assert not rep.undecided and rep.rank == exact, (trial, N, cavs, ring)
+        if rep.condition_s:
+            assert rep.theory_rank == exact, (trial, cavs)
+        else:
+            assert exact < rep.reachable_states, (trial, cavs)
+            violated += 1
+            cross += any(c.zero_vehicle != c.pole_vehicle for c in rep.cancellations)
+    assert violated >= 10 and cross >= 3  # the sweep does exercise both kinds of (S) failure
+
+
+def test_ring_conserved_mode_is_found_by_the_staircase_on_the_full_state():
+    """On the full ring state the only direction no input reaches is the total spacing: the
+    orthogonal complement of the controllable subspace is span(c), its mode is 0."""
+    ring = _deeplcc((8,), ring=True)
+    dec = kalman_decomposition(ring.A, ring.B)
+    assert dec.n_c == 15 and not dec.undecided
+    u = dec.T[:, dec.n_c]
+    u = u * np.sign(u @ ring.conserved)
+    dev = np.linalg.norm(u - ring.conserved)
+    assert dev < 1e-12
+    # c A = 0 exactly, so |u' A u| <= 2 ||A|| dev (+ rounding): the mode is 0 to that accuracy
+    norm_a = np.linalg.norm(ring.A, 2)
+    assert abs(u @ ring.A @ u) <= 2 * norm_a * dev + 32 * np.finfo(float).eps * norm_a
