@@ -205,7 +205,8 @@ def reduce_conserved(
     without entry ``k`` (``x = W z``, ``x_k = -sum_{j != k} c_j x_j / c_k``).
 
     Requires ``c A = 0`` (the hyperplane is invariant and contains the range of ``A``) and
-    ``c B = 0``; then ``A W = W A_z`` exactly with ``A_z = P A W`` (``P``: drop row ``k``).
+    ``c B = 0``; then ``A W = W A_z`` with ``A_z = P A W`` (``P``: drop row ``k``), in floating
+    point too for the ring's matrices (entries ``a - b`` with one of them zero).
     ``k`` defaults to the entry of ``c`` whose column of ``A`` is smallest (a CAV's spacing on
     the ring: zero, and ``A_z`` is ``A`` with row and column ``k`` deleted), ties broken by the
     largest ``|c_k|``.
@@ -286,7 +287,7 @@ class PlatoonControllabilityReport(ControllabilityReport):
     model_states : int
         ``2N``.
     reachable_states : int
-        See :attr:`reachable_verdict`.
+        See :attr:`PlatoonControllabilityReport.reachable_verdict`.
     subspace : str
         What was analysed.
     conserved_mode : str or None
@@ -325,7 +326,7 @@ class PlatoonControllabilityReport(ControllabilityReport):
     def reachable_verdict(self) -> str:
         """The verdict on the states of the first CAV and every vehicle behind it (open
         platoon: the most any input can reach, Theorem 2 (i); ring: the hyperplane), i.e.
-        ``rank`` against :attr:`reachable_states` instead of ``n_states``."""
+        ``rank`` against ``reachable_states`` instead of ``n_states``."""
         if self.rank == self.reachable_states:
             return "controllable"
         return "uncontrollable" if self.rank_upper < self.reachable_states else "undecided"
