@@ -547,3 +547,28 @@ def test_ring_conserved_mode_is_found_by_the_staircase_on_the_full_state():
     # c A = 0 exactly, so |u' A u| <= 2 ||A|| dev (+ rounding): the mode is 0 to that accuracy
     norm_a = np.linalg.norm(ring.A, 2)
     assert abs(u @ ring.A @ u) <= 2 * norm_a * dev + 32 * np.finfo(float).eps * norm_a
+
+
+def test_string_verdicts_do_not_depend_on_the_realisation():
+    """The loop in random dense coordinates (cond <= 10): the same verdict on both sides of the
+    boundary and at it, the same peak to 1e-9 (loop_string_stability on T^-1 A T)."""
+    from lcc_synth.analysis.platoon_string import platoon_loop
+    from lcc_synth.analysis.string_stability import loop_string_stability
+
+    model = _deeplcc()
+    hdv_c = sum((c.alpha3**2 - c.alpha2**2 + 2 * c.alpha1) / c.alpha1**2
+                for i, c in enumerate(model.coefficients, 1) if i not in (3, 6))  # fmt: skip
+    kv = -np.sqrt(1.0 + hdv_c / 8)  # k_s = 0.5, k_p = 0: on the boundary
+    rng = np.random.default_rng(3)
+    for dk in (0.0, 1e-3, -1e-3):
+        g = PlatoonGains.from_table({f"u_{c}": {f"s_{c}": 0.5, f"v_{c}": kv + dk} for c in (3, 6)},
+                                    model)  # fmt: skip
+        A, h, c = platoon_loop(model, g)
+        base = loop_string_stability(A, h, c)
+        for _ in range(3):
+            Q = np.linalg.qr(rng.standard_normal((16, 16)))[0]
+            T = Q @ np.diag(rng.uniform(1.0, 10.0, 16)) @ Q.T
+            Ti = np.linalg.inv(T)
+            rep = loop_string_stability(Ti @ A @ T, Ti @ h, c @ T)
+            assert rep.verdict == base.verdict, (dk, rep)
+            assert rep.gamma_peak == pytest.approx(base.gamma_peak, rel=1e-9)
