@@ -70,10 +70,10 @@ DeeP-LCC platoon (8 vehicles, CAVs 3 and 6): rank 12 of 16, vehicles 1, 2 outsid
 reachable states controllable, decided with margin 2.3e10 (no coupling to drop), 2 ms; the
 closest pair of (S) is vehicle 7's own eq. (13), relative residual 0.11. OVM rings with one
 AV (the paper's alpha 0.6, beta 0.9, v* 15): N = 20 controllable on the hyperplane (39 of 39),
-margin 9.5e8, 45 ms; N = 40: 79 of 79, margin 2.2e8, 0.1-0.2 s (Householder basis: margins
-1.9e8 and 4.2e7). The all-HDV rings: rank 0, not stabilisable (their stop-and-go mode has
-real part +0.027). Under the Prescott, Sandybridge and SkylakeX OpenBLAS kernels the tests'
-verdicts are the same.
+margin 9.5e8, 45-60 ms; N = 40: 79 of 79, margin 2.2e8, 0.2-0.3 s (Householder basis: the same
+ranks, margins 1.9e8 and 4.2e7, 50-150 ms). The all-HDV rings: rank 0, not stabilisable
+(their stop-and-go mode has real part +0.027). Under the Prescott, Sandybridge and SkylakeX
+OpenBLAS kernels the tests' verdicts are the same.
 """
 
 from __future__ import annotations
