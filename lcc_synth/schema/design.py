@@ -195,7 +195,8 @@ CASES = Table(
     ("analyze",),
     (
         Key("semantics", "string", "How the gain enters the command.", "added", choices=_SEM),
-        Key("gains", "table", "State name -> gain; missing states 0.", {}),
+        Key("gains", "table", "State name -> gain; missing states 0. Platoon / ring: one "
+            "table per CAV input, [cases.NAME.gains.u_3] with s_i / v_i gains.", {}),
         Key("label", "string", "Label in tables and figures.", Derived("NAME")),
     ),
 )
