@@ -181,7 +181,7 @@ def warn_large_gains(gains: Mapping[str, Any], field: str, limit: float = GAIN_L
 class System:
     """The ``[hdv]`` + ``[system]`` tables: nonlinear HDV model, layout and equilibrium.
 
-    For ``kind = "platoon"`` / ``"ring"`` the layout is :attr:`platoon` (``size`` vehicles,
+    For ``kind = "platoon"`` / ``"ring"`` the layout is ``platoon`` (``size`` vehicles,
     CAVs at ``cavs``, per-vehicle HDV models); ``m`` and ``n`` are then the vehicles ahead of
     and behind the first CAV (``m = size``, ``n = 0`` without a CAV).
     """

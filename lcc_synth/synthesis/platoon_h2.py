@@ -1,7 +1,7 @@
 """Multi-input H2 for mixed platoons and the ring road: plant, true H2, Riccati, derivatives.
 
-The design plant
-----------------
+The platoon design plant
+------------------------
 For a :class:`~lcc_synth.models.platoon.PlatoonModel` ``dx = A x + B u + H v_h`` (one input
 column per CAV) and a gain semantics (:meth:`~lcc_synth.models.platoon.PlatoonGains.
 input_feedback`) the CAVs' gain rows ``K`` (``n_cav x nx``) act as

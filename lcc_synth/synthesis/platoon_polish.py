@@ -1,8 +1,8 @@
 """Structured multi-input H2 for platoons: a cheap stabilising start, then descent on the TRUE
 H2 norm with every CAV's row pattern kept exactly (robust multi-model objectives included).
 
-Method
-------
+Polishing method
+----------------
 1. **Start** (:func:`initial_gain`): the full-information Riccati gain
    (:func:`~lcc_synth.synthesis.platoon_h2.platoon_riccati`) truncated to the pattern. On the
    ring the gain is defined modulo the conserved direction ``c``, so each row is first shifted
@@ -50,7 +50,6 @@ from lcc_synth.synthesis.platoon_h2 import (
 
 __all__ = [
     "NEWTON_MAX_FREE",
-    "Objective",
     "h2_objective",
     "robust_objective",
     "DescentResult",

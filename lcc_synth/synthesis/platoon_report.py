@@ -32,7 +32,7 @@ class PlatoonCheck(Record):
     h2 : float
         True H2 norm (ring: on the invariant subspace).
     max_real_eig : float
-        Largest real part of the closed-loop eigenvalues on :attr:`subspace`.
+        Largest real part of the closed-loop eigenvalues on ``subspace``.
     stable : bool
     subspace : str
         ``"full state"`` or the ring's invariant hyperplane.
