@@ -419,7 +419,7 @@ def test_choices_are_the_code_constants():
     from lcc_synth.models.platoon import PLATOON_KINDS
 
     assert declared("system").key("kind").choices == (*KINDS, *PLATOON_KINDS)
-    assert declared("controllers.NAME:static").key("kind").choices == KINDS
+    assert declared("controllers.NAME:static").key("kind").choices == (*KINDS, *PLATOON_KINDS)
     assert set(declared("controllers.NAME").key("type").choices) == set(CONTROLLER_TYPES)
     assert set(declared("controllers.NAME:suite").key("type").choices) == set(SUITE_TYPES)
     for tid in ("controllers.NAME:static", "synthesis", "synthesis.baseline", "cases.NAME",

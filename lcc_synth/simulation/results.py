@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -77,9 +77,10 @@ class SimResult(Record):
     scenario: Scenario | None = None
     draws: Draws | None = None
     wall_time: float = 0.0
-    cavs: tuple[int, ...] | None = None
-    ring: bool = False
-    circumference: float = float("nan")
+    # not in the one-line repr (the scenario shown there holds the layout)
+    cavs: tuple[int, ...] | None = field(default=None, repr=False)
+    ring: bool = field(default=False, repr=False)
+    circumference: float = field(default=float("nan"), repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.cavs is None:

@@ -99,8 +99,8 @@ class Scenario(Record):
         spacing at ``v*``.
     ring : bool
         A ring road: no head vehicle, column 0 follows the last column (needs ``cavs``).
-    circumference : float
-        Ring length (m), > 0; NaN on an open road.
+    circumference : float, optional
+        Ring length (m), > 0; ``None`` on an open road.
     accel_noise_uniform : float
         Half width ``w`` (m/s^2, >= 0) of a uniform acceleration noise ``U[-w, w]`` on every
         vehicle but the head (CAVs included), added after the limits and emergency braking
@@ -135,7 +135,7 @@ class Scenario(Record):
     name: str = "scenario"
     cavs: tuple[int, ...] | None = None
     ring: bool = False
-    circumference: float = float("nan")
+    circumference: float | None = None
     accel_noise_uniform: float = 0.0
 
     def __post_init__(self) -> None:
@@ -218,7 +218,7 @@ class Scenario(Record):
         if self.m != cavs[0] - 1:
             raise ConfigError("scenario.m", f"must be cavs[0] - 1 = {cavs[0] - 1}, got {self.m}")
         if self.ring:
-            c = float(self.circumference)
+            c = float("nan") if self.circumference is None else float(self.circumference)
             if not (np.isfinite(c) and c > 0):
                 raise ConfigError("system.circumference", f"must be > 0 m, got {c!r}")
 
@@ -484,7 +484,7 @@ def _platoon_layout(system: System) -> dict[str, Any]:
         values[key] = full
     return {
         "m": cols[0] - 1, "n": nv - 1 - cols[0], "cavs": cols, "hdv_values": values,
-        "ring": bool(P.ring), "circumference": P.length,
+        "ring": bool(P.ring), "circumference": P.length if P.ring else None,
     }  # fmt: skip
 
 
