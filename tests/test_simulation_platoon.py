@@ -320,3 +320,47 @@ def test_bad_layouts_are_named_field_errors_and_exit_2(tmp_path, capsys, path, o
         load_spec(bad)
     assert main(["simulate", str(bad), "--json", "--no-record"]) == 2
     assert "Traceback" not in capsys.readouterr().err
+
+
+class _PythonPath:
+    """A controller without ``linear_law``: the simulator calls it from Python every sample."""
+
+    def __init__(self, inner):
+        self.inner, self.name, self.sample_time = inner, inner.name, inner.sample_time
+
+    def reset(self, ctx):
+        self.inner.reset(ctx)
+
+    def __call__(self, obs):
+        return self.inner(obs)
+
+    def describe(self):
+        return self.inner.describe()
+
+    def stats(self):
+        return {}
+
+
+@pytest.mark.parametrize("ring", [False, True])
+def test_python_controller_path_with_several_cavs_equals_the_compiled_law(ring):
+    models = _HETERO[:5] if ring else _HETERO
+    cavs = (2, 5)
+    P = Platoon(tuple(models), cavs, 15.0, ring)
+    M = platoon_model(P, warn=False)
+    gains = _lqr_gains(M) if not ring else PlatoonGains(
+        np.tile([-0.1, -0.5] * 5, (2, 1)) * 0.3, cavs, "added"
+    )
+    ctrl = PlatoonGainController("k", gains, M)
+    pert = Brake(vehicle=1, start=1.0, duration=1.0, decel=-2.0)
+    sc, _ = _platoon_scenario(models, cavs, ring=ring, duration=15.0, cav_aeb=True,
+                              perturbations=(pert,))  # fmt: skip
+    a = simulate(sc, ctrl)
+    b = simulate(sc, _PythonPath(ctrl))
+    assert b.u_cmd.shape == a.u_cmd.shape == (1, sc.steps, 2)
+    np.testing.assert_allclose(b.u_cmd, a.u_cmd, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(b.velocity, a.velocity, rtol=0, atol=1e-9)
+    assert np.ptp(a.u_cmd) > 0.1  # the law did something
+    # the HDV law on every CAV, its own slot's parameters, both paths
+    a = simulate(sc, HDVController())
+    b = simulate(sc, _PythonPath(HDVController()))
+    np.testing.assert_allclose(b.velocity, a.velocity, rtol=0, atol=1e-9)
