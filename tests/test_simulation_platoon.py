@@ -364,3 +364,20 @@ def test_python_controller_path_with_several_cavs_equals_the_compiled_law(ring):
     a = simulate(sc, HDVController())
     b = simulate(sc, _PythonPath(HDVController()))
     np.testing.assert_allclose(b.velocity, a.velocity, rtol=0, atol=1e-9)
+
+
+def test_hdv_controller_drives_every_cav_with_its_own_slots_law():
+    # every position its own parameters (the CAV slots too): with every CAV driving its HDV
+    # law the run cannot depend on which positions are CAVs, bit for bit
+    models = [OVM(alpha=a, beta=b, s_go=g) for a, b, g in
+              zip((0.45, 0.55, 0.7, 0.5, 0.65, 0.8), (0.6, 0.85, 0.95, 0.75, 0.7, 1.0),
+                  (38.0, 36.0, 33.0, 37.0, 34.5, 34.0), strict=True)]  # fmt: skip
+    head = Brake(vehicle="head", start=1.0, duration=2.0, decel=-3.0)
+    runs = []
+    for cavs in ((2, 5), (1,), (6,)):
+        sc, _ = _platoon_scenario(models, cavs, duration=20.0, perturbations=(head,))
+        runs.append(simulate(sc, HDVController()))
+    for r in runs[1:]:
+        assert np.array_equal(r.velocity, runs[0].velocity)
+        assert np.array_equal(r.spacing, runs[0].spacing, equal_nan=True)
+    assert np.ptp(runs[0].velocity[0, :, 2]) > 2.0
