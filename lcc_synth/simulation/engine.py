@@ -107,7 +107,7 @@ def _steps_of(value: float, dt: float, field: str, multiple: bool) -> int:
 def simulation_bytes(sc: Scenario) -> int:
     """Bytes :func:`simulate` allocates for ``sc``: the time grid and the perturbation
     overrides (``steps x (1 + 2 vehicles)``), the recorded samples (``batch x kept samples x
-    (4 vehicles + 1)`` floats) and the delay ring buffer."""
+    (4 vehicles + 1 per CAV)`` floats) and the delay ring buffer."""
     T, nv, B = sc.steps, sc.n_vehicles, sc.batch
     kept = (T - 1) // sc.record_every + 1
     nc = len(sc.cav_columns)
