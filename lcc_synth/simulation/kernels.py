@@ -117,6 +117,46 @@ def _observe(b, k, p, v, hp, hv, L, lat, loss, noise, seed, sid0, is_cav, ring, 
         obs_p[b, j] = pj
 
 
+@numba.njit(cache=True)
+def _ring_first(
+    b, k, p, v, hp, hv, L, delay_steps, delay_own, code, params, a_min, a_max, abs_min, kc,
+    u_hold, cav_aeb, hdv_aeb, noise_std, seed, sid0, circ, aeb,
+):  # fmt: skip
+    """Acceleration of the ring's column 0 (before noise and overrides): as every other
+    vehicle's in :func:`_advance`, its predecessor the last column, ``circ`` ahead."""
+    last = p.shape[1] - 1
+    if kc >= 0:
+        a = min(max(u_hold[b, kc], a_min), a_max)
+        if cav_aeb:
+            s0 = p[b, last] + circ - p[b, 0]
+            if (v[b, 0] ** 2 - v[b, last] ** 2) / (2.0 * s0) >= abs_min:
+                a = a_min
+                aeb[kc] = True
+        return a
+    d = delay_steps[b, 0]
+    if d == 0:
+        s = p[b, last] + circ - p[b, 0]
+        ds = v[b, last] - v[b, 0]
+        vv = v[b, 0]
+    else:
+        sl = (k - d + L) % L
+        s = hp[sl, b, last] + circ - hp[sl, b, 0]
+        ds = hv[sl, b, last] - hv[sl, b, 0]
+        vv = hv[sl, b, 0] if delay_own else v[b, 0]
+    a = _hdv_accel6(
+        code, params[b, 0, 0], params[b, 0, 1], params[b, 0, 2],
+        params[b, 0, 3], params[b, 0, 4], params[b, 0, 5], s, ds, vv,
+    )  # fmt: skip
+    if noise_std > 0.0:
+        a += noise_std * _normal(seed, sid0 + b, 0, k, 0)
+    a = min(max(a, a_min), a_max)
+    if hdv_aeb:
+        s = p[b, last] + circ - p[b, 0]
+        if (v[b, 0] ** 2 - v[b, last] ** 2) / (2.0 * s) >= abs_min:
+            a = a_min
+    return a
+
+
 @numba.njit(cache=True, nogil=True)
 def _advance(
     b0, b1, k0, k1, p, v, hp, hv, L, delay_steps, delay_own, code, params, law_code,
@@ -226,9 +266,11 @@ def _advance(
                     ahead = cav - 1 if cav > 0 else nv - 1
                     u = 0.0
                     if hdv_law:
-                        u = _hdv_accel(
-                            law_code, law_params[b, c], ys[cav], yv[ahead] - yv[cav], yv[cav]
-                        )
+                        u = _hdv_accel6(
+                            law_code, law_params[b, c, 0], law_params[b, c, 1],
+                            law_params[b, c, 2], law_params[b, c, 3], law_params[b, c, 4],
+                            law_params[b, c, 5], ys[cav], yv[ahead] - yv[cav], yv[cav],
+                        )  # fmt: skip
                     for j in range(j0, nv):
                         if Ks[c, j] != 0.0:
                             u += Ks[c, j] * (ys[j] - (s_ref[b, j] + sh))
@@ -243,30 +285,30 @@ def _advance(
             # ---- accelerations ----
             for j in range(nv):
                 kc = is_cav[j]
-                if j == 0 and not ring:
-                    a = 0.0
+                if j == 0:
+                    if ring:  # the ring's column 0 follows the last column, C ahead
+                        a = _ring_first(b, k, p, v, hp, hv, L, delay_steps, delay_own, code,
+                                        params, a_min, a_max, abs_min, kc, u_hold, cav_aeb,
+                                        hdv_aeb, noise_std, seed, sid0, circ, aeb)  # fmt: skip
+                    else:
+                        a = 0.0  # the head: cruising unless a perturbation drives it
                 elif kc >= 0:
                     a = min(max(u_hold[b, kc], a_min), a_max)
                     if cav_aeb:
-                        s0 = _gap(p, b, j, ring, circ)
-                        ahead = j - 1 if j > 0 else nv - 1
-                        if (v[b, j] ** 2 - v[b, ahead] ** 2) / (2.0 * s0) >= abs_min:
+                        s0 = p[b, j - 1] - p[b, j]
+                        if (v[b, j] ** 2 - v[b, j - 1] ** 2) / (2.0 * s0) >= abs_min:
                             a = a_min
                             aeb[kc] = True
                 else:
-                    ahead = j - 1 if j > 0 else nv - 1
                     d = delay_steps[b, j]
                     if d == 0:
-                        s = _gap(p, b, j, ring, circ)
-                        ds = v[b, ahead] - v[b, j]
+                        s = p[b, j - 1] - p[b, j]
+                        ds = v[b, j - 1] - v[b, j]
                         vv = v[b, j]
                     else:
                         sl = (k - d + L) % L
-                        if j > 0:
-                            s = hp[sl, b, j - 1] - hp[sl, b, j]
-                        else:
-                            s = hp[sl, b, ahead] + circ - hp[sl, b, 0]
-                        ds = hv[sl, b, ahead] - hv[sl, b, j]
+                        s = hp[sl, b, j - 1] - hp[sl, b, j]
+                        ds = hv[sl, b, j - 1] - hv[sl, b, j]
                         vv = hv[sl, b, j] if delay_own else v[b, j]
                     a = _hdv_accel6(
                         code, params[b, j, 0], params[b, j, 1], params[b, j, 2],
@@ -276,8 +318,8 @@ def _advance(
                         a += noise_std * _normal(seed, sid0 + b, j, k, 0)
                     a = min(max(a, a_min), a_max)
                     if hdv_aeb:
-                        s = _gap(p, b, j, ring, circ)
-                        if (v[b, j] ** 2 - v[b, ahead] ** 2) / (2.0 * s) >= abs_min:
+                        s = p[b, j - 1] - p[b, j]
+                        if (v[b, j] ** 2 - v[b, j - 1] ** 2) / (2.0 * s) >= abs_min:
                             a = a_min
                 if unif_noise > 0.0 and (j > 0 or ring):
                     a += unif_noise * (2.0 * _u01(seed, sid0 + b, j, k, 9) - 1.0)
