@@ -198,6 +198,13 @@ class System:
         """Equilibrium spacing of the HDV model at ``v_star``."""
         return float(self.hdv.equilibrium_spacing(self.v_star))
 
+    @property
+    def columns(self) -> int:
+        """Vehicles the simulator runs: ``m + n + 2`` (the head included), ``size`` on a ring."""
+        if self.platoon is not None and self.platoon.ring:
+            return self.platoon.size
+        return self.m + self.n + 2
+
     def linear_model(self, warn: bool = True) -> LCCModel | PlatoonModel:
         """The linearised model of this system (homogeneous for the paper's kinds; each
         vehicle at its own equilibrium for a platoon or ring)."""

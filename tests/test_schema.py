@@ -435,7 +435,7 @@ def test_choices_are_the_code_constants():
     from lcc_synth.models.platoon import PLATOON_KINDS
 
     assert declared("system").key("kind").choices == (*KINDS, *PLATOON_KINDS)
-    assert declared("controllers.NAME:static").key("kind").choices == KINDS
+    assert declared("controllers.NAME:static").key("kind").choices == (*KINDS, *PLATOON_KINDS)
     assert set(declared("controllers.NAME").key("type").choices) == set(CONTROLLER_TYPES)
     assert set(declared("controllers.NAME:suite").key("type").choices) == set(SUITE_TYPES)
     for tid in ("controllers.NAME:static", "synthesis", "synthesis.baseline", "cases.NAME",
@@ -470,7 +470,7 @@ def _loader(tid: str):
     from lcc_synth.experiments.sweep import load_sweep
     from lcc_synth.metrics import metrics_from
     from lcc_synth.mpc.settings import settings_from_table
-    from lcc_synth.simulation.scenario import scenario_from
+    from lcc_synth.simulation.scenario_file import scenario_from
     from lcc_synth.synthesis.config import spec_from_problem
 
     if tid in ("scenario", "scenario.delay", "scenario.v2v", "system"):

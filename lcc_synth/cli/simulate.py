@@ -189,8 +189,14 @@ def print_table(spec, rep: dict[str, Any], file=None, collisions=None) -> None:
     file = file or sys.stdout
     sc = spec.scenario
     cfg = spec.metrics
+    if sc.layout is None:
+        where = f"m={sc.m}, n={sc.n}"
+    else:  # a platoon or ring: CAVs by position
+        size, ring = sc.layout
+        cavs = ", ".join(str(c + 1 if ring else c) for c in sc.cav_columns)
+        where = f"{'ring' if ring else 'platoon'} of {size}, CAVs at {cavs}"
     print(
-        f"{spec.name}: m={sc.m}, n={sc.n}, v*={sc.v_star:g} m/s, dt={sc.dt:g} s, "
+        f"{spec.name}: {where}, v*={sc.v_star:g} m/s, dt={sc.dt:g} s, "
         f"{sc.steps} steps, batch={sc.batch}; metrics over t in "
         f"[{cfg.window[0]:g}, {cfg.window[1]:g}] s, vehicles={cfg.vehicles}",
         file=file,

@@ -41,7 +41,8 @@ from lcc_synth.models.records import Record, system_tables, toml_text
 from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
 from lcc_synth.schema import declared
 from lcc_synth.simulation.results import SimResult
-from lcc_synth.simulation.scenario import Scenario, scenario_from
+from lcc_synth.simulation.scenario import Scenario
+from lcc_synth.simulation.scenario_file import scenario_from
 
 __all__ = [
     "SUITE_TYPES",

@@ -51,7 +51,8 @@ from lcc_synth.metrics import MetricsConfig
 from lcc_synth.models.records import Record, system_tables
 from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
 from lcc_synth.schema import declared
-from lcc_synth.simulation.scenario import Scenario
+from lcc_synth.simulation.scenario import Scenario, split_ranges
+from lcc_synth.simulation.scenario_file import scenario_from
 
 __all__ = [
     "SWEEP_METRICS", "SWEEP_COUNTS", "MAX_COUNT", "SweepSpec", "SweepResult", "load_sweep",
@@ -131,7 +132,6 @@ def load_sweep(
     """
     from lcc_synth.experiments.comparison import fallback_names, select_names
     from lcc_synth.metrics import metrics_from
-    from lcc_synth.simulation.scenario import scenario_from, split_ranges
 
     problem = path if isinstance(path, Problem) else load_problem(path)
     src = str(problem.path)
@@ -139,7 +139,7 @@ def load_sweep(
         data = problem.data
         check_top_level(data)
         system = system_from(data, src)
-        nv = system.m + system.n + 2  # [lo, hi] settings drawn per scenario:
+        nv = system.columns  # [lo, hi] settings drawn per scenario:
         sc_table, ranges = split_ranges(declared("").get(data, "scenario", ""), nv)
         scenario = scenario_from({**data, "scenario": sc_table}, system, problem.path.parent)
         metrics = metrics_from(data, system, scenario=scenario)

@@ -30,8 +30,9 @@ _FILTER = Key("measurement_filter", "number", "Time constant of a first-order lo
               "received spacing and velocity (0: off).", 0.0, lo=0.0, unit="s")
 _SEMANTICS = Key("semantics", "string", "replace: u = sum(gain * error); added: the CAV's HDV "
                  "law plus that sum.", "added", choices=("added", "replace"))
-_GAINS = Key("gains", "table", "State name (s_i, v_i, -p_0) -> gain; missing states 0.",
-             REQUIRED)
+_GAINS = Key("gains", "table", "State name (s_i, v_i, -p_0) -> gain; missing states 0. "
+             "kind = platoon / ring: one table per CAV input, [controllers.NAME.gains.u_i] "
+             "with state name (s_j, v_j of positions) -> gain.", REQUIRED)
 
 GENERIC = Table(_C, "A CAV controller of simulate: its type selects the keys (below).",
                 ("simulate",), (_TYPE,))
@@ -57,7 +58,8 @@ STATIC = Table(
     _C, 'type = "static": static state feedback, eq. (23).', _CMDS,
     (_TYPE,
      Key("kind", "string", "Linear model whose state names the gains use.",
-         Derived("[system].kind"), choices=("lcc", "cf_lcc", "fd_lcc", "ccc")),
+         Derived("[system].kind"),
+         choices=("lcc", "cf_lcc", "fd_lcc", "ccc", "platoon", "ring")),
      _SEMANTICS, _GAINS, _SAMPLE_TIME, _EQUILIBRIUM, _EQ_TAU, _FILTER),
     variant="static",
 )

@@ -146,6 +146,9 @@ SCENARIO = Table(
         Key("hdv_accel_noise", "number",
             "Std of white acceleration noise on every HDV." + _SWEEP_RANGE, 0.0,
             lo=0.0, unit="m/s²"),
+        Key("accel_noise_uniform", "number", "Half width w of a uniform acceleration noise "
+            "U[-w, w] on every vehicle but the head (CAVs included), added after the limits "
+            "and emergency braking (the DeeP-LCC paper's scheme).", 0.0, lo=0.0, unit="m/s²"),
         Key("heterogeneity", "table", "Per-HDV parameter draws: [scenario.heterogeneity].", {}),
         Key("delay", "table", "HDV reaction delay: [scenario.delay].", {}),
         Key("v2v", "table", "What the CAV receives: [scenario.v2v].", {}),
@@ -240,8 +243,8 @@ LOSS_RATE_LIST = Table(
 
 _P_TYPE = Key("type", "string", "The kind of motion.", REQUIRED,
               choices=("sine", "brake", "brake_profile", "accel_profile", "speed_profile"))
-_P_VEHICLE = Key("vehicle", "any", 'The vehicle driven: "head" or a paper index (-m..n).',
-                 "head")
+_P_VEHICLE = Key("vehicle", "any", 'The vehicle driven: "head" or a paper index (-m..n); '
+                 'kind = platoon: "head" or a position 1..size; ring: a position.', "head")
 _P_START = Key("start", "number", "Start of the window (open interval start < t < end).",
                20.0, unit="s")
 _P_DECEL = Key("decel", "number", "Braking acceleration, < 0.", -5.0, unit="m/s²")
@@ -298,8 +301,13 @@ METRICS = Table(
     (
         Key("window", "number list", "Closed interval of sample times of AAVE and fuel, inside "
             "the simulated time.", [20.0, 40.0], length=2, unit="s"),
-        Key("vehicles", "any", 'Vehicles averaged: "cav_and_behind", "all" (head included), '
-            '"hdvs" or a list of paper indices.', "cav_and_behind"),
+        Key("vehicles", "any", 'Vehicles averaged: "cav_and_behind", "first_cav_and_behind" '
+            '(the first CAV and every vehicle behind it; on a ring both mean every vehicle), '
+            '"all" (head included), "hdvs" or a list of paper indices (platoon, ring: '
+            'positions).', "cav_and_behind"),
+        Key("accel_smoothing", "integer", "Fuel: smooth every acceleration by a centred "
+            "moving average of this many recorded samples first (odd; 1: none; the DeeP-LCC "
+            "paper: 9).", 1, lo=1, hi=1001),
         Key("baseline", "string", "A controller name: report reductions versus it (not in "
             "run).", None),
     ),

@@ -181,6 +181,8 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
 
     sumo = require_sumo()
     nv, T, dt, cav = sc.n_vehicles, sc.steps, float(sc.dt), sc.cav
+    is_cav = np.full(nv, -1, dtype=np.int64)  # the observation kernel's CAV index per column
+    is_cav[cav] = 0
     t = sc.times()
     L_veh = float(sc.sumo.vehicle_length)
     a_min, a_max = float(sc.a_min), float(sc.a_max)
@@ -288,7 +290,8 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
                 hp[k % L, 0], hv[k % L, 0] = p, v
             if k % ratio == 0:
                 _observe_all(k, P, V, hp, hv, L, lat, loss, noise, int(sc.seed),
-                             int(sc.first_index) + b, cav, obs_s, obs_v, obs_p, alive)  # fmt: skip
+                             int(sc.first_index) + b, is_cav, False, 0.0,
+                             obs_s, obs_v, obs_p, alive)  # fmt: skip
                 u = np.asarray(
                     controller(Observation(float(t[k]), obs_s.copy(), obs_v.copy(), obs_p.copy())),
                     dtype=float,

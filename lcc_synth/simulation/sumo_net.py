@@ -140,6 +140,18 @@ def check_sumo_scenario(sc) -> None:
     """
     import numpy as np
 
+    if getattr(sc, "ring", False) or len(getattr(sc, "cav_columns", (sc.cav,))) > 1:
+        raise ConfigError(
+            "scenario.backend",
+            'SUMO runs one CAV on an open road for now (a ring or several CAVs: backend = '
+            '"builtin")',
+        )
+    if getattr(sc, "accel_noise_uniform", 0.0) > 0.0:
+        raise ConfigError(
+            "scenario.accel_noise_uniform",
+            'must be 0 with scenario.backend = "sumo" (SUMO\'s own imperfection: '
+            "[scenario.sumo] sigma)",
+        )
     if sc.hdv.name != "idm":
         raise ConfigError(
             "hdv.model",
