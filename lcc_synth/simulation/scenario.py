@@ -385,8 +385,8 @@ class Scenario(Record):
         return Draws(values, delays, s_eq)
 
 
-@dataclass(frozen=True)
-class Draws:
+@dataclass(frozen=True, repr=False)
+class Draws(Record):
     """The random (or explicit) per-vehicle quantities of a batch.
 
     Attributes
