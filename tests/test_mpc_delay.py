@@ -352,3 +352,35 @@ def test_platoon_mpc_refuses_a_delay():
         mpc_controller_from_table("mpc", table, system)
     assert err.value.field == "controllers.mpc.prediction.delay"
     assert "single-CAV" in err.value.message
+
+
+def test_controller_register_holds_the_simulated_past_states(tmp_path):
+    """In the closed loop (exact V2V) the delay states the controller feeds its QP are the
+    simulator's recorded spacings and velocities 1..4 samples back, as errors from the
+    controller's CURRENT equilibrium (v_eq, its s_eq)."""
+    path = tmp_path / "brake_delayed.toml"
+    path.write_text((PROBLEMS / "mpc_head_brake.toml").read_text() + _DELAY_MPC)
+    spec = load_spec(path)
+    ctrl = spec.controllers["mpc_delay"]
+    res = simulate(replace(spec.scenario, duration=30.0), ctrl)
+    hist = ctrl._members[0].hist
+    lin = ctrl._lin0
+    nx, cols, D = lin.model.nx, lin.delay.columns, lin.delay.depth
+    assert D == 4
+    ratio = int(round(ctrl.sample_time / res.dt))
+    s_off = ctrl._members[0].s_off
+    checked = 0
+    for k in range(D, len(hist["x0"]), 7):
+        v_eq = hist["v_eq"][k]
+        s_eq = spec.system.hdv.equilibrium_spacing(v_eq)
+        z = hist["x0"][k]
+        for j in range(1, D + 1):
+            i = (k - j) * ratio  # the sample j controller periods back
+            w = np.empty(nx + 1)
+            w[0:nx:2] = res.spacing[0, i, 1:] - s_eq - s_off[1:]
+            w[1:nx:2] = res.velocity[0, i, 1:] - v_eq
+            w[nx] = res.velocity[0, i, 0] - v_eq
+            r = z[nx + (j - 1) * cols.size: nx + j * cols.size]
+            np.testing.assert_allclose(r, w[cols], atol=1e-9)
+        checked += 1
+    assert checked > 30
