@@ -49,6 +49,18 @@ vs 0.38 ms, p99 5.1 vs 4.9 ms with 4 HDVs; 0.41 / 7.9 vs 0.38 / 4.9 ms with 10);
 formulation (0.19 vs 0.13 s; 0.43 vs 0.07 s) and one evaluation of its matrices, i.e. one
 re-linearisation (25 vs 7 ms; 98 vs 8 ms), grow with the state.
 
+Limits (measured on ``problems/mpc_head_brake.toml``, every HDV delayed, default weights):
+the predicted cost of a delayed string grows fast with the delay, because the string amplifies
+the head's brake from HDV to HDV (the terminal weight's largest entry with 10 HDVs predicted:
+188 at 0.4 s, 3.3e3 at 0.5 s, 1.1e5 at 0.6 s), so with all 10 HDVs predicted and a delay of
+0.5 s or more the l1 penalty on the safe spacing is no longer exact: the CAV trades its gap for
+the tail (with 0.6 s predicted, 97-103 steps with slack up to 10 m and emergency braking, true
+delays 0.2-0.6 s). Predicting the 4 HDVs behind (``n_model = 4``, as
+``problems/sweep_robustness.toml``) keeps the slack at 0 up to 0.4 s predicted. A string whose
+HDVs all react 0.6 s late collides by itself in this brake (the all-HDV baseline: HDVs 8 / 9 at
+49 s); the MPCs that predict 4 HDVs with 0.4 or 0.6 s do not prevent a collision at its tail
+either (the delay-free one and 0.2 s happen to).
+
 The controller keeps the last ``max l`` observed states (absolute spacings minus the offsets,
 velocities, the reference velocity) at its own period and forms ``r_j`` from them with the
 CURRENT equilibrium (the linear model is about one fixed equilibrium); before the first
