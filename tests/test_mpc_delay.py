@@ -140,6 +140,33 @@ def test_augmented_prediction_matches_the_delay_differential_equation(taus, boun
     assert np.abs(X[::100] - free).max() / np.abs(X).max() > 20 * err[0.1]
 
 
+def test_the_head_input_of_a_delayed_hdv_ahead_is_delayed_too():
+    """General LCC with 2 HDVs ahead: HDV -2 follows the head, so its delayed row reacts to the
+    head's velocity error 0.4 s old (the ``d`` entry of the register). The head's error ramps
+    0 -> 1 m/s over 1 s; Heun on the DDE with that error as an extra (delayed) state."""
+    model = model_from_hdv("lcc", 2, 2, HDV, 15.0, warn=False)
+    nx = model.nx
+    dm = lcc_delay_model(model, 0.4, 0.1)
+    assert nx in dm.columns  # the head's error is kept in the register
+    A = np.zeros((nx + 1, nx + 1))
+    A[:nx, :nx] = model.A
+    A[:nx, nx] = model.H[:, 0]
+    taus = np.zeros(nx + 1)
+    taus[[1, 3, 7, 9]] = 0.4  # the velocity rows of HDVs -2, -1, 1, 2 (not the CAV's)
+    B = np.zeros(nx + 1)
+    B[nx] = 1.0  # d' = 1 for t < 1 s
+    X = heun_dde(A, B, taus, lambda t: 1.0 if t < 1.0 else 0.0, np.zeros(nx + 1), 10.0, 1e-3)
+    z = np.zeros(dm.nz)
+    Z = [z[:nx]]
+    for k in range(100):
+        z = dm.Ad @ z + dm.Hd[:, 0] * min(k * 0.1, 1.0)
+        Z.append(z[:nx])
+    err = np.abs(X[::100, :nx] - np.array(Z)).max() / np.abs(X[:, :nx]).max()
+    assert err < 0.01  # measured 0.66 % (the same at 0.5 ms)
+    # the head error's weights sit in the register (HDV -2 sees it 0.4 s late), not in Hd
+    assert dm.Hd[model.index("v_-2"), 0] == 0.0
+
+
 def test_heterogeneous_delays_share_one_register_with_per_row_weights():
     model = _cf()
     dm = lcc_delay_model(model, (0.2, 0.0, 0.6, 0.31), 0.1)
@@ -384,3 +411,19 @@ def test_controller_register_holds_the_simulated_past_states(tmp_path):
             np.testing.assert_allclose(r, w[cols], atol=1e-9)
         checked += 1
     assert checked > 30
+
+
+def test_fd_lcc_mpc_with_delays_runs_without_fallback():
+    """FD-LCC (no vehicle ahead, the marginal -p_0 state left out of the Riccati equation) with
+    delay states: builds, and in the Table II scenario with HDVs 0.4 s late every QP solves."""
+    from lcc_synth.mpc import build_mpc
+
+    spec = load_spec(PROBLEMS / "mpc_table2_fd.toml")
+    ctrl = build_mpc(spec.system, horizon=20, prediction={"delay": 0.4})
+    lin = ctrl._lin0
+    assert 0 not in lin.delay.columns  # no HDV reacts to -p_0
+    assert not lin.P[0].any()
+    res = simulate(replace(spec.scenario, duration=25.0, delay=0.4), ctrl)
+    st = res.controller_stats
+    assert st["solves"] == 250 and st["fallbacks"] == 0 and st["errors"] == 0
+    assert not res.collided.any()
