@@ -6,17 +6,19 @@ speed and own speed delayed), so its linearised velocity row (eq. 8) is the dela
 differential equation ``dv_i/dt = a1 s_i(t - tau) - a2 v_i(t - tau) + a3 v_{i-1}(t - tau)``
 (the head velocity error ``d(t - tau)`` when vehicle ``i - 1`` is the head), while the
 kinematic rows ``ds_i/dt = v_{i-1} - v_i`` and the CAV's rows are not delayed. Split
-``[A | H] = G_nd + sum_l G_l`` into the undelayed rows and the rows of the HDVs with lag ``l``
-(``tau_i`` rounded to ``l_i = round(tau_i / Ts)`` controller periods, 0 = undelayed) acting on
+``[A | H] = G_nd + sum_g G_g`` into the undelayed rows and the rows of the HDVs with delay
+``tau_g`` (one group per distinct delay: heterogeneous delays share one register) acting on
 ``w = [x; d]``::
 
-    dx/dt = A_nd x(t) + H_nd d(t) + B u(t) + sum_l G_l w(t - l Ts)
+    dx/dt = A_nd x(t) + H_nd d(t) + B u(t) + sum_g G_g w(t - tau_g)
 
-Over one sample ``[k Ts, (k+1) Ts]`` the command ``u`` and the head prediction ``d`` are held
-(exact, as today's ZOH model) and the delayed ``w`` is **interpolated linearly** between its
-samples. The delay is not rounded: with ``tau = (l + phi) Ts`` (``0 <= phi < 1``) the delayed
-argument ``t - tau`` crosses the samples ``k-l-1, k-l`` for ``s < phi Ts`` and ``k-l, k-l+1``
-after, so the exact discretisation of that piecewise-linear input is::
+Over one sample ``[k Ts, (k+1) Ts]`` the command ``u`` and the head prediction ``d`` of the
+undelayed rows are held (as today's ZOH model; exact for ``u``) and the delayed ``w`` is
+**interpolated linearly** between its samples (exact for the CAV's velocity when its
+acceleration is the held command: LCC, FD-LCC). The delay is not rounded: with ``tau = (l +
+phi) Ts`` (``0 <= phi < 1``) the delayed argument ``t - tau`` crosses the samples ``k-l-1,
+k-l`` for ``s < phi Ts`` and ``k-l, k-l+1`` after, so the exact discretisation of that
+piecewise-linear input is::
 
     x_{k+1} = E x_k + Gam (B u_k + H_nd d_k) + sum_i W_i^{(l, phi)} G w_{k-l+1-i},  i = 0, 1, 2
 
@@ -61,10 +63,11 @@ HDVs all react 0.6 s late collides by itself in this brake (the all-HDV baseline
 49 s); the MPCs that predict 4 HDVs with 0.4 or 0.6 s do not prevent a collision at its tail
 either (the delay-free one and 0.2 s happen to).
 
-The controller keeps the last ``max l`` observed states (absolute spacings minus the offsets,
-velocities, the reference velocity) at its own period and forms ``r_j`` from them with the
-CURRENT equilibrium (the linear model is about one fixed equilibrium); before the first
-``max l`` samples the history is the first observation held.
+The controller (:class:`StateHistory`) keeps the last ``D`` observed ``w`` (absolute spacings
+minus their offsets, velocities, the reference velocity) at its own period and forms ``r_j``
+from them with the CURRENT equilibrium (the linear model is about one fixed equilibrium);
+before the first ``D`` samples the history is the first observation held. The delays are given
+(``prediction.delay``); estimating them from the observed HDVs is not implemented.
 """
 
 from __future__ import annotations
