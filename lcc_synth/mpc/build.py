@@ -10,6 +10,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
+
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains
 from lcc_synth.models.platoon import PlatoonGains
@@ -117,6 +119,10 @@ def _platoon_mpc(name, settings, system, named, source, field_name):
     """The joint MPC of every CAV of a platoon or ring (:mod:`lcc_synth.mpc.platoon`); its
     fallback rows from ``fallback = "NAME"`` or ``fallback_gains_file`` (platoon gain form),
     else each CAV's HDV law."""
+    if np.any(np.asarray(settings.prediction.delay, dtype=float) != 0.0):
+        raise ConfigError(f"{field_name}.prediction.delay", "HDV delays in the prediction are "
+                          "implemented for the single-CAV MPC only; give 0 for a platoon or "
+                          "ring")  # fmt: skip
     model = system.linear_model(warn=False)
     fallback, fb_source = None, "hdv_law"
     if named is not None:

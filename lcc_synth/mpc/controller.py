@@ -10,9 +10,10 @@ At every sample (``sample_time``, default 0.1 s; the simulator holds the command
    ``s_ref - s*`` from the context (heterogeneous strings with ``spacing_reference =
    "own_equilibrium"``; zero otherwise).
 2. **State.** The error state of the model (``s_i - s_eq``, ``v_i - v_eq`` for the CAV and the
-   ``n_model`` HDVs behind, the HDVs ahead). FD-LCC's ``-p_0`` is the CAV's position relative to
-   a reference point moving at ``v_eq``; when its weight is 0 it is re-zeroed at every sample
-   (the QP then only uses it to predict the spacing to a vehicle ahead, if there is one).
+   ``n_model`` HDVs behind, the HDVs ahead; ``prediction.delay``: also the past samples the
+   delayed HDVs react to, :mod:`lcc_synth.mpc.delay`). FD-LCC's ``-p_0`` is the CAV's position
+   relative to a reference point moving at ``v_eq``; when its weight is 0 it is re-zeroed at
+   every sample (the QP then only uses it to predict the spacing to a vehicle ahead, if any).
 3. **Head prediction.** ``d_k = v_ref - v_eq`` held over the horizon (``head = "constant"``), or
    the reference vehicle's measured acceleration held for ``head_accel_hold`` seconds
    (``head = "accel"``; velocity never below 0).
@@ -56,6 +57,7 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains, cav_feedback
 from lcc_synth.models.hdv import free_speed
 from lcc_synth.mpc.comfort import jerk_bound, solve_prioritised
+from lcc_synth.mpc.delay import StateHistory, pad
 from lcc_synth.mpc.formulation import (
     Family,
     Formulation,
@@ -64,7 +66,7 @@ from lcc_synth.mpc.formulation import (
     linearize,
     state_weights,
 )
-from lcc_synth.mpc.report import new_step_record, step_statistics
+from lcc_synth.mpc.report import new_step_record, predicted_states, step_statistics
 from lcc_synth.mpc.settings import MPCSettings, paper_fallback_gains
 from lcc_synth.mpc.solver import POLISH_NAMES, OSQPSolver
 
@@ -96,6 +98,7 @@ class _Member:
     plan_age: int = 0
     warm: tuple | None = None
     past: np.ndarray = field(default_factory=lambda: np.zeros(1))  # commands, newest first
+    delay: StateHistory | None = None  # prediction.delay: the observed states the HDVs see
     hist: dict[str, list] = field(default_factory=dict)
 
 
@@ -150,12 +153,14 @@ class MPCController:
         try:
             self._lin0 = linearize(self.kind, self.m, n_model, system.hdv, v0, settings)
         except ConfigError as err:
-            raise ConfigError(f"weights ({err.field})", err.message) from None
+            where = err.field if err.field == "prediction.delay" else f"weights ({err.field})"
+            raise ConfigError(where, err.message) from None
         model = self._lin0.model
         self._families = self._make_families(model)
-        check_horizon(settings.horizon, model.nx, len(self._families))
+        nz = self._lin0.Ad.shape[0]  # model.nx, or more with delay states
+        check_horizon(settings.horizon, nz, len(self._families))
         self.formulation = Formulation(
-            self.kind, model.nx, settings, state_weights(model, settings), self._families
+            self.kind, nz, settings, pad(state_weights(model, settings), nz), self._families
         )
         self._shift_z, self._shift_y = self.formulation.shift_indices()
         self.fallback = fallback if fallback is not None else paper_fallback_gains(
@@ -241,8 +246,7 @@ class MPCController:
         self._members = []
         for b in range(ctx.batch):
             lin, qp, K, kh = self._linearization(float(ctx.v_star[b]))
-            nx = lin.model.nx
-            p = self.formulation.param(np.zeros(nx), np.zeros(N), 0.0)
+            p = self.formulation.param(np.zeros(lin.Ad.shape[0]), np.zeros(N), 0.0)
             q, lo, hi = self.formulation.bounds(
                 qp, p, self._a_min, self._a_max, np.full((F, N), -np.inf)
             )
@@ -252,6 +256,7 @@ class MPCController:
             mem = _Member(solver, lin, qp, K, kh, np.zeros(W), s_off, v_eq=float(ctx.v_star[b]))
             mem.hist = {k: [] for k in _HIST_KEYS}
             mem.past = np.zeros(max(1, self.formulation.W))
+            mem.delay = None if lin.delay is None else StateHistory(lin.delay)
             self._members.append(mem)
 
     def __call__(self, obs: Observation) -> np.ndarray:
@@ -328,6 +333,8 @@ class MPCController:
         else:
             d_model = d
         s0 = float(obs.spacing[b, cav])
+        if mem.delay is not None:
+            x = mem.delay.push(x, d0, s_eq, v_eq)
         return x, xi, d, d_model, s_eq, s0
 
     def _family_bounds(self, mem: _Member, x0, d, s_eq, s0) -> np.ndarray:
@@ -441,7 +448,7 @@ class MPCController:
             st["fallback_shifted"] += 1
             code = 1
         else:
-            xs = np.array(x0, dtype=float)
+            xs = np.array(x0[: mem.fb_K.size], dtype=float)  # without delay states
             if self.kind == "fd_lcc":
                 xs[0] = xi
             cmd = float(mem.fb_K @ xs + mem.fb_kh * (d_model[0] if d_model.size else 0.0))
@@ -489,7 +496,7 @@ class MPCController:
     def _record_fail(self, mem: _Member, cmd: float) -> None:
         if not self.record:
             return
-        nx = mem.lin.model.nx
+        nx = mem.lin.Ad.shape[0]
         N = self.settings.horizon
         self._record(mem, cmd, math.nan, 3, None, 0.0, np.full(nx, np.nan), np.full(N, np.nan),
                      None)
@@ -515,20 +522,14 @@ class MPCController:
         for key in ("u", "u_model", "status", "osqp_time", "iterations", "slack", "v_eq", "v_lin"):
             out[key] = np.array([m.hist[key][:S] for m in self._members])
         out["step_time"] = np.array(self._st["step_time"][: S * B]).reshape(S, B).T
+        nx = self._lin0.model.nx  # the delay states are left out
         for key in ("x0", "d", "plan"):
             out[key] = np.array([np.array(m.hist[key][:S]) for m in self._members])
-        nx = out["x0"].shape[-1]
-        X = np.full((B, S, N + 1, nx), np.nan)
-        for b, mem in enumerate(self._members):
-            for k in range(S):
-                U = mem.hist["plan"][k]
-                if np.all(np.isfinite(U)):
-                    X[b, k] = mem.hist["lin"][k].predict(mem.hist["x0"][k], mem.hist["d"][k], U)
-        out["predicted_states"] = X
+        out["x0"] = out["x0"][..., :nx]
+        out["predicted_states"] = X = predicted_states([m.hist for m in self._members], S, N, nx)
         v_eq = out["v_eq"][:, :, None, None]
-        s_eq = np.asarray(
-            self.system.hdv.equilibrium_spacing(np.clip(out["v_eq"], 1.0, self._v_hi - 1.0))
-        )[:, :, None, None]
+        v_cl = np.clip(out["v_eq"], 1.0, self._v_hi - 1.0)
+        s_eq = np.asarray(self.system.hdv.equilibrium_spacing(v_cl))[:, :, None, None]
         out["predicted_velocity"] = X[..., 1::2] + v_eq
         cols = np.arange(-self.m, self.n_model + 1) + self.m + 1
         offs = np.array([mem.s_off[cols] for mem in self._members])[:, None, None, :]

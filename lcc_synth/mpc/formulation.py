@@ -5,7 +5,9 @@ the controller's sample time ``Ts``::
 
     x_{k+1} = Ad x_k + Bd u_k + Hd d_k,          k = 0 .. N-1
 
-with ``d_k`` the predicted head-vehicle velocity error (held constant by default). The QP is
+with ``d_k`` the predicted head-vehicle velocity error (held constant by default); with
+``prediction.delay`` ``x`` is the state augmented with the HDVs' delay states of
+:mod:`lcc_synth.mpc.delay` (unweighted, unconstrained). The QP is
 condensed: the decision vector is ``z = [u_0 .. u_{N-1}, e_1 .. e_{N*F}]`` (model inputs and one
 spacing slack per constrained family and step), and
 
@@ -69,6 +71,7 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains, cav_feedback
 from lcc_synth.models.hdv import CarFollowingModel
 from lcc_synth.models.linear import LCCModel, discretize, model_from_hdv
+from lcc_synth.mpc.delay import DelayModel, lcc_delay_model, pad
 from lcc_synth.mpc.settings import MPCSettings
 
 __all__ = [
@@ -110,6 +113,7 @@ class Linearization:
     K_law: np.ndarray
     k_h: float
     x_dir: np.ndarray
+    delay: DelayModel | None = None  # prediction.delay: the matrices are the augmented ones
 
     def predict(self, x0: np.ndarray, d: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Predicted states ``(N+1, nx)`` for inputs ``u`` and head errors ``d`` (both ``(N,)``)."""
@@ -166,7 +170,8 @@ def terminal_cost(
     ConfigError
         When the Riccati equation has no stabilising solution.
     """
-    keep = np.arange(model.nx)
+    nz = Ad.shape[0]  # model.nx, or more with delay states
+    keep = np.arange(nz)
     if model.kind == "fd_lcc" and q[0] == 0.0:
         keep = keep[1:]
     A_r = Ad[np.ix_(keep, keep)]
@@ -187,7 +192,7 @@ def terminal_cost(
         ) from None
     if not np.all(np.isfinite(P_r)):
         raise ConfigError("weights", "the terminal Riccati solution is not finite")
-    P = np.zeros((model.nx, model.nx))
+    P = np.zeros((nz, nz))
     P[np.ix_(keep, keep)] = 0.5 * (P_r + P_r.T)
     return P
 
@@ -229,7 +234,8 @@ def linearize(
 
 def _linearize(kind, m, n, hdv, v_lin, settings) -> Linearization:
     model = model_from_hdv(kind, m, n, hdv, v_lin, warn=False)
-    Ad, BH = discretize(model.A, np.hstack([model.B, model.H]), settings.sample_time)
+    Ts = settings.sample_time
+    Ad, BH = discretize(model.A, np.hstack([model.B, model.H]), Ts)
     Bd, Hd = BH[:, 0].copy(), BH[:, 1].copy()
     q = state_weights(model, settings)
     if kind == "cf_lcc":
@@ -238,10 +244,12 @@ def _linearize(kind, m, n, hdv, v_lin, settings) -> Linearization:
     else:
         K_law, k_h = np.zeros(model.nx), 0.0
     total = settings.weights.input_on == "total"
+    x_dir, dm = steady_direction(model), lcc_delay_model(model, settings.prediction.delay, Ts)
+    if dm is not None:  # delay states (lcc_synth.mpc.delay)
+        Ad, Bd, Hd = dm.Ad, dm.Bd[:, 0], dm.Hd[:, 0]
+        q, K_law, x_dir = pad(q, dm.nz), pad(K_law, dm.nz), pad(x_dir, dm.nz)
     P = terminal_cost(model, Ad, Bd, q, settings.weights.input, K_law if total else None)
-    return Linearization(
-        float(v_lin), model, Ad, Bd, Hd, P, K_law, float(k_h), steady_direction(model)
-    )
+    return Linearization(float(v_lin), model, Ad, Bd, Hd, P, K_law, float(k_h), x_dir, dm)
 
 
 def steady_direction(model: LCCModel) -> np.ndarray:

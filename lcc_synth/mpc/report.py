@@ -11,7 +11,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["bound_margin", "safety_summary", "new_step_record", "step_statistics"]
+__all__ = [
+    "bound_margin", "safety_summary", "new_step_record", "predicted_states", "step_statistics"
+]
 
 
 def bound_margin(result, s_min: float = 5.0, t_gap: float = 0.8) -> np.ndarray:
@@ -130,3 +132,16 @@ def step_statistics(st: dict[str, Any]) -> dict[str, Any]:
         "violation_steps": st["violation_steps"],
         "max_violation_m": st["max_violation"],
     }
+
+
+def predicted_states(hists: list[dict], S: int, N: int, nx: int) -> np.ndarray:
+    """The predicted states ``(B, S, N+1, nx)`` of every recorded plan of the members'
+    histories (``lin.predict`` from the recorded ``x0``, ``d``, ``plan``); NaN where no plan
+    was solved. Only the first ``nx`` states are kept (not the delay states)."""
+    X = np.full((len(hists), S, N + 1, nx), np.nan)
+    for b, h in enumerate(hists):
+        for k in range(S):
+            U = h["plan"][k]
+            if np.all(np.isfinite(U)):
+                X[b, k] = h["lin"][k].predict(h["x0"][k], h["d"][k], U)[:, :nx]
+    return X

@@ -43,6 +43,8 @@ A problem file selects the MPC with a controller table (every key optional)::
     equilibrium_window = 5.0   # moving-average window (s)
     relinearize = false        # re-linearise the HDV model when v_eq drifts ...
     relinearize_threshold = 1.0     # ... by more than this (m/s)
+    delay = 0.0                # HDV reaction delay (s) in the prediction: one for every HDV
+                               #   or a list, one per modelled HDV front to tail (mpc.delay)
 
     [controllers.mpc.solver]   # OSQP
     eps_abs = 1.0e-6
@@ -128,6 +130,7 @@ class Prediction(Record):
     equilibrium_window: float = 5.0
     relinearize: bool = False
     relinearize_threshold: float = 1.0
+    delay: float | tuple[float, ...] = 0.0
 
     def equilibrium_mode(self, kind: str) -> str:
         """The estimator used for a model of ``kind``."""
@@ -183,6 +186,8 @@ class MPCSettings(Record):
         """JSON-serialisable view."""
         out = asdict(self)
         out["constraints"]["behind"] = list(self.constraints.behind)
+        if isinstance(self.prediction.delay, tuple):
+            out["prediction"]["delay"] = list(self.prediction.delay)
         return out
 
     def toml_table(self) -> dict[str, Any]:
@@ -263,6 +268,12 @@ def validate(s: MPCSettings, field_prefix: str = "") -> None:
     _pos(p.head_accel_hold, f"{pre}prediction.head_accel_hold")
     _pos(p.equilibrium_window, f"{pre}prediction.equilibrium_window", strict=True)
     _pos(p.relinearize_threshold, f"{pre}prediction.relinearize_threshold", strict=True)
+    for tau in p.delay if isinstance(p.delay, tuple) else (p.delay,):
+        _pos(tau, f"{pre}prediction.delay")
+        if tau > 5.0:
+            raise ConfigError(f"{pre}prediction.delay", f"must be <= 5 s, got {tau}")
+    if isinstance(p.delay, tuple) and not p.delay:
+        raise ConfigError(f"{pre}prediction.delay", "must be a number or a non-empty list")
     o = s.solver
     _pos(o.eps_abs, f"{pre}solver.eps_abs", strict=True)
     _pos(o.eps_rel, f"{pre}solver.eps_rel")
@@ -309,6 +320,12 @@ def settings_from_table(table: Mapping[str, Any], field_name: str) -> MPCSetting
                         f"{f}.constraints.behind", f"must be a list of integers, got {behind!r}"
                     )
                 values[k] = tuple(behind)
+            elif k == "delay":
+                tau = t.raw(raw, "delay")
+                if not isinstance(tau, list | int | float) or isinstance(tau, bool):
+                    raise ConfigError(f"{f}.prediction.delay",
+                                      f"must be a number (s) or a list of numbers, got {tau!r}")
+                values[k] = tuple(tau) if isinstance(tau, list) else tau
             else:
                 values[k] = t.get(raw, k, f"{f}.{sub}")
         return cls(**values)

@@ -152,7 +152,11 @@ MPC_PREDICTION = Table(
          unit="s"),
      Key("relinearize", "boolean", "Re-linearise the HDV model when v_eq drifts.", False),
      Key("relinearize_threshold", "number", "... by more than this.", 1.0, lo=0.0,
-         lo_open=True, unit="m/s")),
+         lo_open=True, unit="m/s"),
+     Key("delay", "any", "HDV reaction delay in the prediction model (delay states, "
+         "lcc_synth.mpc.delay): a number in [0, 5] for every HDV, or a list with one per "
+         "HDV the MPC models, front to tail (single-CAV MPC only); 0: none.", 0.0,
+         unit="s")),
     variant=_MPC,
 )
 MPC_SOLVER = Table(
