@@ -145,6 +145,8 @@ class DeePLCCController:
         self.reduced: ReducedQP = reduce(windows(data, Tini, N), q, r, w.lambda_g, w.lambda_y,
                                          W)  # fmt: skip
         self.qp: DeepQP = formulate(self.reduced, w.slack, w.slack_quadratic)
+        self.data = data
+        self.spacing_rows = W
         self.setup_time = time.perf_counter() - t0
         self.data_columns = data.T - Tini - N + 1
         self._shift_z, self._shift_y = self.qp.shift_indices(self.n_c)
