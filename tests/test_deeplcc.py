@@ -151,6 +151,17 @@ def test_reduced_qp_equals_the_full_qp_in_g(noise):
     # Clarabel at 1e-11 and daqp (exact active set): agreement limited by H's conditioning
     assert np.max(np.abs(u_red - u_full)) < 1e-6
     assert np.max(np.abs(sig_red - sig_full)) < 1e-6
+    # the controller's OSQP (eps_abs = eps_rel = 1e-6): the planned inputs are the first N
+    # rows of A x, so OSQP's termination bounds their residual by eps_abs + eps_rel ||Ax||_inf
+    # (about 2e-6 here); 10x that is the test's scale (measured: 2e-10 when the polish failed
+    # on the degenerate active set, 1e-15 when it succeeded)
+    from lcc_synth.mpc.settings import SolverSettings
+    from lcc_synth.mpc.solver import OSQPSolver
+
+    res = OSQPSolver(dqp.qp, dqp.q, lo, hi, SolverSettings()).solve(dqp.q, lo, hi)
+    u_osqp = c[:N] + dqp.Gamma[:N] @ res.z[: dqp.n_nu]
+    tol = 10 * (1e-6 + 1e-6 * np.abs(dqp.qp.A @ res.z).max())
+    assert res.ok and np.max(np.abs(u_osqp - u_red)) < tol
 
 
 @dataclass(frozen=True)
