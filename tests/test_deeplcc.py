@@ -164,6 +164,51 @@ def test_reduced_qp_equals_the_full_qp_in_g(noise):
     assert res.ok and np.max(np.abs(u_osqp - u_red)) < tol
 
 
+def test_first_move_converges_to_the_model_based_mpc_on_the_same_cost():
+    """Exact linear data: as lambda_g -> 0 DeeP-LCC's QP becomes the model-based finite-horizon
+    QP on the same cost (the fundamental lemma). Measured first-move distance 1.5e-2, 1.1e-3,
+    3.0e-4 at lambda_g = 1e-2, 1e-3, 1e-4 (lambda_y = 1e4; the regularisation's bias, O(lambda_g)
+    plus O(lambda_g / lambda_y) through sigma_y). 1e-6 is out of reach: below lambda_g ~ 1e-5
+    the Hessian in g, 2 (lambda_g I + B'B) with rank(B'B) < K, is singular to working
+    precision, which reduce() refuses by name."""
+    import cvxpy as cp
+
+    from lcc_synth.mpc.solver import solve_exact
+
+    rng = np.random.default_rng(5)
+    model = platoon(4, (1,))
+    data, _ = linear_data(model, 800, rng)
+    Tini, N = 10, 15
+    win = windows(data, Tini, N)
+    q, r = np.array([1.0, 1.0, 1.0, 1.0, 0.5]), np.array([0.1])
+    W = spacing_rows(N, data.p, [0], 0.8)
+    traj, x_t = linear_data(model, Tini, rng, x0=0.5 * rng.normal(size=model.nx))
+    Ad, Bd, _ = model.discretize(TS)
+    C = model.output_matrix(["v_1", "v_2", "v_3", "v_4", "s_1"])
+    u = cp.Variable(N)
+    x, cost = x_t, 0
+    for k in range(N):  # future head error 0
+        x = Ad @ x + Bd[:, 0] * u[k]
+        cost += cp.sum_squares(cp.multiply(np.sqrt(q), C @ x)) + r[0] * cp.square(u[k])
+    cp.Problem(cp.Minimize(cost)).solve(solver="CLARABEL", tol_gap_abs=1e-12,
+                                        tol_gap_rel=1e-12, tol_feas=1e-12)  # fmt: skip
+    u_mpc = np.asarray(u.value)
+    b = np.concatenate([traj.u.ravel(), traj.e, np.zeros(N)])
+    diff = {}
+    for lam_g in (1e-2, 1e-3, 1e-4):
+        red = reduce(win, q, r, lam_g, 1e4, W)
+        dqp = formulate(red, 100.0, 1.0)
+        c = red.Cb @ b + red.Cy @ traj.y.ravel()
+        lo, hi = dqp.bounds(c, -50.0, 50.0, np.full(N, -1e3))  # no active constraint
+        z = solve_exact(dqp.qp, dqp.q, lo, hi)
+        diff[lam_g] = abs(c[0] + dqp.Gamma[0] @ z[: dqp.n_nu] - u_mpc[0])
+    assert diff[1e-2] > diff[1e-3] > diff[1e-4]
+    assert diff[1e-4] < 1e-3 * abs(u_mpc[0]) and diff[1e-2] < 2e-2 * abs(u_mpc[0])
+    with pytest.raises(ConfigError) as err:
+        reduce(win, q, r, 1e-9, 1e4, W)
+    assert err.value.field == "weights.lambda_g"
+
+
 @dataclass(frozen=True)
 class _Ctx(ControlContext):
     """A hand-made context with several CAVs (``cavs``, as the multi-CAV simulator gives)."""

@@ -57,6 +57,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
+from lcc_synth.errors import ConfigError
+
 __all__ = ["DataSet", "hankel", "Windows", "windows", "predict", "ReducedQP", "reduce",
            "spacing_rows"]
 
@@ -221,7 +223,14 @@ def reduce(
     H = B.T @ B
     H[np.diag_indices(K)] += lambda_g
     H *= 2.0
-    Lc = sla.cholesky(H, lower=True, check_finite=False)
+    try:
+        Lc = sla.cholesky(H, lower=True, check_finite=False)
+    except np.linalg.LinAlgError:
+        raise ConfigError(
+            "weights.lambda_g",
+            f"{lambda_g:g} is too small for these data: 2 (lambda_g I + ...) is singular to "
+            "working precision (the Hessian of the QP in g); raise lambda_g",
+        ) from None
     A = np.vstack([win.Up, win.Ep, win.Ef])
     C = np.vstack([win.Uf, W_rows @ win.Yf])
     Fy = -2.0 * lambda_y * win.Yp.T
