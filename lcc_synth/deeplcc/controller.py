@@ -150,9 +150,9 @@ class DeePLCCController:
         self.setup_time = time.perf_counter() - t0
         self.data_columns = data.T - Tini - N + 1
         self._shift_z, self._shift_y = self.qp.shift_indices(self.n_c)
-        n_behind = self.nv - 1 - max(self.cavs)
         fb_kind = "fd_lcc" if kind == "fd_lcc" else "cf_lcc"
-        self.fallback = paper_fallback_gains(fb_kind, max(n_behind, 0))
+        # the paper's gain reaches two vehicles behind; columns past the tail are skipped
+        self.fallback = paper_fallback_gains(fb_kind, 2)
         self._fb = [(name[0], int(name.split("_")[1]), float(g))
                     for name, g in self.fallback.gains.items()]  # fmt: skip
         self._v_hi = free_speed(hdv)
