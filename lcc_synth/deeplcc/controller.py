@@ -429,6 +429,13 @@ class DeePLCCController:
         })  # fmt: skip
         return d
 
+    def as_dict(self) -> dict[str, Any]:
+        """What defines the controller (settings, string, data key), without run-time facts
+        such as the set-up time: two loads of one problem file give equal dicts."""
+        return {"type": "deep_lcc", "name": self.name, "kind": self.kind,
+                "cavs": list(self.cavs), "n_vehicles": self.nv, "data_key": self.data_key,
+                **self.settings.as_dict()}  # fmt: skip
+
     def toml_table(self) -> dict[str, Any]:
         """The ``[controllers.NAME]`` table that builds this controller."""
         return self.settings.toml_table()
