@@ -44,10 +44,13 @@ outputs are determined and ``Gamma`` has rank ``N n_c + min(n_x, N n_c)``, which
 be infinite off a subspace). Only ``A`` must have full row rank: the persistency-of-excitation
 check (:mod:`lcc_synth.deeplcc.data`) guarantees it.
 
-Numerical limits (measured): ``H`` has condition number about 1e7 for the default weights at
-T = 2000 (eigenvalues from ``2 lambda_g`` to ``2 lambda_y ||Y_p||^2``); the Cholesky
-factorisation then loses about 7 digits in ``L^-1``, and the reduced QP's solution matched
-the full QP in ``g`` (cvxpy + Clarabel) to 1e-7 relative on the test case.
+Numerical limits (measured): for the head-brake data (T = 2000, n = 10, default weights) ``H``
+has eigenvalues from ``2 lambda_g`` = 200 to 3.7e10 (condition number 1.8e8), so the
+Cholesky factor's solves lose up to about 8 of 16 digits; on the test case (T = 160) the
+reduced QP's plan matched the full QP in ``g`` (cvxpy + Clarabel at 1e-11) to 3e-11 (exact
+data) and 6e-11 (noisy data). With exact data and ``lambda_g`` below about 1e-5 ``H`` is
+singular to working precision (``B'B`` has rank below ``K``): :func:`reduce` refuses it by
+name (``weights.lambda_g``).
 """
 
 from __future__ import annotations
