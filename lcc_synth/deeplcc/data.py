@@ -37,6 +37,8 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
+import uuid
 from dataclasses import dataclass, fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -335,7 +337,9 @@ def load_or_collect(base, settings: DataSettings) -> tuple[DataSet, str, bool]:
     if settings.cache:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_suffix(".tmp.npz")
+            # a private temporary file, renamed atomically: concurrent runs (sweep workers)
+            # collecting the same data never read a half-written cache
+            tmp = path.with_name(f"{path.stem}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp.npz")
             np.savez(tmp, u=data.u, e=data.e, y=data.y, dt=data.dt, key=key,
                      version=FORMAT_VERSION)  # fmt: skip
             tmp.replace(path)
