@@ -248,6 +248,21 @@ def test_several_cavs_give_one_command_column_each():
     assert st["solves"] == 1 and st["fallbacks"] == 0
 
 
+def test_a_string_other_than_the_datas_or_a_ring_is_a_named_error():
+    ctrl, _ = _controller_on_linear_data(4, (1,))
+    with pytest.raises(ConfigError, match="CAVs at columns"):
+        ctrl.reset(_ctx(4, (2,)))
+
+    @dataclass(frozen=True)
+    class Ring(_Ctx):
+        ring: bool = True
+
+    s = OVM().equilibrium_spacing(15.0)
+    ring = Ring(0, 3, 1, TS, np.full(1, 15.0), np.full(1, s), -5.0, 2.0, OVM(), cavs=(1,))
+    with pytest.raises(ConfigError, match="ring"):
+        ctrl.reset(ring)
+
+
 def test_forced_failure_runs_the_shifted_plan_then_the_static_gain():
     ctrl, _ = _controller_on_linear_data(4, (1,))
     ctrl.reset(_ctx(4, (1,)))

@@ -173,6 +173,9 @@ class DeePLCCController:
 
     def reset(self, ctx: ControlContext) -> None:
         """Check the string, set up one OSQP workspace per batch member."""
+        if getattr(ctx, "ring", False):
+            raise ConfigError(f"controllers.{self.name}", "DeeP-LCC needs an open string with a "
+                              "head vehicle (its external input); the ring has none")  # fmt: skip
         cavs = tuple(int(c) for c in getattr(ctx, "cavs", (ctx.m + 1,)))
         if cavs != self.cavs or ctx.n_vehicles != self.nv:
             raise ConfigError(f"controllers.{self.name}", f"the data are of a string of {self.nv} "
