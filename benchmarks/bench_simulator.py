@@ -1,5 +1,6 @@
 """Simulator throughput (issue 3 targets: >= 5e6 vehicle-steps/s for a heterogeneous batch with
-static gains on 2 cores; one Table II run, 12 vehicles x 10,000 steps, well under 0.2 s).
+static gains on 2 cores; one Table II run, 12 vehicles x 10,000 steps, well under 0.2 s), and
+the platoon with two CAVs and the ring road of issue 11.
 
 Run: ``/work/venv/bin/python benchmarks/bench_simulator.py [--batch B] [--repeat R]``.
 The first call compiles (or loads from numba's cache) the kernels; it is timed separately.
@@ -82,6 +83,23 @@ def main() -> None:
         print(
             f"Python controller path, single Table II run, sample_time={ts}: {t * 1e3:.0f} ms "
             f"({t / per * 1e6:.1f} us per controller call incl. simulation)"
+        )
+
+    # several CAVs and the ring (issue 11): the shipped platoon and ring files
+    for fname, cname, batch in (("platoon_deeplcc_brake.toml", "lqr", 1),
+                                ("platoon_deeplcc_brake.toml", "lqr", args.batch),
+                                ("ring_stop_and_go.toml", "all_hdv", 1),
+                                ("ring_stop_and_go.toml", "av", 1)):  # fmt: skip
+        sp = load_spec(ROOT / "problems" / fname, seeds=batch)
+        scp, ctrl = sp.scenario, sp.controllers[cname]
+        draws = scp.draw()
+        simulate(scp, ctrl, draws)
+        t = best_of(lambda s=scp, c=ctrl, d=draws: simulate(s, c, d), args.repeat)
+        work = scp.batch * scp.n_vehicles * scp.steps
+        print(
+            f"{sp.name} [{cname}] ({len(scp.cav_columns)} CAV(s){', ring' if scp.ring else ''}), "
+            f"batch {scp.batch}, {scp.n_vehicles} vehicles x {scp.steps} steps: {t * 1e3:.1f} ms "
+            f"({work / t / 1e6:.1f} M vehicle-steps/s)"
         )
 
 

@@ -53,6 +53,7 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import MetricsConfig
 from lcc_synth.models.feedback import StaticGains
 from lcc_synth.models.hdv import IDM, OVM
+from lcc_synth.models.platoon import PlatoonGains, PlatoonModel
 from lcc_synth.models.records import Record, plain, system_tables, toml_text
 from lcc_synth.problem import Problem, System, system_from
 from lcc_synth.simulation.perturbations import Brake, BrakeProfile, Profile, Sine
@@ -116,7 +117,14 @@ def model(
 def controllability(model, tol: float | None = None):
     """Controllability of ``(A, B)`` (Sec. III, Theorems 1-3): a
     :class:`~lcc_synth.analysis.controllability.ControllabilityReport` (rank, verdict,
-    uncontrollable modes). :func:`lcc_synth.analysis.controllability.controllability_report`."""
+    uncontrollable modes). :func:`lcc_synth.analysis.controllability.controllability_report`;
+    a platoon or ring model (several CAVs; the ring on its invariant hyperplane, the conserved
+    total spacing named):
+    :func:`lcc_synth.analysis.platoon_controllability.platoon_controllability`."""
+    if isinstance(model, PlatoonModel):
+        from lcc_synth.analysis.platoon_controllability import platoon_controllability
+
+        return platoon_controllability(model, tol)
     from lcc_synth.analysis.controllability import controllability_report
 
     return controllability_report(model, tol)
@@ -125,7 +133,13 @@ def controllability(model, tol: float | None = None):
 def observability(model, outputs: Sequence[str] | None = None, tol: float | None = None):
     """Observability from the measured ``outputs`` (state names; default the paper's set, eq.
     19 / 21: the tail HDV's velocity ``v_n``, plus the CAV's ``s_0, v_0`` for LCC and CCC;
-    :func:`~lcc_synth.analysis.controllability.default_outputs`)."""
+    :func:`~lcc_synth.analysis.controllability.default_outputs`; a platoon or ring: every
+    CAV's own states plus the tail's velocity,
+    :func:`lcc_synth.analysis.platoon_controllability.platoon_observability`)."""
+    if isinstance(model, PlatoonModel):
+        from lcc_synth.analysis.platoon_controllability import platoon_observability
+
+        return platoon_observability(model, outputs, tol)
     from lcc_synth.analysis.controllability import default_outputs, observability_report
 
     return observability_report(model, outputs or default_outputs(model), tol)
@@ -154,7 +168,16 @@ def string_stability(model, gain: Mapping[str, float] | StaticGains, method: str
     (24)-(27)): a :class:`~lcc_synth.analysis.string_stability.StringStabilityReport`
     (``plant_stable``, ``string_stable``, ``gamma_peak`` and its frequency, ``verdict``).
     A mapping is read as ``"added"`` gains (:func:`gains`).
-    :func:`lcc_synth.analysis.string_stability.gains_string_stability`."""
+    :func:`lcc_synth.analysis.string_stability.gains_string_stability`. On an open platoon
+    (several CAVs) ``gain`` is a :class:`~lcc_synth.models.platoon.PlatoonGains` or its table
+    ``{"u_3": {"s_3": ..., "v_2": ...}, ...}`` (read as ``"added"``):
+    :func:`lcc_synth.analysis.platoon_string.platoon_string_stability`."""
+    if isinstance(model, PlatoonModel):
+        from lcc_synth.analysis.platoon_string import platoon_string_stability
+
+        if not isinstance(gain, PlatoonGains):
+            gain = PlatoonGains.from_table(dict(gain), model, "added")
+        return platoon_string_stability(model, gain, method=method)
     from lcc_synth.analysis.string_stability import gains_string_stability
 
     return gains_string_stability(model, gains(gain), method=method)
@@ -294,10 +317,11 @@ def scenario(system: System, perturbations: Sequence[Any] = (), **keys: Any) -> 
 def simulate(scenario: Scenario, controller):
     """Run the nonlinear mixed-traffic simulation: a
     :class:`~lcc_synth.simulation.results.SimResult` (trajectories ``(batch, T, vehicles)``).
-    :func:`lcc_synth.simulation.engine.simulate`."""
-    from lcc_synth.simulation.engine import simulate as _simulate
+    :func:`lcc_synth.simulation.engine.simulate`, or SUMO with ``backend = "sumo"``
+    (:func:`lcc_synth.simulation.backends.run_scenario`)."""
+    from lcc_synth.simulation.backends import run_scenario
 
-    return _simulate(scenario, controller)
+    return run_scenario(scenario, controller)
 
 
 def metrics(

@@ -20,7 +20,22 @@ finite differences (:func:`rms_jerk`) and as ISO 15622's "average over 1 s" (:fu
 (:func:`iso15622_jerk_limit`) outside emergency braking.
 
 Vehicle sets: ``"cav_and_behind"`` (the paper's "sum over i = 0..10": CAV and the HDVs behind),
-``"all"`` (head included), ``"hdvs"`` (every HDV), or explicit paper indices / ``"head"``.
+``"first_cav_and_behind"`` (the DeeP-LCC paper's: the first CAV of a mixed platoon and every
+vehicle behind it, CAVs included; for one CAV the same as ``"cav_and_behind"``), ``"all"``
+(head included), ``"hdvs"`` (every HDV), or explicit paper indices / ``"head"`` (a platoon or
+ring: positions ``1..N``). On a ring there is no head and every vehicle is behind every CAV
+(the road closes): ``"cav_and_behind"`` and ``"first_cav_and_behind"`` are every vehicle, as
+is ``"all"``.
+
+Several CAVs: the command, jerk and emergency-braking metrics cover every CAV — ``max|u|``
+over all of them, the RMS jerk of the worst CAV, the 1 s jerk's worst case, margin and time
+over the limit over every CAV (times summed over the CAVs), AEB samples summed.
+
+Fuel of the DeeP-LCC paper (Wang et al. 2023, the platoon brake test): the same Bowyer rate
+(:func:`bowyer_fuel_rate`) on accelerations first smoothed by a centred moving average of
+``accel_smoothing = 9`` recorded samples (:func:`smooth_acceleration`; the window shrinks at
+the ends of the run, as MATLAB's ``movmean``), over the window 0-40 s and the vehicle set
+``"first_cav_and_behind"``.
 """
 
 from __future__ import annotations
@@ -46,6 +61,7 @@ __all__ = [
     "window_mask",
     "check_window",
     "bowyer_fuel_rate",
+    "smooth_acceleration",
     "aave",
     "fuel",
     "min_spacing",
@@ -68,7 +84,7 @@ __all__ = [
     "aggregate",
 ]
 
-VEHICLE_SETS = ("cav_and_behind", "all", "hdvs")
+VEHICLE_SETS = ("cav_and_behind", "first_cav_and_behind", "all", "hdvs")
 
 #: Averaging window (s) of ISO 15622's jerk limit.
 JERK_WINDOW = 1.0
@@ -78,11 +94,13 @@ _ISO_JERK = ((5.0, 20.0), (5.0, 2.5))
 
 @dataclass(frozen=True, repr=False)
 class MetricsConfig(Record):
-    """Window and vehicle set of AAVE and fuel, and an optional baseline controller name."""
+    """Window and vehicle set of AAVE and fuel, an optional baseline controller name, and the
+    moving-average length (recorded samples, odd; 1: none) of the accelerations in the fuel."""
 
     window: tuple[float, float] = (20.0, 40.0)
     vehicles: str | tuple[int | str, ...] = "cav_and_behind"
     baseline: str | None = None
+    accel_smoothing: int = 1
 
     def __post_init__(self) -> None:
         t0, t1 = self.window
@@ -93,28 +111,47 @@ class MetricsConfig(Record):
                 "metrics.vehicles",
                 f"must be one of {list(VEHICLE_SETS)} or a list of indices, got {self.vehicles!r}",
             )
+        k = self.accel_smoothing
+        if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 1 or k % 2 == 0:
+            raise ConfigError(
+                "metrics.accel_smoothing", f"must be an odd integer >= 1 (1: none), got {k!r}"
+            )
 
     def toml_table(self) -> dict[str, Any]:
         """The ``[metrics]`` table (what :func:`metrics_from` reads)."""
         vehicles = self.vehicles if isinstance(self.vehicles, str) else list(self.vehicles)
-        return {"window": [float(t) for t in self.window], "vehicles": vehicles,
-                "baseline": self.baseline}  # fmt: skip
+        out = {"window": [float(t) for t in self.window], "vehicles": vehicles,
+               "baseline": self.baseline}  # fmt: skip
+        if self.accel_smoothing != 1:
+            out["accel_smoothing"] = int(self.accel_smoothing)
+        return out
+
+
+def _layout(result) -> tuple[int, bool] | None:
+    """``(N, ring)`` of a platoon or ring result (vehicles named by position), else None."""
+    sc = getattr(result, "scenario", None)
+    return None if sc is None else sc.layout
 
 
 def vehicle_columns(result, vehicles: str | Sequence[int | str] = "cav_and_behind") -> np.ndarray:
     """Array columns of a vehicle set (see the module docstring)."""
     nv, cav = result.n_vehicles, result.cav
+    ring = bool(getattr(result, "ring", False))
+    cavs = tuple(getattr(result, "cavs", None) or (cav,))
     if isinstance(vehicles, str):
-        if vehicles == "cav_and_behind":
-            return np.arange(cav, nv)
+        if vehicles in ("cav_and_behind", "first_cav_and_behind"):
+            return np.arange(nv) if ring else np.arange(cavs[0], nv)
         if vehicles == "all":
             return np.arange(nv)
         if vehicles == "hdvs":
-            return np.array([j for j in range(1, nv) if j != cav])
+            return np.array([j for j in range(0 if ring else 1, nv) if j not in cavs])
         if vehicles == "head":
             return np.array([0])
         raise ConfigError("metrics.vehicles", f"must be one of {list(VEHICLE_SETS)}")
-    cols = [vehicle_column(v, result.m, result.n, "metrics.vehicles") for v in vehicles]
+    cols = [
+        vehicle_column(v, result.m, result.n, "metrics.vehicles", _layout(result))
+        for v in vehicles
+    ]
     if not cols:
         raise ConfigError("metrics.vehicles", "must name at least one vehicle")
     return np.array(cols)
@@ -164,6 +201,22 @@ def bowyer_fuel_rate(v, a):
     return np.where(R > 0, f, 0.444)
 
 
+def smooth_acceleration(a: np.ndarray, length: int) -> np.ndarray:
+    """Centred moving average of ``length`` (odd) samples along axis 1 of ``a``
+    (``(batch, T, ...)``); near the ends the window shrinks to the samples that exist
+    (MATLAB's ``movmean``). ``length = 1`` returns ``a``."""
+    a = np.asarray(a, dtype=float)
+    if length <= 1:
+        return a
+    h = length // 2
+    T = a.shape[1]
+    c = np.cumsum(np.concatenate([np.zeros_like(a[:, :1]), a], axis=1), axis=1)
+    hi = np.minimum(np.arange(T) + h + 1, T)
+    lo = np.maximum(np.arange(T) - h, 0)
+    shape = (1, T) + (1,) * (a.ndim - 2)
+    return (c[:, hi] - c[:, lo]) / (hi - lo).reshape(shape)
+
+
 def _slice(result, arr, window, vehicles):
     mask = window_mask(result, window)
     cols = vehicle_columns(result, vehicles)
@@ -182,22 +235,32 @@ def aave(result, window=(20.0, 40.0), vehicles="cav_and_behind") -> np.ndarray:
     return np.where(result.collided.any(axis=1), np.nan, out)
 
 
-def fuel(result, window=(20.0, 40.0), vehicles="cav_and_behind") -> np.ndarray:
+def fuel(
+    result, window=(20.0, 40.0), vehicles="cav_and_behind", accel_smoothing: int = 1
+) -> np.ndarray:
     """Total fuel (mL) of the vehicle set over the window (Bowyer model, rectangle rule).
 
     ``window`` ``(t0, t1)`` (s) defaults to Table II's (20, 40); the flat API's ``lcc.fuel`` and
     ``lcc.metrics`` require it. NaN for a scenario with a collision (see the module docstring).
+    ``accel_smoothing``: the accelerations are first smoothed over the whole recorded run by
+    :func:`smooth_acceleration` (the DeeP-LCC paper: 9), then cut to the window.
     """
     v, mask, cols = _slice(result, result.velocity, window, vehicles)
-    a = result.acceleration[:, mask][:, :, cols]
+    acc = result.acceleration
+    if accel_smoothing > 1:
+        acc = smooth_acceleration(acc[:, :, cols], accel_smoothing)
+        cols = slice(None)
+    a = acc[:, mask][:, :, cols]
     out = bowyer_fuel_rate(v, a).sum(axis=(1, 2)) * result.dt
     return np.where(result.collided.any(axis=1), np.nan, out)
 
 
 def min_spacing(result) -> np.ndarray:
-    """Minimum spacing (m) of every vehicle over the run, ``(batch, nv)``; NaN for the head."""
+    """Minimum spacing (m) of every vehicle over the run, ``(batch, nv)``; NaN for the head
+    (on a ring column 0's is its gap to the last vehicle)."""
     out = np.full((result.batch, result.n_vehicles), np.nan)
-    out[:, 1:] = np.nanmin(result.spacing[:, :, 1:], axis=1)
+    j0 = 0 if getattr(result, "ring", False) else 1
+    out[:, j0:] = np.nanmin(result.spacing[:, :, j0:], axis=1)
     return out
 
 
@@ -208,13 +271,14 @@ def min_time_to_collision(result) -> np.ndarray:
     ``inf`` when it never does; NaN for the head.
     """
     v = result.velocity
-    closing = v[:, :, 1:] - v[:, :, :-1]
-    s = result.spacing[:, :, 1:]
+    j0 = 0 if getattr(result, "ring", False) else 1
+    closing = (v - np.roll(v, 1, axis=2))[:, :, j0:]  # column 0 of a ring: behind the last
+    s = result.spacing[:, :, j0:]
     with np.errstate(divide="ignore", invalid="ignore"):
         ttc = np.where(closing > 0, s / closing, np.inf)
     ttc = np.where(np.isnan(ttc), np.inf, ttc)
     out = np.full((result.batch, result.n_vehicles), np.nan)
-    out[:, 1:] = ttc.min(axis=1)
+    out[:, j0:] = ttc.min(axis=1)
     return out
 
 
@@ -224,15 +288,22 @@ def max_abs_velocity_error(result) -> np.ndarray:
 
 
 def max_abs_command(result) -> np.ndarray:
-    """``max_t |u|`` (m/s^2) of the CAV's command (before limits and emergency braking)."""
-    return np.nanmax(np.abs(result.u_cmd), axis=1)
+    """``max_t |u|`` (m/s^2) of the CAV's command (before limits and emergency braking); the
+    largest over every CAV when there are several."""
+    u = np.asarray(result.u_cmd)
+    return np.nanmax(np.abs(u).reshape(u.shape[0], -1), axis=1)
+
+
+def _cav_cols(result) -> list[int]:
+    return list(getattr(result, "cavs", None) or (result.cav,))
 
 
 def rms_jerk(result) -> np.ndarray:
-    """RMS of the CAV's jerk (m/s^3): finite differences of its applied acceleration."""
-    a = result.acceleration[:, :, result.cav]
+    """RMS of the CAV's jerk (m/s^3): finite differences of its applied acceleration (the
+    worst CAV's when there are several)."""
+    a = result.acceleration[:, :, _cav_cols(result)]
     jerk = np.diff(a, axis=1) / result.dt
-    return np.sqrt(np.nanmean(jerk**2, axis=1))
+    return np.max(np.sqrt(np.nanmean(jerk**2, axis=1)), axis=1)
 
 
 def iso15622_jerk_limit(v):
@@ -249,9 +320,11 @@ def jerk_1s(result) -> np.ndarray:
     ``da/dt`` over the window ``[t - w dt, t]`` of ``w = round(JERK_WINDOW / dt)`` samples
     (1 s at any ``dt`` dividing it), ``a`` the CAV's applied acceleration. NaN for the first
     second, after a collision, and where the window holds a sample of the CAV's emergency
-    braking (AEB at ``t - 1 s .. t``: during it and for 1 s after it).
+    braking (AEB at ``t - 1 s .. t``: during it and for 1 s after it). Several CAVs:
+    ``(batch, T, n_cav)``, each CAV with its own emergency braking.
     """
-    a = result.acceleration[:, :, result.cav]
+    cols = _cav_cols(result)
+    a = result.acceleration[:, :, cols] if len(cols) > 1 else result.acceleration[:, :, cols[0]]
     w = max(1, int(round(JERK_WINDOW / result.dt)))
     j = np.full(a.shape, np.nan)
     j[:, w:] = (a[:, w:] - a[:, :-w]) / (w * result.dt)
@@ -262,12 +335,17 @@ def jerk_1s(result) -> np.ndarray:
 
 def max_jerk_1s(result) -> np.ndarray:
     """``max_t |j1(t)|`` (m/s^3) of :func:`jerk_1s`; NaN when no sample is defined."""
-    return _nanmax(np.abs(jerk_1s(result)))
+    j = jerk_1s(result)
+    return _nanmax(np.abs(j).reshape(j.shape[0], -1))
 
 
 def _jerk_margin(result) -> np.ndarray:
-    """``(batch, T)`` ISO 15622 limit at the CAV's speed at ``t`` minus ``|j1(t)|``."""
-    return iso15622_jerk_limit(result.velocity[:, :, result.cav]) - np.abs(jerk_1s(result))
+    """``(batch, T)`` ISO 15622 limit at the CAV's speed at ``t`` minus ``|j1(t)|``
+    (``(batch, T * n_cav)`` with several CAVs)."""
+    cols = _cav_cols(result)
+    v = result.velocity[:, :, cols] if len(cols) > 1 else result.velocity[:, :, cols[0]]
+    out = iso15622_jerk_limit(v) - np.abs(jerk_1s(result))
+    return out.reshape(out.shape[0], -1)
 
 
 def jerk_limit_margin(result) -> np.ndarray:
@@ -289,8 +367,10 @@ def _nanmax(x: np.ndarray) -> np.ndarray:
 
 
 def aeb_activations(result) -> np.ndarray:
-    """Number of samples where the CAV's emergency braking overrode its command."""
-    return result.aeb_active.sum(axis=1)
+    """Number of samples where the CAV's emergency braking overrode its command (summed over
+    the CAVs when there are several)."""
+    a = np.asarray(result.aeb_active)
+    return a.reshape(a.shape[0], -1).sum(axis=1)
 
 
 def collisions(result) -> np.ndarray:
@@ -321,7 +401,7 @@ def per_scenario(result, config: MetricsConfig | None = None) -> dict[str, np.nd
 def _per_scenario(result, cfg: MetricsConfig) -> dict[str, np.ndarray]:
     return {
         "aave": aave(result, cfg.window, cfg.vehicles),
-        "fuel_ml": fuel(result, cfg.window, cfg.vehicles),
+        "fuel_ml": fuel(result, cfg.window, cfg.vehicles, cfg.accel_smoothing),
         "min_spacing": min_spacing(result),
         "min_ttc": min_time_to_collision(result),
         "max_abs_velocity_error": max_abs_velocity_error(result),
@@ -354,7 +434,7 @@ def aggregate(per: dict[str, np.ndarray]) -> dict[str, Any]:
             "fuel_ml_std": _stat(f, np.nanstd),
             "fuel_ml_all": f.tolist(),
             "scenarios_with_collision": int((per["collisions"] > 0).sum()),
-            "min_spacing": float(np.nanmin(ms[:, 1:])),
+            "min_spacing": float(np.nanmin(ms)),  # the head's is NaN
             "collisions": int(per["collisions"].sum()),
             "aeb_activations": int(per["aeb_activations"].sum()),
             "max_abs_command": float(np.nanmax(per["max_abs_command"])),
@@ -362,11 +442,11 @@ def aggregate(per: dict[str, np.ndarray]) -> dict[str, Any]:
             "max_jerk_1s_cav": _stat(per["max_jerk_1s_cav"], np.nanmax),
             "jerk_1s_margin_cav": _stat(per["jerk_1s_margin_cav"], np.nanmin),
             "jerk_1s_over_limit_s": float(per["jerk_1s_over_limit_s"].sum()),
-            "min_ttc": float(np.nanmin(ttc[:, 1:])),
+            "min_ttc": float(np.nanmin(ttc)),
             "per_vehicle": {
                 "max_abs_velocity_error": np.nanmax(mv, axis=0).tolist(),
-                "min_spacing": [float("nan")] + np.nanmin(ms[:, 1:], axis=0).tolist(),
-                "min_ttc": [float("nan")] + np.nanmin(ttc[:, 1:], axis=0).tolist(),
+                "min_spacing": np.nanmin(ms, axis=0).tolist(),  # NaN for the head
+                "min_ttc": np.nanmin(ttc, axis=0).tolist(),
             },
             "batch": int(a.shape[0]),
         }
@@ -401,9 +481,11 @@ def metrics_from(
         t_end = scenario.t_start + scenario.steps * scenario.dt
         check_window(window, scenario.t_start, t_end, scenario.dt, f"{f}.window")
     vehicles = table.raw(mt, "vehicles")
+    P = getattr(system, "platoon", None)
+    where = None if P is None else (P.size, bool(P.ring))
     if isinstance(vehicles, list):
         for v in vehicles:
-            vehicle_column(v, system.m, system.n, f"{f}.vehicles")
+            vehicle_column(v, system.m, system.n, f"{f}.vehicles", where)
         vehicles = tuple(vehicles)
     elif vehicles not in VEHICLE_SETS:
         raise ConfigError(
@@ -412,7 +494,7 @@ def metrics_from(
     baseline = table.get(mt, "baseline", f)
     if baseline is not None and controllers and baseline not in controllers:
         raise ConfigError(f"{f}.baseline", f"must name a controller, one of {list(controllers)}")
-    return MetricsConfig(window, vehicles, baseline)
+    return MetricsConfig(window, vehicles, baseline, table.get(mt, "accel_smoothing", f))
 
 
 def evaluate(

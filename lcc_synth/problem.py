@@ -181,7 +181,7 @@ def warn_large_gains(gains: Mapping[str, Any], field: str, limit: float = GAIN_L
 class System:
     """The ``[hdv]`` + ``[system]`` tables: nonlinear HDV model, layout and equilibrium.
 
-    For ``kind = "platoon"`` / ``"ring"`` the layout is :attr:`platoon` (``size`` vehicles,
+    For ``kind = "platoon"`` / ``"ring"`` the layout is ``platoon`` (``size`` vehicles,
     CAVs at ``cavs``, per-vehicle HDV models); ``m`` and ``n`` are then the vehicles ahead of
     and behind the first CAV (``m = size``, ``n = 0`` without a CAV).
     """
@@ -197,6 +197,13 @@ class System:
     def s_star(self) -> float:
         """Equilibrium spacing of the HDV model at ``v_star``."""
         return float(self.hdv.equilibrium_spacing(self.v_star))
+
+    @property
+    def columns(self) -> int:
+        """Vehicles the simulator runs: ``m + n + 2`` (the head included), ``size`` on a ring."""
+        if self.platoon is not None and self.platoon.ring:
+            return self.platoon.size
+        return self.m + self.n + 2
 
     def linear_model(self, warn: bool = True) -> LCCModel | PlatoonModel:
         """The linearised model of this system (homogeneous for the paper's kinds; each

@@ -149,3 +149,40 @@ def test_added_semantics_with_zero_gain_is_the_all_hdv_platoon():
         assert np.array_equal(back.K, np.eye(3, 16))
     with pytest.raises(ConfigError, match="u_4"):
         PlatoonGains.from_table({"u_4": {"s_1": 1.0}}, M)
+
+
+def _ring_roots(c, N: int) -> np.ndarray:
+    """Every eigenvalue of a homogeneous all-HDV ring, independently of the state space: the
+    travelling-wave modes x_i ~ z^i of eq. (8) give, for each k, the quadratic
+    lambda^2 + a2 lambda + a1 = (a3 lambda + a1) w_k with w_k = exp(2 pi i k / N)."""
+    roots = []
+    for k in range(N):
+        w = np.exp(2j * np.pi * k / N)
+        roots.extend(np.roots([1.0, c.alpha2 - c.alpha3 * w, c.alpha1 * (1 - w)]))
+    return np.array(roots)
+
+
+@pytest.mark.parametrize(
+    ("hdv", "N", "circumference"),
+    [
+        (OVM(), 20, None),  # the synthesis files' ring at v* = 15
+        # Sugiyama: 22 IDM cars (v0 30, T 1, s0 2, a 1, b 1.5, delta 4) of length 5 m on 230 m:
+        # in gap coordinates, a ring of 230 - 22 * 5 = 120 m of point vehicles
+        (IDM(v0=30.0, T=1.0, s0=2.0, a=1.0, b=1.5, delta=4.0), 22, 230.0 - 22 * 5.0),
+    ],
+)
+def test_all_hdv_ring_is_string_unstable_and_its_wave_grows(hdv, N, circumference):
+    """The known condition (the paper's HDV string stability, a2^2 - a3^2 - 2 a1 >= 0) fails,
+    and the ring's state space has a growing mode: the same eigenvalues as the travelling-wave
+    polynomial, apart from the conserved mode at 0."""
+    v_star = None if circumference else 15.0
+    P = Platoon((hdv,) * N, (), v_star, ring=True, circumference=circumference)
+    M = platoon_model(P)
+    c = M.coefficients[0]
+    assert c.alpha2**2 - c.alpha3**2 - 2 * c.alpha1 < 0
+    ev = np.linalg.eigvals(M.A)
+    ref = _ring_roots(c, N)
+    assert np.max(ev.real) > 1e-3 and np.max(ev.real) == pytest.approx(np.max(ref.real), rel=1e-8)
+    # every eigenvalue is a root of the wave polynomial (two roots per k, 2N states)
+    d = np.abs(ev[:, None] - ref[None, :]).min(axis=1)
+    assert d.max() < 1e-8 * max(1.0, np.abs(ref).max())

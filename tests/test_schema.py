@@ -325,6 +325,11 @@ def _load_coverage_corpus(tmp: Path) -> None:
     assert system_from({"system": platoon}).platoon.cavs == (2,)
     ring = {"kind": "ring", "size": 4, "circumference": 80.0}
     assert system_from({"system": ring}).platoon.length == 80.0
+    robust = {"samples": 3, "seed": 1, "objective": "worst", "alpha": [0.5, 0.7],
+              "beta": [0.8, 1.0], "s_go": [33.0, 37.0]}  # fmt: skip
+    syn = {"name": "cov", "system": {"kind": "platoon", "size": 4, "cavs": [2]},
+           "synthesis": {"patterns": {"u_2": [1, 3]}, "robust": robust}}  # fmt: skip
+    assert spec_from_problem(Problem(tmp / "p.toml", syn)).patterns == {2: (1, 2, 3)}
 
 
 def test_every_declared_key_is_read_by_a_loader(tmp_path):
@@ -430,7 +435,7 @@ def test_choices_are_the_code_constants():
     from lcc_synth.models.platoon import PLATOON_KINDS
 
     assert declared("system").key("kind").choices == (*KINDS, *PLATOON_KINDS)
-    assert declared("controllers.NAME:static").key("kind").choices == KINDS
+    assert declared("controllers.NAME:static").key("kind").choices == (*KINDS, *PLATOON_KINDS)
     assert set(declared("controllers.NAME").key("type").choices) == set(CONTROLLER_TYPES)
     assert set(declared("controllers.NAME:suite").key("type").choices) == set(SUITE_TYPES)
     for tid in ("controllers.NAME:static", "synthesis", "synthesis.baseline", "cases.NAME",
@@ -465,7 +470,7 @@ def _loader(tid: str):
     from lcc_synth.experiments.sweep import load_sweep
     from lcc_synth.metrics import metrics_from
     from lcc_synth.mpc.settings import settings_from_table
-    from lcc_synth.simulation.scenario import scenario_from
+    from lcc_synth.simulation.scenario_file import scenario_from
     from lcc_synth.synthesis.config import spec_from_problem
 
     if tid in ("scenario", "scenario.delay", "scenario.v2v", "system"):

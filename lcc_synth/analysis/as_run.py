@@ -24,7 +24,7 @@ time. The simulator runs more than that (:class:`~lcc_synth.controllers.static.L
 
 :func:`as_run_loop` builds that loop exactly, as a linear discrete-time system on
 ``xi = [x, w, y_f, delay line]`` driven by the head velocity ``v_h`` at the samples: the plant
-is discretised exactly with ZOH on the command at ``T`` (:func:`lcc_synth.models.linear.
+is discretised exactly with ZOH on the command at ``T`` (:func:`lcc_synth.models.platoon.
 discretize`), the head velocity enters it with a first-order hold (linear between samples;
 ``x = zeta + Lam v_h`` makes that causal, with a feed-through ``d = c Lam`` to the tail), and
 a latency of ``d T`` is ``d`` copies of the received vector (a shift register). A latency

@@ -15,6 +15,7 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.linear import LCCModel
+from lcc_synth.models.platoon import PlatoonGains, PlatoonModel
 from lcc_synth.models.records import Record
 
 __all__ = ["AnalysisOptions", "analysis_options_from", "GainCase", "cases_from"]
@@ -71,21 +72,27 @@ class GainCase(Record):
     """One ``[cases.NAME]`` table: a named static gain (eq. 23) to analyse."""
 
     name: str
-    gains: object  # StaticGains
+    gains: object  # StaticGains, or PlatoonGains on a platoon / ring
     label: str
+    table: dict | None = None  # platoon / ring: the per-CAV gains table as read
 
     def toml_table(self) -> dict:
         """The ``[cases.NAME]`` table (what :func:`cases_from` reads)."""
-        return {"semantics": self.gains.semantics, "gains": dict(self.gains.gains),
-                "label": self.label}  # fmt: skip
+        gains = dict(self.gains.gains) if self.table is None else self.table
+        return {"semantics": self.gains.semantics, "gains": gains, "label": self.label}
 
 
-def cases_from(data: Mapping, model: LCCModel, source: str | None = None) -> dict[str, GainCase]:
+def cases_from(
+    data: Mapping, model: LCCModel | PlatoonModel, source: str | None = None
+) -> dict[str, GainCase]:
     """Parse ``[cases.NAME]`` tables into :class:`GainCase` (in file order).
 
     Each table: ``semantics = "added" | "replace"`` (default ``"added"``), ``gains = { s_-2 =
     1.0, v_-2 = -1.0, ... }`` (state name -> gain, missing states 0) and an optional ``label``.
-    Errors name ``cases.NAME.<field>`` and the file.
+    On a platoon or ring (:class:`~lcc_synth.models.platoon.PlatoonModel`) ``gains`` holds one
+    table per CAV input, ``[cases.NAME.gains.u_3]`` with ``s_i`` / ``v_i`` gains
+    (:meth:`~lcc_synth.models.platoon.PlatoonGains.from_table`). Errors name
+    ``cases.NAME.<field>`` and the file.
     """
     from lcc_synth.models.feedback import StaticGains
     from lcc_synth.problem import warn_large_gains
@@ -104,6 +111,13 @@ def cases_from(data: Mapping, model: LCCModel, source: str | None = None) -> dic
             raw = C.get(table, "gains", field)
             warn_large_gains(raw, f"{field}.gains")
             label = C.get(table, "label", field, default=name)
+            if isinstance(model, PlatoonModel):
+                for u, row in raw.items():
+                    if isinstance(row, dict):
+                        warn_large_gains(row, f"{field}.gains.{u}")
+                pg = PlatoonGains.from_table(raw, model, semantics, field=f"{field}.gains")
+                out[name] = GainCase(name, pg, label, pg.as_table(model))
+                continue
             try:
                 gains = StaticGains(raw, semantics)
                 gains.check(model)

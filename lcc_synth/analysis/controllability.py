@@ -16,7 +16,7 @@ subspace when both project onto it with residual ``||(I - Q Q^T) e|| <= membersh
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -38,6 +38,7 @@ __all__ = [
     "controllability_report",
     "observability_report",
     "default_outputs",
+    "classify_vehicles",
 ]
 
 
@@ -210,17 +211,33 @@ def _finite_or_none(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-def _classify(
-    model: LCCModel, basis: np.ndarray, membership_tol: float
+def classify_vehicles(
+    blocks: Mapping[int, slice],
+    basis: np.ndarray,
+    membership_tol: float = MEMBERSHIP_TOL,
+    directions: np.ndarray | None = None,
 ) -> tuple[list[int], list[int], list[int]]:
-    nx = model.nx
-    eye = np.eye(nx)
+    """``(inside, outside, partial)``: which vehicles' states lie in the subspace ``basis``.
+
+    Parameters
+    ----------
+    blocks : mapping of int to slice
+        Each vehicle's state indices.
+    basis : (nx, rank) array
+        Orthonormal basis of the subspace.
+    membership_tol : float
+        Projection tolerance (see the module docstring).
+    directions : (nx, nx) array, optional
+        Column ``i`` is the direction tested for state ``i`` (default the coordinate direction
+        ``e_i``; on a ring: its projection onto the invariant hyperplane).
+    """
+    nx = basis.shape[0]
+    eye = np.eye(nx) if directions is None else directions
     coords = basis.T @ eye  # (rank, nx): projection coefficients of every coordinate direction
     inside_res = np.linalg.norm(eye - basis @ coords, axis=0)  # residual of each e_i
     along = np.linalg.norm(coords, axis=0)  # length of each e_i's projection
     inside, outside, partial = [], [], []
-    for vehicle in model.vehicles:
-        b = model.block(vehicle)
+    for vehicle, b in blocks.items():
         if np.all(inside_res[b] <= membership_tol):
             inside.append(vehicle)
         elif np.all(along[b] <= membership_tol):
@@ -262,7 +279,8 @@ def controllability_report(
 def _subspace_fields(model: LCCModel, dec: Staircase, membership_tol: float) -> dict:
     """The fields shared by the controllability and observability reports."""
     basis = dec.T[:, : dec.n_c]
-    inside, outside, partial = _classify(model, basis, membership_tol)
+    blocks = {vehicle: model.block(vehicle) for vehicle in model.vehicles}
+    inside, outside, partial = classify_vehicles(blocks, basis, membership_tol)
     return dict(
         kind=model.kind,
         m=model.m,

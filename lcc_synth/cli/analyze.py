@@ -4,7 +4,8 @@ For the problem's linear system: the linear coefficients and the controllability
 (13), the controllable and observable subspaces (which vehicles they contain); for every
 ``[cases.NAME]`` gain: closed-loop plant stability, the head-to-tail string-stability verdict
 and the peak ``|Gamma(jw)|`` with its frequency. ``--png`` draws ``|Gamma(jw)|`` of every case
-(Fig. 9).
+(Fig. 9). ``kind = "platoon" | "ring"`` (several CAVs, the ring on its invariant hyperplane,
+gains per CAV in ``[cases.NAME.gains.u_3]``): :mod:`lcc_synth.cli.analyze_platoon`.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import argparse
 import json
 import math
 import sys
+from functools import partial
 
 from lcc_synth.cli.arguments import add_problem_arguments, add_recording
 
@@ -38,7 +40,7 @@ def analyze(problem_path: str) -> tuple[dict, dict]:
         observability_report,
     )
     from lcc_synth.analysis.string_stability import string_stability
-    from lcc_synth.analysis.transfer import closed_loop_eigenvalues
+    from lcc_synth.analysis.transfer import closed_loop_eigenvalues, gamma_state_space
     from lcc_synth.errors import ConfigError
     from lcc_synth.models.feedback import closed_loop, input_feedback
     from lcc_synth.problem import load_problem, system_from
@@ -48,6 +50,12 @@ def analyze(problem_path: str) -> tuple[dict, dict]:
     system = system_from(prob.data, src)
     model = system.linear_model(warn=False)
     opts = analysis_options_from(prob.data, src)
+    if system.platoon is not None:  # kind = "platoon" | "ring": several CAVs, the ring
+        from lcc_synth.cli.analyze_platoon import platoon_document
+
+        cases = cases_from(prob.data, model, src)
+        doc, reports = platoon_document(prob, system, model, opts, cases)
+        return doc, {"model": model, "options": opts, "reports": reports}
     outputs = list(opts.outputs) if opts.outputs else default_outputs(model)
     for name in outputs:
         if name not in model.state_names:
@@ -98,7 +106,7 @@ def analyze(problem_path: str) -> tuple[dict, dict]:
             )
         else:
             rep = string_stability(model, K, kh, method=opts.method)
-            reports[name] = (K, kh, rep, case.label)
+            reports[name] = (partial(gamma_state_space, model, K, kh), rep, case.label)
             entry.update(rep.as_dict())
         doc["cases"][name] = entry
     extra = {"model": model, "options": opts, "reports": reports}
@@ -189,12 +197,10 @@ def run(args: argparse.Namespace) -> int:
     if rrd is not None:
         import numpy as np
 
-        from lcc_synth.analysis.transfer import gamma_state_space
-
         omega = extra["options"].omega()
         curves = {
-            name: (omega, np.abs(gamma_state_space(extra["model"], K, kh, omega)), rep.as_dict())
-            for name, (K, kh, rep, _label) in extra["reports"].items()
+            name: (omega, np.abs(gamma(omega)), rep.as_dict())
+            for name, (gamma, rep, _label) in extra["reports"].items()
         }
         record_analysis_file(rrd, doc["problem"], gamma=curves, summary=doc)
         print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
@@ -206,19 +212,22 @@ def run(args: argparse.Namespace) -> int:
             )
         import numpy as np
 
-        from lcc_synth.analysis.transfer import gamma_state_space
         from lcc_synth.figures import plot_gamma_curves
 
         omega = extra["options"].omega()
         curves = {}
-        for K, kh, rep, label in extra["reports"].values():
-            mag = np.abs(gamma_state_space(extra["model"], K, kh, omega))
+        for gamma, rep, label in extra["reports"].values():
+            mag = np.abs(gamma(omega))
             curves[label] = (mag, rep)
         title = f"{doc['problem']}: head-to-tail |Gamma(jw)| (Fig. 9)"
         written.append(str(plot_gamma_curves(curves, omega, args.png, title=title)))
     doc["written"] = written
     if args.json:
         print(json.dumps(doc))
+    elif "controllability" in doc and "reachable_verdict" in doc["controllability"]:
+        from lcc_synth.cli.analyze_platoon import print_platoon
+
+        print_platoon(doc)
     else:
         _print_human(doc)
         for w in written:

@@ -194,7 +194,7 @@ def run(args: argparse.Namespace) -> int:
         "suite": suite.name,
         "scenarios": {
             s: {"layout": ss.layout, "title": ss.title, "metrics_window": list(ss.metrics.window),
-                "metrics_vehicles": ss.metrics.vehicles}
+                "metrics_vehicles": ss.metrics.vehicles, "backend": ss.scenario.backend}
             for s, ss in suite.scenarios.items()
         },
         "layouts": {

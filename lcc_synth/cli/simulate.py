@@ -48,10 +48,13 @@ def load(args):
     (+ ``--seeds``)."""
     from lcc_synth.errors import ConfigError
     from lcc_synth.experiments.spec import load_spec
+    from lcc_synth.simulation.backends import check_backend
 
     if args.seeds is not None and args.seeds < 1:
         raise ConfigError("--seeds", f"must be >= 1, got {args.seeds}")
-    return load_spec(args.problem, seeds=args.seeds)
+    spec = load_spec(args.problem, seeds=args.seeds)
+    check_backend(spec.scenario)  # SUMO missing: before any run
+    return spec
 
 
 def chunks(scenario, budget: float = MEMORY_BUDGET) -> list:
@@ -80,12 +83,12 @@ def iter_results(spec, budget: float = MEMORY_BUDGET):
     """Yield ``(chunk, controller_name, SimResult)``, one controller run at a time: every
     controller on the same draws, seed chunk after seed chunk (a single chunk unless the study
     exceeds ``budget``)."""
-    from lcc_synth.simulation.engine import simulate
+    from lcc_synth.simulation.backends import run_scenario
 
     for i, scenario in enumerate(chunks(spec.scenario, budget)):
         draws = scenario.draw()
         for name, ctrl in spec.controllers.items():
-            yield i, name, simulate(scenario, ctrl, draws)
+            yield i, name, run_scenario(scenario, ctrl, draws)
 
 
 def collect(args, on_result=None):
@@ -95,13 +98,13 @@ def collect(args, on_result=None):
     ``on_result(spec, name, result)``, when given, is called as soon as each controller's result
     exists (the recording), so an interrupted run keeps the controllers finished before.
     """
-    from lcc_synth.simulation.engine import simulate
+    from lcc_synth.simulation.backends import run_scenario
 
     spec = load(args)
     draws = spec.scenario.draw()
     results = {}
     for name, ctrl in spec.controllers.items():
-        results[name] = simulate(spec.scenario, ctrl, draws)
+        results[name] = run_scenario(spec.scenario, ctrl, draws)
         if on_result is not None:
             on_result(spec, name, results[name])
     return spec, results
@@ -186,8 +189,14 @@ def print_table(spec, rep: dict[str, Any], file=None, collisions=None) -> None:
     file = file or sys.stdout
     sc = spec.scenario
     cfg = spec.metrics
+    if sc.layout is None:
+        where = f"m={sc.m}, n={sc.n}"
+    else:  # a platoon or ring: CAVs by position
+        size, ring = sc.layout
+        cavs = ", ".join(str(c + 1 if ring else c) for c in sc.cav_columns)
+        where = f"{'ring' if ring else 'platoon'} of {size}, CAVs at {cavs}"
     print(
-        f"{spec.name}: m={sc.m}, n={sc.n}, v*={sc.v_star:g} m/s, dt={sc.dt:g} s, "
+        f"{spec.name}: {where}, v*={sc.v_star:g} m/s, dt={sc.dt:g} s, "
         f"{sc.steps} steps, batch={sc.batch}; metrics over t in "
         f"[{cfg.window[0]:g}, {cfg.window[1]:g}] s, vehicles={cfg.vehicles}",
         file=file,

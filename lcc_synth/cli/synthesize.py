@@ -37,6 +37,7 @@ def run(args: argparse.Namespace) -> int:
     from lcc_synth.synthesis.design import synthesize
     from lcc_synth.synthesis.gains_file import write_gains
     from lcc_synth.synthesis.h2 import SynthesisError
+    from lcc_synth.synthesis.platoon_config import PlatoonSynthesisSpec
     from lcc_synth.synthesis.report import format_report
 
     problem = load_problem(args.problem)
@@ -51,6 +52,8 @@ def run(args: argparse.Namespace) -> int:
             "problems/synth_cf_lcc_pattern.toml)", src,
         )  # fmt: skip
     spec = spec_from_problem(problem)
+    if isinstance(spec, PlatoonSynthesisSpec):
+        return _run_platoon(args, spec, src)
     if args.figure and spec.design != "sparsity":
         raise ConfigError(
             "--figure", f"only design = 'sparsity' draws a Pareto front; this one is "
@@ -84,6 +87,39 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(doc))
     else:
         print(format_report(rep))
+        for w in written:
+            print(f"wrote {w}")
+    return 0
+
+
+def _run_platoon(args: argparse.Namespace, spec, src: str) -> int:
+    """The platoon / ring branch (:mod:`lcc_synth.synthesis.platoon_design`)."""
+    from lcc_synth.errors import ConfigError
+    from lcc_synth.resources import set_progress
+    from lcc_synth.synthesis.gains_file import write_gains
+    from lcc_synth.synthesis.h2 import SynthesisError
+    from lcc_synth.synthesis.platoon_design import synthesize_platoon
+    from lcc_synth.synthesis.platoon_report import format_platoon_report
+
+    for opt, flag in (("figure", "--figure"), ("rrd", "--rrd")):
+        if getattr(args, opt, None):
+            raise ConfigError(flag, f"not available for kind = {spec.system.kind!r} yet", src)
+    set_progress(not args.no_progress)
+    try:
+        rep = synthesize_platoon(spec)
+    except SynthesisError as err:
+        if args.json:
+            print(json.dumps({"ok": False, "error": str(err), "details": err.details},
+                             default=str))
+        print(f"lcc-synth synthesize: synthesis failed: {err}", file=sys.stderr)
+        return 1
+    finally:
+        set_progress(False)
+    written = [str(write_gains(args.out, rep))] if args.out else []
+    if args.json:
+        print(json.dumps({"ok": True, **rep.as_dict(), "written": written}))
+    else:
+        print(format_platoon_report(rep))
         for w in written:
             print(f"wrote {w}")
     return 0

@@ -2,6 +2,13 @@
 
 The simulator evaluates their :class:`LinearLaw` inside its compiled loop (no Python call per
 step); ``__call__`` evaluates the same law for any other caller.
+
+Several CAVs (a mixed platoon or a ring): :class:`HDVController` drives every CAV with its own
+HDV law (its slot's parameters), and :class:`PlatoonGainController` applies one row of a
+:class:`~lcc_synth.models.platoon.PlatoonGains` per CAV. Its gains are on the platoon model's
+states ``s_i, v_i`` of positions ``i``: position ``i`` is array column ``i`` of an open platoon
+and ``i - 1`` on a ring, and every spacing error is taken from that vehicle's own equilibrium
+spacing at ``v*`` (the model linearises each vehicle at its own equilibrium).
 """
 
 from __future__ import annotations
@@ -17,7 +24,9 @@ from lcc_synth.controllers.base import ControlContext, Observation
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import free_speed
 
-__all__ = ["LinearLaw", "HDVController", "StaticGainController", "EQUILIBRIA"]
+__all__ = [
+    "LinearLaw", "HDVController", "StaticGainController", "PlatoonGainController", "EQUILIBRIA",
+]
 
 #: Equilibrium options of the static-gain controllers (see :class:`StaticGainController`).
 EQUILIBRIA = ("fixed", "estimated")
@@ -30,7 +39,10 @@ class LinearLaw:
     ``u = [F_hdv(s_0, v_-1 - v_0, v_0) if hdv_law] + sum_j Ks[j] (s_j - s_ref_j)
     + sum_j Kv[j] (v_j - v*) + Kp * (-(p_0 - p_0(t_0) - v* (t - t_0)))``
     with the nominal HDV model ``F_hdv`` of the :class:`ControlContext` and ``t_0`` the first
-    sample. Arrays are indexed by vehicle column (head = 0). The simulator evaluates this law
+    sample. Arrays are indexed by vehicle column (head = 0); with several CAVs ``Ks``, ``Kv``
+    are ``(n_cav, n_vehicles)`` and ``Kp`` ``(n_cav,)``, one row per CAV (a single row, e.g.
+    the HDV law's zeros, applies to every CAV), and ``F_hdv`` is each CAV's own HDV law
+    (``ControlContext.cav_models``). The simulator evaluates this law
     inside its compiled loop (no Python call per step); ``__call__`` evaluates the same law.
 
     With ``equilibrium_decay`` set (the only state of the law), ``v*`` above is replaced by an
@@ -53,7 +65,7 @@ class LinearLaw:
 
     Ks: np.ndarray
     Kv: np.ndarray
-    Kp: float = 0.0
+    Kp: float | np.ndarray = 0.0
     hdv_law: bool = False
     equilibrium_decay: float | None = None
     v_bounds: tuple[float, float] = (0.0, float("inf"))
@@ -113,13 +125,41 @@ class _LinearController(ABC):
         if self._filtered is None:  # started at the first received values
             self._filtered = tuple(x.copy() for x in y)
         out = tuple(f.copy() for f in self._filtered)
+        cols = list(self._ctx.cavs)
         for f, x in zip(out, y, strict=True):
-            f[:, self._ctx.cav] = x[:, self._ctx.cav]  # the CAV's own values: exact, unfiltered
+            f[:, cols] = x[:, cols]  # the CAVs' own values: exact, unfiltered
         self._filtered = tuple(x + (f - x) * d for x, f in zip(y, self._filtered, strict=True))
         return out
 
+    def _call_rows(self, obs: Observation) -> np.ndarray:
+        """The law with one gain row per CAV (several CAVs or a ring; fixed equilibrium)."""
+        ctx, law = self._ctx, self._law_cache
+        spacing, velocity = self._received(obs)
+        Ks, Kv = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (law.Ks, law.Kv))
+        Kp = np.atleast_1d(np.asarray(law.Kp, dtype=float))
+        if Ks.shape[0] == 1:
+            Ks, Kv, Kp = (np.repeat(x, ctx.n_cav, axis=0) for x in (Ks, Kv, Kp))
+        s_err = np.nan_to_num(spacing - ctx.spacing_reference())  # the head's: no gain
+        v_err = velocity - np.asarray(ctx.v_star, dtype=float)[:, None]
+        u = s_err @ Ks.T + v_err @ Kv.T
+        if self._p_ref is None:
+            self._p_ref = obs.position[:, list(ctx.cavs)].copy()
+            self._t_ref = obs.t
+        for k, c in enumerate(ctx.cavs):
+            if law.hdv_law:
+                a = ctx.ahead(c)
+                u[:, k] += ctx.cav_models[k].accel(
+                    spacing[:, c], velocity[:, a] - velocity[:, c], velocity[:, c]
+                )
+            if Kp[k] != 0.0:
+                drift = obs.position[:, c] - self._p_ref[:, k] - ctx.v_star * (obs.t - self._t_ref)
+                u[:, k] -= Kp[k] * drift
+        return u[:, 0] if ctx.n_cav == 1 else u
+
     def __call__(self, obs: Observation) -> np.ndarray:
         ctx, law = self._ctx, self._law_cache
+        if ctx.n_cav > 1 or ctx.ring or np.ndim(law.Ks) == 2:
+            return self._call_rows(obs)
         cav = ctx.cav
         spacing, velocity = self._received(obs)
         vs = ctx.v_star
@@ -180,7 +220,7 @@ class HDVController(_LinearController):
         return {"type": "hdv", "sample_time": self.sample_time}
 
     def as_dict(self) -> dict[str, Any]:
-        """Name and :meth:`describe`."""
+        """Name and :meth:`HDVController.describe`."""
         return {"name": self.name, **self.describe()}
 
 
@@ -269,6 +309,13 @@ class StaticGainController(_LinearController):
         self.measurement_filter = float(mf)
 
     def _law(self, ctx: ControlContext) -> LinearLaw:
+        if ctx.n_cav != 1 or ctx.ring:
+            raise ConfigError(
+                f"controllers.{self.name}",
+                f"{self.model.kind} gains are for one CAV on an open string; the scenario has "
+                f"{ctx.n_cav} CAV(s){' on a ring' if ctx.ring else ''} (use kind = platoon / "
+                "ring gains)",
+            )
         if (ctx.m, ctx.n) != (self.model.m, self.model.n):
             raise ConfigError(
                 f"controllers.{self.name}",
@@ -311,5 +358,90 @@ class StaticGainController(_LinearController):
         return out
 
     def as_dict(self) -> dict[str, Any]:
-        """Name, :meth:`describe` and the model's layout."""
+        """Name, :meth:`StaticGainController.describe` and the model's layout."""
         return {"name": self.name, "m": self.model.m, "n": self.model.n, **self.describe()}
+
+class PlatoonGainController(_LinearController):
+    """Static feedback of every CAV of a mixed platoon or ring: row ``k`` of the gains is CAV
+    ``cavs[k]``'s command on the platoon model's state errors (see the module docstring).
+
+    Parameters
+    ----------
+    name : str
+    gains : lcc_synth.models.platoon.PlatoonGains
+        ``"replace"``: ``u = K x`` is the CAV's whole command; ``"added"``: the CAV keeps its
+        own nonlinear HDV law towards its predecessor and adds ``K x`` (plus ``kh`` times the
+        head's velocity error).
+    model : lcc_synth.models.platoon.PlatoonModel
+        The platoon the gains are written for (its CAV positions and ring flag are checked
+        against the scenario's).
+    sample_time : float, optional
+        Controller period (s); default every simulation step.
+    measurement_filter : float
+        As :class:`StaticGainController` (0: off).
+    """
+
+    def __init__(self, name: str, gains, model, sample_time: float | None = None,
+                 measurement_filter: float = 0.0):  # fmt: skip
+        gains.input_feedback(model)  # checks the CAVs and the state count
+        mf = measurement_filter
+        if isinstance(mf, bool) or not isinstance(mf, int | float) or not 0.0 <= mf < np.inf:
+            raise ConfigError(
+                "measurement_filter", f"must be a number of seconds >= 0 (0: off), got {mf!r}"
+            )
+        self.name = name
+        self.gains = gains
+        self.model = model
+        self.sample_time = sample_time
+        self.measurement_filter = float(mf)
+
+    def columns(self) -> tuple[int, ...]:
+        """Array column of every position 1..N (``i`` open, ``i - 1`` on the ring)."""
+        off = 1 if self.model.ring else 0
+        return tuple(i - off for i in range(1, self.model.platoon.size + 1))
+
+    def _law(self, ctx: ControlContext) -> LinearLaw:
+        cols = self.columns()
+        want = tuple(cols[i - 1] for i in self.model.cavs)
+        nv = len(cols) + (0 if self.model.ring else 1)
+        if ctx.cavs != want or bool(ctx.ring) != self.model.ring or ctx.n_vehicles != nv:
+            road = "ring" if self.model.ring else "platoon"
+            raise ConfigError(
+                f"controllers.{self.name}",
+                f"gains are for CAV columns {list(want)} of {nv} ({road}); the scenario has "
+                f"CAV columns {list(ctx.cavs)} of {ctx.n_vehicles}"
+                f"{' on a ring' if ctx.ring else ''}",
+            )
+        K = self.gains.K
+        Ks = np.zeros((len(want), nv))
+        Kv = np.zeros((len(want), nv))
+        Ks[:, list(cols)] = K[:, 0::2]
+        Kv[:, list(cols)] = K[:, 1::2]
+        if not self.model.ring:
+            Kv[:, 0] += self.gains.kh  # the head's velocity error
+        return LinearLaw(
+            Ks, Kv, np.zeros(len(want)), self.gains.semantics == "added",
+            measurement_filter=self.measurement_filter,
+        )  # fmt: skip
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "type": "static",
+            "kind": "ring" if self.model.ring else "platoon",
+            "semantics": self.gains.semantics,
+            "gains": self.gains.as_table(self.model),
+            "sample_time": self.sample_time,
+            "equilibrium": "fixed",
+            "measurement_filter": self.measurement_filter,
+        }
+
+    def toml_table(self) -> dict[str, Any]:
+        """The ``[controllers.NAME]`` table that builds this controller (gains inline)."""
+        out = self.describe()
+        if out["measurement_filter"] == 0.0:
+            del out["measurement_filter"]
+        return out
+
+    def as_dict(self) -> dict[str, Any]:
+        """Name, :meth:`describe` and the CAV positions."""
+        return {"name": self.name, "cavs": list(self.model.cavs), **self.describe()}

@@ -23,13 +23,13 @@ def base_scenario(system, source: str | None = None):
     from pathlib import Path
 
     from lcc_synth.problem import load_problem
-    from lcc_synth.simulation.scenario import Scenario, scenario_from
+    from lcc_synth.simulation.scenario_file import scenario_from
 
     if source:
         problem = load_problem(source)
         if "scenario" in problem.data:
             return scenario_from(problem.data, system, Path(source).parent)
-    return Scenario(m=system.m, n=system.n, hdv=system.hdv, v_star=system.v_star)
+    return scenario_from({"scenario": {}}, system)  # the [scenario] defaults on this string
 
 
 def deep_lcc_controller_from_table(name: str, table, system, source: str | None = None,

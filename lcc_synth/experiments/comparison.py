@@ -41,7 +41,8 @@ from lcc_synth.models.records import Record, system_tables, toml_text
 from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
 from lcc_synth.schema import declared
 from lcc_synth.simulation.results import SimResult
-from lcc_synth.simulation.scenario import Scenario, scenario_from
+from lcc_synth.simulation.scenario import Scenario
+from lcc_synth.simulation.scenario_file import scenario_from
 
 __all__ = [
     "SUITE_TYPES",
@@ -468,8 +469,14 @@ def run_suite(
     """
     import time
 
-    from lcc_synth.simulation.engine import simulate
+    from lcc_synth.simulation.backends import check_backend, run_scenario
 
+    for sname, ss in suite.scenarios.items():  # the simulator is installed: before any design
+        try:
+            check_backend(ss.scenario)
+        except ConfigError as err:
+            err = ConfigError(f"scenarios.{sname}.backend", err.message, suite.source)
+            raise err from None
     timings: dict[str, float] = {}
     layouts = suite.layouts_used()
     n_ctrl = len(suite.controllers)
@@ -519,7 +526,7 @@ def run_suite(
             results[sname] = {}
             for cname, ctrl in built[ss.layout].items():
                 bar.set_postfix_str(f"{sname}/{cname}")
-                res = simulate(ss.scenario, ctrl, draws)
+                res = run_scenario(ss.scenario, ctrl, draws)
                 row = metrics_row(res, ss.metrics)
                 table[sname][cname] = row
                 results[sname][cname] = res

@@ -15,7 +15,8 @@ from lcc_synth.metrics import MetricsConfig, metrics_from
 from lcc_synth.models.records import Record, system_tables, toml_text
 from lcc_synth.problem import Problem, System, load_problem, system_from
 from lcc_synth.schema import declared
-from lcc_synth.simulation.scenario import Scenario, scenario_from
+from lcc_synth.simulation.scenario import Scenario
+from lcc_synth.simulation.scenario_file import scenario_from
 from lcc_synth.simulation.timestep import check_time_step
 
 __all__ = ["SimulationSpec", "controllers_from", "fallback_target", "load_spec",

@@ -51,7 +51,8 @@ from lcc_synth.metrics import MetricsConfig
 from lcc_synth.models.records import Record, system_tables
 from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
 from lcc_synth.schema import declared
-from lcc_synth.simulation.scenario import Scenario
+from lcc_synth.simulation.scenario import Scenario, split_ranges
+from lcc_synth.simulation.scenario_file import scenario_from
 
 __all__ = [
     "SWEEP_METRICS", "SWEEP_COUNTS", "MAX_COUNT", "SweepSpec", "SweepResult", "load_sweep",
@@ -131,7 +132,6 @@ def load_sweep(
     """
     from lcc_synth.experiments.comparison import fallback_names, select_names
     from lcc_synth.metrics import metrics_from
-    from lcc_synth.simulation.scenario import scenario_from, split_ranges
 
     problem = path if isinstance(path, Problem) else load_problem(path)
     src = str(problem.path)
@@ -139,7 +139,7 @@ def load_sweep(
         data = problem.data
         check_top_level(data)
         system = system_from(data, src)
-        nv = system.m + system.n + 2  # [lo, hi] settings drawn per scenario:
+        nv = system.columns  # [lo, hi] settings drawn per scenario:
         sc_table, ranges = split_ranges(declared("").get(data, "scenario", ""), nv)
         scenario = scenario_from({**data, "scenario": sc_table}, system, problem.path.parent)
         metrics = metrics_from(data, system, scenario=scenario)
@@ -286,7 +286,7 @@ def run_chunk(
     Returns ``{"start", "stop", "metrics": {controller: {metric: (stop - start,) array}},
     "fallbacks": {controller: int}, "sim_time": {controller: s}, "wall_time": s}``.
     """
-    from lcc_synth.simulation.engine import simulate
+    from lcc_synth.simulation.backends import run_scenario
     from lcc_synth.simulation.scenario import scenario_variant
 
     t0 = time.perf_counter()
@@ -301,7 +301,7 @@ def run_chunk(
         t1 = time.perf_counter()
         per, fallbacks[name] = [], 0
         for sc, dr in zip(runs, draws, strict=True):
-            res = simulate(sc, ctrl, dr)
+            res = run_scenario(sc, ctrl, dr)
             per.append(scenario_metrics(res, config))
             fallbacks[name] += int((res.controller_stats or {}).get("fallbacks", 0) or 0)
         times[name] = time.perf_counter() - t1
@@ -493,10 +493,11 @@ def run_sweep(
     tables = {name: _inline_gains_file(name, t, spec) for name, t in tables.items()}
     # fail early, in the client, on a controller that cannot be built
     from lcc_synth.experiments.comparison import build_controllers
+    from lcc_synth.simulation.backends import check_backend
     from lcc_synth.simulation.timestep import check_time_step
-
     built = build_controllers(tables, spec.system, spec.source)
-    try:  # a step too coarse for a loop: error / warning here, not on the workers
+    try:  # a step too coarse for a loop, SUMO missing: error / warning here, not on the workers
+        check_backend(spec.scenario)
         check_time_step(spec.scenario, built)
     except ConfigError as err:
         raise err.with_source(spec.source) if spec.source else err from None

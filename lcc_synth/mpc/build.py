@@ -1,6 +1,9 @@
 """The MPC of a ``[controllers.NAME]`` problem table (``type = "mpc"``): its settings
 (:mod:`lcc_synth.mpc.settings`) and its fallback gain: another controller of the file
-(``fallback = "NAME"``), a gains file (``fallback_gains_file``) or the paper's."""
+(``fallback = "NAME"``), a gains file (``fallback_gains_file``) or the paper's. On a
+``kind = "platoon" | "ring"`` system it is the joint MPC of every CAV
+(:class:`~lcc_synth.mpc.platoon.PlatoonMPCController`), whose fallback gains are in the
+platoon form ``{u_i: {state: gain}}`` (default: each CAV's HDV law)."""
 
 from __future__ import annotations
 
@@ -9,7 +12,9 @@ from pathlib import Path
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.platoon import PlatoonGains
 from lcc_synth.mpc.controller import MPCController
+from lcc_synth.mpc.platoon import PlatoonMPCController
 from lcc_synth.mpc.settings import settings_from_table
 
 __all__ = ["mpc_controller_from_table", "build_mpc"]
@@ -74,14 +79,16 @@ def mpc_controller_from_table(name: str, table, system, source: str | None = Non
         settings = settings_from_table(table, field_name)
         fallback = None
         fb_source = "paper"
-        if named is not None:
+        if named is not None and getattr(system, "platoon", None) is None:
             fallback, fb_source = _named_fallback(named, f"{field_name}.fallback")
-        if settings.fallback_gains_file:
+        if settings.fallback_gains_file and getattr(system, "platoon", None) is None:
             path = Path(settings.fallback_gains_file)
             if not path.is_absolute() and source:
                 path = Path(source).parent / path
             fallback = _load_gains_file(path, system, f"{field_name}.fallback_gains_file")
             fb_source = str(path)
+        if getattr(system, "platoon", None) is not None:  # kind = "platoon" | "ring"
+            return _platoon_mpc(name, settings, system, named, source, field_name)
         try:
             return MPCController(name, settings, system, fallback, fb_source)
         except ConfigError as err:
@@ -90,6 +97,52 @@ def mpc_controller_from_table(name: str, table, system, source: str | None = Non
             raise ConfigError(f"{field_name}.{err.field}", err.message) from None
     except ConfigError as err:
         raise err.with_source(source) if source and not err.source else err from None
+
+
+def _platoon_gains(data, model, field_name: str) -> PlatoonGains:
+    """A :class:`PlatoonGains` from ``{"gains": {"u_i": {state: gain}}, "semantics": ...}``."""
+    if not isinstance(data, dict) or not isinstance(data.get("gains"), dict):
+        raise ConfigError(field_name, "must give gains in the platoon form "
+                          "{u_i: {state: gain}}")  # fmt: skip
+    semantics = data.get("semantics", "added")
+    try:
+        return PlatoonGains.from_table(data["gains"], model, semantics, f"{field_name}.gains")
+    except ConfigError as err:
+        if err.field.startswith(field_name):
+            raise
+        raise ConfigError(f"{field_name}.{err.field}", err.message) from None
+
+
+def _platoon_mpc(name, settings, system, named, source, field_name):
+    """The joint MPC of every CAV of a platoon or ring (:mod:`lcc_synth.mpc.platoon`); its
+    fallback rows from ``fallback = "NAME"`` or ``fallback_gains_file`` (platoon gain form),
+    else each CAV's HDV law."""
+    model = system.linear_model(warn=False)
+    fallback, fb_source = None, "hdv_law"
+    if named is not None:
+        fallback = _platoon_gains(named, model, f"{field_name}.fallback")
+        fb_source = f"controller {named.get('controller', '?')}"
+    if settings.fallback_gains_file:
+        path = Path(settings.fallback_gains_file)
+        if not path.is_absolute() and source:
+            path = Path(source).parent / path
+        where = f"{field_name}.fallback_gains_file"
+        if not path.is_file():
+            raise ConfigError(where, f"no such gains file: {path}")
+        try:
+            data = json.loads(path.read_text())
+        except json.JSONDecodeError as err:
+            raise ConfigError(where, f"{path} is not valid JSON: {err}") from None
+        if isinstance(data, dict) and data.get("kind", system.kind) != system.kind:
+            raise ConfigError(where, f"{path} holds gains for kind={data['kind']!r}; the MPC "
+                              f"controls kind={system.kind!r}")  # fmt: skip
+        fallback, fb_source = _platoon_gains(data, model, where), str(path)
+    try:
+        return PlatoonMPCController(name, settings, system, fallback, fb_source)
+    except ConfigError as err:
+        if err.field.startswith(field_name):
+            raise
+        raise ConfigError(f"{field_name}.{err.field}", err.message) from None
 
 
 def build_mpc(system, name: str = "mpc", **settings):

@@ -46,7 +46,8 @@ def jerk_bound(scale: float, v: float) -> float:
 
 
 def _slack(form, z: np.ndarray) -> float:
-    return float(np.sum(z[form.N:])) if z.size > form.N else 0.0
+    n = getattr(form, "n_input", form.N)  # the joint platoon QP has N inputs per CAV
+    return float(np.sum(z[n:])) if z.size > n else 0.0
 
 
 def solve_prioritised(solver, form, q, lo, hi, warm_z, warm_y, record: dict):

@@ -29,7 +29,8 @@ def _span(lo: float, hi: float, pad: float = 0.08, min_span: float = 1.0) -> tup
 
 
 def plot_ranges(result: Any) -> dict[str, Any]:
-    """Axis ranges for :func:`simulation_blueprint` from a ``SimResult``: ``{"time": (t0, t1),
+    """Axis ranges for :func:`simulation_blueprint` from a ``SimResult`` (several CAVs: the
+    commands of all; a ring: column 0's spacing too): ``{"time": (t0, t1),
     "velocity" | "spacing" | "acceleration" | "u_cmd": (lo, hi)}`` over the whole batch, padded.
 
     Non-finite samples (after a collision) are ignored; spacings are clipped below at -5 m."""
@@ -44,7 +45,8 @@ def plot_ranges(result: Any) -> dict[str, Any]:
 
     data = {
         "velocity": finite(result.velocity),
-        "spacing": finite(np.asarray(result.spacing)[..., 1:]),
+        "spacing": finite(np.asarray(result.spacing)[..., 0 if getattr(result, "ring", False)
+                                                     else 1:]),
         "acceleration": finite(result.acceleration),
         "u_cmd": np.concatenate([finite(result.u_cmd), [0.0, 1.0]]),  # + the AEB flag 0/1
     }
@@ -146,7 +148,8 @@ def simulation_blueprint(
         *[
             rrb.Spatial2DView(
                 origin=f"/{s}/{c}/road",
-                name=f"{c}: road (x: m from CAV, y: {ROAD_Y_SCALE:g}·velocity error)",
+                name=f"{c}: road (x: m from CAV, y: {ROAD_Y_SCALE:g}·velocity error; ring: a "
+                "circle, radius raised with the velocity error)",
             )
             for c in ctrls
         ],

@@ -1,4 +1,13 @@
-"""Recording simulation results: trajectories, road view, events, metrics, MPC history."""
+"""Recording simulation results: trajectories, road view, events, metrics, MPC history.
+
+Several CAVs (a mixed platoon or a ring): vehicles are named by position (``p1`` .. ``pN``,
+a CAV ``cavI``), each CAV has its own colour (:data:`CAV_COLORS`, the first the single-CAV
+blue), and ``cav/u_cmd`` and ``cav/aeb_active`` hold one series per CAV. The ring's road view
+is a circle: a vehicle at position ``p`` (not wrapped by the simulator) is drawn at the angle
+``2 pi p / C`` on the circle of circumference ``C`` (radius ``R = C / 2 pi``), its radius
+raised by ``RING_V_SCALE * R`` per m/s of velocity error (:func:`ring_view`); the open road
+view is as for one CAV, positions relative to the first CAV.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +19,8 @@ import numpy as np
 from lcc_synth.errors import ConfigError
 from lcc_synth.recording.core import (
     _PALETTE,
+    COLOR_HDV,
+    COLOR_HEAD,
     ROAD_Y_SCALE,
     _comparison_markdown,
     _flush_started,
@@ -35,6 +46,46 @@ from lcc_synth.recording.decimate import (
     event_rows,
     minmax_rows,
 )
+
+#: Colours of the CAVs of a platoon or ring, in order (the first is the single CAV's blue).
+CAV_COLORS = ((31, 119, 180), (148, 103, 189), (44, 160, 44), (214, 39, 40), (23, 190, 207),
+              (255, 127, 14))  # fmt: skip
+#: Ring road view: radial offset per m/s of velocity error, as a fraction of the radius.
+RING_V_SCALE = 0.02
+
+
+def vehicle_style(result) -> tuple[list[str], np.ndarray, list[float]]:
+    """``(names, colors, widths)`` of every column of ``result``: the single-CAV names of
+    :func:`~lcc_synth.recording.core.vehicle_names`, or a platoon's / ring's by position
+    (``head``, ``p1`` .. ``pN``, CAVs ``cavI``) with one colour per CAV (:data:`CAV_COLORS`)."""
+    m, n = int(result.m), int(result.n)
+    sc = getattr(result, "scenario", None)
+    if sc is None or sc.layout is None:
+        return vehicle_names(m, n), vehicle_colors(m, n), vehicle_widths(m, n)
+    nv, ring, cavs = int(result.n_vehicles), bool(result.ring), tuple(result.cavs)
+    off = 1 if ring else 0
+    names = [
+        "head" if j == 0 and not ring else f"cav{j + off}" if j in cavs else f"p{j + off}"
+        for j in range(nv)
+    ]
+    colors = np.tile(np.array(COLOR_HDV, dtype=np.uint8), (nv, 1))
+    widths = [1.0] * nv
+    if not ring:
+        colors[0] = COLOR_HEAD
+        widths[0] = 2.5
+    for k, c in enumerate(cavs):
+        colors[c] = CAV_COLORS[k % len(CAV_COLORS)]
+        widths[c] = 3.0
+    return names, colors, widths
+
+
+def ring_view(position: np.ndarray, velocity: np.ndarray, v_star: float, circumference: float):
+    """``(..., 2)`` points of the ring's road view (see the module docstring): angle
+    ``2 pi p / C`` (positions wrap here only), radius ``R (1 + RING_V_SCALE (v - v*))``."""
+    R = circumference / (2.0 * np.pi)
+    theta = 2.0 * np.pi * np.mod(position, circumference) / circumference
+    r = R * (1.0 + RING_V_SCALE * (velocity - v_star))
+    return np.stack([r * np.cos(theta), r * np.sin(theta)], axis=-1)
 
 
 def _record_events(rec, entity, t, aeb_on, collided, ctime, names, limit: int = 1000) -> None:
@@ -126,13 +177,14 @@ def record_simulation(
     s = entity_name(scenario)
     c = entity_name(controller if controller is not None else result.controller)
     base = f"/{s}/{c}"
-    names = vehicle_names(m, n)
-    colors = vehicle_colors(m, n)
-    widths = vehicle_widths(m, n)
+    names, colors, widths = vehicle_style(result)
     label = [f"{c} {v}" for v in names]
     vel_all = velocity[run]
     acc_all = np.asarray(result.acceleration)[run]
-    aeb_on = np.asarray(result.aeb_active)[run].astype(bool)
+    cavs = tuple(getattr(result, "cavs", None) or (cav,))
+    ring = bool(getattr(result, "ring", False))
+    aeb_cav = np.asarray(result.aeb_active)[run].astype(bool).reshape(T, -1)
+    aeb_on = aeb_cav.any(axis=1)
     collided = np.asarray(result.collided)[run]
     ctime = np.asarray(result.collision_time)[run]
     stride = _sample_indices(T, 1 if minmax else int(decimate))
@@ -151,27 +203,38 @@ def record_simulation(
     idx, tcol = rows(vel_all)
     vel = vel_all[idx]
     _send_series(rec, f"{base}/velocity", tcol, vel, label, colors, widths)
-    spacing = np.asarray(result.spacing)[run, :, 1:]
+    j0 = 0 if ring else 1  # the head has no spacing; the ring's column 0 has
+    spacing = np.asarray(result.spacing)[run, :, j0:]
     idx, tcol = rows(spacing)
-    _send_series(rec, f"{base}/spacing", tcol, spacing[idx], label[1:], colors[1:], widths[1:])
+    _send_series(rec, f"{base}/spacing", tcol, spacing[idx], label[j0:], colors[j0:], widths[j0:])
     idx, tcol = rows(acc_all)
     _send_series(rec, f"{base}/acceleration", tcol, acc_all[idx], label, colors, widths)
     state = _state(rec)
     u_color = state.color(base)  # one color per controller: u_cmd of all controllers overlaid
-    u_all = np.asarray(result.u_cmd)[run, :, None]
+    u_all = np.asarray(result.u_cmd)[run].reshape(T, -1)
     idx, tcol = rows(u_all)
-    _send_series(rec, f"{base}/cav/u_cmd", tcol, u_all[idx], [f"{c} u_cmd"], [u_color], [2.0])
-    aeb = aeb_on.astype(np.float64)[:, None]
+    if len(cavs) == 1:
+        u_names, u_colors, aeb_names = [f"{c} u_cmd"], [u_color], [f"{c} AEB active"]
+    else:
+        u_names = [f"{c} u_cmd {names[j]}" for j in cavs]
+        u_colors = [tuple(int(x) for x in colors[j]) for j in cavs]
+        aeb_names = [f"{c} AEB active {names[j]}" for j in cavs]
+    _send_series(rec, f"{base}/cav/u_cmd", tcol, u_all[idx], u_names, u_colors,
+                 [2.0] * len(cavs))  # fmt: skip
+    aeb = aeb_cav.astype(np.float64)
     idx, tcol = rows(aeb)
-    red = [(214, 39, 40)]
-    _send_series(rec, f"{base}/cav/aeb_active", tcol, aeb[idx], [f"{c} AEB active"], red)
+    red = [(214, 39, 40)] * len(cavs)
+    _send_series(rec, f"{base}/cav/aeb_active", tcol, aeb[idx], aeb_names, red)
 
     # Road view (Fig. 11): x = position relative to the CAV, y = scaled velocity error.
     pos = np.asarray(result.position)[run]
     v_star = float(np.asarray(result.v_star).reshape(-1)[run])
     xy_all = np.empty((T, nv, 2), dtype=np.float32)
-    xy_all[..., 0] = pos - pos[:, cav : cav + 1]
-    xy_all[..., 1] = ROAD_Y_SCALE * (vel_all - v_star)
+    if ring:
+        xy_all[:] = ring_view(pos, vel_all, v_star, float(result.circumference))
+    else:
+        xy_all[..., 0] = pos - pos[:, cav : cav + 1]
+        xy_all[..., 1] = ROAD_Y_SCALE * (vel_all - v_star)
     idx, tcol = rows(xy_all.reshape(T, -1), ROAD_BUCKET_S)  # scrubbing / playback: 10 frames/s
     xy = xy_all[idx]
     rec.log(
@@ -188,10 +251,16 @@ def record_simulation(
         indexes=[tcol],
         columns=[_rows(rr, rr.Points2D.descriptor_positions(), points, len(idx), nv)],
     )
-    x_lo, x_hi = float(np.nanmin(xy[..., 0])), float(np.nanmax(xy[..., 0]))
+    if ring:
+        circle = ring_view(np.linspace(0.0, float(result.circumference), 181), v_star, v_star,
+                           float(result.circumference))  # fmt: skip
+        strip = [circle.tolist()]
+    else:
+        x_lo, x_hi = float(np.nanmin(xy[..., 0])), float(np.nanmax(xy[..., 0]))
+        strip = [[[x_lo - 5.0, 0.0], [x_hi + 5.0, 0.0]]]
     rec.log(
         f"{base}/road/equilibrium",
-        rr.LineStrips2D([[[x_lo - 5.0, 0.0], [x_hi + 5.0, 0.0]]], colors=[(90, 90, 90)], radii=0.2),
+        rr.LineStrips2D(strip, colors=[(90, 90, 90)], radii=0.2),
         static=True,
     )
 
@@ -205,7 +274,7 @@ def record_simulation(
         else f"every {decimate}"
     )
     header = (
-        f"# {c}\n\nscenario `{scenario}`, run {run} of {batch}; m = {m} ahead, n = {n} behind; "
+        f"# {c}\n\nscenario `{scenario}`, run {run} of {batch}; {_layout_text(result, names)}; "
         f"v* = {_fmt(v_star)} m/s, s* = {_fmt(s_star)} m; {T} steps recorded {how}.\n\n"
     )
     record_text(
@@ -230,6 +299,18 @@ def record_simulation(
         record_mpc_history(rec, base, mpc_history, run=run)
     _flush_started(rec)
     return base
+
+
+def _layout_text(result, names: list[str]) -> str:
+    """``m = .. ahead, n = .. behind`` (one CAV) or the platoon's / ring's CAVs."""
+    sc = getattr(result, "scenario", None)
+    if sc is None or sc.layout is None:
+        return f"m = {int(result.m)} ahead, n = {int(result.n)} behind"
+    size, ring = sc.layout
+    road = f"ring of {size} vehicles, C = {_fmt(float(result.circumference))} m" if ring else (
+        f"platoon of {size} vehicles behind the head"
+    )
+    return f"{road}, CAVs {', '.join(names[j] for j in result.cavs)}"
 
 
 def record_metrics(rec: Any, scenario: str, controller: str, metrics: Mapping[str, Any]) -> None:

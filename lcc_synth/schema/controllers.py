@@ -30,8 +30,9 @@ _FILTER = Key("measurement_filter", "number", "Time constant of a first-order lo
               "received spacing and velocity (0: off).", 0.0, lo=0.0, unit="s")
 _SEMANTICS = Key("semantics", "string", "replace: u = sum(gain * error); added: the CAV's HDV "
                  "law plus that sum.", "added", choices=("added", "replace"))
-_GAINS = Key("gains", "table", "State name (s_i, v_i, -p_0) -> gain; missing states 0.",
-             REQUIRED)
+_GAINS = Key("gains", "table", "State name (s_i, v_i, -p_0) -> gain; missing states 0. "
+             "kind = platoon / ring: one table per CAV input, [controllers.NAME.gains.u_i] "
+             "with state name (s_j, v_j of positions) -> gain.", REQUIRED)
 
 GENERIC = Table(_C, "A CAV controller of simulate: its type selects the keys (below).",
                 ("simulate",), (_TYPE,))
@@ -57,7 +58,8 @@ STATIC = Table(
     _C, 'type = "static": static state feedback, eq. (23).', _CMDS,
     (_TYPE,
      Key("kind", "string", "Linear model whose state names the gains use.",
-         Derived("[system].kind"), choices=("lcc", "cf_lcc", "fd_lcc", "ccc")),
+         Derived("[system].kind"),
+         choices=("lcc", "cf_lcc", "fd_lcc", "ccc", "platoon", "ring")),
      _SEMANTICS, _GAINS, _SAMPLE_TIME, _EQUILIBRIUM, _EQ_TAU, _FILTER),
     variant="static",
 )
@@ -82,10 +84,11 @@ MPC = Table(
      Key("sample_time", "number", "Controller period; the simulator holds the command.", 0.1,
          lo=0.0, lo_open=True, unit="s"),
      Key("horizon", "integer", "Prediction steps N (at most 500).", 50, lo=1),
-     Key("n_model", "integer", "HDVs behind that the MPC predicts; absent: all of [system].n.",
-         None, lo=0),
+     Key("n_model", "integer", "HDVs behind that the MPC predicts; absent: all of [system].n "
+         "(platoon, ring: not used, the joint MPC models every vehicle).", None, lo=0),
      Key("fallback_gains_file", "any", "Static fallback gain file (a path); absent: the "
-         "paper's gain.", None),
+         "paper's gain (platoon, ring: gains {u_i: {state: gain}}; absent: each CAV's HDV "
+         "law).", None),
      Key("fallback", "string", "Another controller of the file (static, or h2 once "
          "synthesised) whose gain is the static fallback; not with fallback_gains_file.", None),
      Key("weights", "table", "Stage cost: [controllers.NAME.weights].", {}),
@@ -100,8 +103,8 @@ MPC_WEIGHTS = Table(
          unit="(m/s)⁻²"),
      Key("spacing", "number", "Weight on the spacing error of every HDV.", 0.5, lo=0.0,
          unit="m⁻²"),
-     Key("spacing_cav", "number", "Weight on the CAV's own spacing error s_0; absent: "
-         "spacing.", None, lo=0.0, unit="m⁻²"),
+     Key("spacing_cav", "number", "Weight on the CAV's own spacing error s_0 (platoon, ring: "
+         "every CAV's); absent: spacing.", None, lo=0.0, unit="m⁻²"),
      Key("position", "number", "Weight on FD-LCC's -p_0 state (0: not regulated).", 0.0,
          lo=0.0),
      Key("input", "number", "Weight on the CAV acceleration (see input_on).", 1.0, lo=0.0,
@@ -126,8 +129,8 @@ MPC_CONSTRAINTS = Table(
      Key("margin", "number", "The QP enforces the bounds this much tighter.", 0.1, lo=0.0,
          unit="m"),
      Key("spacing_ahead", "boolean", "Enforce the spacing ahead (needs a vehicle ahead).", True),
-     Key("behind", "any", "A list of integers: HDVs behind with soft bounds s_i >= "
-         "s_min_behind + t_gap_behind v_i.", []),
+     Key("behind", "any", "A list of integers (not for platoon, ring): HDVs behind with soft "
+         "bounds s_i >= s_min_behind + t_gap_behind v_i.", []),
      Key("s_min_behind", "number", "Safe spacing of those HDVs.", 5.0, lo=0.0, unit="m"),
      Key("t_gap_behind", "number", "Their time gap.", 0.8, lo=0.0, unit="s"),
      Key("jerk_scale", "number", "|a_k - a_{k-W}| <= jerk_scale * ISO 15622 limit * W Ts "

@@ -23,12 +23,15 @@ SYNTHESIS = Table(
             "stability LMI).", "structured",
             choices=("full_state", "structured", "sparsity", "string_stable")),
         Key("semantics", "string", "How the gain enters the command (eq. 23; fd_lcc: replace "
-            "only).", Derived("replace for fd_lcc and cf_lcc, else added"), choices=_SEM),
+            "only).", Derived("replace for fd_lcc, cf_lcc, platoon and ring, else added"),
+            choices=_SEM),
         Key("pattern", "any", 'Vehicles heard besides the CAV: "all" or a list of paper '
             "indices in [-m, n] (structured, string_stable).", "all"),
         Key("method", "string", "full_state: riccati | lmi; the others: lmi (convex "
-            "restriction + polish) | direct.", Derived("riccati for full_state, else lmi"),
-            choices=Derived("riccati, lmi for full_state; lmi, direct otherwise")),
+            "restriction + polish) | direct (platoon, ring: riccati | direct only).",
+            Derived("riccati for full_state, else lmi (platoon, ring: direct)"),
+            choices=Derived("riccati, lmi for full_state; lmi, direct otherwise; platoon and "
+                            "ring: riccati for full_state, direct for structured")),
         Key("cross_check", "boolean", "full_state: also solve the other method and compare.",
             True),
         Key("tol", "number", "Polishing tolerance (relative gradient norm).", 1e-7, lo=0.0,
@@ -43,6 +46,40 @@ SYNTHESIS = Table(
             {}),
         Key("as_run", "any", "Design the loop as it runs: true, false or the table "
             "[synthesis.as_run] (true: its defaults).", False),
+        Key("comm_range", "integer", "platoon, ring (structured): every CAV hears the R "
+            "vehicles ahead of it and the R behind it, itself included (the ring wraps "
+            "around); 0 = decentralised (itself only); absent: every vehicle.", None, lo=0,
+            hi=10000),
+        Key("patterns", "table", "platoon, ring (structured): per-CAV heard positions "
+            "[synthesis.patterns] (override comm_range).", {}),
+        Key("robust", "table", "platoon, ring: one gain for sampled HDV parameter sets "
+            "[synthesis.robust].", {}),
+    ),
+)
+
+PATTERNS = Table(
+    "synthesis.patterns",
+    "platoon, ring: the vehicles each CAV hears (structured design).",
+    _SYN,
+    any_key=Key("u_I", "number list", "CAV I's heard vehicle positions, integers in [1, size] "
+                "(the CAV itself is always heard).", None, lo=1.0),
+)
+
+ROBUST = Table(
+    "synthesis.robust",
+    "platoon, ring: the robust multi-model design over sampled HDV parameters (OVM).",
+    _SYN,
+    (
+        Key("samples", "integer", "Number of sampled members.", 20, lo=1, hi=1000),
+        Key("seed", "integer", "Seed of numpy.random.default_rng.", 0, lo=0, hi=2**32 - 1),
+        Key("objective", "string", "Minimise the mean or the (smooth) worst true H2 norm over "
+            "the members.", "mean", choices=("mean", "worst")),
+        Key("alpha", "number list", "[lo, hi] of each vehicle's uniform alpha draw; absent: "
+            "nominal.", None, length=2, lo=0.0, unit="1/s"),
+        Key("beta", "number list", "[lo, hi] of each vehicle's uniform beta draw; absent: "
+            "nominal.", None, length=2, lo=0.0, unit="1/s"),
+        Key("s_go", "number list", "[lo, hi] of each vehicle's uniform s_go draw; absent: "
+            "nominal.", None, length=2, lo=0.0, unit="m"),
     ),
 )
 
@@ -158,7 +195,8 @@ CASES = Table(
     ("analyze",),
     (
         Key("semantics", "string", "How the gain enters the command.", "added", choices=_SEM),
-        Key("gains", "table", "State name -> gain; missing states 0.", {}),
+        Key("gains", "table", "State name -> gain; missing states 0. Platoon / ring: one "
+            "table per CAV input, [cases.NAME.gains.u_3] with s_i / v_i gains.", {}),
         Key("label", "string", "Label in tables and figures.", Derived("NAME")),
     ),
 )
@@ -219,5 +257,5 @@ MAPS = Table(
     ),
 )
 
-TABLES = (SYNTHESIS, WEIGHTS, SPARSITY, STRING, BASELINE, AS_RUN, GAIN_TABLE, ANALYSIS, CASES,
-          REGIONS, MAPS)  # fmt: skip
+TABLES = (SYNTHESIS, WEIGHTS, SPARSITY, STRING, BASELINE, AS_RUN, PATTERNS, ROBUST, GAIN_TABLE,
+          ANALYSIS, CASES, REGIONS, MAPS)  # fmt: skip

@@ -146,6 +146,9 @@ SCENARIO = Table(
         Key("hdv_accel_noise", "number",
             "Std of white acceleration noise on every HDV." + _SWEEP_RANGE, 0.0,
             lo=0.0, unit="m/s²"),
+        Key("accel_noise_uniform", "number", "Half width w of a uniform acceleration noise "
+            "U[-w, w] on every vehicle but the head (CAVs included), added after the limits "
+            "and emergency braking (the DeeP-LCC paper's scheme).", 0.0, lo=0.0, unit="m/s²"),
         Key("heterogeneity", "table", "Per-HDV parameter draws: [scenario.heterogeneity].", {}),
         Key("delay", "table", "HDV reaction delay: [scenario.delay].", {}),
         Key("v2v", "table", "What the CAV receives: [scenario.v2v].", {}),
@@ -153,6 +156,29 @@ SCENARIO = Table(
             "[[scenario.perturbations]].", []),
         Key("hdv_values", "table", "Explicit per-HDV model parameters: [scenario.hdv_values].",
             {}),
+        Key("backend", "string", "The simulator: the built-in one, or SUMO (co-simulation "
+            'through libsumo; pip install -e ".[sumo]"; [scenario.sumo]).', "builtin",
+            choices=("builtin", "sumo")),
+        Key("sumo", "table", "SUMO's car-following model and integration (backend = "
+            '"sumo"): [scenario.sumo].', {}),
+    ),
+)
+
+SUMO = Table(
+    "scenario.sumo",
+    "How backend = \"sumo\" runs: the HDVs' SUMO car-following model (parameters from the "
+    "[hdv] IDM ones: v0 -> maxSpeed, T -> tau, s0 -> minGap, a -> accel, b -> decel, delta) "
+    "and SUMO's integration scheme.",
+    _SIM,
+    (
+        Key("car_following", "string", "SUMO's car-following model of the HDVs (needs [hdv] "
+            'model = "idm").', "IDM", choices=("IDM", "EIDM", "Krauss")),
+        Key("step_method", "string", "SUMO's position update: euler (semi-implicit, SUMO's "
+            "default) or ballistic (mean speed).", "euler", choices=("euler", "ballistic")),
+        Key("sigma", "number", "SUMO's driver imperfection (Krauss, EIDM; 0 for the IDM).",
+            0.0, lo=0.0, hi=1.0),
+        Key("vehicle_length", "number", "Vehicle length in SUMO (spacings are bumper-to-bumper "
+            "gaps: it only lengthens the road).", 5.0, lo=0.0, lo_open=True, unit="m"),
     ),
 )
 
@@ -217,8 +243,8 @@ LOSS_RATE_LIST = Table(
 
 _P_TYPE = Key("type", "string", "The kind of motion.", REQUIRED,
               choices=("sine", "brake", "brake_profile", "accel_profile", "speed_profile"))
-_P_VEHICLE = Key("vehicle", "any", 'The vehicle driven: "head" or a paper index (-m..n).',
-                 "head")
+_P_VEHICLE = Key("vehicle", "any", 'The vehicle driven: "head" or a paper index (-m..n); '
+                 'kind = platoon: "head" or a position 1..size; ring: a position.', "head")
 _P_START = Key("start", "number", "Start of the window (open interval start < t < end).",
                20.0, unit="s")
 _P_DECEL = Key("decel", "number", "Braking acceleration, < 0.", -5.0, unit="m/s²")
@@ -275,8 +301,13 @@ METRICS = Table(
     (
         Key("window", "number list", "Closed interval of sample times of AAVE and fuel, inside "
             "the simulated time.", [20.0, 40.0], length=2, unit="s"),
-        Key("vehicles", "any", 'Vehicles averaged: "cav_and_behind", "all" (head included), '
-            '"hdvs" or a list of paper indices.', "cav_and_behind"),
+        Key("vehicles", "any", 'Vehicles averaged: "cav_and_behind", "first_cav_and_behind" '
+            '(the first CAV and every vehicle behind it; on a ring both mean every vehicle), '
+            '"all" (head included), "hdvs" or a list of paper indices (platoon, ring: '
+            'positions).', "cav_and_behind"),
+        Key("accel_smoothing", "integer", "Fuel: smooth every acceleration by a centred "
+            "moving average of this many recorded samples first (odd; 1: none; the DeeP-LCC "
+            "paper: 9).", 1, lo=1, hi=1001),
         Key("baseline", "string", "A controller name: report reductions versus it (not in "
             "run).", None),
     ),
@@ -314,5 +345,5 @@ SCENARIOS = Table(
     includes=("scenario",),
 )
 
-TABLES = (TOP, HDV, SYSTEM, SYSTEM_HDV_VALUES, SCENARIO, HETEROGENEITY, HDV_VALUES, DELAY, V2V,
-          LOSS_RATE_LIST, *PERTURBATIONS, METRICS, SWEEP, LAYOUTS, SCENARIOS)  # fmt: skip
+TABLES = (TOP, HDV, SYSTEM, SYSTEM_HDV_VALUES, SCENARIO, SUMO, HETEROGENEITY, HDV_VALUES, DELAY,
+          V2V, LOSS_RATE_LIST, *PERTURBATIONS, METRICS, SWEEP, LAYOUTS, SCENARIOS)  # fmt: skip

@@ -1,8 +1,15 @@
-"""Nonlinear mixed-traffic simulator (Section V): a string of vehicles on an open single lane.
+"""Nonlinear mixed-traffic simulator (Section V): a string of vehicles on a single lane, open
+or closed into a ring.
 
-Column 0 is the head vehicle (prescribed motion: cruising unless perturbed), columns ``1..m``
-the HDVs ahead, ``m + 1`` the CAV, ``m + 2 .. m + n + 1`` the HDVs behind. Many scenarios
-(``batch``) advance together; each may have its own HDV parameters and reaction delays.
+Open string: column 0 is the head vehicle (prescribed motion: cruising unless perturbed),
+columns ``1..m`` the HDVs ahead, ``m + 1`` the CAV, ``m + 2 .. m + n + 1`` the HDVs behind.
+A mixed platoon (``[system] kind = "platoon"``) has several CAVs: column ``i`` is position
+``i`` (1..N) behind the head, the CAV columns are :attr:`Scenario.cav_columns`. A ring
+(``kind = "ring"``) has no head: column ``j`` is position ``j + 1`` (0..N-1), column 0 follows
+column N-1, and its spacing is ``p[N-1] + C - p[0]`` (``C`` the circumference). Positions are
+never wrapped (the road view wraps them, angle ``2 pi p / C``): the ring offset enters only
+column 0's spacing, so the open string's arithmetic is untouched. Many scenarios (``batch``)
+advance together; each may have its own HDV parameters and reaction delays.
 
 Integration, as in the paper's reference scripts: sample ``k`` is at ``t_k = t_start + k dt``;
 the acceleration ``a_k`` of every vehicle is computed from the state at sample ``k``
@@ -18,19 +25,22 @@ Per step:
   spacing and relative speed with the current own speed (``"perception"``), plus optional white
   acceleration noise, clipped to ``[a_min, a_max]``; optionally emergency braking (eq. 29) on
   the current state.
-* CAV: the controller's command (held between controller samples: zero-order hold) clipped to
+* CAVs: each CAV's command (held between controller samples: zero-order hold) clipped to
   ``[a_min, a_max]``, then emergency braking, eq. (29): ``a_min`` when
-  ``(v_0^2 - v_-1^2) / (2 s_0) >= |a_min|`` on the CAV's exact state.
+  ``(v_0^2 - v_-1^2) / (2 s_0) >= |a_min|`` on that CAV's exact state (per CAV).
+* Optional uniform acceleration noise ``U[-w, w]`` (``accel_noise_uniform``) on every vehicle
+  but the head, added after the limits and emergency braking (the DeeP-LCC reference scheme).
 * Perturbations override the acceleration of their vehicle while active (not clipped: they are
   the scenario's input); speed profiles are tracked within the limits.
 * Collisions: a vehicle with spacing ``<= 0`` at a sample is marked (per vehicle, with the
   time) and its scenario STOPS: that sample is recorded, every later sample of the scenario
   is NaN. Other scenarios of the batch go on.
 
-What the CAV observes (V2V): at each controller sample every other vehicle's link delivers its
+What the CAVs observe (V2V): at each controller sample every other vehicle's link delivers its
 spacing, velocity and position, ``latency`` seconds old and with Gaussian measurement noise,
-with probability ``1 - loss_rate``; a lost packet leaves the last received value. The CAV's own
-spacing, velocity and position are exact.
+with probability ``1 - loss_rate``; a lost packet leaves the last received value. Every CAV's
+own spacing, velocity and position are exact, and the CAVs are connected: each CAV's exact
+values are known to all (one observation serves every CAV).
 
 The stepping loop is compiled with numba. Controllers with a fixed linear law (the CAV as an
 HDV, static gains, with the fixed or the estimated equilibrium and the optional measurement
@@ -97,13 +107,35 @@ def _steps_of(value: float, dt: float, field: str, multiple: bool) -> int:
 def simulation_bytes(sc: Scenario) -> int:
     """Bytes :func:`simulate` allocates for ``sc``: the time grid and the perturbation
     overrides (``steps x (1 + 2 vehicles)``), the recorded samples (``batch x kept samples x
-    (4 vehicles + 1)`` floats) and the delay ring buffer."""
+    (4 vehicles + 1 per CAV)`` floats) and the delay ring buffer."""
     T, nv, B = sc.steps, sc.n_vehicles, sc.batch
     kept = (T - 1) // sc.record_every + 1
+    nc = len(sc.cav_columns)
     delay = float(np.max(np.asarray(sc.delay, dtype=float), initial=0.0)) + sc.delay_spread
     delay = max(delay if np.isfinite(delay) else 0.0, sc.v2v.latency, 0.0)
     ring = (int(delay / sc.dt) + 2) * B * nv * 16
-    return 8 * T * (1 + 2 * nv) + B * kept * (8 * (4 * nv + 1) + 1) + ring
+    return 8 * T * (1 + 2 * nv) + B * kept * (8 * (4 * nv + nc) + nc) + ring
+
+
+def _law_arrays(law, n_cav: int, nv: int, ring: bool, name: str):
+    """``(Ks, Kv, Kp)`` of a :class:`~lcc_synth.controllers.static.LinearLaw` as one row per
+    CAV (``(n_cav, nv)``, ``(n_cav,)``): a single row (one CAV, or a law without gains such as
+    the HDV law) applies to every CAV."""
+    Ks = np.atleast_2d(np.asarray(law.Ks, dtype=float))
+    Kv = np.atleast_2d(np.asarray(law.Kv, dtype=float))
+    Kp = np.atleast_1d(np.asarray(law.Kp, dtype=float))
+    field = f"controllers.{name}"
+    if Ks.shape[1:] != (nv,) or Kv.shape != Ks.shape or Kp.shape != (Ks.shape[0],):
+        raise ConfigError(field, f"linear law needs {nv} spacing and velocity gains per CAV")
+    if not ring and np.any(Ks[:, 0] != 0.0):
+        raise ConfigError(field, "linear law has a gain on the head's spacing (it has none)")
+    if Ks.shape[0] != n_cav:
+        if Ks.shape[0] != 1 or (n_cav > 1 and (Ks.any() or Kv.any() or Kp.any())):
+            raise ConfigError(
+                field, f"has gains for {Ks.shape[0]} CAV(s); the scenario has {n_cav}"
+            )
+        Ks, Kv, Kp = (np.repeat(x, n_cav, axis=0) for x in (Ks, Kv, Kp))
+    return tuple(np.ascontiguousarray(x) for x in (Ks, Kv, Kp))
 
 
 def simulate(
@@ -129,6 +161,11 @@ def simulate(
     sc = scenario
     B, nv, T, dt = sc.batch, sc.n_vehicles, sc.steps, sc.dt
     cav = sc.cav
+    cavs = np.asarray(sc.cav_columns, dtype=np.int64)
+    n_cav = len(cavs)
+    is_cav = np.full(nv, -1, dtype=np.int64)
+    is_cav[cavs] = np.arange(n_cav)
+    ring, circ = bool(sc.ring), float(sc.circumference) if sc.ring else 0.0
     require_memory(
         "scenario.duration",
         simulation_bytes(sc),
@@ -141,6 +178,8 @@ def simulate(
 
     # initial state: equilibrium cruise, head at p = 0
     s0 = np.nan_to_num(draws.initial_spacing, nan=0.0)
+    if ring:  # column 0 at p = 0; its spacing is what the others leave of the circumference
+        s0[:, 0] = 0.0
     p = -np.cumsum(s0, axis=1)
     v = np.full((B, nv), float(sc.v_star))
 
@@ -167,18 +206,26 @@ def simulate(
     nom_params = np.zeros(6)
     for i, key in enumerate(names):
         nom_params[i] = getattr(sc.hdv, key)
+    if sc.cavs is None:  # the CAV's HDV law: the nominal model
+        law_params = np.ascontiguousarray(np.broadcast_to(nom_params, (B, 1, 6)))
+    else:  # each CAV's own slot (platoon)
+        law_params = np.ascontiguousarray(params[:, cavs, :])
 
-    acc_ovr, spd_ovr = overrides(sc.perturbations, t, dt, sc.m, sc.n)
+    acc_ovr, spd_ovr = overrides(sc.perturbations, t, dt, sc.m, sc.n, sc.layout)
 
     v_star = np.full(B, float(sc.v_star))
     s_star = np.full(B, sc.s_star)
     if sc.spacing_reference == "own_equilibrium":
         s_ref = draws.initial_spacing.copy()
-        s_ref[:, 0] = s_star
+        if not ring:
+            s_ref[:, 0] = s_star
     else:
         s_ref = np.repeat(s_star[:, None], nv, axis=1)
     ctx = ControlContext(
-        sc.m, sc.n, B, dt, v_star, s_star, sc.a_min, sc.a_max, sc.hdv, s_ref=s_ref.copy()
+        sc.m, sc.n, B, dt, v_star, s_star, sc.a_min, sc.a_max, sc.hdv, s_ref=s_ref.copy(),
+        cavs=tuple(int(c) for c in cavs), ring=ring,
+        circumference=float(sc.circumference) if ring else float("nan"),
+        cav_models=sc.cav_models(),
     )
     controller.reset(ctx)
     ts = controller.sample_time
@@ -193,7 +240,9 @@ def simulate(
     obs_p = p.copy()
     obs_v = v.copy()
     obs_s = np.concatenate([np.full((B, 1), np.nan), p[:, :-1] - p[:, 1:]], axis=1)
-    p_ref = p[:, cav].copy()
+    if ring:
+        obs_s[:, 0] = p[:, -1] + circ - p[:, 0]
+    p_ref = p[:, cavs].copy()
 
     stride = sc.record_every
     Tr = (T - 1) // stride + 1
@@ -201,16 +250,21 @@ def simulate(
     out_v = np.empty((B, Tr, nv))
     out_a = np.empty((B, Tr, nv))
     out_s = np.empty((B, Tr, nv))
-    out_u = np.empty((B, Tr))
-    out_aeb = np.zeros((B, Tr), dtype=np.bool_)
+    out_u = np.empty((B, Tr, n_cav))
+    out_aeb = np.zeros((B, Tr, n_cav), dtype=np.bool_)
     alive = np.ones(B, dtype=np.bool_)
     collided = np.zeros((B, nv), dtype=np.bool_)
     ctime = np.full((B, nv), np.nan)
-    u_hold = np.zeros(B)
+    u_hold = np.zeros((B, n_cav))
 
     v_hat = v_star.copy()
     est = (-1.0, 0.0, 0.0)  # (decay, v_lo, v_hi); decay < 0: errors from the fixed v*
     if law is not None and law.equilibrium_decay is not None:
+        if n_cav > 1:
+            raise ConfigError(
+                f"controllers.{controller.name}.equilibrium",
+                'must be "fixed" with several CAVs (the estimate follows one CAV\'s predecessor)',
+            )
         est = (float(law.equilibrium_decay), *map(float, law.v_bounds))
     meas = None if law is None else law.measurement_decay(ratio * dt)
     meas_decay = -1.0 if meas is None else float(meas)  # < 0: the values as received
@@ -220,11 +274,11 @@ def simulate(
     def advance_range(b0, b1, k0, k1, mode, Ks, Kv, Kp, hdv_law):
         _advance(
             b0, b1, k0, k1, p, v, hp, hv, L, delay_steps, sc.delay_model == "full", code,
-            params, code, nom_params,
-            float(dt), float(sc.t_start), float(sc.a_min), float(sc.a_max), cav,
-            bool(sc.cav_aeb), bool(sc.hdv_aeb), float(sc.hdv_accel_noise), int(sc.seed),
-            int(sc.first_index),
-            acc_ovr, spd_ovr, mode, ratio, u_hold, Ks, Kv, float(Kp), bool(hdv_law),
+            params, code, law_params,
+            float(dt), float(sc.t_start), float(sc.a_min), float(sc.a_max), cavs, is_cav,
+            ring, circ, bool(sc.cav_aeb), bool(sc.hdv_aeb), float(sc.hdv_accel_noise),
+            float(sc.accel_noise_uniform), int(sc.seed), int(sc.first_index),
+            acc_ovr, spd_ovr, mode, ratio, u_hold, Ks, Kv, Kp, bool(hdv_law),
             v_star, s_ref, p_ref, est[0], est[1], est[2], v_hat, meas_decay, f_s, f_v,
             loss, lat, obs_noise, obs_s, obs_v, obs_p,
             alive, collided, ctime, stride, out_p, out_v, out_a, out_s, out_u, out_aeb,
@@ -245,35 +299,34 @@ def simulate(
             f.result()
 
     if law is not None:
-        Ks = np.ascontiguousarray(law.Ks, dtype=float)
-        Kv = np.ascontiguousarray(law.Kv, dtype=float)
-        if Ks.shape != (nv,) or Kv.shape != (nv,) or Ks[0] != 0.0:
-            raise ConfigError(
-                f"controllers.{controller.name}",
-                f"linear law needs {nv} spacing and velocity gains, none on the head's spacing",
-            )
-        advance(0, T, 1, Ks, Kv, law.Kp, law.hdv_law)
+        Ks, Kv, Kp = _law_arrays(law, n_cav, nv, ring, controller.name)
+        advance(0, T, 1, Ks, Kv, Kp, law.hdv_law)
     else:
-        zeros = np.zeros(nv)
+        zeros = np.zeros((n_cav, nv))
+        kp0 = np.zeros(n_cav)
         for k0 in range(0, T, ratio):
             _observe_all(k0, p, v, hp, hv, L, lat, loss, obs_noise, int(sc.seed),
-                         int(sc.first_index), cav,
+                         int(sc.first_index), is_cav, ring, circ,
                          obs_s, obs_v, obs_p, alive)  # fmt: skip
             tk = float(t[k0])
             obs = Observation(tk, obs_s.copy(), obs_v.copy(), obs_p.copy())
-            u = np.asarray(controller(obs), dtype=float).reshape(-1)
-            if u.shape != (B,):
+            u = np.asarray(controller(obs), dtype=float)
+            want = (B,) if n_cav == 1 else (B, n_cav)
+            if n_cav == 1 and u.ndim == 2 and u.shape == (B, 1):
+                u = u[:, 0]
+            if u.shape != want:
                 raise RuntimeError(
-                    f"controller {controller.name!r} returned shape {u.shape}, expected ({B},)"
+                    f"controller {controller.name!r} returned shape {u.shape}, expected {want}"
                 )
-            bad = alive & ~np.isfinite(u)
+            u = u.reshape(B, n_cav)
+            bad = alive & ~np.isfinite(u).all(axis=1)
             if bad.any():
                 raise RuntimeError(
                     f"controller {controller.name!r} returned a non-finite command at t = {tk:g} s "
                     f"for scenario(s) {np.flatnonzero(bad).tolist()}"
                 )
-            u_hold[:] = np.where(alive, u, 0.0)
-            advance(k0, min(k0 + ratio, T), 0, zeros, zeros, 0.0, False)
+            u_hold[:] = np.where(alive[:, None], u, 0.0)
+            advance(k0, min(k0 + ratio, T), 0, zeros, zeros, kp0, False)
 
     return SimResult(
         t=t[::stride].copy(),
@@ -281,13 +334,16 @@ def simulate(
         velocity=out_v,
         acceleration=out_a,
         spacing=out_s,
-        u_cmd=out_u,
-        aeb_active=out_aeb,
+        u_cmd=out_u[:, :, 0] if n_cav == 1 else out_u,
+        aeb_active=out_aeb[:, :, 0] if n_cav == 1 else out_aeb,
         collided=collided,
         collision_time=ctime,
         m=sc.m,
         n=sc.n,
         cav=cav,
+        cavs=tuple(int(c) for c in cavs),
+        ring=ring,
+        circumference=float(sc.circumference) if ring else float("nan"),
         v_star=v_star,
         s_star=s_star,
         controller=controller.name,

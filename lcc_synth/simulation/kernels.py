@@ -67,28 +67,46 @@ def _eq_spacing(code, pr, v):
     return (pr[2] + v * pr[1]) / math.sqrt(1.0 - (v / pr[0]) ** pr[5])
 
 
+@numba.njit(cache=True, inline="always")
+def _gap(p, b, j, ring, circ):
+    """Spacing of column ``j``: to column ``j - 1``; on the ring column 0's is to the last
+    column, one circumference ahead (positions are not wrapped)."""
+    if j > 0:
+        return p[b, j - 1] - p[b, j]
+    if ring:
+        return p[b, p.shape[1] - 1] + circ - p[b, 0]
+    return _NAN
+
+
 @numba.njit(cache=True)
-def _observe(b, k, p, v, hp, hv, L, lat, loss, noise, seed, sid0, cav, obs_s, obs_v, obs_p):
-    """Update the CAV's received values of scenario ``b`` at sample ``k`` (V2V model)."""
+def _observe(b, k, p, v, hp, hv, L, lat, loss, noise, seed, sid0, is_cav, ring, circ,
+             obs_s, obs_v, obs_p):  # fmt: skip
+    """Update the CAVs' received values of scenario ``b`` at sample ``k`` (V2V model; every
+    CAV's own entries exact)."""
     nv = p.shape[1]
     for j in range(nv):
-        if j == cav:
+        if is_cav[j] >= 0:
             obs_p[b, j] = p[b, j]
             obs_v[b, j] = v[b, j]
-            obs_s[b, j] = p[b, j - 1] - p[b, j]
+            obs_s[b, j] = _gap(p, b, j, ring, circ)
             continue
         if loss[j] > 0.0 and _u01(seed, sid0 + b, j, k, 2) < loss[j]:
             continue  # packet lost: hold the last value
         if lat == 0:
             pj = p[b, j]
             vj = v[b, j]
-            sj = p[b, j - 1] - p[b, j] if j > 0 else _NAN
+            sj = _gap(p, b, j, ring, circ)
         else:
             slot = (k - lat + L) % L
             pj = hp[slot, b, j]
             vj = hv[slot, b, j]
-            sj = hp[slot, b, j - 1] - hp[slot, b, j] if j > 0 else _NAN
-        if noise[0] > 0.0 and j > 0:
+            if j > 0:
+                sj = hp[slot, b, j - 1] - hp[slot, b, j]
+            elif ring:
+                sj = hp[slot, b, nv - 1] + circ - hp[slot, b, 0]
+            else:
+                sj = _NAN
+        if noise[0] > 0.0 and (j > 0 or ring):
             sj += noise[0] * _normal(seed, sid0 + b, j, k, 3)
         if noise[1] > 0.0:
             vj += noise[1] * _normal(seed, sid0 + b, j, k, 5)
@@ -99,10 +117,51 @@ def _observe(b, k, p, v, hp, hv, L, lat, loss, noise, seed, sid0, cav, obs_s, ob
         obs_p[b, j] = pj
 
 
+@numba.njit(cache=True)
+def _ring_first(
+    b, k, p, v, hp, hv, L, delay_steps, delay_own, code, params, a_min, a_max, abs_min, kc,
+    u_hold, cav_aeb, hdv_aeb, noise_std, seed, sid0, circ, aeb,
+):  # fmt: skip
+    """Acceleration of the ring's column 0 (before noise and overrides): as every other
+    vehicle's in :func:`_advance`, its predecessor the last column, ``circ`` ahead."""
+    last = p.shape[1] - 1
+    if kc >= 0:
+        a = min(max(u_hold[b, kc], a_min), a_max)
+        if cav_aeb:
+            s0 = p[b, last] + circ - p[b, 0]
+            if (v[b, 0] ** 2 - v[b, last] ** 2) / (2.0 * s0) >= abs_min:
+                a = a_min
+                aeb[kc] = True
+        return a
+    d = delay_steps[b, 0]
+    if d == 0:
+        s = p[b, last] + circ - p[b, 0]
+        ds = v[b, last] - v[b, 0]
+        vv = v[b, 0]
+    else:
+        sl = (k - d + L) % L
+        s = hp[sl, b, last] + circ - hp[sl, b, 0]
+        ds = hv[sl, b, last] - hv[sl, b, 0]
+        vv = hv[sl, b, 0] if delay_own else v[b, 0]
+    a = _hdv_accel6(
+        code, params[b, 0, 0], params[b, 0, 1], params[b, 0, 2],
+        params[b, 0, 3], params[b, 0, 4], params[b, 0, 5], s, ds, vv,
+    )  # fmt: skip
+    if noise_std > 0.0:
+        a += noise_std * _normal(seed, sid0 + b, 0, k, 0)
+    a = min(max(a, a_min), a_max)
+    if hdv_aeb:
+        s = p[b, last] + circ - p[b, 0]
+        if (v[b, 0] ** 2 - v[b, last] ** 2) / (2.0 * s) >= abs_min:
+            a = a_min
+    return a
+
+
 @numba.njit(cache=True, nogil=True)
 def _advance(
-    b0, b1, k0, k1, p, v, hp, hv, L, delay_steps, delay_own, code, params, nom_code,
-    nom_params, dt, t_start, a_min, a_max, cav, cav_aeb, hdv_aeb, noise_std, seed, sid0,
+    b0, b1, k0, k1, p, v, hp, hv, L, delay_steps, delay_own, code, params, law_code,
+    law_params, dt, t_start, a_min, a_max, cavs, is_cav, ring, circ, cav_aeb, hdv_aeb,
+    noise_std, unif_noise, seed, sid0,
     acc_ovr, spd_ovr, mode, ratio, u_hold, Ks, Kv, Kp, hdv_law, v_star, s_ref, p_ref,
     est_decay, v_lo, v_hi, v_hat, meas_decay, f_s, f_v,
     loss, lat, obs_noise, obs_s, obs_v, obs_p, alive, collided, ctime,
@@ -112,19 +171,29 @@ def _advance(
 
     Releases the GIL: disjoint scenario ranges run on several threads at once.
 
-    ``mode`` 1 evaluates the linear law (Ks, Kv, Kp, hdv_law) at every ``ratio``-th sample;
-    mode 0 applies the held command ``u_hold`` (set by a Python controller). ``est_decay >= 0``
-    takes the law's errors from the equilibrium estimate ``v_hat`` (``(batch,)``, updated in
-    place; see :class:`~lcc_synth.controllers.static.LinearLaw`), ``est_decay < 0`` from ``v_star``.
+    ``cavs`` (``(n_cav,)``) are the CAV columns, ``is_cav[j]`` the CAV index of column ``j``
+    (-1 for a vehicle that is not a CAV). ``ring``: no head vehicle, column 0 follows the last
+    column at ``circ`` ahead (:func:`_gap`). ``mode`` 1 evaluates the linear law at every
+    ``ratio``-th sample: CAV ``c`` commands ``[F(law_params[b, c]) if hdv_law] +
+    Ks[c] . (s - s_ref - sh) + Kv[c] . (v - ve) - Kp[c] (p - p_ref[b, c] - v* t)``; mode 0
+    applies the held commands ``u_hold`` (``(batch, n_cav)``, set by a Python controller).
+    ``est_decay >= 0`` takes the law's errors from the equilibrium estimate ``v_hat``
+    (``(batch,)``, updated in place from the velocity ahead of the first CAV; see
+    :class:`~lcc_synth.controllers.static.LinearLaw`), ``est_decay < 0`` from ``v_star``.
     ``meas_decay >= 0`` makes the law read the measurement filter's outputs: ``f_s``, ``f_v``
     (``(batch, n_vehicles)``, the filter states, NaN until the first sample) in place of every
     received spacing and velocity; ``meas_decay < 0`` the values as received.
+    ``noise_std``: Gaussian acceleration noise on every HDV before the limits;
+    ``unif_noise``: ``U[-w, w]`` on every vehicle but the head after the limits.
     """
     nv = p.shape[1]
+    n_cav = cavs.shape[0]
+    j0 = 0 if ring else 1  # first column with a vehicle ahead
     abs_min = abs(a_min)
     acc = np.empty(nv)
     ys = np.empty(nv)  # spacings and velocities the law reads at a sample
     yv = np.empty(nv)
+    aeb = np.zeros(n_cav, dtype=np.bool_)
     for b in range(b0, b1):
         for k in range(k0, k1):
             rec = k % stride == 0
@@ -136,7 +205,8 @@ def _advance(
                         out_v[b, r, j] = _NAN
                         out_a[b, r, j] = _NAN
                         out_s[b, r, j] = _NAN
-                    out_u[b, r] = _NAN
+                    for c in range(n_cav):
+                        out_u[b, r, c] = _NAN
                 continue
             t = t_start + k * dt
             if L > 1:
@@ -145,36 +215,35 @@ def _advance(
                     hp[slot, b, j] = p[b, j]
                     hv[slot, b, j] = v[b, j]
             hit = False
-            for j in range(1, nv):
-                if p[b, j - 1] - p[b, j] <= 0.0:
+            for j in range(j0, nv):
+                if _gap(p, b, j, ring, circ) <= 0.0:
                     collided[b, j] = True
                     ctime[b, j] = t
                     hit = True
             if rec:
-                out_s[b, r, 0] = _NAN
                 for j in range(nv):
                     out_p[b, r, j] = p[b, j]
                     out_v[b, r, j] = v[b, j]
-                    if j > 0:
-                        out_s[b, r, j] = p[b, j - 1] - p[b, j]
+                    out_s[b, r, j] = _gap(p, b, j, ring, circ)
             if hit:
                 alive[b] = False
                 if rec:
                     for j in range(nv):
                         out_a[b, r, j] = _NAN
-                    out_u[b, r] = _NAN
+                    for c in range(n_cav):
+                        out_u[b, r, c] = _NAN
                 continue
-            # ---- CAV command (sampled, zero-order hold) ----
+            # ---- CAV commands (sampled, zero-order hold) ----
             if mode == 1 and k % ratio == 0:
-                _observe(b, k, p, v, hp, hv, L, lat, loss, obs_noise, seed, sid0, cav,
-                         obs_s, obs_v, obs_p)  # fmt: skip
+                _observe(b, k, p, v, hp, hv, L, lat, loss, obs_noise, seed, sid0, is_cav, ring,
+                         circ, obs_s, obs_v, obs_p)  # fmt: skip
                 for j in range(nv):
                     ys[j] = obs_s[b, j]
                     yv[j] = obs_v[b, j]
                 if meas_decay >= 0.0:
                     for j in range(nv):
-                        if j == cav:
-                            continue  # the CAV's own values are exact: not filtered
+                        if is_cav[j] >= 0:
+                            continue  # the CAVs' own values are exact: not filtered
                         if f_v[b, j] != f_v[b, j]:  # first sample: start at the received value
                             f_s[b, j] = ys[j]
                             f_v[b, j] = yv[j]
@@ -183,41 +252,53 @@ def _advance(
                         yv[j] = f_v[b, j]
                         f_s[b, j] = y_s + (f_s[b, j] - y_s) * meas_decay
                         f_v[b, j] = y_v + (f_v[b, j] - y_v) * meas_decay
-                u = 0.0
-                if hdv_law:
-                    u = _hdv_accel(
-                        nom_code, nom_params, ys[cav], yv[cav - 1] - yv[cav], yv[cav]
-                    )
                 ve = v_star[b]
                 sh = 0.0
                 if est_decay >= 0.0:
                     ve = min(max(v_hat[b], v_lo), v_hi)
-                    sh = _eq_spacing(nom_code, nom_params, ve) - _eq_spacing(
-                        nom_code, nom_params, v_star[b]
+                    sh = _eq_spacing(law_code, law_params[b, 0], ve) - _eq_spacing(
+                        law_code, law_params[b, 0], v_star[b]
                     )
-                    y = yv[cav - 1]
+                    y = yv[cavs[0] - 1]
                     v_hat[b] = y + (v_hat[b] - y) * est_decay
-                for j in range(1, nv):
-                    if Ks[j] != 0.0:
-                        u += Ks[j] * (ys[j] - (s_ref[b, j] + sh))
-                for j in range(nv):
-                    if Kv[j] != 0.0:
-                        u += Kv[j] * (yv[j] - ve)
-                if Kp != 0.0:
-                    u -= Kp * (obs_p[b, cav] - p_ref[b] - v_star[b] * (t - t_start))
-                u_hold[b] = u
-            aeb = False
+                for c in range(n_cav):
+                    cav = cavs[c]
+                    ahead = cav - 1 if cav > 0 else nv - 1
+                    u = 0.0
+                    if hdv_law:
+                        u = _hdv_accel6(
+                            law_code, law_params[b, c, 0], law_params[b, c, 1],
+                            law_params[b, c, 2], law_params[b, c, 3], law_params[b, c, 4],
+                            law_params[b, c, 5], ys[cav], yv[ahead] - yv[cav], yv[cav],
+                        )  # fmt: skip
+                    for j in range(j0, nv):
+                        if Ks[c, j] != 0.0:
+                            u += Ks[c, j] * (ys[j] - (s_ref[b, j] + sh))
+                    for j in range(nv):
+                        if Kv[c, j] != 0.0:
+                            u += Kv[c, j] * (yv[j] - ve)
+                    if Kp[c] != 0.0:
+                        u -= Kp[c] * (obs_p[b, cav] - p_ref[b, c] - v_star[b] * (t - t_start))
+                    u_hold[b, c] = u
+            for c in range(n_cav):
+                aeb[c] = False
             # ---- accelerations ----
             for j in range(nv):
+                kc = is_cav[j]
                 if j == 0:
-                    a = 0.0
-                elif j == cav:
-                    a = min(max(u_hold[b], a_min), a_max)
+                    if ring:  # the ring's column 0 follows the last column, C ahead
+                        a = _ring_first(b, k, p, v, hp, hv, L, delay_steps, delay_own, code,
+                                        params, a_min, a_max, abs_min, kc, u_hold, cav_aeb,
+                                        hdv_aeb, noise_std, seed, sid0, circ, aeb)  # fmt: skip
+                    else:
+                        a = 0.0  # the head: cruising unless a perturbation drives it
+                elif kc >= 0:
+                    a = min(max(u_hold[b, kc], a_min), a_max)
                     if cav_aeb:
                         s0 = p[b, j - 1] - p[b, j]
                         if (v[b, j] ** 2 - v[b, j - 1] ** 2) / (2.0 * s0) >= abs_min:
                             a = a_min
-                            aeb = True
+                            aeb[kc] = True
                 else:
                     d = delay_steps[b, j]
                     if d == 0:
@@ -240,24 +321,27 @@ def _advance(
                         s = p[b, j - 1] - p[b, j]
                         if (v[b, j] ** 2 - v[b, j - 1] ** 2) / (2.0 * s) >= abs_min:
                             a = a_min
+                if unif_noise > 0.0 and (j > 0 or ring):
+                    a += unif_noise * (2.0 * _u01(seed, sid0 + b, j, k, 9) - 1.0)
                 ov = acc_ovr[k, j]
                 if ov == ov:
                     a = ov
-                    if j == cav:
-                        aeb = False
+                    if kc >= 0:
+                        aeb[kc] = False
                 sv = spd_ovr[k, j]
                 if sv == sv:
                     a = min(max((sv - v[b, j]) / dt, a_min), a_max)
-                    if j == cav:
-                        aeb = False
+                    if kc >= 0:
+                        aeb[kc] = False
                 if v[b, j] + dt * a < 0.0:
                     a = -v[b, j] / dt
                 acc[j] = a
             if rec:
                 for j in range(nv):
                     out_a[b, r, j] = acc[j]
-                out_u[b, r] = u_hold[b]
-                out_aeb[b, r] = aeb
+                for c in range(n_cav):
+                    out_u[b, r, c] = u_hold[b, c]
+                    out_aeb[b, r, c] = aeb[c]
             for j in range(nv):
                 p[b, j] += dt * v[b, j]
                 v[b, j] += dt * acc[j]
@@ -265,7 +349,8 @@ def _advance(
 
 @numba.njit(cache=True)
 def _observe_all(
-    k, p, v, hp, hv, L, lat, loss, noise, seed, sid0, cav, obs_s, obs_v, obs_p, alive
+    k, p, v, hp, hv, L, lat, loss, noise, seed, sid0, is_cav, ring, circ, obs_s, obs_v, obs_p,
+    alive,
 ):
     B = p.shape[0]
     nv = p.shape[1]
@@ -277,4 +362,5 @@ def _observe_all(
                 hv[slot, b, j] = v[b, j]
     for b in range(B):
         if alive[b]:
-            _observe(b, k, p, v, hp, hv, L, lat, loss, noise, seed, sid0, cav, obs_s, obs_v, obs_p)
+            _observe(b, k, p, v, hp, hv, L, lat, loss, noise, seed, sid0, is_cav, ring, circ,
+                     obs_s, obs_v, obs_p)

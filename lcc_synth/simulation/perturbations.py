@@ -4,7 +4,9 @@ A perturbation overrides the acceleration of one vehicle while it is active (the
 law, the CAV's controller and its emergency braking included). Outside every active window the
 head vehicle cruises (zero acceleration) and the other vehicles follow their laws.
 
-Vehicles are named by the paper's index ``-m .. n`` (``0`` = CAV) or ``"head"``.
+Vehicles are named by the paper's index ``-m .. n`` (``0`` = CAV) or ``"head"``; in a mixed
+platoon or on a ring (``[system] kind = "platoon" | "ring"``) by their position ``1..N``
+(``"head"`` only on the open platoon): the layout ``(N, ring)`` is passed as ``platoon``.
 
 Signs carry meaning and are checked, never reinterpreted: a ``brake``'s ``decel`` and a
 ``brake_profile``'s ``decel`` are braking accelerations (< 0), the profile's ``accel`` its
@@ -46,8 +48,25 @@ __all__ = [
 Vehicle = int | str
 
 
-def vehicle_column(vehicle: Vehicle, m: int, n: int, field: str = "vehicle") -> int:
-    """Array column of ``vehicle`` ("head" or a paper index in ``[-m, n]``)."""
+def vehicle_column(
+    vehicle: Vehicle, m: int, n: int, field: str = "vehicle",
+    platoon: tuple[int, bool] | None = None,
+) -> int:
+    """Array column of ``vehicle`` ("head" or a paper index in ``[-m, n]``).
+
+    With ``platoon = (N, ring)`` the vehicle is ``"head"`` (open platoon) or a position
+    ``1..N``: column ``i`` of the open platoon, ``i - 1`` on the ring.
+    """
+    if platoon is not None:
+        size, ring = platoon
+        if vehicle == "head" and not ring:
+            return 0
+        allowed = f"an integer position in [1, {size}]" + ("" if ring else ' or "head"')
+        if isinstance(vehicle, bool) or not isinstance(vehicle, int | np.integer) or not (
+            1 <= int(vehicle) <= size
+        ):
+            raise ConfigError(field, f"must be {allowed}, got {vehicle!r}")
+        return int(vehicle) - 1 if ring else int(vehicle)
     if vehicle == "head":
         return 0
     if isinstance(vehicle, bool) or not isinstance(vehicle, int | np.integer):
@@ -221,17 +240,19 @@ Perturbation = Sine | Brake | BrakeProfile | Profile
 
 
 def overrides(
-    perturbations: Sequence[Perturbation], t: np.ndarray, dt: float, m: int, n: int
+    perturbations: Sequence[Perturbation], t: np.ndarray, dt: float, m: int, n: int,
+    platoon: tuple[int, bool] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Acceleration overrides and speed targets, each ``(T, m + n + 2)``, NaN when free.
 
     Later perturbations win where several are active on the same vehicle at once.
+    ``platoon``: the ``(N, ring)`` layout of a platoon or ring (see :func:`vehicle_column`).
     """
     nv = m + n + 2
     acc = np.full((len(t), nv), np.nan)
     spd = np.full((len(t), nv), np.nan)
     for i, p in enumerate(perturbations):
-        col = vehicle_column(p.vehicle, m, n, f"scenario.perturbations[{i}].vehicle")
+        col = vehicle_column(p.vehicle, m, n, f"scenario.perturbations[{i}].vehicle", platoon)
         vals = p.values(t, dt)
         on = ~np.isnan(vals)
         dest, other = (spd, acc) if p.target == "speed" else (acc, spd)
@@ -270,16 +291,18 @@ def read_profile_csv(path: Path, field: str) -> tuple[list[float], list[float]]:
 
 
 def perturbation_from_table(
-    table: Mapping[str, Any], field: str, m: int, n: int, base_dir: Path | None = None
+    table: Mapping[str, Any], field: str, m: int, n: int, base_dir: Path | None = None,
+    platoon: tuple[int, bool] | None = None,
 ) -> Perturbation:
-    """Build one perturbation from a ``[[scenario.perturbations]]`` entry."""
+    """Build one perturbation from a ``[[scenario.perturbations]]`` entry (``platoon``: see
+    :func:`vehicle_column`)."""
     if not isinstance(table, Mapping):
         raise ConfigError(field, f"must be a table, got {table!r}")
     kind = declared("scenario.perturbations").get(table, "type", field)
     P = declared(f"scenario.perturbations:{kind}")
     P.check(table, field)
     vehicle = P.raw(table, "vehicle")
-    vehicle_column(vehicle, m, n, f"{field}.vehicle")
+    vehicle_column(vehicle, m, n, f"{field}.vehicle", platoon)
     if kind == "sine":
         period = P.get(table, "period", field)
         start = P.get(table, "start", field)

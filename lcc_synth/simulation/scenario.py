@@ -1,15 +1,18 @@
 """What is simulated: the :class:`Scenario` of a batch of runs (string, limits, perturbations,
-heterogeneity, delays, V2V), its random :class:`Draws`, and its problem-file table.
+heterogeneity, delays, V2V) and its random :class:`Draws`; the ``[scenario]`` table is read by
+:mod:`lcc_synth.simulation.scenario_file`.
 
 Vehicle columns as in :mod:`lcc_synth.simulation.engine`: 0 the head vehicle, ``1..m`` the HDVs
-ahead, ``m + 1`` the CAV, ``m + 2 .. m + n + 1`` the HDVs behind.
+ahead, ``m + 1`` the CAV, ``m + 2 .. m + n + 1`` the HDVs behind. A mixed platoon or ring
+(``cavs`` given) keeps ``m`` = first CAV column - 1 and ``n`` = columns after it, so that
+``m + n + 2`` is the number of columns: the open platoon's column ``i`` is position ``i``, the
+ring's column ``j`` position ``j + 1`` (no head).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -17,80 +20,25 @@ import numpy as np
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import IDM, MODELS, OVM
 from lcc_synth.models.records import Record
-from lcc_synth.problem import System, check_range
 from lcc_synth.schema import declared
-from lcc_synth.simulation.perturbations import Perturbation, perturbation_from_table
+from lcc_synth.simulation.perturbations import Perturbation
+from lcc_synth.simulation.sumo_net import SumoSettings, check_sumo_scenario
+from lcc_synth.simulation.v2v import V2V
+from lcc_synth.simulation.v2v import check_number as _num
 
 __all__ = [
-    "MODEL_PARAMS", "RANGE_FIELDS", "V2V", "Scenario", "Draws", "draw_ranges", "scenario_from",
+    "BACKENDS", "MODEL_PARAMS", "RANGE_FIELDS", "V2V", "Scenario", "Draws", "draw_ranges",
     "scenario_variant", "split_ranges",
 ]  # fmt: skip
+
+#: Simulators a scenario runs in (:func:`lcc_synth.simulation.backends.run_scenario`).
+BACKENDS = ("builtin", "sumo")
 
 #: Parameter order of each HDV model inside the compiled loop.
 MODEL_PARAMS = {
     "ovm": ("alpha", "beta", "s_st", "s_go", "v_max"),
     "idm": ("v0", "T", "s0", "a", "b", "delta"),
 }
-
-
-def _num(name: str, value, lo=None, hi=None, lo_open=False) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(name, f"must be a number, got {value!r}") from None
-    return check_range(name, x, lo, hi, lo_open, shown=value)
-
-
-@dataclass(frozen=True, repr=False)
-class V2V(Record):
-    """What the CAV receives from the other vehicles.
-
-    Parameters
-    ----------
-    loss_rate : float or sequence of float
-        Packet-loss probability in [0, 1], one for all links or one per vehicle column
-        (head..tail; the CAV's entry is ignored).
-    latency : float
-        Age (s) of every received value, >= 0; rounded to simulation steps.
-    spacing_noise, velocity_noise, position_noise : float
-        Standard deviations of the measurement noise on received values, >= 0.
-    """
-
-    loss_rate: float | Sequence[float] = 0.0
-    latency: float = 0.0
-    spacing_noise: float = 0.0
-    velocity_noise: float = 0.0
-    position_noise: float = 0.0
-
-    def __post_init__(self) -> None:
-        rates = np.atleast_1d(np.asarray(self.loss_rate, dtype=float))
-        if rates.ndim != 1 or not np.all(np.isfinite(rates)) or np.any((rates < 0) | (rates > 1)):
-            raise ConfigError(
-                "scenario.v2v.loss_rate", f"must be in [0, 1], got {self.loss_rate!r}"
-            )
-        _num("scenario.v2v.latency", self.latency, lo=0.0)
-        for key in ("spacing_noise", "velocity_noise", "position_noise"):
-            _num(f"scenario.v2v.{key}", getattr(self, key), lo=0.0)
-
-    def toml_table(self) -> dict[str, Any]:
-        """The ``[scenario.v2v]`` table."""
-        rates = np.atleast_1d(np.asarray(self.loss_rate, dtype=float))
-        loss = float(rates[0]) if np.ndim(self.loss_rate) == 0 else rates.tolist()
-        return {"loss_rate": loss, "latency": float(self.latency),
-                **{k: float(getattr(self, k))
-                   for k in ("spacing_noise", "velocity_noise", "position_noise")}}  # fmt: skip
-
-    def rates(self, nv: int) -> np.ndarray:
-        """Per-column loss rates ``(nv,)``."""
-        rates = np.atleast_1d(np.asarray(self.loss_rate, dtype=float))
-        if rates.size == 1:
-            return np.full(nv, float(rates[0]))
-        if rates.size != nv:
-            raise ConfigError(
-                "scenario.v2v.loss_rate",
-                f"needs 1 or {nv} entries (one per vehicle, head..tail), got {rates.size}",
-            )
-        return rates.copy()
 
 
 @dataclass(frozen=True, repr=False)
@@ -146,6 +94,26 @@ class Scenario(Record):
         Reference of the spacing errors the controllers see: the nominal ``s*`` for every
         vehicle, or each HDV's own equilibrium spacing at ``v*`` (the heterogeneous
         linearisation, eq. 8 around each vehicle's equilibrium). Same thing when homogeneous.
+    backend : {"builtin", "sumo"}
+        The simulator: the built-in one (:mod:`lcc_synth.simulation.engine`) or SUMO
+        (:mod:`lcc_synth.simulation.sumo`; checked here for what SUMO cannot reproduce).
+    sumo : SumoSettings
+        SUMO's car-following model and integration scheme (``backend = "sumo"`` only).
+    cavs : tuple of int, optional
+        CAV columns of a mixed platoon or ring (sorted, at least one; ``m`` must be
+        ``cavs[0] - 1``); ``None``: the single CAV at column ``m + 1``. With ``cavs`` given the
+        explicit ``hdv_values`` of the CAV columns are kept (each CAV's own HDV law, used when
+        it drives as an HDV) and every vehicle, CAVs included, starts at its own equilibrium
+        spacing at ``v*``.
+    ring : bool
+        A ring road: no head vehicle, column 0 follows the last column (needs ``cavs``).
+    circumference : float, optional
+        Ring length (m), > 0; ``None`` on an open road.
+    accel_noise_uniform : float
+        Half width ``w`` (m/s^2, >= 0) of a uniform acceleration noise ``U[-w, w]`` on every
+        vehicle but the head (CAVs included), added after the limits and emergency braking
+        (the DeeP-LCC paper's scheme; ``hdv_accel_noise`` is Gaussian, HDVs only, before the
+        limits).
     """
 
     m: int
@@ -173,11 +141,19 @@ class Scenario(Record):
     record_every: int = 1
     spacing_reference: str = "nominal"
     name: str = "scenario"
+    backend: str = "builtin"
+    sumo: SumoSettings = field(default_factory=SumoSettings, repr=False)
+    cavs: tuple[int, ...] | None = None
+    ring: bool = False
+    circumference: float | None = None
+    accel_noise_uniform: float = 0.0
 
     def __post_init__(self) -> None:
+        self._check_layout()
         for key, lo in (
-            ("m", 0), ("n", 0), ("batch", 1), ("record_every", 1), ("seed", 0), ("first_index", 0)
-        ):
+            ("m", -1 if self.ring else 0), ("n", 0), ("batch", 1), ("record_every", 1),
+            ("seed", 0), ("first_index", 0),
+        ):  # fmt: skip
             val = getattr(self, key)
             if isinstance(val, bool) or not isinstance(val, int | np.integer) or val < lo:
                 raise ConfigError(f"scenario.{key}", f"must be an integer >= {lo}, got {val!r}")
@@ -191,6 +167,10 @@ class Scenario(Record):
                 "scenario.spacing_reference",
                 f'must be "nominal" or "own_equilibrium", got {self.spacing_reference!r}',
             )
+        if self.backend not in BACKENDS:
+            raise ConfigError(
+                "scenario.backend", f"must be one of {list(BACKENDS)}, got {self.backend!r}"
+            )
         _num("scenario.dt", self.dt, lo=0.0, lo_open=True)
         _num("scenario.duration", self.duration, lo=0.0, lo_open=True)
         _num("scenario.t_start", self.t_start)
@@ -201,6 +181,7 @@ class Scenario(Record):
             raise ConfigError("scenario.a_min", f"must be < 0, got {self.a_min}")
         _num("scenario.a_max", self.a_max, lo=0.0, lo_open=True)
         _num("scenario.hdv_accel_noise", self.hdv_accel_noise, lo=0.0)
+        _num("scenario.accel_noise_uniform", self.accel_noise_uniform, lo=0.0)
         _num("scenario.delay_spread", self.delay_spread, lo=0.0)
         delay = np.asarray(self.delay, dtype=float)
         if not np.all(np.isfinite(delay)) or np.any(delay < 0):
@@ -228,6 +209,64 @@ class Scenario(Record):
                     f"scenario.hdv_values.{key}",
                     f"not a parameter of the {self.hdv.name} model; allowed: {list(allowed)}",
                 )
+        if self.backend == "sumo":
+            check_sumo_scenario(self)
+
+    def _check_layout(self) -> None:
+        if self.cavs is None:
+            if self.ring:
+                raise ConfigError("scenario.cavs", "a ring needs its CAV columns (cavs)")
+            return
+        cavs = tuple(self.cavs)
+        nv = self.m + self.n + 2
+        lo = 0 if self.ring else 1
+        if not cavs or any(
+            isinstance(c, bool) or not isinstance(c, int | np.integer) or not lo <= c < nv
+            for c in cavs
+        ) or list(cavs) != sorted(set(cavs)):
+            raise ConfigError(
+                "system.cavs",
+                f"CAV columns must be distinct, sorted, in [{lo}, {nv - 1}] and at least one "
+                f"(the simulator needs a CAV: drive it as an HDV for an all-HDV run), got "
+                f"{list(cavs)}",
+            )
+        object.__setattr__(self, "cavs", tuple(int(c) for c in cavs))
+        if self.m != cavs[0] - 1:
+            raise ConfigError("scenario.m", f"must be cavs[0] - 1 = {cavs[0] - 1}, got {self.m}")
+        if self.ring:
+            c = float("nan") if self.circumference is None else float(self.circumference)
+            if not (np.isfinite(c) and c > 0):
+                raise ConfigError("system.circumference", f"must be > 0 m, got {c!r}")
+
+    @property
+    def cav_columns(self) -> tuple[int, ...]:
+        """Array columns of the CAVs (``(m + 1,)`` for the paper's single CAV)."""
+        return (self.m + 1,) if self.cavs is None else tuple(self.cavs)
+
+    @property
+    def layout(self) -> tuple[int, bool] | None:
+        """``(N, ring)`` of a mixed platoon or ring (vehicles named by position, see
+        :func:`~lcc_synth.simulation.perturbations.vehicle_column`); ``None`` for the paper's
+        single-CAV string (vehicles named by the paper's index)."""
+        if self.cavs is None:
+            return None
+        return (self.n_vehicles if self.ring else self.n_vehicles - 1, bool(self.ring))
+
+    def cav_models(self):
+        """Each CAV's own HDV law (the nominal model, or a platoon slot's explicit values)."""
+        if self.cavs is None or not self.hdv_values:
+            return tuple(self.hdv for _ in self.cav_columns)
+        from dataclasses import replace
+
+        out = []
+        for c in self.cav_columns:
+            kw = {
+                k: float(np.asarray(v, dtype=float).reshape(-1)[c])
+                for k, v in self.hdv_values.items()
+                if np.ndim(v) <= 1
+            }
+            out.append(replace(self.hdv, **kw))
+        return tuple(out)
 
     def toml_table(self) -> dict[str, Any]:
         """The ``[scenario]`` table of this scenario (what :func:`scenario_from` reads; ``m``,
@@ -246,7 +285,9 @@ class Scenario(Record):
                         "model": self.delay_model}  # fmt: skip
         out["heterogeneity"] = {k: float(w) for k, w in self.heterogeneity.items()}
         out["v2v"] = self.v2v.toml_table()
-        if self.hdv_values:
+        if self.accel_noise_uniform:
+            out["accel_noise_uniform"] = float(self.accel_noise_uniform)
+        if self.hdv_values and self.cavs is None:  # a platoon's come from [system.hdv_values]
             hdv = self.is_hdv()
             out["hdv_values"] = {}
             for key, arr in self.hdv_values.items():
@@ -259,6 +300,9 @@ class Scenario(Record):
                     )
                 out["hdv_values"][key] = arr[hdv].tolist()
         out["perturbations"] = [p.toml_table() for p in self.perturbations]
+        if self.backend != "builtin":
+            out["backend"] = self.backend
+            out["sumo"] = self.sumo.toml_table()
         return out
 
     @property
@@ -286,8 +330,9 @@ class Scenario(Record):
     def is_hdv(self) -> np.ndarray:
         """``(nv,)`` mask of the HDV columns (not head, not CAV)."""
         mask = np.ones(self.n_vehicles, dtype=bool)
-        mask[0] = False
-        mask[self.cav] = False
+        if not self.ring:
+            mask[0] = False
+        mask[list(self.cav_columns)] = False
         return mask
 
     def draw(self) -> Draws:
@@ -319,9 +364,13 @@ class Scenario(Record):
             draws = np.stack([r.uniform(-self.delay_spread, self.delay_spread, nv) for r in rngs])
             delays = delays + draws
         delays = np.where(hdv_mask, np.maximum(delays, 0.0), 0.0)
-        # the head and the CAV follow no HDV law: nominal values there
+        # the head and the CAV follow no HDV law: nominal values there (a platoon's CAVs keep
+        # their slot's explicit values: their own HDV law)
+        fixed = ~hdv_mask
+        if self.cavs is not None and self.hdv_values:
+            fixed[list(self.cav_columns)] = False
         for key in names:
-            values[key][:, ~hdv_mask] = getattr(self.hdv, key)
+            values[key][:, fixed] = getattr(self.hdv, key)
         try:
             model = MODELS[self.hdv.name](**values)
             s_eq = np.broadcast_to(model.equilibrium_spacing(self.v_star), (B, nv)).copy()
@@ -329,8 +378,10 @@ class Scenario(Record):
             raise ConfigError(
                 f"scenario.heterogeneity.{err.field}", f"a drawn HDV is invalid: {err.message}"
             ) from None
-        s_eq[:, 0] = np.nan
-        s_eq[:, self.cav] = self.s_star
+        if not self.ring:
+            s_eq[:, 0] = np.nan
+        if self.cavs is None:
+            s_eq[:, self.cav] = self.s_star
         return Draws(values, delays, s_eq)
 
 
@@ -425,85 +476,4 @@ def scenario_variant(sc: Scenario, ranges: Mapping[str, tuple[float, float]], in
         first_index=int(index),
         hdv_accel_noise=drawn.get("hdv_accel_noise", sc.hdv_accel_noise),
         v2v=replace(sc.v2v, **v2v),
-    )
-
-
-# --------------------------------------------------------------------------------------------
-# The [scenario] table
-# --------------------------------------------------------------------------------------------
-
-def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None = None):
-    """Build the :class:`Scenario` of a problem's ``[scenario]`` table."""
-    f = "scenario"
-    S = declared("scenario")
-    sc = declared("").get(data, "scenario", "")
-    S.check(sc, f)
-    hv_t = S.get(sc, "hdv_values", f)
-    hdv_values = None
-    if hv_t:
-        HV = declared("scenario.hdv_values")
-        HV.check(hv_t, f"{f}.hdv_values", allowed=list(MODEL_PARAMS[system.hdv.name]))
-        hdv_values = {}
-        hdv_cols = [j for j in range(system.m + system.n + 2) if j not in (0, system.m + 1)]
-        each = HV.get_each(hv_t, f"{f}.hdv_values", length=len(hdv_cols))
-        for key, vals in each.items():
-            full = np.full(system.m + system.n + 2, float(getattr(system.hdv, key)))
-            full[hdv_cols] = vals
-            hdv_values[key] = full
-    het = S.get(sc, "heterogeneity", f)
-    heterogeneity = declared("scenario.heterogeneity").get_each(het, f"{f}.heterogeneity")
-    D = declared("scenario.delay")
-    delay_t = S.get(sc, "delay", f)
-    D.check(delay_t, f"{f}.delay")
-    delay_model = D.get(delay_t, "model", f"{f}.delay")
-    delay = D.get(delay_t, "mean", f"{f}.delay")
-    spread = D.get(delay_t, "spread", f"{f}.delay", hi=delay)
-    V = declared("scenario.v2v")
-    v2v_t = S.get(sc, "v2v", f)
-    V.check(v2v_t, f"{f}.v2v")
-    nv = system.m + system.n + 2
-    if isinstance(V.raw(v2v_t, "loss_rate"), list):
-        loss = declared("scenario.v2v:list").get(v2v_t, "loss_rate", f"{f}.v2v", length=nv)
-    else:
-        loss = V.get(v2v_t, "loss_rate", f"{f}.v2v")
-    v2v = V2V(
-        loss,
-        V.get(v2v_t, "latency", f"{f}.v2v"),
-        V.get(v2v_t, "spacing_noise", f"{f}.v2v"),
-        V.get(v2v_t, "velocity_noise", f"{f}.v2v"),
-        V.get(v2v_t, "position_noise", f"{f}.v2v"),
-    )
-    perts = S.raw(sc, "perturbations")
-    if not isinstance(perts, list):
-        raise ConfigError(
-            f"{f}.perturbations", "must be an array of tables [[scenario.perturbations]]"
-        )
-    perturbations = tuple(
-        perturbation_from_table(p, f"{f}.perturbations[{i}]", system.m, system.n, base_dir)
-        for i, p in enumerate(perts)
-    )
-    return Scenario(
-        m=system.m,
-        n=system.n,
-        hdv=system.hdv,
-        v_star=system.v_star,
-        dt=S.get(sc, "dt", f),
-        duration=S.get(sc, "duration", f),
-        t_start=S.get(sc, "t_start", f),
-        batch=S.get(sc, "batch", f),
-        a_min=S.get(sc, "a_min", f),
-        a_max=S.get(sc, "a_max", f),
-        cav_aeb=S.get(sc, "cav_aeb", f),
-        hdv_aeb=S.get(sc, "hdv_aeb", f),
-        perturbations=perturbations,
-        hdv_values=hdv_values,
-        heterogeneity=heterogeneity,
-        delay=delay,
-        delay_spread=spread,
-        delay_model=delay_model,
-        hdv_accel_noise=S.get(sc, "hdv_accel_noise", f),
-        v2v=v2v,
-        seed=S.get(sc, "seed", f),
-        record_every=S.get(sc, "record_every", f),
-        spacing_reference=S.get(sc, "spacing_reference", f),
     )

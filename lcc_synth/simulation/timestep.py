@@ -184,6 +184,8 @@ def loop_matrix(controller, scenario) -> tuple[np.ndarray, str] | None:
     from lcc_synth.models.linear import model_from_hdv
 
     name = getattr(controller, "name", "?")
+    if scenario.cavs is not None:
+        return _platoon_loop(controller, scenario, name)
     if isinstance(controller, StaticGainController):
         model, gains = controller.model, controller.gains
         if (model.m, model.n) != (scenario.m, scenario.n):
@@ -196,6 +198,37 @@ def loop_matrix(controller, scenario) -> tuple[np.ndarray, str] | None:
         gains = StaticGains({}, "added")
         what = f"the HDV string (controller {name!r} checked with the CAV as an HDV)"
     A, _ = closed_loop(model, *input_feedback(model, gains))
+    return A, what
+
+
+def _platoon_loop(controller, scenario, name: str) -> tuple[np.ndarray, str] | None:
+    """:func:`loop_matrix` of a mixed platoon or ring: a platoon gain's closed loop, or every
+    CAV driving with its own HDV law (the platoon model rebuilt from the scenario's vehicles;
+    the ring on its invariant hyperplane, where the conserved total spacing does not move)."""
+    from dataclasses import replace
+
+    from lcc_synth.controllers.static import PlatoonGainController
+    from lcc_synth.models.platoon import Platoon, PlatoonGains, platoon_model
+
+    if isinstance(controller, PlatoonGainController):
+        model, gains = controller.model, controller.gains
+        what = f"the closed loop of controller {name!r}"
+    else:
+        ring, off = bool(scenario.ring), 0 if scenario.ring else 1
+        values = scenario.hdv_values or {}
+        models = tuple(
+            replace(scenario.hdv, **{k: float(np.asarray(v).reshape(-1)[j])
+                                     for k, v in values.items() if np.ndim(v) <= 1})
+            for j in range(off, scenario.n_vehicles)
+        )  # fmt: skip
+        cavs = tuple(c + 1 - off for c in scenario.cav_columns)
+        model = platoon_model(Platoon(models, cavs, float(scenario.v_star), ring), warn=False)
+        gains = PlatoonGains(np.zeros((len(cavs), model.nx)), cavs, "added")
+        what = f"the platoon with its CAVs as HDVs (controller {name!r})"
+    A = gains.closed_loop(model)[0]
+    if model.ring:
+        V = model.invariant_basis()
+        A = V.T @ A @ V
     return A, what
 
 

@@ -70,6 +70,7 @@ from lcc_synth.models.records import Record, system_tables, toml_text
 from lcc_synth.problem import Problem, System, check_top_level, system_from, warn_large_gains
 from lcc_synth.schema import declared
 from lcc_synth.synthesis.h2 import Weights
+from lcc_synth.synthesis.platoon_config import PlatoonSynthesisSpec, platoon_spec
 
 __all__ = ["DESIGNS", "SynthesisSpec", "spec_from_problem"]
 
@@ -187,8 +188,10 @@ def _as_run(t: dict, system: System, design: str):
     )
 
 
-def spec_from_problem(problem: Problem) -> SynthesisSpec:
-    """Parse the ``[hdv]``, ``[system]`` and ``[synthesis]`` tables of a problem file."""
+def spec_from_problem(problem: Problem) -> SynthesisSpec | PlatoonSynthesisSpec:
+    """Parse the ``[hdv]``, ``[system]`` and ``[synthesis]`` tables of a problem file (a
+    :class:`~lcc_synth.synthesis.platoon_config.PlatoonSynthesisSpec` for ``kind = "platoon"``
+    or ``"ring"``)."""
     src = str(problem.path)
     try:
         check_top_level(problem.data)
@@ -196,6 +199,13 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec:
         T = declared("synthesis")
         t = declared("").get(problem.data, "synthesis", "")
         T.check(t, "synthesis")
+        if system.platoon is not None:
+            return platoon_spec(problem.name, system, t, src)
+        for key in ("comm_range", "patterns", "robust"):
+            if key in t:
+                T.get(t, key, "synthesis")  # a value out of range: that error first
+                raise ConfigError(f"synthesis.{key}", f"only kind = 'platoon' or 'ring' has one "
+                                  f"(kind = {system.kind!r}: use pattern)")  # fmt: skip
         design = T.get(t, "design", "synthesis")
         default_sem = "replace" if system.kind in ("fd_lcc", "cf_lcc") else "added"
         semantics = T.get(t, "semantics", "synthesis", default=default_sem)

@@ -20,6 +20,8 @@ from lcc_synth.synthesis.h2 import (
     riccati_gain,
     single_thread_blas,
 )
+from lcc_synth.synthesis.platoon_config import PlatoonSynthesisSpec
+from lcc_synth.synthesis.platoon_design import synthesize_platoon
 from lcc_synth.synthesis.report import SynthesisReport, check_gain, evaluate_gain
 from lcc_synth.synthesis.sparsity import sparsity_sweep
 from lcc_synth.synthesis.string_lmi import string_aware_h2
@@ -107,14 +109,17 @@ def baseline_check(spec: SynthesisSpec, plant: H2Plant) -> dict:
 
 
 @single_thread_blas
-def synthesize(spec: SynthesisSpec) -> SynthesisReport:
-    """Synthesise the gain of ``spec`` and check it.
+def synthesize(spec: SynthesisSpec | PlatoonSynthesisSpec) -> SynthesisReport:
+    """Synthesise the gain of ``spec`` and check it (a platoon / ring spec:
+    :func:`~lcc_synth.synthesis.platoon_design.synthesize_platoon`, its report).
 
     Raises
     ------
     SynthesisError
         Solver failure, infeasibility, a non-stabilising result or a failed cross-check.
     """
+    if isinstance(spec, PlatoonSynthesisSpec):  # kind = "platoon" | "ring": several CAVs
+        return synthesize_platoon(spec)
     t_start = time.perf_counter()
     model = spec.system.linear_model(warn=False)
     plant = make_plant(model, spec.semantics, spec.weights)

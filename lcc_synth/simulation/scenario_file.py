@@ -1,0 +1,166 @@
+"""The ``[scenario]`` table of a problem file: :func:`scenario_from` builds the
+:class:`~lcc_synth.simulation.scenario.Scenario` (a mixed platoon or ring takes its layout from
+the ``[system]`` table's platoon)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lcc_synth.errors import ConfigError
+from lcc_synth.problem import System
+from lcc_synth.schema import declared
+from lcc_synth.simulation.perturbations import perturbation_from_table
+from lcc_synth.simulation.scenario import MODEL_PARAMS, V2V, Scenario
+from lcc_synth.simulation.sumo_net import SumoSettings
+
+__all__ = ["scenario_from"]
+
+
+
+def _platoon_layout(system: System) -> dict[str, Any]:
+    """Scenario fields of a ``platoon`` / ``ring`` system: CAV columns, ``m``, ``n``, every
+    column's explicit HDV values (a CAV's: its slot's law) and the ring."""
+    P = system.platoon
+    nv = P.size if P.ring else P.size + 1
+    cols = tuple(c - 1 if P.ring else c for c in P.cavs)
+    if not cols:
+        raise ConfigError(
+            "system.cavs",
+            "simulate needs at least one CAV position (an all-HDV run drives the CAVs with "
+            'an HDV controller: type = "hdv")',
+        )
+    off = 0 if P.ring else 1  # column of position 1
+    values = {}
+    for key in MODEL_PARAMS[system.hdv.name]:
+        full = np.full(nv, float(getattr(system.hdv, key)))
+        full[off:] = [float(getattr(h, key)) for h in P.hdv]
+        values[key] = full
+    return {
+        "m": cols[0] - 1, "n": nv - 1 - cols[0], "cavs": cols, "hdv_values": values,
+        "ring": bool(P.ring), "circumference": P.length if P.ring else None,
+    }  # fmt: skip
+
+
+def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None = None):
+    """Build the :class:`Scenario` of a problem's ``[scenario]`` table.
+
+    For ``[system] kind = "platoon" | "ring"`` the layout comes from ``system.platoon``: the
+    CAV columns, every vehicle's own parameters (``[system.hdv_values]``; a
+    ``[scenario.hdv_values]`` table is then an error), every vehicle starting at its own
+    equilibrium spacing at ``v*``, spacing errors from each vehicle's own equilibrium
+    (``spacing_reference = "own_equilibrium"``, the platoon model's linearisation), vehicles
+    of perturbations named by position."""
+    f = "scenario"
+    S = declared("scenario")
+    sc = declared("").get(data, "scenario", "")
+    S.check(sc, f)
+    hv_t = S.get(sc, "hdv_values", f)
+    hdv_values = None
+    layout: dict[str, Any] = {}
+    if system.platoon is not None:
+        if hv_t:
+            raise ConfigError(
+                f"{f}.hdv_values",
+                f"kind = {system.kind!r} takes its per-vehicle parameters from "
+                "[system.hdv_values] (one value per position)",
+            )
+        if S.get(sc, "spacing_reference", f) != "own_equilibrium" and (
+            "spacing_reference" in sc
+        ):
+            raise ConfigError(
+                f"{f}.spacing_reference",
+                f'must be "own_equilibrium" for kind = {system.kind!r}: the platoon model '
+                "linearises every vehicle at its own equilibrium",
+            )
+        layout = _platoon_layout(system)
+        hdv_values = layout.pop("hdv_values")
+    elif hv_t:
+        HV = declared("scenario.hdv_values")
+        HV.check(hv_t, f"{f}.hdv_values", allowed=list(MODEL_PARAMS[system.hdv.name]))
+        hdv_values = {}
+        hdv_cols = [j for j in range(system.m + system.n + 2) if j not in (0, system.m + 1)]
+        each = HV.get_each(hv_t, f"{f}.hdv_values", length=len(hdv_cols))
+        for key, vals in each.items():
+            full = np.full(system.m + system.n + 2, float(getattr(system.hdv, key)))
+            full[hdv_cols] = vals
+            hdv_values[key] = full
+    het = S.get(sc, "heterogeneity", f)
+    heterogeneity = declared("scenario.heterogeneity").get_each(het, f"{f}.heterogeneity")
+    D = declared("scenario.delay")
+    delay_t = S.get(sc, "delay", f)
+    D.check(delay_t, f"{f}.delay")
+    delay_model = D.get(delay_t, "model", f"{f}.delay")
+    delay = D.get(delay_t, "mean", f"{f}.delay")
+    spread = D.get(delay_t, "spread", f"{f}.delay", hi=delay)
+    V = declared("scenario.v2v")
+    v2v_t = S.get(sc, "v2v", f)
+    V.check(v2v_t, f"{f}.v2v")
+    m, n = layout.pop("m", system.m), layout.pop("n", system.n)
+    nv = m + n + 2
+    if isinstance(V.raw(v2v_t, "loss_rate"), list):
+        loss = declared("scenario.v2v:list").get(v2v_t, "loss_rate", f"{f}.v2v", length=nv)
+    else:
+        loss = V.get(v2v_t, "loss_rate", f"{f}.v2v")
+    v2v = V2V(
+        loss,
+        V.get(v2v_t, "latency", f"{f}.v2v"),
+        V.get(v2v_t, "spacing_noise", f"{f}.v2v"),
+        V.get(v2v_t, "velocity_noise", f"{f}.v2v"),
+        V.get(v2v_t, "position_noise", f"{f}.v2v"),
+    )
+    perts = S.raw(sc, "perturbations")
+    if not isinstance(perts, list):
+        raise ConfigError(
+            f"{f}.perturbations", "must be an array of tables [[scenario.perturbations]]"
+        )
+    where = None if system.platoon is None else (
+        system.platoon.size, bool(system.platoon.ring)
+    )
+    perturbations = tuple(
+        perturbation_from_table(p, f"{f}.perturbations[{i}]", m, n, base_dir, where)
+        for i, p in enumerate(perts)
+    )
+    spacing_reference = S.get(sc, "spacing_reference", f)
+    if system.platoon is not None:
+        spacing_reference = "own_equilibrium"
+    return Scenario(
+        m=m,
+        n=n,
+        hdv=system.hdv,
+        v_star=system.v_star,
+        dt=S.get(sc, "dt", f),
+        duration=S.get(sc, "duration", f),
+        t_start=S.get(sc, "t_start", f),
+        batch=S.get(sc, "batch", f),
+        a_min=S.get(sc, "a_min", f),
+        a_max=S.get(sc, "a_max", f),
+        cav_aeb=S.get(sc, "cav_aeb", f),
+        hdv_aeb=S.get(sc, "hdv_aeb", f),
+        perturbations=perturbations,
+        hdv_values=hdv_values,
+        heterogeneity=heterogeneity,
+        delay=delay,
+        delay_spread=spread,
+        delay_model=delay_model,
+        hdv_accel_noise=S.get(sc, "hdv_accel_noise", f),
+        v2v=v2v,
+        seed=S.get(sc, "seed", f),
+        record_every=S.get(sc, "record_every", f),
+        backend=S.get(sc, "backend", f),
+        sumo=_sumo_from(S.get(sc, "sumo", f), f"{f}.sumo"),
+        spacing_reference=spacing_reference,
+        accel_noise_uniform=S.get(sc, "accel_noise_uniform", f),
+        **layout,
+    )
+
+
+def _sumo_from(table: Mapping[str, Any], f: str) -> SumoSettings:
+    """The :class:`SumoSettings` of a ``[scenario.sumo]`` table."""
+    T = declared("scenario.sumo")
+    T.check(table, f)
+    return SumoSettings(**{k: T.get(table, k, f) for k in
+                           ("car_following", "step_method", "sigma", "vehicle_length")})

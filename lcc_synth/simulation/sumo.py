@@ -1,0 +1,420 @@
+"""Co-simulation in SUMO: the scenario's string on a SUMO road, the HDVs driven by SUMO's
+car-following models, the CAV by any lcc_synth controller, stepped in-process with libsumo.
+
+:func:`simulate_sumo` is the ``backend = "sumo"`` counterpart of
+:func:`lcc_synth.simulation.engine.simulate`: the same arguments, the same
+:class:`~lcc_synth.simulation.results.SimResult` (metrics, tables, figures and recordings are
+unchanged), the open straight road with one CAV (the built-in simulator's layout: column 0 the
+head, ``1..m`` the HDVs ahead, ``m + 1`` the CAV, the HDVs behind).
+
+Per scenario of the batch (one SUMO run each: ``libsumo.start`` / ``close``, one at a time per
+process):
+
+* a straight single-lane road built by ``netconvert`` (long enough for the head's prescribed
+  motion plus the string; :mod:`.sumo_net`), one vehicle type per HDV with its drawn
+  parameters (:func:`~lcc_synth.simulation.sumo_net.vehicle_types`), every vehicle inserted at
+  time 0 at the built-in simulator's initial state (equilibrium spacings at ``v*``, every speed
+  ``v*``), SUMO's step = the scenario's ``dt``;
+* the head, the CAV, and every HDV while a perturbation drives it, are commanded: speed mode
+  0 and lane-change mode 0 (SUMO's safety checks off), ``vehicle.setSpeed(v_k + dt a_k)`` each
+  step with ``a_k`` computed exactly as the built-in kernel does (perturbation overrides,
+  speed-profile tracking within the limits, the CAV's command clipped to ``[a_min, a_max]``
+  then emergency braking eq. 29 on the state read from SUMO, speeds kept >= 0); an HDV is
+  released to SUMO's model when its perturbation ends;
+* the CAV's controller sees what it would see in the built-in simulator: the same V2V model
+  (loss, latency, noise; the built-in simulator's compiled observation routine and its random
+  streams), at its sample time with zero-order hold;
+* collisions are SUMO's (``--collision.action warn``, ``collisionMinGapFactor = 0``:
+  ``libsumo.simulation.getCollisions``) and any spacing ``<= 0`` at a sample, whichever
+  comes first; as in the built-in simulator the scenario stops there (later samples NaN).
+
+The recorded acceleration of a sample is ``(v_{k+1} - v_k) / dt`` of SUMO's speeds (what SUMO
+applied); the spacing is SUMO's bumper-to-bumper gap (module docstring of :mod:`.sumo_net`).
+
+Differences from the built-in simulator (measured on ``problems/sumo_head_brake.toml``: an IDM
+string, v* = 15 m/s, the CAV and 10 HDVs behind, the head-brake profile, dt = 0.01 s;
+``tests/test_sumo.py`` checks them, ``benchmarks/bench_sumo.py`` prints them):
+
+* Integration. The built-in simulator is explicit Euler (``p_{k+1} = p_k + dt v_k``). SUMO's
+  default is semi-implicit Euler (``p_{k+1} = p_k + dt v_{k+1}``), ``step_method =
+  "ballistic"`` the mean speed (``p_{k+1} = p_k + dt (v_k + v_{k+1}) / 2``). That is the whole
+  difference: SUMO's IDM string equals the built-in IDM law integrated with SUMO's position
+  update to 1e-10 m. For equal speeds each gap moves by ``dt`` times the relative speed, which
+  the string carries on: all-HDV max |dv| 0.023 m/s, max |ds| 0.077 m, AAVE -0.13 %, fuel
+  -0.03 % (ballistic: half of each); h2 and MPC alike. First order in dt (x 5 at dt = 0.05 s),
+  and less than half of either simulator's own step error (0.05-0.06 m/s against a
+  dt = 0.0005 s run).
+* IDM sub-stepping. SUMO's IDM integrates its speed over ``round(dt / stepping)`` sub-steps
+  (``stepping`` 0.25 s by default, the leader's speed held); the backend sets ``stepping = dt``:
+  one sub-step, the built-in simulator's update. SUMO's default gives the same run, bit for bit,
+  up to dt = 0.25 s; at dt = 0.5 s (2 sub-steps) it moves velocities by up to 0.58 m/s.
+* Minimum gap. SUMO's ``minGap`` is the IDM jam distance ``s0`` inside the desired gap, and its
+  IDM reports a collision below ``collisionMinGapFactor x minGap`` (0.5 by default): the backend
+  sets the factor to 0 (collision = negative gap, the built-in definition) and reports SUMO's
+  bumper-to-bumper gap as the spacing (the vehicle length changes the run by < 1e-12).
+* Deceleration bound. SUMO never brakes harder than ``emergencyDecel`` (set to ``|a_min|``,
+  the built-in clip) and accelerates at most ``accel`` (the IDM ``a <= a_max``).
+
+Wall time: about 35 us per step for 12 vehicles at low load (0.25 s for the 70 s all-HDV run,
+0.42 s with a static gain called from Python every step; the built-in compiled loop takes
+3 ms); SUMO's own step is about a quarter of it, the rest this module's Python loop.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import threading
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lcc_synth.controllers.base import ControlContext, Controller, Observation
+from lcc_synth.simulation.kernels import _observe_all
+from lcc_synth.simulation.perturbations import overrides
+from lcc_synth.simulation.results import SimResult
+from lcc_synth.simulation.scenario import MODEL_PARAMS, Draws, Scenario
+from lcc_synth.simulation.sumo_net import (
+    require_sumo,
+    route_file,
+    straight_road,
+    vehicle_types,
+)
+
+__all__ = ["simulate_sumo", "head_travel", "merge_stats"]
+
+#: libsumo holds one simulation per process: runs from several threads take turns.
+_LOCK = threading.Lock()
+#: Road lengths already built in this process (netconvert once per length).
+_NETS: dict[tuple[float, float], Path] = {}
+_DIR: tempfile.TemporaryDirectory | None = None
+
+#: Free road (m) before the tail and after the head's furthest position.
+_MARGIN = 50.0
+
+
+def _work_dir() -> Path:
+    global _DIR
+    if _DIR is None:
+        _DIR = tempfile.TemporaryDirectory(prefix="lcc-sumo-")
+    return Path(_DIR.name)
+
+
+def head_travel(acc_ovr: np.ndarray, spd_ovr: np.ndarray, v0: float, dt: float,
+                a_min: float, a_max: float) -> float:  # fmt: skip
+    """Distance (m) the head vehicle covers under its prescribed motion (cruise at ``v0``
+    unless a perturbation drives it), integrated as the backend commands it."""
+    v, dist = float(v0), 0.0
+    for k in range(acc_ovr.shape[0]):
+        a = 0.0
+        if acc_ovr[k, 0] == acc_ovr[k, 0]:
+            a = float(acc_ovr[k, 0])
+        if spd_ovr[k, 0] == spd_ovr[k, 0]:
+            a = min(max((float(spd_ovr[k, 0]) - v) / dt, a_min), a_max)
+        v = max(v + dt * a, 0.0)
+        dist += dt * v
+    return dist
+
+
+def _road(length: float, speed: float) -> Path:
+    key = (float(np.ceil(length / 100.0) * 100.0), float(speed))
+    if key not in _NETS:
+        _NETS[key] = straight_road(key[0], key[1], _work_dir() / f"road_{len(_NETS)}")
+    return _NETS[key]
+
+
+def merge_stats(stats: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """One statistics dict from the per-scenario ``controller.stats()`` of a batch run
+    scenario by scenario: integers summed (``steps``, the controller's samples, counted once as
+    for a batch run together: the maximum), ``max*`` values the maximum, lists concatenated,
+    other numbers averaged over the scenarios (e.g. a median time becomes the mean of the
+    per-scenario medians); nested dicts alike."""
+    stats = [s for s in stats if s]
+    if not stats:
+        return {}
+    if len(stats) == 1:
+        return dict(stats[0])
+    out: dict[str, Any] = {}
+    for key in stats[0]:
+        vals = [s.get(key) for s in stats]
+        real = [v for v in vals if v is not None]
+        first = real[0] if real else None
+        if first is None:
+            out[key] = None
+        elif isinstance(first, dict):
+            out[key] = merge_stats([v for v in real if isinstance(v, dict)])
+        elif isinstance(first, list | tuple):
+            out[key] = [x for v in real for x in v]
+        elif isinstance(first, bool):
+            out[key] = any(real)
+        elif isinstance(first, int | np.integer) and all(isinstance(v, int | np.integer)
+                                                        for v in real):  # fmt: skip
+            keep_max = str(key).startswith("max") or key == "steps"
+            out[key] = max(real) if keep_max else int(sum(real))
+        elif isinstance(first, float | int | np.floating):
+            out[key] = (max(real) if str(key).startswith("max")
+                        else float(np.mean(real)))  # fmt: skip
+        else:
+            out[key] = first
+    return out
+
+
+def _start_args(sc: Scenario, net: Path, routes: Path, seed: int) -> list[str]:
+    args = ["sumo", "--net-file", str(net), "--route-files", str(routes),
+            "--step-length", repr(float(sc.dt)), "--begin", "0",
+            "--collision.action", "warn", "--collision.mingap-factor", "0",
+            "--time-to-teleport", "-1", "--no-step-log", "true", "--no-warnings", "true",
+            "--duration-log.disable", "true", "--seed", str(seed)]  # fmt: skip
+    if sc.sumo.step_method == "ballistic":
+        args += ["--step-method.ballistic", "true"]
+    return args
+
+
+def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, spd_ovr, ratio,
+         out: dict[str, np.ndarray]) -> dict[str, Any]:  # fmt: skip
+    """Run scenario ``b`` of the batch in SUMO; fills row ``b`` of ``out``; returns the
+    controller's statistics."""
+    from lcc_synth.simulation.engine import _steps_of
+
+    sumo = require_sumo()
+    nv, T, dt, cav = sc.n_vehicles, sc.steps, float(sc.dt), sc.cav
+    is_cav = np.full(nv, -1, dtype=np.int64)  # the observation kernel's CAV index per column
+    is_cav[cav] = 0
+    t = sc.times()
+    L_veh = float(sc.sumo.vehicle_length)
+    a_min, a_max = float(sc.a_min), float(sc.a_max)
+    v_star = float(sc.v_star)
+
+    s0 = np.nan_to_num(draws.initial_spacing[b], nan=0.0)
+    p = -np.cumsum(s0)  # built-in frame: head at 0
+    v = np.full(nv, v_star)
+    origin = _MARGIN - float(p[-1]) + nv * L_veh  # SUMO lane position of the head's front
+    travel = head_travel(acc_ovr, spd_ovr, v_star, dt, a_min, a_max)
+    names = MODEL_PARAMS["idm"]
+    params = {k: draws.hdv_values[k][b] for k in names}
+    vmax = max(float(np.max(params["v0"])), v_star, float(np.nanmax(spd_ovr, initial=0.0)))
+    net = _road(origin + travel + 2 * _MARGIN, 2.0 * vmax + 10.0)
+    hdv_mask = sc.is_hdv()
+    types = []
+    for j in range(nv):
+        idm = {k: float(params[k][j]) for k in names}
+        if not hdv_mask[j]:  # commanded vehicles: no speed cap from their type
+            idm["v0"] = 2.0 * vmax + 10.0
+        types.append(vehicle_types(sc.sumo, idm, dt, a_min))
+    departures = [(origin + float(p[j]) - j * L_veh, v_star) for j in range(nv)]
+    run_dir = Path(tempfile.mkdtemp(prefix="run_", dir=_work_dir()))
+    routes = route_file(run_dir / "string.rou.xml", types, departures)
+    ids = [f"v{j}" for j in range(nv)]
+    seed = int(np.random.default_rng([int(sc.seed), int(sc.first_index) + b]).integers(2**31 - 1))
+
+    # V2V: the built-in observation routine on a batch of one (random streams of scenario
+    # first_index + b), its latency ring buffer filled with the equilibrium cruise
+    lat = _steps_of(sc.v2v.latency, dt, "scenario.v2v.latency", multiple=False)
+    L = lat + 1
+    P, V = p[None].copy(), v[None].copy()
+    if L > 1:
+        back = np.arange(L)
+        hp = np.empty((L, 1, nv))
+        hv = np.empty((L, 1, nv))
+        hp[(-back) % L] = P[None] - (back * dt)[:, None, None] * V[None]
+        hv[(-back) % L] = V[None]
+    else:
+        hp = np.empty((1, 1, 1))
+        hv = np.empty((1, 1, 1))
+    loss = sc.v2v.rates(nv)
+    noise = np.array([sc.v2v.spacing_noise, sc.v2v.velocity_noise, sc.v2v.position_noise])
+    obs_p, obs_v = P.copy(), V.copy()
+    obs_s = np.concatenate([np.full((1, 1), np.nan), P[:, :-1] - P[:, 1:]], axis=1)
+    alive = np.ones(1, dtype=np.bool_)
+
+    s_star = np.array([sc.s_star])
+    if sc.spacing_reference == "own_equilibrium":
+        s_ref = draws.initial_spacing[b].copy()
+        s_ref[0] = sc.s_star
+    else:
+        s_ref = np.full(nv, sc.s_star)
+    ctx = ControlContext(sc.m, sc.n, 1, dt, np.array([v_star]), s_star, a_min, a_max, sc.hdv,
+                         s_ref=s_ref[None].copy())  # fmt: skip
+    controller.reset(ctx)
+
+    stride = sc.record_every
+    o_p, o_v, o_a, o_s = (out[k][b] for k in ("position", "velocity", "acceleration", "spacing"))
+    o_u, o_aeb = out["u_cmd"][b], out["aeb_active"][b]
+    o_p[:], o_v[:], o_a[:], o_s[:], o_u[:] = np.nan, np.nan, np.nan, np.nan, np.nan
+    collided, ctime = out["collided"][b], out["collision_time"][b]
+    commanded = np.zeros(nv, dtype=bool)
+    commanded[0] = commanded[cav] = True
+    u_hold = 0.0
+    abs_min = abs(a_min)
+
+    var_pos, var_speed = sumo.constants.VAR_LANEPOSITION, sumo.constants.VAR_SPEED
+    shift = np.arange(nv) * L_veh - origin  # SUMO lane position -> built-in position
+    # the columns commanded at some step: head, CAV, every HDV a perturbation drives
+    ever = np.isfinite(acc_ovr) | np.isfinite(spd_ovr)
+    cols = sorted({0, cav} | set(np.flatnonzero(ever.any(axis=0)).tolist()))
+
+    def read() -> tuple[np.ndarray, np.ndarray]:
+        got = sumo.vehicle.getAllSubscriptionResults()
+        x = np.array([got[i][var_pos] for i in ids])
+        return x + shift, np.array([got[i][var_speed] for i in ids])
+
+    sumo.start(_start_args(sc, net, routes, seed))
+    try:
+        sumo.simulationStep()  # inserts every vehicle at its departure state: sample 0
+        for j in np.flatnonzero(commanded):
+            sumo.vehicle.setSpeedMode(ids[j], 0)
+        for i in ids:
+            sumo.vehicle.setLaneChangeMode(i, 0)
+            sumo.vehicle.subscribe(i, (var_pos, var_speed))
+        p, v = read()
+        hit_sumo: set[int] = set()
+        for k in range(T):
+            rec = k % stride == 0
+            r = k // stride
+            spacing = np.concatenate([[np.nan], p[:-1] - p[1:]])
+            hit = set(hit_sumo)
+            if np.any(spacing[1:] <= 0.0):
+                hit |= set((np.flatnonzero(spacing[1:] <= 0.0) + 1).tolist())
+            if rec:
+                o_p[r], o_v[r], o_s[r] = p, v, spacing
+            if hit:
+                for j in hit:
+                    collided[j] = True
+                    ctime[j] = t[k]
+                break
+            P[0], V[0] = p, v
+            if L > 1:
+                hp[k % L, 0], hv[k % L, 0] = p, v
+            if k % ratio == 0:
+                _observe_all(k, P, V, hp, hv, L, lat, loss, noise, int(sc.seed),
+                             int(sc.first_index) + b, is_cav, False, 0.0,
+                             obs_s, obs_v, obs_p, alive)  # fmt: skip
+                u = np.asarray(
+                    controller(Observation(float(t[k]), obs_s.copy(), obs_v.copy(), obs_p.copy())),
+                    dtype=float,
+                ).reshape(-1)
+                if u.shape != (1,):
+                    raise RuntimeError(
+                        f"controller {controller.name!r} returned shape {u.shape}, expected (1,)"
+                    )
+                if not np.isfinite(u[0]):
+                    raise RuntimeError(
+                        f"controller {controller.name!r} returned a non-finite command at "
+                        f"t = {t[k]:g} s for scenario {b}"
+                    )
+                u_hold = float(u[0])
+            aeb = False
+            for j in cols:
+                ov, sv = acc_ovr[k, j], spd_ovr[k, j]
+                driven = bool(ever[k, j])
+                if j == 0:
+                    a = 0.0
+                elif j == cav:
+                    a = min(max(u_hold, a_min), a_max)
+                    if sc.cav_aeb and (v[j] ** 2 - v[j - 1] ** 2) / (2.0 * spacing[j]) >= abs_min:
+                        a, aeb = a_min, True
+                elif driven:
+                    a = 0.0
+                else:
+                    if commanded[j]:  # its perturbation ended: back to SUMO's model
+                        sumo.vehicle.setSpeed(ids[j], -1.0)
+                        sumo.vehicle.setSpeedMode(ids[j], 31)
+                        commanded[j] = False
+                    continue
+                if ov == ov:
+                    a = float(ov)
+                if sv == sv:
+                    a = min(max((float(sv) - v[j]) / dt, a_min), a_max)
+                if driven and j == cav:
+                    aeb = False
+                if driven and not commanded[j]:
+                    sumo.vehicle.setSpeedMode(ids[j], 0)
+                    commanded[j] = True
+                sumo.vehicle.setSpeed(ids[j], max(v[j] + dt * a, 0.0))
+            sumo.simulationStep()
+            hit_sumo = {ids.index(c.collider) for c in sumo.simulation.getCollisions()
+                        if c.collider in ids}  # fmt: skip
+            p_next, v_next = read()
+            if rec:
+                o_a[r] = (v_next - v) / dt
+                o_u[r] = u_hold
+                o_aeb[r] = aeb
+            p, v = p_next, v_next
+    finally:
+        sumo.close()
+        shutil.rmtree(run_dir, ignore_errors=True)
+    return controller.stats()
+
+
+def simulate_sumo(
+    scenario: Scenario, controller: Controller, draws: Draws | None = None
+) -> SimResult:
+    """Run ``controller`` on every scenario of the batch in SUMO (module docstring).
+
+    Parameters
+    ----------
+    scenario : Scenario
+        With ``backend = "sumo"`` (or any scenario that passes
+        :func:`~lcc_synth.simulation.sumo_net.check_sumo_scenario`); its ``sumo`` settings
+        choose the car-following model and SUMO's integration scheme.
+    controller : Controller
+        Any object of the controller protocol, called from Python at its sample time (reset
+        once per scenario, with a batch of one).
+    draws : Draws, optional
+        Per-vehicle draws (default ``scenario.draw()``).
+
+    Returns
+    -------
+    SimResult
+        As :func:`lcc_synth.simulation.engine.simulate`; ``controller_stats`` merges the
+        per-scenario statistics (:func:`merge_stats`).
+    """
+    from lcc_synth.simulation.engine import _steps_of
+    from lcc_synth.simulation.sumo_net import check_sumo_scenario
+
+    wall0 = time.perf_counter()
+    sc = scenario
+    check_sumo_scenario(sc)
+    require_sumo()
+    draws = sc.draw() if draws is None else draws
+    B, nv, T, dt = sc.batch, sc.n_vehicles, sc.steps, sc.dt
+    ts = controller.sample_time
+    ratio = 1 if ts is None else _steps_of(
+        ts, dt, f"controllers.{controller.name}.sample_time", multiple=True
+    )
+    acc_ovr, spd_ovr = overrides(sc.perturbations, sc.times(), dt, sc.m, sc.n)
+    Tr = (T - 1) // sc.record_every + 1
+    out = {
+        "position": np.empty((B, Tr, nv)),
+        "velocity": np.empty((B, Tr, nv)),
+        "acceleration": np.empty((B, Tr, nv)),
+        "spacing": np.empty((B, Tr, nv)),
+        "u_cmd": np.empty((B, Tr)),
+        "aeb_active": np.zeros((B, Tr), dtype=np.bool_),
+        "collided": np.zeros((B, nv), dtype=np.bool_),
+        "collision_time": np.full((B, nv), np.nan),
+    }
+    stats = []
+    with _LOCK:
+        for b in range(B):
+            stats.append(_one(sc, controller, draws, b, acc_ovr, spd_ovr, ratio, out))
+    return SimResult(
+        t=sc.times()[:: sc.record_every].copy(),
+        **out,
+        m=sc.m,
+        n=sc.n,
+        cav=sc.cav,
+        v_star=np.full(B, float(sc.v_star)),
+        s_star=np.full(B, sc.s_star),
+        controller=controller.name,
+        controller_info=controller.describe(),
+        controller_stats=merge_stats(stats),
+        dt=dt * sc.record_every,
+        sim_dt=dt,
+        scenario=sc,
+        draws=draws,
+        wall_time=time.perf_counter() - wall0,
+    )

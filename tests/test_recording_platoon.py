@@ -1,0 +1,98 @@
+"""Recordings of several CAVs and of the ring road: the ring drawn as a circle (angle
+``2 pi p / C``), one command series per CAV, CAVs colour-coded, read back from the file."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rerun")
+
+from rerun.chunk import RrdReader  # noqa: E402
+
+from lcc_synth import recording as R  # noqa: E402
+from lcc_synth.experiments.spec import load_spec  # noqa: E402
+from lcc_synth.recording.simulation import (  # noqa: E402
+    CAV_COLORS,
+    RING_V_SCALE,
+    ring_view,
+    vehicle_style,
+)
+from lcc_synth.simulation.engine import simulate  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _chunks(path: Path) -> dict[str, list]:
+    out: dict[str, list] = {}
+    for ch in RrdReader(path).stream():
+        out.setdefault(ch.entity_path, []).append(ch)
+    return out
+
+
+def _temporal(chunks, entity: str, component: str) -> list:
+    times, values = [], []
+    for ch in chunks[entity]:
+        if ch.is_static:
+            continue
+        rb = ch.to_record_batch()
+        if component in rb.schema.names:
+            times.append(rb.column("time").cast("int64").to_numpy())
+            values += rb.column(component).to_pylist()
+    order = np.argsort(np.concatenate(times), kind="stable")
+    return [values[i] for i in order]
+
+
+def _record(tmp_path, problem: str, duration: float):
+    spec = load_spec(ROOT / "problems" / problem)
+    sc = replace(spec.scenario, duration=duration)
+    results = {n: simulate(sc, c) for n, c in spec.controllers.items()}
+    path = tmp_path / f"{spec.name}.rrd"
+    with R.open_recording(path, spec.name, R.simulation_blueprint(spec.name, list(results))) as rec:
+        for res in results.values():
+            R.record_simulation(rec, res, spec.name)
+    return path, results, spec.name
+
+
+def test_ring_road_view_is_the_circle_of_the_positions(tmp_path):
+    path, results, name = _record(tmp_path, "ring_stop_and_go.toml", 60.0)
+    chunks = _chunks(path)
+    res = results["all_hdv"]
+    C = res.circumference
+    road = np.array(_temporal(chunks, f"/{name}/all_hdv/road", "Points2D:positions"))
+    assert road.shape == (len(res.t), 20, 2)
+    p, v = res.position[0], res.velocity[0]
+    # angle 2 pi p / C (positions are not wrapped by the simulator)
+    ang = np.angle(road[..., 0] + 1j * road[..., 1])
+    want = 2 * np.pi * np.mod(p, C) / C
+    assert np.abs(np.angle(np.exp(1j * (ang - want)))).max() < 1e-5
+    radius = np.hypot(road[..., 0], road[..., 1])
+    R0 = C / (2 * np.pi)
+    assert np.allclose(radius, R0 * (1 + RING_V_SCALE * (v - 15.0)), rtol=1e-5)
+    assert p.max() > 2 * C  # the vehicles went round more than twice (p is not wrapped)
+    # the initial state: 20 m apart on the circle (an angle of 2 pi / 20 between neighbours)
+    assert np.allclose(np.diff(np.unwrap(ang[0])), -2 * np.pi / 20, atol=1e-5)
+    # spacing series of all 20 vehicles (column 0's gap to the last vehicle included)
+    sp = np.array(_temporal(chunks, f"/{name}/all_hdv/spacing", "Scalars:scalars"))
+    np.testing.assert_array_equal(sp, res.spacing[0])
+    np.testing.assert_allclose(ring_view(np.array([0.0, -C / 4]), 15.0, 15.0, C),
+                               [[R0, 0.0], [0.0, -R0]], atol=1e-9)  # fmt: skip
+
+
+def test_platoon_recording_has_one_command_per_cav_and_coloured_cavs(tmp_path):
+    path, results, name = _record(tmp_path, "platoon_deeplcc_brake.toml", 10.0)
+    chunks = _chunks(path)
+    res = results["lqr"]
+    u = np.array(_temporal(chunks, f"/{name}/lqr/cav/u_cmd", "Scalars:scalars"))
+    np.testing.assert_array_equal(u, res.u_cmd[0])
+    assert u.shape == (len(res.t), 2)
+    names, colors, _ = vehicle_style(res)
+    assert names == ["head", "p1", "p2", "cav3", "p4", "p5", "cav6", "p7", "p8"]
+    assert tuple(colors[3]) == CAV_COLORS[0] and tuple(colors[6]) == CAV_COLORS[1]
+    road = np.array(_temporal(chunks, f"/{name}/lqr/road", "Points2D:positions"))
+    np.testing.assert_array_equal(
+        road[..., 0], (res.position[0] - res.position[0, :, 3:4]).astype(np.float32)
+    )
