@@ -71,7 +71,7 @@ def one_cav(full_steps: int) -> None:
     st = res.controller_stats
     print("1. one CAV, n = 10, T = 2000, Tini = 20, N = 50 (problems/deeplcc_head_brake.toml)")
     print(f"   data collection (2000 samples, no cache): {t_collect:.2f} s; reduction + "
-          f"CasADi formulation: {deep.setup_time:.2f} s; QP: {deep.qp.n_nu + deep.qp.n_w} "
+          f"CasADi formulation: {deep.setup_time:.2f} s; QP: {deep.qp.n_var} "
           f"variables, {3 * deep.qp.n_w} constraints (g has {deep.data_columns})")
     print("   deep_lcc step ms ", dist(np.array(deep._st["step_time"]) * 1e3))
     print("   deep_lcc OSQP ms ", dist(np.array(deep._st["osqp_time"]) * 1e3))
@@ -186,7 +186,7 @@ def two_cav(steps: int = 800) -> None:
         v_head += Ts * a_head
     stt = ctrl.stats()
     print(f"3. two CAVs (positions 3, 6 of 8), T = 2000: reduction + formulation {setup:.2f} s, "
-          f"QP {ctrl.qp.n_nu + ctrl.qp.n_w} variables (g has {ctrl.data_columns})")
+          f"QP {ctrl.qp.n_var} variables (g has {ctrl.data_columns})")
     print("   deep_lcc step ms ", dist(np.array(ctrl._st["step_time"]) * 1e3))
     print("   deep_lcc CPU ms  ", dist(cpu))
     print(f"   iterations median {stt['iterations']['median']:.0f} max "

@@ -192,9 +192,9 @@ class DeePLCCController:
         self._members = []
         n_w = self.qp.n_w
         for b in range(ctx.batch):
-            lo, hi = self.qp.bounds(np.zeros(2 * n_w), self._a_min, self._a_max,
-                                    np.full(n_w, -np.inf))  # fmt: skip
-            solver = OSQPSolver(self.qp.qp, self.qp.q, lo, hi, self.settings.solver)
+            q, lo, hi = self.qp.vectors(np.zeros(2 * n_w), self._a_min, self._a_max,
+                                        np.full(n_w, -np.inf))  # fmt: skip
+            solver = OSQPSolver(self.qp.qp, q, lo, hi, self.settings.solver)
             s_off = np.asarray(ctx.spacing_reference()[b], float) - float(ctx.s_star[b])
             s_off = np.nan_to_num(s_off, nan=0.0)[list(self.cavs)]
             mem = _Member(solver, s_off, np.zeros(Wn), np.zeros((Tini + 1, self.nv)),
@@ -289,11 +289,11 @@ class DeePLCCController:
         cvec = red.Cb @ bvec + red.Cy @ y_ini
         N = self.settings.horizon
         b_w = np.tile(c.s_min + c.margin + c.t_gap * mem.v_eq - s_eq, N)
-        lo, hi = qp.bounds(cvec, self._a_min, self._a_max, b_w)
+        q, lo, hi = qp.vectors(cvec, self._a_min, self._a_max, b_w)
         warm = mem.warm
         mem.solver.force_failure = self.force_failure
         res = mem.solver.solve(
-            qp.q, lo, hi,
+            q, lo, hi,
             None if warm is None else warm[0][self._shift_z],
             None if warm is None else warm[1][self._shift_y],
         )  # fmt: skip
@@ -307,10 +307,8 @@ class DeePLCCController:
             return self._fallback(mem, obs, b, s_eq, res.status)
         z = res.z
         mem.warm = (z, res.y)
-        n_w = qp.n_w
-        nu = z[: qp.n_nu]
-        plan = (cvec[:n_w] + qp.Gamma[:n_w] @ nu).reshape(N, self.n_c)
-        slack = float(z[qp.n_nu:].max())
+        plan = qp.plan(z).reshape(N, self.n_c)
+        slack = float(qp.slack(z).max())
         if slack > 1e-6:
             st["slack_steps"] += 1
             st["max_slack"] = max(st["max_slack"], slack)
@@ -422,7 +420,7 @@ class DeePLCCController:
                 "formulation": "exact reduction of the QP in g (lcc_synth.deeplcc.hankel), "
                                "CasADi, built once",
                 "g_columns": self.data_columns,
-                "variables": self.qp.n_nu + self.qp.n_w,
+                "variables": self.qp.n_var,
                 "constraints": 3 * self.qp.n_w,
                 "setup_time_s": self.setup_time,
                 "solver": f"osqp {osqp.__version__}",

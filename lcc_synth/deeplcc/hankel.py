@@ -36,12 +36,14 @@ and ``M = (I - Q_A Q_A') Z_C``:
     Gamma = M' M,   c = Z_C' Q_A R_A^-T b - M' Z_f y_ini,   G = L^-T M,
     g0 = L^-T (Q_A R_A^-T b - (I - Q_A Q_A') Z_f y_ini),   Z_f = L^-1 (-2 lambda_y Y_p').
 
-So the online QP has ``dim C = 2 N n_c`` variables ``nu`` (plus the spacing slacks) instead
+So the online QP needs at most ``dim C = 2 N n_c`` unknowns (plus the spacing slacks) instead
 of ``K`` (1931 for T = 2000), with constant matrices; ``Gamma`` is a Gram matrix (positive
 semidefinite by construction, possibly singular: with exact noise-free data the future
-outputs are determined and ``Gamma`` has rank ``N n_c + min(n_x, N n_c)``, which the
-``nu``-form handles without any rank decision, unlike a value function in ``C g``, which would
-be infinite off a subspace). Only ``A`` must have full row rank: the persistency-of-excitation
+outputs are determined and ``Gamma`` has rank ``N n_c + min(n_x, N n_c)``; the ``nu``-form
+needs no rank decision, unlike a value function in ``C g``, which would be infinite off a
+subspace). :mod:`lcc_synth.deeplcc.qp` solves it in the future inputs and the spacings'
+deviation from what they imply, the variables in which it is well conditioned.
+Only ``A`` must have full row rank: the persistency-of-excitation
 check (:mod:`lcc_synth.deeplcc.data`) guarantees it.
 
 Numerical limits (measured): for the head-brake data (T = 2000, n = 10, default weights) ``H``
@@ -167,7 +169,7 @@ class ReducedQP:
     B : numpy.ndarray
         ``(nC, r)`` factor ``Gamma = B B'`` on its range (``B = V sqrt(Lambda)`` over the
         eigenvalues above round-off, ``nC eps lambda_max``): ``B B'`` is the exactly positive
-        semidefinite ``Gamma`` the online QP uses (:mod:`lcc_synth.deeplcc.qp`).
+        semidefinite ``Gamma`` the online QP is built from (:mod:`lcc_synth.deeplcc.qp`).
     n_u : int
         Rows of ``C`` that are future inputs (``N n_c``); the rest are the ``w`` rows.
     """
