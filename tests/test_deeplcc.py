@@ -399,3 +399,28 @@ def test_absolute_spacing_bound_opens_the_gap_when_closing_in(cache):
     assert margin[0] < -6.0 and abs(margin[-1]) < 0.05  # settles on the bound
     first = int(np.argmax(margin > -0.05))
     assert 0 < first and margin[first:].min() > -0.05  # once reached, it is kept
+
+
+def test_two_cavs_in_the_nonlinear_platoon_simulator(tmp_path):
+    """problems/platoon_deeplcc_brake.toml (CAVs at 3 and 6, heterogeneous noisy HDVs) with a
+    default DeeP-LCC: one command column per CAV, no collision, fuel and AAVE below all-HDV."""
+    from pathlib import Path
+
+    from lcc_synth.experiments.spec import load_spec
+    from lcc_synth.metrics import summary
+
+    path = Path(__file__).resolve().parents[1] / "problems" / "platoon_deeplcc_brake.toml"
+    spec = load_spec(path)
+    table = {"type": "deep_lcc", "data": {"cache_dir": str(tmp_path)}}
+    ctrl = deep_lcc_controller_from_table("deep_lcc", table, spec.system, str(path))
+    assert ctrl.cavs == (3, 6) and ctrl.p == 8 + 2
+    sc = replace(spec.scenario, duration=20.0)  # the brake and the recovery
+    draws = sc.draw()
+    res = simulate(sc, ctrl, draws)
+    base = simulate(sc, spec.controllers["all_hdv"], draws)
+    assert not res.collided.any() and res.controller_stats["errors"] == 0
+    h = ctrl.history()
+    assert h["u"].shape[-1] == 2 and not np.allclose(h["u"][0, :, 0], h["u"][0, :, 1])
+    cfg = replace(spec.metrics, window=(0.0, 20.0))
+    m, b = summary(res, cfg), summary(base, cfg)
+    assert m["aave"] < 0.95 * b["aave"] and m["fuel_ml"] < 0.95 * b["fuel_ml"]
