@@ -87,6 +87,10 @@ class SwitchedOn:
         """The wrapped controller's description plus ``start``."""
         return {**self.inner.describe(), "start": self.start}
 
+    def toml_table(self) -> dict[str, Any]:
+        """The wrapped controller's ``[controllers.NAME]`` table plus ``start``."""
+        return {**self.inner.toml_table(), "start": self.start}
+
     def stats(self) -> dict[str, Any]:
         """The wrapped controller's statistics."""
         return self.inner.stats()
