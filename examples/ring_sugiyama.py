@@ -39,6 +39,10 @@ def benchmark(problem: str | Path) -> tuple[dict, dict]:
         r = run_scenario(spec.scenario, ctrl, draws)
         s = summary(r, spec.metrics)
         rows[name] = {k: s[k] for k in KEYS} | {"wall_s": r.wall_time}
+        # fuel per distance driven (mL/km): a fixed window favours a slower ring
+        t0, t1 = spec.metrics.window
+        km = s["mean_speed"] * (t1 - t0) * r.n_vehicles / 1000.0
+        rows[name]["fuel_ml_per_km"] = s["fuel_ml"] / km
         results[name] = r
     return rows, results
 
@@ -55,9 +59,8 @@ def goals(rows: dict) -> dict:
         out["cut_80_8"] = out["velocity_std_reduction_pct"] >= 80.8
         for other in ("follower_stopper", "pi_saturation"):
             o = rows[other]
-            out[f"beats_{other}"] = bool(
-                b["velocity_std"] < o["velocity_std"] and b["fuel_ml"] < o["fuel_ml"]
-            ) if not math.isnan(o["velocity_std"]) else True  # fmt: skip
+            for k in ("velocity_std", "fuel_ml", "fuel_ml_per_km"):
+                out[f"beats_{other}_{k}"] = bool(b[k] < o[k]) if not math.isnan(o[k]) else True
         out["mean_speed_not_lower"] = bool(b["mean_speed"] >= base["mean_speed"])
     return out
 
@@ -70,10 +73,10 @@ def main() -> int:
     rows, results = benchmark(args.problem)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    head = f"{'controller':18s}" + "".join(f"{k:>16s}" for k in (*KEYS, "wall_s"))
+    head = f"{'controller':18s}" + "".join(f"{k:>16s}" for k in (*KEYS, "fuel_ml_per_km", "wall_s"))
     print(head)
     for name, r in rows.items():
-        print(f"{name:18s}" + "".join(f"{r[k]:16.4g}" for k in (*KEYS, "wall_s")))
+        print(f"{name:18s}" + "".join(f"{r[k]:16.4g}" for k in (*KEYS, "fuel_ml_per_km", "wall_s")))
     verdicts = goals(rows)
     print(json.dumps(verdicts, indent=1))
     (out / "ring_sugiyama.json").write_text(json.dumps({"table": rows, "goals": verdicts},

@@ -89,6 +89,8 @@ __all__ = [
     "velocity_std",
     "mean_speed",
     "braking_events",
+    "WAVE_METRICS",
+    "wave_metrics",
     "summary",
     "evaluate",
     "per_scenario",
@@ -421,6 +423,20 @@ def braking_events(
     return cross.sum(axis=(1, 2))
 
 
+#: The wave metrics (:func:`wave_metrics`) -> label.
+WAVE_METRICS = {"velocity_std": "velocity std (m/s)", "mean_speed": "mean speed (m/s)",
+                "braking_events": "braking events"}  # fmt: skip
+
+
+def wave_metrics(result, config: MetricsConfig | None = None) -> dict[str, np.ndarray]:
+    """:data:`WAVE_METRICS` of every scenario (``(batch,)`` each) over the config's window and
+    vehicle set."""
+    cfg = config or MetricsConfig()
+    return {"velocity_std": velocity_std(result, cfg.window, cfg.vehicles),
+            "mean_speed": mean_speed(result, cfg.window, cfg.vehicles),
+            "braking_events": braking_events(result, cfg.window, cfg.vehicles)}  # fmt: skip
+
+
 def _stat(x: np.ndarray, fn=np.nanmean) -> float:
     """Batch statistic over the scenarios where ``x`` is defined (NaN when none is)."""
     x = np.asarray(x, dtype=float)
@@ -445,9 +461,7 @@ def _per_scenario(result, cfg: MetricsConfig) -> dict[str, np.ndarray]:
     return {
         "aave": aave(result, cfg.window, cfg.vehicles),
         "fuel_ml": fuel(result, cfg.window, cfg.vehicles, cfg.accel_smoothing),
-        "velocity_std": velocity_std(result, cfg.window, cfg.vehicles),
-        "mean_speed": mean_speed(result, cfg.window, cfg.vehicles),
-        "braking_events": braking_events(result, cfg.window, cfg.vehicles),
+        **wave_metrics(result, cfg),
         "min_spacing": min_spacing(result),
         "min_ttc": min_time_to_collision(result),
         "max_abs_velocity_error": max_abs_velocity_error(result),
