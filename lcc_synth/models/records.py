@@ -115,11 +115,14 @@ def system_tables(system: Any) -> dict[str, Any]:
     if P is not None:
         hdv = system.hdv.toml_table()
         params = [k for k in hdv if k != "model"]
-        return {"hdv": hdv, "system": {
+        sys_t = {
             "kind": system.kind, "size": int(P.size), "cavs": [int(c) for c in P.cavs],
             "v_star": float(system.v_star),
             "hdv_values": {k: [float(getattr(h, k)) for h in P.hdv] for k in params},
-        }}  # fmt: skip
+        }  # fmt: skip
+        if P.vehicle_length:
+            sys_t["vehicle_length"] = float(P.vehicle_length)
+        return {"hdv": hdv, "system": sys_t}
     return {
         "hdv": system.hdv.toml_table(),
         "system": {"kind": system.kind, "m": int(system.m), "n": int(system.n),
