@@ -48,6 +48,7 @@ the ends of the run, as MATLAB's ``movmean``), over the window 0-40 s and the ve
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -66,6 +67,7 @@ __all__ = [
     "MetricsConfig",
     "metrics_from",
     "vehicle_columns",
+    "PHASE_PREFIX",
     "window_mask",
     "check_window",
     "bowyer_fuel_rate",
@@ -115,11 +117,16 @@ class MetricsConfig(Record):
     vehicles: str | tuple[int | str, ...] = "cav_and_behind"
     baseline: str | None = None
     accel_smoothing: int = 1
+    phases: tuple[tuple[str, tuple[float, float]], ...] = ()
 
     def __post_init__(self) -> None:
         t0, t1 = self.window
         if not (np.isfinite(t0) and np.isfinite(t1) and t1 > t0):
             raise ConfigError("metrics.window", f"must be [t0, t1] with t1 > t0, got {self.window}")
+        for name, (p0, p1) in self.phases:
+            if not (np.isfinite(p0) and np.isfinite(p1) and p1 > p0):
+                raise ConfigError(f"metrics.phases.{name}",
+                                  f"must be [t0, t1] with t1 > t0, got {[p0, p1]}")  # fmt: skip
         if isinstance(self.vehicles, str) and self.vehicles not in VEHICLE_SETS:
             raise ConfigError(
                 "metrics.vehicles",
@@ -138,6 +145,8 @@ class MetricsConfig(Record):
                "baseline": self.baseline}  # fmt: skip
         if self.accel_smoothing != 1:
             out["accel_smoothing"] = int(self.accel_smoothing)
+        if self.phases:
+            out["phases"] = {name: [float(t) for t in w] for name, w in self.phases}
         return out
 
 
@@ -457,10 +466,17 @@ def per_scenario(result, config: MetricsConfig | None = None) -> dict[str, np.nd
         return _per_scenario(result, cfg)
 
 
+#: Prefix of the per-phase fuel keys of :func:`per_scenario` (``"fuel_ml@NAME"``).
+PHASE_PREFIX = "fuel_ml@"
+
+
 def _per_scenario(result, cfg: MetricsConfig) -> dict[str, np.ndarray]:
+    phases = {f"{PHASE_PREFIX}{name}": fuel(result, w, cfg.vehicles, cfg.accel_smoothing)
+              for name, w in cfg.phases}  # fmt: skip
     return {
         "aave": aave(result, cfg.window, cfg.vehicles),
         "fuel_ml": fuel(result, cfg.window, cfg.vehicles, cfg.accel_smoothing),
+        **phases,
         **wave_metrics(result, cfg),
         "min_spacing": min_spacing(result),
         "min_ttc": min_time_to_collision(result),
@@ -484,9 +500,10 @@ def aggregate(per: dict[str, np.ndarray]) -> dict[str, Any]:
     """Summary of :func:`per_scenario` arrays (see :func:`summary`)."""
     a, f = per["aave"], per["fuel_ml"]
     ms, ttc, mv = per["min_spacing"], per["min_ttc"], per["max_abs_velocity_error"]
+    phases = {k[len(PHASE_PREFIX):]: v for k, v in per.items() if k.startswith(PHASE_PREFIX)}
     with warnings.catch_warnings():  # all-NaN slices: scenarios stopped by a collision
         warnings.simplefilter("ignore", RuntimeWarning)
-        return {
+        out = {
             "aave": _stat(a),
             "aave_std": _stat(a, np.nanstd),
             "aave_all": a.tolist(),
@@ -513,6 +530,9 @@ def aggregate(per: dict[str, np.ndarray]) -> dict[str, Any]:
             },
             "batch": int(a.shape[0]),
         }
+        if phases:  # [metrics] phases: the fuel of each window, as fuel_ml's
+            out["fuel_ml_phases"] = {name: _stat(x) for name, x in phases.items()}
+        return out
 
 
 def summary(result, config: MetricsConfig | None = None) -> dict[str, Any]:
@@ -526,7 +546,8 @@ def summary(result, config: MetricsConfig | None = None) -> dict[str, Any]:
     The CAV's jerk: ``rms_jerk_cav`` is the mean, ``max_jerk_1s_cav`` (:func:`max_jerk_1s`)
     the worst case, ``jerk_1s_margin_cav`` the least margin to ISO 15622's limit (negative:
     exceeded), ``jerk_1s_over_limit_s`` the total time above it (0: within the limit).
-    Per-vehicle lists are ordered head..tail (head spacing is NaN).
+    Per-vehicle lists are ordered head..tail (head spacing is NaN). With ``phases`` in the
+    config, ``fuel_ml_phases`` maps each phase name to its mean fuel (mL, as ``fuel_ml``).
     """
     return aggregate(per_scenario(result, config))
 
@@ -558,7 +579,27 @@ def metrics_from(
     baseline = table.get(mt, "baseline", f)
     if baseline is not None and controllers and baseline not in controllers:
         raise ConfigError(f"{f}.baseline", f"must name a controller, one of {list(controllers)}")
-    return MetricsConfig(window, vehicles, baseline, table.get(mt, "accel_smoothing", f))
+    phases = _phases_from(table.raw(mt, "phases"), scenario, f"{f}.phases")
+    return MetricsConfig(window, vehicles, baseline, table.get(mt, "accel_smoothing", f), phases)
+
+
+def _phases_from(raw, scenario, f: str) -> tuple[tuple[str, tuple[float, float]], ...]:
+    """``[metrics] phases``: ``{name = [t0, t1]}``, each inside the simulated time."""
+    if raw is None:
+        return ()
+    if not isinstance(raw, Mapping):
+        raise ConfigError(f, f"must be a table {{name = [t0, t1], ...}}, got {raw!r}")
+    out = []
+    for name, w in raw.items():
+        ok = isinstance(w, list | tuple) and len(w) == 2 and all(
+            isinstance(t, int | float) and not isinstance(t, bool) for t in w)  # fmt: skip
+        if not ok or not (math.isfinite(w[0]) and math.isfinite(w[1]) and w[1] > w[0]):
+            raise ConfigError(f"{f}.{name}", f"must be [t0, t1] (s) with t1 > t0, got {w!r}")
+        if scenario is not None:
+            t_end = scenario.t_start + scenario.steps * scenario.dt
+            check_window(tuple(w), scenario.t_start, t_end, scenario.dt, f"{f}.{name}")
+        out.append((str(name), (float(w[0]), float(w[1]))))
+    return tuple(out)
 
 
 def evaluate(

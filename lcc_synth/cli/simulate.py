@@ -117,6 +117,13 @@ def _pct(base, x):
         return 100.0 * (base - x) / base
 
 
+def _mean_finite(x) -> float:
+    import numpy as np
+
+    ok = np.isfinite(x)
+    return float(np.mean(x[ok])) if ok.any() else float("nan")
+
+
 def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str, Any]:
     """Report from the :func:`lcc_synth.metrics.per_scenario` arrays of every controller;
     ``info[name] = (controller_info, controller_stats, wall_time_s)``.
@@ -126,7 +133,7 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
     import numpy as np
 
     from lcc_synth.experiments.tables import collided
-    from lcc_synth.metrics import aggregate
+    from lcc_synth.metrics import PHASE_PREFIX, aggregate
 
     cfg = spec.metrics
     out: dict[str, Any] = {}
@@ -152,6 +159,11 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
                 "fuel_pct_std": float(np.std(rf[ok])) if ok.any() else nan,
                 "scenarios": int(ok.sum()),
             }
+            if cfg.phases:  # [metrics] phases: each phase's fuel reduction (mean over draws)
+                out[name]["reduction_vs_baseline"]["fuel_phases_pct"] = {
+                    p: _mean_finite(_pct(per[cfg.baseline][k], arrays[k]))
+                    for p, k in ((p, PHASE_PREFIX + p) for p, _ in cfg.phases)
+                }
     return dict(sorted(out.items(), key=lambda item: collided(item[1])))
 
 
@@ -241,12 +253,29 @@ def print_table(spec, rep: dict[str, Any], file=None, collisions=None) -> None:
     print("  ".join(c.ljust(w) for c, w in zip(cols, widths, strict=True)), file=file)
     for r in rows:
         print("  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)), file=file)
+    for line in phase_lines(rep, cfg):
+        print(line, file=file)
     for line in collision_lines(rep, collisions):
         print(line, file=file)
     from lcc_synth.cli.output import controller_stats_lines
 
     for line in controller_stats_lines({n: e["controller_stats"] for n, e in rep.items()}):
         print(line, file=file)
+
+
+def phase_lines(rep: dict[str, Any], cfg) -> list[str]:
+    """``fuel per phase (mL)`` lines of :func:`report` when ``[metrics] phases`` is set: each
+    controller's fuel of every phase (with its reduction versus the baseline)."""
+    if not cfg.phases:
+        return []
+    heads = ", ".join(f"{p} [{w[0]:g}, {w[1]:g}] s" for p, w in cfg.phases)
+    out = [f"fuel per phase (mL): {heads}"]
+    for name, e in rep.items():
+        red = (e.get("reduction_vs_baseline") or {}).get("fuel_phases_pct", {})
+        cells = [f"{e['fuel_ml_phases'][p]:.2f}" + (f" ({red[p]:+.2f} %)" if p in red else "")
+                 for p, _ in cfg.phases]  # fmt: skip
+        out.append(f"  {name}: " + ", ".join(cells))
+    return out
 
 
 def collision_lines(rep: dict[str, Any], collisions=None) -> list[str]:

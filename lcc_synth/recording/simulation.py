@@ -388,7 +388,11 @@ def record_mpc_history(
             rec, f"{base}/mpc/solve_time_ms", tcol, vals, [f"{k} time (ms)" for k, _ in times],
             _PALETTE[: len(times)],
         )  # fmt: skip
-    status = member("status", 0)
+    status = history.get("status")
+    if status is not None and np.ndim(status) == 3:  # (B, S, n_cav): the joint MPC's per CAV
+        status = np.asarray(status)[run].max(axis=1)[:S]  # the worst outcome of the step
+    else:
+        status = member("status", 0)
     if status is not None:
         code = status.astype(np.float64)
         vals = np.column_stack([code, (code > 0).astype(np.float64)])
@@ -399,9 +403,13 @@ def record_mpc_history(
     every = plan_every or max(1, S // 200)
     steps = np.arange(0, S, every)
     offsets = history.get("pred_time")
+    if offsets is None and "dt" not in history and np.ndim(history.get("plan")) == 4:
+        # the joint MPC (lcc_synth.mpc.platoon) predicts at its own period: t's spacing
+        offsets = (t[1] - t[0] if S > 1 else 0.0) * np.arange(np.shape(history["plan"])[2])
     for key, label in (("plan", "u"), ("predicted_velocity", "velocity"),
                        ("predicted_spacing", "spacing")):  # fmt: skip
-        pred = member(key, 1 if key == "plan" else 2)
+        # a plan is (B, S, N) or, the joint MPC's, (B, S, N, n_cav): one strip per CAV
+        pred = member(key, 1 if key == "plan" and np.ndim(history.get(key)) < 4 else 2)
         if pred is None:
             continue
         pred = np.asarray(pred, dtype=np.float64)[steps]

@@ -189,7 +189,7 @@ DEEP_LCC = Table(
      Key("weights", "table", "Cost: [controllers.NAME.weights].", {}),
      Key("constraints", "table", "Bounds: [controllers.NAME.constraints].", {}),
      Key("solver", "table", "OSQP settings: [controllers.NAME.solver].", {}),
-     Key("data", "table", "Offline data: [controllers.NAME.data].", {})),
+     Key("data", "table", "Offline data: [controllers.NAME.data].", {}), _START),
     variant=_DEEP,
 )
 DEEP_LCC_WEIGHTS = Table(

@@ -315,6 +315,9 @@ METRICS = Table(
             "paper: 9).", 1, lo=1, hi=1001),
         Key("baseline", "string", "A controller name: report reductions versus it (not in "
             "run).", None),
+        Key("phases", "table", "Fuel over several windows of the same run: {name = [t0, t1], "
+            "...} (s, closed as window, inside the simulated time); reported as "
+            "fuel_ml_phases (and fuel_phases_pct versus the baseline).", None),
     ),
 )
 
