@@ -27,6 +27,11 @@ row rank. Data that fail are refused with a :class:`ConfigError` naming the data
 table. A collision or emergency braking during collection is refused the same way (the
 recorded inputs are then not the excitation).
 
+**Progress.** A collection that runs longer than :data:`BAR_DELAY` = 1 s shows a progress bar
+on stderr (one step per simulation sample; measured 0.55 s for T = 2000 on a loaded 2-core
+machine, so usually nothing is printed); the reduction that follows is timed in the
+controller's ``setup_time``.
+
 **Cache.** The data are a deterministic function of the collection scenario and the data
 table; the file ``deeplcc-<hash>.npz`` (SHA-256 of a canonical JSON of both, the package's
 data-format version included) in ``cache_dir`` is reused by later runs.
@@ -38,6 +43,7 @@ import hashlib
 import json
 import math
 import os
+import sys
 import uuid
 from dataclasses import dataclass, fields, is_dataclass, replace
 from pathlib import Path
@@ -53,6 +59,7 @@ from lcc_synth.resources import progress
 
 __all__ = [
     "PE_THRESHOLD",
+    "BAR_DELAY",
     "FORMAT_VERSION",
     "DataSettings",
     "Excitation",
@@ -60,6 +67,7 @@ __all__ = [
     "excitation",
     "check_excitation",
     "collection_scenario",
+    "collection_bar",
     "collect",
     "data_key",
     "load_or_collect",
@@ -123,10 +131,11 @@ class Excitation:
     name = "deep_lcc_excitation"
     sample_time = None
 
-    def __init__(self, values: np.ndarray):
+    def __init__(self, values: np.ndarray, bar=None):
         self.values = np.asarray(values, dtype=float)
         self._k = 0
         self._batch = 1
+        self.bar = bar  # a progress bar (tqdm) advanced by one per step, or None
 
     def reset(self, ctx: ControlContext) -> None:
         """Restart the sequence."""
@@ -136,6 +145,8 @@ class Excitation:
     def __call__(self, obs: Observation) -> np.ndarray:
         row = self.values[min(self._k, len(self.values) - 1)]
         self._k += 1
+        if self.bar is not None:
+            self.bar.update(1)
         out = np.broadcast_to(row, (self._batch, row.size)).copy()
         return out[:, 0] if row.size == 1 else out
 
@@ -265,6 +276,20 @@ def collection_scenario(base, settings: DataSettings):
     return replace(base, **changes)
 
 
+#: Seconds a collection runs before its progress bar appears on stderr.
+BAR_DELAY = 1.0
+
+
+def collection_bar(steps: int):
+    """The collection's progress bar on stderr (tqdm, as
+    :func:`lcc_synth.experiments.comparison.progress_bar`), shown only once the collection
+    has run :data:`BAR_DELAY` s (a cached or quick collection prints nothing)."""
+    from tqdm import tqdm
+
+    return tqdm(total=steps, desc="deep_lcc data", file=sys.stderr, delay=BAR_DELAY,
+                leave=True, dynamic_ncols=True, unit="step")  # fmt: skip
+
+
 def collect(scenario, settings: DataSettings) -> DataSet:
     """Run the collection (module docstring) on the collection ``scenario``.
 
@@ -290,7 +315,8 @@ def collect(scenario, settings: DataSettings) -> DataSet:
     head = Profile(tuple(times.tolist()), tuple(accel.tolist()), "accel", "step", "head")
     sc = replace(scenario, perturbations=(head,))
     progress(f"deep_lcc: collecting {T} data samples at dt = {dt:g} s (seed {settings.seed})")
-    res = simulate(sc, Excitation(u_cmd))
+    with collection_bar(steps) as bar:
+        res = simulate(sc, Excitation(u_cmd, bar))
     if res.collided.any():
         who = "; ".join(res.collision_report())
         raise ConfigError(settings.field, f"the data collection collided ({who}): lower "
