@@ -142,7 +142,7 @@ def test_reduced_qp_equals_the_full_qp_in_g(noise):
     c = red.Cb @ np.concatenate([u_ini, e_ini, e_f]) + red.Cy @ y_ini
     qv, lo, hi = dqp.vectors(c, a[0], a[1], b_w)
     x = solve_exact(dqp.qp, qv, lo, hi)
-    u_red, sig_red = dqp.plan(x, c), dqp.slack(x)
+    u_red, sig_red = dqp.plan(x), dqp.slack(x)
     u_full, sig_full = _full_qp_first_moves(win, q, r, lam_g, lam_y, W, (u_ini, e_ini, e_f),
                                             y_ini, a, b_w, slack)  # fmt: skip
     assert np.isclose(u_full.min(), a[0], atol=1e-6) or np.isclose(u_full.max(), a[1], atol=1e-6)
@@ -158,7 +158,7 @@ def test_reduced_qp_equals_the_full_qp_in_g(noise):
     from lcc_synth.mpc.solver import OSQPSolver
 
     res = OSQPSolver(dqp.qp, qv, lo, hi, SolverSettings()).solve(qv, lo, hi)
-    u_osqp = dqp.plan(res.z, c)
+    u_osqp = dqp.plan(res.z)
     tol = 10 * (1e-6 + 1e-6 * np.abs(dqp.qp.A @ res.z).max())
     assert res.ok and np.max(np.abs(u_osqp - u_red)) < tol
 
@@ -200,7 +200,7 @@ def test_first_move_converges_to_the_model_based_mpc_on_the_same_cost():
         c = red.Cb @ b + red.Cy @ traj.y.ravel()
         qv, lo, hi = dqp.vectors(c, -50.0, 50.0, np.full(N, -1e3))  # no active constraint
         z = solve_exact(dqp.qp, qv, lo, hi)
-        diff[lam_g] = abs(dqp.plan(z, c)[0] - u_mpc[0])
+        diff[lam_g] = abs(dqp.plan(z)[0] - u_mpc[0])
     assert diff[1e-2] > diff[1e-3] > diff[1e-4]
     assert diff[1e-4] < 1e-3 * abs(u_mpc[0]) and diff[1e-2] < 2e-2 * abs(u_mpc[0])
     with pytest.raises(ConfigError) as err:

@@ -294,7 +294,7 @@ class DeePLCCController:
         mem.solver.force_failure = self.force_failure
         res = mem.solver.solve(
             q, lo, hi,
-            None if warm is None else qp.from_natural(warm[0][self._shift_z], cvec),
+            None if warm is None else warm[0][self._shift_z],
             None if warm is None else warm[1][self._shift_y],
         )  # fmt: skip
         st["solves"] += 1
@@ -306,8 +306,8 @@ class DeePLCCController:
             st["qp_failures"][res.status] = st["qp_failures"].get(res.status, 0) + 1
             return self._fallback(mem, obs, b, s_eq, res.status)
         z = res.z
-        mem.warm = (qp.natural(z, cvec), res.y)
-        plan = qp.plan(z, cvec).reshape(N, self.n_c)
+        mem.warm = (z, res.y)
+        plan = qp.plan(z).reshape(N, self.n_c)
         slack = float(qp.slack(z).max())
         if slack > 1e-6:
             st["slack_steps"] += 1

@@ -38,7 +38,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg as sla
 import scipy.sparse as sp
 
 from lcc_synth.deeplcc.hankel import ReducedQP
@@ -72,7 +71,6 @@ class DeepQP:
     Gc: np.ndarray
     n_w: int
     n_beta: int
-    Lu: np.ndarray | None = None
 
     @property
     def n_var(self) -> int:
@@ -90,24 +88,9 @@ class DeepQP:
         lo[2 * n:], hi[2 * n:] = 0.0, np.inf
         return self.Qc @ c + self.q0, lo - off, hi - off
 
-    def plan(self, x: np.ndarray, c: np.ndarray) -> np.ndarray:
-        """The planned inputs ``v_u = c_u + L_u z`` of a solution (``(n_w,)``, step-major)."""
-        n = self.n_w
-        if self.Lu is None:
-            return x[:n]
-        return c[:n] + self.Lu @ x[:n]
-
-    def natural(self, x: np.ndarray, c: np.ndarray) -> np.ndarray:
-        """``[v_u, beta, sigma]`` of a solution (time-ordered: what a warm start shifts)."""
-        return np.concatenate([self.plan(x, c), x[self.n_w:]])
-
-    def from_natural(self, xn: np.ndarray, c: np.ndarray) -> np.ndarray:
-        """The decision vector of ``[v_u, beta, sigma]`` at the parameter ``c``."""
-        if self.Lu is None:
-            return xn
-        n = self.n_w
-        z = sla.solve_triangular(self.Lu, xn[:n] - c[:n], lower=True)
-        return np.concatenate([z, xn[n:]])
+    def plan(self, x: np.ndarray) -> np.ndarray:
+        """The planned inputs ``v_u`` of a solution (``(n_w,)``, step-major)."""
+        return x[: self.n_w]
 
     def slack(self, x: np.ndarray) -> np.ndarray:
         """The spacing slacks of a solution."""
@@ -149,19 +132,10 @@ def formulate(red: ReducedQP, slack: float, slack_quadratic: float) -> DeepQP:
     nz = 2 * n + nb
     x = ca.MX.sym("x", nz)
     c = ca.MX.sym("c", 2 * n)
-    import os
-    white = os.environ.get("DEEP_WHITEN", "1") == "1"
-    if white:
-        zu, beta, sigma = x[:n], x[n:n + nb], x[n + nb:]
-        du = ca.DM(Luu) @ zu
-        vu = c[:n] + du
-        cost = (0.5 * ca.dot(zu, zu) + 0.5 * ca.dot(beta, beta)
-                + slack * ca.sum1(sigma) + slack_quadratic * ca.dot(sigma, sigma))  # fmt: skip
-    else:
-        vu, beta, sigma = x[:n], x[n:n + nb], x[n + nb:]
-        du = vu - c[:n]
-        cost = (0.5 * ca.dot(du, ca.DM(Gi) @ du) + 0.5 * ca.dot(beta, beta)
-                + slack * ca.sum1(sigma) + slack_quadratic * ca.dot(sigma, sigma))  # fmt: skip
+    vu, beta, sigma = x[:n], x[n:n + nb], x[n + nb:]
+    du = vu - c[:n]
+    cost = (0.5 * ca.dot(du, ca.DM(Gi) @ du) + 0.5 * ca.dot(beta, beta)
+            + slack * ca.sum1(sigma) + slack_quadratic * ca.dot(sigma, sigma))  # fmt: skip
     vw = c[n:] + ca.DM(K) @ du + (ca.DM(Sh) @ beta if nb else 0)
     g = ca.vertcat(vu, vw + sigma, sigma)
     H, grad = ca.hessian(cost, x)
@@ -173,4 +147,4 @@ def formulate(red: ReducedQP, slack: float, slack_quadratic: float) -> DeepQP:
     A = sp.csc_matrix(An)
     empty = np.zeros((0, 0))
     qp = QPMatrices(P, A, empty, empty, np.zeros(0), np.zeros(0))
-    return DeepQP(qp, q0.reshape(-1), Qcn, Gcn, n, nb, Luu if white else None)
+    return DeepQP(qp, q0.reshape(-1), Qcn, Gcn, n, nb)
