@@ -48,7 +48,6 @@ the ends of the run, as MATLAB's ``movmean``), over the window 0-40 s and the ve
 
 from __future__ import annotations
 
-import math
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -125,8 +124,7 @@ class MetricsConfig(Record):
             raise ConfigError("metrics.window", f"must be [t0, t1] with t1 > t0, got {self.window}")
         for name, (p0, p1) in self.phases:
             if not (np.isfinite(p0) and np.isfinite(p1) and p1 > p0):
-                raise ConfigError(f"metrics.phases.{name}",
-                                  f"must be [t0, t1] with t1 > t0, got {[p0, p1]}")  # fmt: skip
+                raise ConfigError(f"metrics.phases.{name}", f"must be [t0, t1], t1 > t0: {p0, p1}")
         if isinstance(self.vehicles, str) and self.vehicles not in VEHICLE_SETS:
             raise ConfigError(
                 "metrics.vehicles",
@@ -466,13 +464,12 @@ def per_scenario(result, config: MetricsConfig | None = None) -> dict[str, np.nd
         return _per_scenario(result, cfg)
 
 
-#: Prefix of the per-phase fuel keys of :func:`per_scenario` (``"fuel_ml@NAME"``).
-PHASE_PREFIX = "fuel_ml@"
+PHASE_PREFIX = "fuel_ml@"  #: per-phase fuel keys of :func:`per_scenario`: ``fuel_ml@NAME``
 
 
 def _per_scenario(result, cfg: MetricsConfig) -> dict[str, np.ndarray]:
-    phases = {f"{PHASE_PREFIX}{name}": fuel(result, w, cfg.vehicles, cfg.accel_smoothing)
-              for name, w in cfg.phases}  # fmt: skip
+    k = cfg.accel_smoothing
+    phases = {f"{PHASE_PREFIX}{p}": fuel(result, w, cfg.vehicles, k) for p, w in cfg.phases}
     return {
         "aave": aave(result, cfg.window, cfg.vehicles),
         "fuel_ml": fuel(result, cfg.window, cfg.vehicles, cfg.accel_smoothing),
@@ -530,9 +527,9 @@ def aggregate(per: dict[str, np.ndarray]) -> dict[str, Any]:
             },
             "batch": int(a.shape[0]),
         }
-        if phases:  # [metrics] phases: the fuel of each window, as fuel_ml's
-            out["fuel_ml_phases"] = {name: _stat(x) for name, x in phases.items()}
-        return out
+    if phases:  # [metrics] phases: the fuel of each window, as fuel_ml's
+        out["fuel_ml_phases"] = {name: _stat(x) for name, x in phases.items()}
+    return out
 
 
 def summary(result, config: MetricsConfig | None = None) -> dict[str, Any]:
@@ -546,8 +543,8 @@ def summary(result, config: MetricsConfig | None = None) -> dict[str, Any]:
     The CAV's jerk: ``rms_jerk_cav`` is the mean, ``max_jerk_1s_cav`` (:func:`max_jerk_1s`)
     the worst case, ``jerk_1s_margin_cav`` the least margin to ISO 15622's limit (negative:
     exceeded), ``jerk_1s_over_limit_s`` the total time above it (0: within the limit).
-    Per-vehicle lists are ordered head..tail (head spacing is NaN). With ``phases`` in the
-    config, ``fuel_ml_phases`` maps each phase name to its mean fuel (mL, as ``fuel_ml``).
+    Per-vehicle lists are ordered head..tail (head spacing is NaN). ``fuel_ml_phases``: the
+    config's phases' mean fuel (mL, as ``fuel_ml``) by name.
     """
     return aggregate(per_scenario(result, config))
 
@@ -579,27 +576,16 @@ def metrics_from(
     baseline = table.get(mt, "baseline", f)
     if baseline is not None and controllers and baseline not in controllers:
         raise ConfigError(f"{f}.baseline", f"must name a controller, one of {list(controllers)}")
-    phases = _phases_from(table.raw(mt, "phases"), scenario, f"{f}.phases")
-    return MetricsConfig(window, vehicles, baseline, table.get(mt, "accel_smoothing", f), phases)
-
-
-def _phases_from(raw, scenario, f: str) -> tuple[tuple[str, tuple[float, float]], ...]:
-    """``[metrics] phases``: ``{name = [t0, t1]}``, each inside the simulated time."""
-    if raw is None:
-        return ()
-    if not isinstance(raw, Mapping):
-        raise ConfigError(f, f"must be a table {{name = [t0, t1], ...}}, got {raw!r}")
-    out = []
-    for name, w in raw.items():
-        ok = isinstance(w, list | tuple) and len(w) == 2 and all(
-            isinstance(t, int | float) and not isinstance(t, bool) for t in w)  # fmt: skip
-        if not ok or not (math.isfinite(w[0]) and math.isfinite(w[1]) and w[1] > w[0]):
-            raise ConfigError(f"{f}.{name}", f"must be [t0, t1] (s) with t1 > t0, got {w!r}")
-        if scenario is not None:
+    phases, raw = [], table.get(mt, "phases", f) or {}
+    for name, w in raw.items():  # each [t0, t1] (t1 > t0: MetricsConfig) inside the run
+        if not (isinstance(w, list) and len(w) == 2 and all(type(t) in (int, float) for t in w)):
+            raise ConfigError(f"{f}.phases.{name}", f"must be [t0, t1] (s), got {w!r}")
+        if scenario is not None and w[1] > w[0]:
             t_end = scenario.t_start + scenario.steps * scenario.dt
-            check_window(tuple(w), scenario.t_start, t_end, scenario.dt, f"{f}.{name}")
-        out.append((str(name), (float(w[0]), float(w[1]))))
-    return tuple(out)
+            check_window(w, scenario.t_start, t_end, scenario.dt, f"{f}.phases.{name}")
+        phases.append((str(name), (float(w[0]), float(w[1]))))
+    return MetricsConfig(window, vehicles, baseline, table.get(mt, "accel_smoothing", f),
+                         tuple(phases))
 
 
 def evaluate(

@@ -44,7 +44,7 @@ from lcc_synth.deeplcc.hankel import ReducedQP
 from lcc_synth.errors import ConfigError
 from lcc_synth.mpc.formulation import QPMatrices
 
-__all__ = ["DeepQP", "formulate"]
+__all__ = ["DeepQP", "formulate", "ExactSolver"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,3 +148,36 @@ def formulate(red: ReducedQP, slack: float, slack_quadratic: float) -> DeepQP:
     empty = np.zeros((0, 0))
     qp = QPMatrices(P, A, empty, empty, np.zeros(0), np.zeros(0))
     return DeepQP(qp, q0.reshape(-1), Qcn, Gcn, n, nb)
+
+
+class ExactSolver:
+    """DAQP (an exact dual active-set solver, CasADi's ``conic`` plugin) on the constant
+    Hessian and constraint matrix of a :class:`DeepQP`, set up once; only the vectors change
+    per solve. DeeP-LCC's second solver: OSQP stops at ``max_iter`` on the few ill-conditioned
+    steps (module docstring of :mod:`lcc_synth.deeplcc.controller`).
+
+    Parameters
+    ----------
+    qp : QPMatrices
+        ``P`` (upper triangle) and ``A`` of the QP.
+    """
+
+    def __init__(self, qp: QPMatrices):
+        import casadi as ca
+
+        Pu = qp.P.toarray()
+        self._H = ca.DM(Pu + np.triu(Pu, 1).T)
+        self._A = ca.DM(qp.A.toarray())
+        self._conic = ca.conic("deep_lcc_exact", "daqp", {"h": self._H.sparsity(),
+                               "a": self._A.sparsity()}, {"error_on_fail": False})  # fmt: skip
+
+    def solve(self, q, l, u) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(x, y)`` (primal, constraint multipliers) of ``min 1/2 x'Px + q'x, l <= Ax <= u``,
+        or None when DAQP does not report success."""
+        big = 1e20  # DAQP's "no bound"
+        lo = np.where(np.isfinite(l), l, -big)
+        hi = np.where(np.isfinite(u), u, big)
+        sol = self._conic(h=self._H, g=np.asarray(q, float), a=self._A, lba=lo, uba=hi)
+        if not self._conic.stats().get("success", False):
+            return None
+        return np.array(sol["x"]).reshape(-1), np.array(sol["lam_a"]).reshape(-1)

@@ -23,7 +23,8 @@
     t_gap = 0.8
     margin = 0.1
 
-    [controllers.deep_lcc.solver]        # OSQP, as the MPC's
+    [controllers.deep_lcc.solver]        # OSQP, as the MPC's, but max_iter = 200 and
+    exact = true               # then DAQP (exact active set) before the fallback chain
     [controllers.deep_lcc.data]          # lcc_synth.deeplcc.data.DataSettings
     T = 2000
     dt = 0.05                  # also the controller's period
@@ -47,6 +48,7 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.models.records import Record
 from lcc_synth.mpc.settings import SolverSettings
 from lcc_synth.schema import declared
+from lcc_synth.schema.controllers import DEEP_MAX_ITER
 
 __all__ = ["DeepWeights", "DeepConstraints", "DeePLCCSettings", "deep_settings_from_table"]
 
@@ -85,8 +87,9 @@ class DeePLCCSettings(Record):
     equilibrium_window: float = 0.5
     weights: DeepWeights = field(default_factory=DeepWeights)
     constraints: DeepConstraints = field(default_factory=DeepConstraints)
-    solver: SolverSettings = field(default_factory=SolverSettings)
+    solver: SolverSettings = field(default_factory=lambda: SolverSettings(max_iter=DEEP_MAX_ITER))
     data: DataSettings = field(default_factory=DataSettings)
+    exact: bool = True
 
     def __post_init__(self) -> None:
         c = self.constraints
@@ -119,6 +122,7 @@ class DeePLCCSettings(Record):
         """The ``[controllers.NAME]`` table of these settings (``None`` values left out)."""
         d = self.as_dict()
         d["data"] = {k: v for k, v in d["data"].items() if v is not None}
+        d["solver"]["exact"] = d.pop("exact")  # a key of the solver table
         return {"type": "deep_lcc", **{k: v for k, v in d.items() if v is not None}}
 
 
@@ -145,7 +149,9 @@ def deep_settings_from_table(table: Mapping[str, Any], field_name: str) -> DeePL
     if not c["a_min"] < 0 < c["a_max"]:
         raise ConfigError(f"{f}.constraints.a_min", "need a_min < 0 < a_max, got "
                           f"[{c['a_min']}, {c['a_max']}]")  # fmt: skip
-    solver = SolverSettings(**read("solver"))
+    solver_keys = read("solver")
+    exact = bool(solver_keys.pop("exact"))
+    solver = SolverSettings(**solver_keys)
     if solver.eps_abs > 1e-3 or solver.eps_rel > 1e-3:
         raise ConfigError(f"{f}.solver.eps_abs", "must be <= 1e-3 (and eps_rel too), got "
                           f"eps_abs={solver.eps_abs}, eps_rel={solver.eps_rel}")  # fmt: skip
@@ -159,4 +165,5 @@ def deep_settings_from_table(table: Mapping[str, Any], field_name: str) -> DeePL
         constraints=DeepConstraints(**c),
         solver=solver,
         data=data,
+        exact=exact,
     )

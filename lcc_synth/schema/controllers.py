@@ -5,7 +5,7 @@ compares them)."""
 
 from __future__ import annotations
 
-from dataclasses import MISSING, fields
+from dataclasses import MISSING, fields, replace
 
 from lcc_synth.controllers.baselines import BASELINE_TYPES
 from lcc_synth.schema.spec import REQUIRED, Derived, Key, Table
@@ -220,8 +220,14 @@ DEEP_LCC_CONSTRAINTS = Table(
          unit="m")),
     variant=_DEEP,
 )
+#: DeeP-LCC's OSQP iteration limit: past it the exact active-set solve takes over.
+DEEP_MAX_ITER = 200
 DEEP_LCC_SOLVER = Table(
-    f"{_C}.solver", "OSQP settings of DeeP-LCC's reduced QP.", _CMDS, MPC_SOLVER.keys,
+    f"{_C}.solver", "OSQP settings of DeeP-LCC's reduced QP.", _CMDS,
+    (*(replace(k, default=DEEP_MAX_ITER, meaning="Iteration limit (then the exact solve).")
+       if k.name == "max_iter" else k for k in MPC_SOLVER.keys),
+     Key("exact", "boolean", "When OSQP stops unsolved, solve the QP with DAQP (an exact "
+         "active-set solver, through CasADi) before the fallback chain.", True)),
     variant=_DEEP,
 )
 DEEP_LCC_DATA = Table(
