@@ -177,3 +177,26 @@ def test_data_collection_shows_a_progress_bar_only_when_slow(monkeypatch, capsys
     D.collect(sc, settings)
     err = capsys.readouterr().err
     assert "deep_lcc data" in err and f"{sc.steps}/{sc.steps}" in err
+
+
+def test_recording_of_the_joint_mpc_history(tmp_path):
+    """The joint MPC's per-CAV status (B, S, n_cav) is recorded as the worst of the step and
+    its plan (B, S, N, n_cav) as one strip per CAV (recording it used to raise)."""
+    pytest.importorskip("rerun")
+    from rerun.chunk import RrdReader
+
+    from lcc_synth import recording as R
+    from lcc_synth.controllers.registry import build_controller
+
+    spec = load_spec(PROBLEMS / "platoon_deeplcc_brake.toml")
+    sc = replace(spec.scenario, duration=3.0)
+    ctrl = build_controller("mpc", {"type": "mpc"}, spec.system)
+    res = simulate(sc, ctrl)
+    h = ctrl.history()
+    assert h["status"].ndim == 3 and h["plan"].ndim == 4 and "pred_time" not in h
+    path = tmp_path / "mpc.rrd"
+    with R.open_recording(path, "p", R.simulation_blueprint("p", ["mpc"])) as rec:
+        R.record_simulation(rec, res, "p", mpc_history=h)
+    seen = {ch.entity_path for ch in RrdReader(path).stream()}
+    assert any(e.endswith("/mpc/status") for e in seen)
+    assert any(e.endswith("/mpc/predicted/u") for e in seen)
