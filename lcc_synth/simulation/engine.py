@@ -28,6 +28,10 @@ Per step:
 * CAVs: each CAV's command (held between controller samples: zero-order hold) clipped to
   ``[a_min, a_max]``, then emergency braking, eq. (29): ``a_min`` when
   ``(v_0^2 - v_-1^2) / (2 s_0) >= |a_min|`` on that CAV's exact state (per CAV).
+  Optional actuator lag ``tau`` (``[scenario] cav_lag``): that clipped command, or the
+  braking command, is the input of ``da/dt = (u - a) / tau`` (Euler at ``dt``; braking goes
+  through the same brake actuator), and the CAV applies ``a``, the lag's state, which then
+  takes every change made to the applied acceleration below (noise, overrides, floor).
 * Optional uniform acceleration noise ``U[-w, w]`` (``accel_noise_uniform``) on every vehicle
   but the head, added after the limits and emergency braking (the DeeP-LCC reference scheme).
 * Perturbations override the acceleration of their vehicle while active (not clipped: they are
@@ -256,6 +260,8 @@ def simulate(
     collided = np.zeros((B, nv), dtype=np.bool_)
     ctime = np.full((B, nv), np.nan)
     u_hold = np.zeros((B, n_cav))
+    lag_f = np.array([dt / tau if tau > 0 else 0.0 for tau in sc.lags()])  # per CAV
+    a_lag = np.zeros((B, n_cav))  # the lagged CAVs' accelerations (cruise: 0)
 
     v_hat = v_star.copy()
     est = (-1.0, 0.0, 0.0)  # (decay, v_lo, v_hi); decay < 0: errors from the fixed v*
@@ -282,6 +288,7 @@ def simulate(
             v_star, s_ref, p_ref, est[0], est[1], est[2], v_hat, meas_decay, f_s, f_v,
             loss, lat, obs_noise, obs_s, obs_v, obs_p,
             alive, collided, ctime, stride, out_p, out_v, out_a, out_s, out_u, out_aeb,
+            lag_f, a_lag,
         )  # fmt: skip
 
     n_threads = _threads(B, (T if law is not None else ratio) * nv)
