@@ -262,6 +262,7 @@ def simulate(
     u_hold = np.zeros((B, n_cav))
     lag_f = np.array([dt / tau if tau > 0 else 0.0 for tau in sc.lags()])  # per CAV
     a_lag = np.zeros((B, n_cav))  # the lagged CAVs' accelerations (cruise: 0)
+    lagged = bool(lag_f.any())  # else the kernel runs without the lag (None)
 
     v_hat = v_star.copy()
     est = (-1.0, 0.0, 0.0)  # (decay, v_lo, v_hi); decay < 0: errors from the fixed v*
@@ -288,7 +289,7 @@ def simulate(
             v_star, s_ref, p_ref, est[0], est[1], est[2], v_hat, meas_decay, f_s, f_v,
             loss, lat, obs_noise, obs_s, obs_v, obs_p,
             alive, collided, ctime, stride, out_p, out_v, out_a, out_s, out_u, out_aeb,
-            lag_f, a_lag,
+            lag_f if lagged else None, a_lag if lagged else None,
         )  # fmt: skip
 
     n_threads = _threads(B, (T if law is not None else ratio) * nv)
@@ -316,7 +317,8 @@ def simulate(
                          int(sc.first_index), is_cav, ring, circ,
                          obs_s, obs_v, obs_p, alive)  # fmt: skip
             tk = float(t[k0])
-            obs = Observation(tk, obs_s.copy(), obs_v.copy(), obs_p.copy())
+            obs = Observation(tk, obs_s.copy(), obs_v.copy(), obs_p.copy(),
+                              a_lag.copy() if lagged else None)
             u = np.asarray(controller(obs), dtype=float)
             want = (B,) if n_cav == 1 else (B, n_cav)
             if n_cav == 1 and u.ndim == 2 and u.shape == (B, 1):

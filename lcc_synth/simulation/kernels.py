@@ -185,7 +185,8 @@ def _advance(
     received spacing and velocity; ``meas_decay < 0`` the values as received.
     ``noise_std``: Gaussian acceleration noise on every HDV before the limits;
     ``unif_noise``: ``U[-w, w]`` on every vehicle but the head after the limits.
-    ``lag_f[c] = dt / tau_c`` (0: no lag) puts CAV ``c`` behind a first-order actuator lag:
+    ``lag_f[c] = dt / tau_c`` (0: no lag; ``lag_f = a_lag = None``: no CAV has one, and the
+    kernel is compiled without the lag) puts CAV ``c`` behind a first-order actuator lag:
     its command (clipped, or ``a_min`` from emergency braking) drives the acceleration state
     ``a_lag[b, c]``, which is what the vehicle applies (then noise, overrides and the
     standstill floor as for every vehicle); the state is then Euler-updated from the applied
@@ -327,9 +328,10 @@ def _advance(
                         s = p[b, j - 1] - p[b, j]
                         if (v[b, j] ** 2 - v[b, j - 1] ** 2) / (2.0 * s) >= abs_min:
                             a = a_min
-                if kc >= 0 and lag_f[kc] > 0.0:  # actuator lag: apply the state
-                    cmd[kc] = a
-                    a = a_lag[b, kc]
+                if lag_f is not None:  # None: compiled without (numba prunes the branch)
+                    if kc >= 0 and lag_f[kc] > 0.0:  # actuator lag: apply the state
+                        cmd[kc] = a
+                        a = a_lag[b, kc]
                 if unif_noise > 0.0 and (j > 0 or ring):
                     a += unif_noise * (2.0 * _u01(seed, sid0 + b, j, k, 9) - 1.0)
                 ov = acc_ovr[k, j]
@@ -351,10 +353,11 @@ def _advance(
                 for c in range(n_cav):
                     out_u[b, r, c] = u_hold[b, c]
                     out_aeb[b, r, c] = aeb[c]
-            for c in range(n_cav):
-                if lag_f[c] > 0.0:
-                    a = acc[cavs[c]]
-                    a_lag[b, c] = a + lag_f[c] * (cmd[c] - a)
+            if lag_f is not None:
+                for c in range(n_cav):
+                    if lag_f[c] > 0.0:
+                        al = acc[cavs[c]]
+                        a_lag[b, c] = al + lag_f[c] * (cmd[c] - al)
             for j in range(nv):
                 p[b, j] += dt * v[b, j]
                 v[b, j] += dt * acc[j]
