@@ -254,3 +254,69 @@ def test_cli_negative_lag_exits_2(tmp_path, capsys):
         "[synthesis]\n", "[synthesis]\ncav_lag = -1.0\n", 1))  # fmt: skip
     assert main(["synthesize", str(syn)]) == 2
     assert "synthesis.cav_lag" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------------- MPC
+def _mpc(system, lag, name="mpc"):
+    from lcc_synth.mpc.build import mpc_controller_from_table
+
+    return mpc_controller_from_table(name, {"type": "mpc", "prediction": {"cav_lag": lag}},
+                                     system)  # fmt: skip
+
+
+def test_mpc_lag_prediction_model():
+    """The lagged prediction is the exact ZOH discretisation: it matches a fine Euler run of
+    the continuous lagged model over one sample; with cav_lag = 0 the matrices are today's."""
+    from lcc_synth.mpc.formulation import linearize
+    from lcc_synth.mpc.lag import LagPrediction
+    from lcc_synth.mpc.settings import MPCSettings, Prediction
+
+    system = api.system("cf_lcc", 0, 4)
+    base = MPCSettings()
+    lin0 = linearize("cf_lcc", 0, 4, system.hdv, 15.0, base)
+    assert lin0.delay is None and lin0.Ad.shape == (10, 10)
+    lin = linearize("cf_lcc", 0, 4, system.hdv, 15.0,
+                    replace(base, prediction=Prediction(cav_lag=0.4)))  # fmt: skip
+    assert isinstance(lin.delay, LagPrediction) and lin.Ad.shape == (11, 11)
+    lag = with_actuator_lag(lin.model.A, lin.model.B, lin.model.H, [1], 0.4)
+    rng = np.random.default_rng(1)
+    z, u, d = rng.normal(size=11), 0.7, -0.3
+    h = 1e-5
+    zz = z.copy()
+    for _ in range(int(round(base.sample_time / h))):
+        zz = zz + h * (lag.A @ zz + lag.B[:, 0] * u + lag.H[:, 0] * d)
+    pred = lin.Ad @ z + lin.Bd * u + lin.Hd * d
+    np.testing.assert_allclose(pred, zz, rtol=0, atol=1e-5 * np.abs(zz).max())
+    # general LCC (the command is the CAV's whole input): the lag row is decoupled,
+    # a_{k+1} = exp(-Ts / tau) a_k + (1 - exp(-Ts / tau)) u_k
+    lcc = linearize("lcc", 0, 4, system.hdv, 15.0,
+                    replace(base, prediction=Prediction(cav_lag=0.4)))  # fmt: skip
+    e = np.exp(-0.1 / 0.4)
+    assert lcc.Ad[-1, -1] == pytest.approx(e, rel=1e-12)
+    assert np.all(lcc.Ad[-1, :-1] == 0.0) and lcc.Hd[-1] == 0.0
+    assert lcc.Bd[-1] == pytest.approx(1.0 - e, rel=1e-12)
+
+
+def test_mpc_with_lag_keeps_its_safety_margin():
+    """Head brake (problems/mpc_head_brake.toml) with a 0.3 s actuator lag in the simulator:
+    the lag-free prediction uses up the MPC's 0.1 m constraint margin on the safe spacing
+    s_0 >= 5 + 0.8 v_0; the lag-aware prediction keeps it, as the MPC does without lag."""
+    from lcc_synth.experiments.spec import load_spec
+
+    spec = load_spec(PROBLEMS / "mpc_head_brake.toml")
+    sc = replace(spec.scenario, cav_lag=0.3)
+    worst = {}
+    for name, lag, scen in (("free", 0.0, sc), ("lag", 0.3, sc), ("nolag", 0.0, spec.scenario)):
+        ctrl = _mpc(spec.system, lag, name)
+        r = simulate(scen, ctrl)
+        assert not r.collided.any() and ctrl.stats()["fallbacks"] == 0
+        worst[name] = float(np.max(5.0 + 0.8 * r.velocity[0, :, 1] - r.spacing[0, :, 1]))
+    assert worst["free"] > -0.05  # the margin (0.1 m) is gone
+    assert worst["lag"] < -0.09 and worst["nolag"] < -0.09
+
+
+def test_mpc_bad_lag():
+    system = api.system("cf_lcc", 0, 4)
+    with pytest.raises(ConfigError) as err:
+        _mpc(system, -0.3)
+    assert err.value.field == "controllers.mpc.prediction.cav_lag"
