@@ -211,15 +211,40 @@ def test_simulator_lag_recursion_limits_and_braking():
     assert not np.array_equal(a, a0)
 
 
-def test_platoon_lag_per_cav():
-    system = api.system("cf_lcc", 0, 10)
+@pytest.mark.parametrize("problem", ["platoon_deeplcc_brake.toml", "ring_stop_and_go.toml"])
+def test_several_cavs_each_with_its_lag(problem):
+    """A platoon (CAVs at positions 3, 6, lags 0.2 / 0.5 s) and the ring (its CAV at position
+    20, the last column): each CAV's applied acceleration is the Euler lag of its own clipped
+    (or braking) command with its own tau."""
+    from lcc_synth.experiments.spec import load_spec
+
+    spec = load_spec(PROBLEMS / problem)
+    n_cav = len(spec.scenario.cav_columns)
+    taus = (0.2, 0.5)[:n_cav]
+    sc = replace(spec.scenario, cav_lag=taus, accel_noise_uniform=0.0, duration=60.0,
+                 record_every=1)
+    name = [k for k in spec.controllers if k != "all_hdv"][0]
+    res = simulate(sc, spec.controllers[name])
+    u = res.u_cmd.reshape(1, -1, n_cav)[0]
+    aeb = res.aeb_active.reshape(1, -1, n_cav)[0]
+    for c, (col, tau) in enumerate(zip(sc.cav_columns, taus, strict=True)):
+        a = res.acceleration[0, :, col]
+        cmd = np.where(aeb[:, c], sc.a_min, np.clip(u[:, c], sc.a_min, sc.a_max))
+        ok = np.isfinite(a[1:])
+        pred = a[:-1] + (sc.dt / tau) * (cmd[:-1] - a[:-1])
+        assert ok.sum() > 1000
+        np.testing.assert_array_equal(a[1:][ok], pred[ok])
+    free = simulate(replace(sc, cav_lag=0.0), spec.controllers[name])
+    assert not np.array_equal(free.velocity, res.velocity, equal_nan=True)
+
+
+def test_lag_per_cav_and_table_form():
     sc = Scenario(m=0, n=10, cav_lag=(0.2,))
     assert sc.lags() == (0.2,)
     assert Scenario(m=0, n=10, cav_lag=0.2).toml_table()["cav_lag"] == 0.2
     assert "cav_lag" not in Scenario(m=0, n=10).toml_table()
     with pytest.raises(ConfigError, match="one per CAV"):
         Scenario(m=0, n=10, cav_lag=(0.2, 0.3))
-    del system
 
 
 # ----------------------------------------------------------------------------- bad input
@@ -320,3 +345,30 @@ def test_mpc_bad_lag():
     with pytest.raises(ConfigError) as err:
         _mpc(system, -0.3)
     assert err.value.field == "controllers.mpc.prediction.cav_lag"
+
+
+def test_ring_column_zero_cav_lag_and_override():
+    """The ring's column 0 as the CAV (its own code path): the lag recursion holds except while
+    a perturbation overrides its acceleration, which then sets the lag state itself."""
+    from lcc_synth.experiments.spec import load_spec
+
+    spec = load_spec(PROBLEMS / "ring_stop_and_go.toml")
+    base = spec.scenario
+    sc = replace(base, cavs=(0,), m=-1, n=base.n_vehicles - 1, cav_lag=0.3, record_every=1,
+                 duration=30.0)  # fmt: skip
+    assert sc.perturbations[0].vehicle == 1  # position 1 = column 0: the CAV itself
+    r = simulate(sc, spec.controllers["all_hdv"])
+    a, u, aeb = r.acceleration[0, :, 0], r.u_cmd[0], r.aeb_active[0]
+    cmd = np.where(aeb, sc.a_min, np.clip(u, sc.a_min, sc.a_max))
+    pred = a[:-1] + (sc.dt / 0.3) * (cmd[:-1] - a[:-1])
+    t = r.t[1:]
+    brake = sc.perturbations[0]
+    on = (t > brake.start - 1e-9) & (t < brake.start + brake.duration + 1e-9)
+    np.testing.assert_array_equal(a[1:][~on & (t > brake.start + brake.duration + 0.02)],
+                                  pred[~on & (t > brake.start + brake.duration + 0.02)])
+    np.testing.assert_array_equal(a[1:][t < brake.start], pred[t < brake.start])
+    inside = (t > brake.start + 0.02) & (t < brake.start + brake.duration - 0.02)
+    assert np.all(a[1:][inside] == brake.decel)
+    # after the override the lag starts from the overridden acceleration (continuous)
+    k = int(np.flatnonzero(r.t > brake.start + brake.duration + 0.02)[0])
+    assert abs(a[k] - brake.decel) < 0.1  # not the stale state from before the brake (~0)
