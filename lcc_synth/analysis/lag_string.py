@@ -7,14 +7,22 @@ exact one of :func:`lcc_synth.analysis.string_stability.loop_string_stability` (
 function without the double zero at ``w = 0``, band from the closed-loop eigenvalues). The
 lag multiplies the CAV's command path by ``1 / (tau s + 1)``: ``Gamma(0) = 1`` stays, the
 phase lag grows with ``w tau``, and a gain that is string stable without lag loses it at a
-large enough ``tau`` (the known effect: CACC needs ``h > 2 tau``-type time gaps).
+large enough ``tau`` (the known effect of CACC work: the lag eats the time gap's margin).
 
 :func:`critical_lag` finds the smallest lag at which a gain stops being string stable: a scan
 of ``tau`` over a geometric grid (``SCAN`` points from ``tau_lo`` to ``tau_max``) for the first
 lag whose verdict is not ``"string_stable"``, then bisection between it and the previous
 (string stable) grid point on the exact verdicts, down to ``rtol`` relative. A lag whose
-verdict is ``"boundary"`` counts as not string stable. Measured figures are in the README and
-``tests/test_actuator_lag.py``.
+verdict is ``"boundary"`` counts as not string stable. About 50 verdicts per gain (0.1-0.3 s
+for the paper's strings).
+
+Measured critical lags (``tests/test_actuator_lag.py``, README): Table II's CF-LCC gain 2.194 s
+(beyond it an interior peak near 0.40 rad/s); Table I's case D (m = n = 2) 0.445 s (a resonance
+at 1.84 rad/s, the plant itself unstable by 0.6 s); the showcase's structured H2 gain 1.583 s;
+the lag-free ``string_stable`` design of ``problems/synth_string_stable_m2n2.toml`` 1.071 s.
+Checked against a direct per-frequency solution of the lag-free loop with the factor
+``1 / (tau s + 1)`` on the CAV's velocity row (agreement 1e-10) and a dense ``|Gamma|`` grid on
+both sides of each critical lag.
 """
 
 from __future__ import annotations

@@ -17,7 +17,11 @@ simulator has no lag (the observation carries none) the CAV applies its command,
 is the MPC's previous command. ``prediction.cav_lag = 0`` (default) is today's model bit for
 bit: :func:`prediction_extension` returns the delay model (``None`` without delays). The lag
 and HDV delays (``prediction.delay``) in one prediction are not implemented (ConfigError).
-Measured effect: README ("CAV actuator lag").
+
+Measured (``problems/mpc_head_brake.toml`` with ``[scenario] cav_lag = 0.3``, default MPC):
+the lag-free prediction uses up the 0.1 m constraint margin of the safe spacing (closest 0.008
+m inside it; AAVE 2.204 m/s, fuel 694.6 mL), the lag-aware one keeps it as without lag (0.098
+m; AAVE 2.257 m/s, fuel 696.3 mL); no slack, fallback or collision in either.
 """
 
 from __future__ import annotations
