@@ -36,6 +36,7 @@ from lcc_synth.analysis.transfer import check_head, tail_output, transfer_respon
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.lag import LaggedModel, check_lag, with_actuator_lag
 from lcc_synth.models.linear import LCCModel
+from lcc_synth.models.platoon import PlatoonGains, PlatoonModel
 from lcc_synth.models.records import Record
 
 __all__ = [
@@ -44,6 +45,8 @@ __all__ = [
     "gamma_lag",
     "CriticalLag",
     "critical_lag",
+    "platoon_lag_string_stability",
+    "platoon_gamma_lag",
     "SCAN",
 ]
 
@@ -184,3 +187,29 @@ def critical_lag(
         else:
             hi, r_hi = mid, r
     return CriticalLag(0.5 * (lo + hi), lo, hi, r_lo.verdict, r_hi.verdict, r_lo.margin, n)
+
+
+def _platoon_loop(model: PlatoonModel, gains: PlatoonGains, tau):
+    from lcc_synth.analysis.platoon_string import platoon_loop
+
+    _, _, c = platoon_loop(model, gains)  # checks: an open platoon
+    rows = [model.index(f"v_{i}") for i in model.cavs]
+    lag = with_actuator_lag(model.A, model.B, model.H, rows, tau, model.state_names)
+    Ku, kh = gains.input_feedback(model)
+    Acl, Hcl = lag.closed_loop(Ku, kh)
+    return Acl, Hcl.ravel(), np.concatenate([c, np.zeros(len(rows))])
+
+
+def platoon_lag_string_stability(
+    model: PlatoonModel, gains: PlatoonGains, tau, method: str = "grid"
+) -> StringStabilityReport:
+    """String stability of an open platoon whose CAVs have the actuator lag ``tau`` (one
+    value, or one per CAV; > 0): the exact verdict of the lagged loop (a lag state per CAV)."""
+    A, h, c = _platoon_loop(model, gains, tau)
+    return loop_string_stability(A, h, c, method=method)
+
+
+def platoon_gamma_lag(model: PlatoonModel, gains: PlatoonGains, tau, omega) -> np.ndarray:
+    """``Gamma(j omega)`` of the lagged platoon loop."""
+    A, h, c = _platoon_loop(model, gains, tau)
+    return transfer_response(A, h, c, 1j * np.asarray(omega, dtype=float))
