@@ -52,17 +52,18 @@ def _case_d():
     return model, K, kh
 
 
-def _gamma_direct(model, K, kh, tau, omega):
+def _gamma_direct(model, K, kh, tau, omega, k_a=0.0):
     """Head-to-tail Gamma of the lagged loop from the lag-free closed loop: the CAV's velocity
     row r of ``dx = A_cl x + h v_h`` becomes ``s v_0 = (A_cl[r] x + h[r] v_h) / (tau s + 1)``;
-    one dense solve per frequency."""
+    one dense solve per frequency (``k_a``: the command also feeds back ``a_0``, so the factor
+    is ``1 / (tau s + 1 - k_a)``)."""
     Acl, Hcl = closed_loop(model, K, kh)
     h = Hcl.ravel()
     r = model.index("v_0")
     out = []
     for w in omega:
         s = 1j * w
-        lag = 1.0 / (tau * s + 1.0)
+        lag = 1.0 / (tau * s + 1.0 - k_a)
         M = s * np.eye(model.nx) - Acl
         M[r] = s * np.eye(model.nx)[r] - lag * Acl[r]
         rhs = h.astype(complex)
@@ -78,6 +79,9 @@ def test_lagged_model_matches_direct_solution():
             w = np.geomspace(1e-3, 10.0, 50)
             ref = _gamma_direct(model, K, kh, tau, w)
             got = gamma_lag(model, K, kh, tau, w)
+            np.testing.assert_allclose(got, ref, rtol=1e-10, atol=1e-13)
+            ref = _gamma_direct(model, K, kh, tau, w, k_a=-0.4)
+            got = gamma_lag(model, K, kh, tau, w, k_a=-0.4)
             np.testing.assert_allclose(got, ref, rtol=1e-10, atol=1e-13)
 
 
