@@ -33,8 +33,9 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.controllers.base import Controller
-from lcc_synth.controllers.registry import CONTROLLER_TYPES, STATIC_RUN_KEYS, build_controller
+from lcc_synth.controllers.registry import CONTROLLER_TYPES, build_controller
 from lcc_synth.errors import ConfigError
+from lcc_synth.experiments.h2_tables import synthesize_table
 from lcc_synth.experiments.tables import SUITE_METRICS, rank_failed_last
 from lcc_synth.metrics import MetricsConfig, metrics_from
 from lcc_synth.models.records import Record, system_tables, toml_text
@@ -155,10 +156,6 @@ def fallback_names(tables: Mapping[str, Any], names: Sequence[str]) -> list[str]
         if target is not None and target not in names and target not in out:
             out.append(target)
     return out
-
-
-def _system_data(system: System) -> dict[str, Any]:
-    return {"kind": system.kind, "m": system.m, "n": system.n, "v_star": system.v_star}
 
 
 def load_suite(
@@ -283,65 +280,6 @@ def controller_table(table: Mapping[str, Any], layout: str) -> dict[str, Any]:
     base = {k: v for k, v in table.items() if k != "layouts"}
     over = table.get("layouts", {}).get(layout, {})
     return _merge(base, over)
-
-
-def synthesize_table(
-    name: str,
-    table: Mapping[str, Any],
-    system: System,
-    hdv_table: Mapping[str, Any],
-    label: str,
-    source: str | None = None,
-):
-    """Synthesise an ``h2`` controller for ``system``.
-
-    Returns ``(static_table, report)``: a ``type = "static"`` controller table holding the
-    synthesised gain (plain data: it can be sent to Dask workers) and the
-    :class:`~lcc_synth.synthesis.report.SynthesisReport`.
-
-    Raises
-    ------
-    ConfigError
-        A bad synthesis key (named ``controllers.NAME...``).
-    lcc_synth.synthesis.SynthesisError
-        Solver failure, infeasibility or an unusable result.
-    """
-    from lcc_synth.synthesis.config import spec_from_problem
-    from lcc_synth.synthesis.design import synthesize
-
-    synth = {k: v for k, v in table.items() if k != "type" and k not in STATIC_RUN_KEYS}
-    if synth.get("as_run") not in (None, False):  # design the loop the controller runs
-        ar = {} if synth["as_run"] is True else dict(synth["as_run"])
-        for key in STATIC_RUN_KEYS:
-            if key in table and key not in ar:
-                ar[key] = table[key]
-        synth["as_run"] = ar
-    data = {
-        "name": label,
-        "hdv": dict(hdv_table),
-        "system": _system_data(system),
-        "synthesis": synth,
-    }
-    problem = Problem(Path(source) if source else Path(f"{label}.toml"), data)
-    try:
-        spec = spec_from_problem(problem)
-    except ConfigError as err:
-        fld = err.field
-        fld = f"controllers.{name}" + fld[len("synthesis") :] if fld.startswith("synthesis") else (
-            f"controllers.{name} ({fld})"
-        )
-        raise ConfigError(fld, err.message, source) from None
-    rep = synthesize(spec)
-    out: dict[str, Any] = {
-        "type": "static",
-        "kind": rep.kind,
-        "semantics": rep.semantics,
-        "gains": dict(rep.gains),
-    }
-    for key in STATIC_RUN_KEYS:
-        if key in table:
-            out[key] = table[key]
-    return out, rep
 
 
 def prepare_controllers(

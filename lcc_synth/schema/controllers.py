@@ -34,8 +34,10 @@ _GAINS = Key("gains", "table", "State name (s_i, v_i, -p_0) -> gain; missing sta
              "kind = platoon / ring: one table per CAV input, [controllers.NAME.gains.u_i] "
              "with state name (s_j, v_j of positions) -> gain.", REQUIRED)
 
-GENERIC = Table(_C, "A CAV controller of simulate: its type selects the keys (below).",
-                ("simulate",), (_TYPE,))
+GENERIC = Table(_C, "A CAV controller of simulate: its type selects the keys (below); h2 "
+                "is synthesised for the problem's [system] before the run.", ("simulate",),
+                (Key("type", "string", "The controller; h2 is synthesised for [system].",
+                     REQUIRED, choices=(*_TYPES, "h2")),))
 SUITE = Table(
     _C,
     "A CAV controller of run and sweep: the keys of its type, plus h2 and per-layout overrides.",
@@ -71,8 +73,8 @@ GAINS_FILE = Table(
     variant="gains_file",
 )
 H2 = Table(
-    _C, 'type = "h2" (run and sweep): an H2 gain synthesised for each layout from the keys of '
-    "[synthesis], then run as a static gain with these keys.", ("sweep", "run"),
+    _C, 'type = "h2": an H2 gain synthesised (simulate: for [system]; run and sweep: for each '
+    "layout) from the keys of [synthesis], then run as a static gain with these keys.", _CMDS,
     (_SUITE_TYPE, _SAMPLE_TIME, _EQUILIBRIUM, _EQ_TAU, _FILTER),
     variant="h2", includes=("synthesis",),
 )
