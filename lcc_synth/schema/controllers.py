@@ -44,7 +44,9 @@ SUITE = Table(
     ("sweep", "run"),
     (_SUITE_TYPE,
      Key("layouts", "table", "Per-layout overrides [controllers.NAME.layouts.LAYOUT] (run "
-         "only).", {})),
+         "only).", {}),
+     Key("only_layouts", "any", "The layouts this controller is for (run only); "
+         "absent: every layout. On the others it has no row.", None)),
     variant="suite",
 )
 LAYOUT_OVERRIDE = Table(
