@@ -50,7 +50,8 @@ def test_ring_h2_of_run_is_the_gain_of_synthesize_on_the_same_tables(tmp_path, c
     # the MPC's fallback is the same table, in the platoon form, zero gains dropped
     fb = tables["mpc"]["fallback"]
     assert fb["controller"] == "h2" and fb["kind"] == "ring"
-    assert fb["gains"] == {u: {k: g for k, g in row.items() if g} for u, row in doc["gains"].items()}
+    want = {u: {k: g for k, g in row.items() if g} for u, row in doc["gains"].items()}
+    assert fb["gains"] == want
     # the paper's single-CAV gains are not for the ring: no row
     assert "paper" not in tables and set(tables) == {"all_hdv", "h2", "mpc"}
 
