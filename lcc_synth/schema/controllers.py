@@ -34,10 +34,9 @@ _GAINS = Key("gains", "table", "State name (s_i, v_i, -p_0) -> gain; missing sta
              "kind = platoon / ring: one table per CAV input, [controllers.NAME.gains.u_i] "
              "with state name (s_j, v_j of positions) -> gain.", REQUIRED)
 
-GENERIC = Table(_C, "A CAV controller of simulate: its type selects the keys (below); h2 "
-                "is synthesised for the problem's [system] before the run.", ("simulate",),
-                (Key("type", "string", "The controller; h2 is synthesised for [system].",
-                     REQUIRED, choices=(*_TYPES, "h2")),))
+GENERIC = Table(_C, "A CAV controller of simulate: its type selects the keys (below); "
+                'type = "h2" is synthesised for the [system] first (the h2 table).',
+                ("simulate",), (_TYPE,))
 SUITE = Table(
     _C,
     "A CAV controller of run and sweep: the keys of its type, plus h2 and per-layout overrides.",
