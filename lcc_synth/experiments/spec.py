@@ -42,7 +42,8 @@ class SimulationSpec(Record):
             "name": self.name,
             **system_tables(self.system),
             "scenario": self.scenario.toml_table(),
-            "controllers": {k: c.toml_table() for k, c in self.controllers.items()},
+            "controllers": {k: getattr(c, "source_table", None) or c.toml_table()
+                            for k, c in self.controllers.items()},  # fmt: skip
             "metrics": self.metrics.toml_table(),
         }
 
@@ -133,14 +134,24 @@ def controllers_from(
 ):
     """Every ``[controllers.NAME]`` table, built in file order: ``type = "h2"`` synthesised
     for ``system`` first (:func:`lcc_synth.experiments.h2_tables.synthesize_h2_tables`, the
-    code path of ``run``; problem names ``LABEL_NAME``), then the MPC fallbacks resolved."""
+    code path of ``run``; problem names ``LABEL_NAME``), then the MPC fallbacks resolved. A
+    synthesised controller, and an MPC with ``fallback = "NAME"``, keep the table the file
+    states as ``source_table`` (what :meth:`SimulationSpec.toml_tables` writes back)."""
     tables = declared("").get(data, "controllers", "")
     if not tables:
         raise ConfigError("controllers", "needs at least one [controllers.NAME] table")
     if all(isinstance(t, Mapping) for t in tables.values()):
         hdv_table = declared("").get(data, "hdv", "")
-        tables, _ = synthesize_h2_tables(tables, system, hdv_table, source, label)
+        given = tables
+        tables, designs = synthesize_h2_tables(tables, system, hdv_table, source, label)
         tables = resolve_fallbacks(tables, system, source)
+        built = {name: build_controller(name, t, system, source) for name, t in tables.items()}
+        for name in designs:  # written back as stated (a reload synthesises the same gain)
+            built[name].source_table = dict(given[name])
+        for name, t in given.items():  # an MPC's fallback = "NAME" is written back as stated
+            if t.get("type") == "mpc" and isinstance(t.get("fallback"), str):
+                built[name].source_table = {**built[name].toml_table(), "fallback": t["fallback"]}
+        return built
     return {name: build_controller(name, t, system, source) for name, t in tables.items()}
 
 
