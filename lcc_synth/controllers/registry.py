@@ -2,7 +2,8 @@
 
 ``type = "hdv"`` and ``"static"`` build the controllers of :mod:`lcc_synth.controllers.static`,
 ``"gains_file"`` a static-gain controller from a gains file written by ``lcc-synth synthesize``,
-``"mpc"`` the controller of :mod:`lcc_synth.mpc` (imported only then), ``"follower_stopper"``,
+``"mpc"`` the controller of :mod:`lcc_synth.mpc` (imported only then), ``"deep_lcc"`` that of
+:mod:`lcc_synth.deeplcc` (likewise), ``"follower_stopper"``,
 ``"pi_saturation"``, ``"acc"`` and ``"cacc"`` the field's baselines
 (:mod:`lcc_synth.controllers.baselines`).
 
@@ -36,7 +37,7 @@ from lcc_synth.schema import declared
 
 __all__ = ["CONTROLLER_TYPES", "STATIC_RUN_KEYS", "build_controller"]
 
-CONTROLLER_TYPES = ("hdv", "static", "gains_file", "mpc", *BASELINE_TYPES)
+CONTROLLER_TYPES = ("hdv", "static", "gains_file", "mpc", "deep_lcc", *BASELINE_TYPES)
 
 
 _EQ_KEYS = ("equilibrium", "equilibrium_tau", "measurement_filter")
@@ -78,6 +79,10 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
                     f"{field}.type", f"'mpc' controllers need lcc_synth.mpc, which failed: {err}"
                 ) from None
             return mpc_controller_from_table(name, table, system, source=source)
+        if ctype == "deep_lcc":
+            from lcc_synth.deeplcc.build import deep_lcc_controller_from_table
+
+            return deep_lcc_controller_from_table(name, table, system, source=source)
         if ctype in BASELINE_TYPES:
             return baseline_from_table(name, ctype, table)
         T = declared(f"controllers.NAME:{ctype}")

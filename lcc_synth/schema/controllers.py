@@ -15,7 +15,7 @@ __all__ = ["TABLES"]
 _CMDS = ("simulate", "sweep", "run")
 _C = "controllers.NAME"
 
-_TYPES = ("hdv", "static", "gains_file", "mpc", *BASELINE_TYPES)
+_TYPES = ("hdv", "static", "gains_file", "mpc", "deep_lcc", *BASELINE_TYPES)
 _TYPE = Key("type", "string", "The controller.", REQUIRED, choices=_TYPES)
 _SUITE_TYPE = Key("type", "string", "The controller; h2 is synthesised for each layout.",
                   REQUIRED, choices=(*_TYPES, "h2"))
@@ -171,6 +171,77 @@ MPC_SOLVER = Table(
     variant=_MPC,
 )
 
+_DEEP = "deep_lcc"
+DEEP_LCC = Table(
+    _C, 'type = "deep_lcc": data-enabled predictive LCC (lcc_synth.deeplcc), every key '
+    "optional; its period is [controllers.NAME.data].dt.", _CMDS,
+    (_TYPE,
+     Key("t_ini", "integer", "Past samples Tini that fix the initial condition.", 20, lo=1),
+     Key("horizon", "integer", "Prediction steps N (at most 200).", 50, lo=1, hi=200),
+     Key("equilibrium", "string", "v*: a moving average of the head's speed or the fixed "
+         "[system].v_star; absent: fixed for fd_lcc, else moving_average.", None,
+         choices=("moving_average", "fixed")),
+     Key("equilibrium_window", "number", "Moving-average window.", 0.5, lo=0.0, lo_open=True,
+         unit="s"),
+     Key("weights", "table", "Cost: [controllers.NAME.weights].", {}),
+     Key("constraints", "table", "Bounds: [controllers.NAME.constraints].", {}),
+     Key("solver", "table", "OSQP settings: [controllers.NAME.solver].", {}),
+     Key("data", "table", "Offline data: [controllers.NAME.data].", {})),
+    variant=_DEEP,
+)
+DEEP_LCC_WEIGHTS = Table(
+    f"{_C}.weights", "DeeP-LCC cost sum ||y||_Q^2 + ||u||_R^2 + lambda_g ||g||^2 + lambda_y "
+    "||sigma_y||^2 + spacing slack.", _CMDS,
+    (Key("velocity", "number", "Q on the velocity error of every vehicle behind the head.",
+         1.0, lo=0.0, lo_open=True, unit="(m/s)⁻²"),
+     Key("spacing", "number", "Q on the spacing error of every CAV.", 0.5, lo=0.0, unit="m⁻²"),
+     Key("input", "number", "R on every CAV acceleration.", 0.1, lo=0.0, lo_open=True),
+     Key("lambda_g", "number", "Regularisation of g.", 100.0, lo=0.0, lo_open=True),
+     Key("lambda_y", "number", "Penalty on the past-output slack sigma_y.", 1.0e4, lo=0.0,
+         lo_open=True),
+     Key("slack", "number", "Exact (l1) penalty on spacing-constraint violation, per m and "
+         "step.", 100.0, lo=0.0),
+     Key("slack_quadratic", "number", "Small quadratic slack term (keeps the QP strictly "
+         "convex).", 1.0, lo=0.0, lo_open=True)),
+    variant=_DEEP,
+)
+DEEP_LCC_CONSTRAINTS = Table(
+    f"{_C}.constraints", "DeeP-LCC bounds: hard acceleration, soft absolute safe spacing of "
+    "every CAV (as the MPC's).", _CMDS,
+    (Key("a_min", "number", "Hard lower bound on every CAV acceleration.", -5.0, unit="m/s²"),
+     Key("a_max", "number", "Hard upper bound on it.", 2.0, unit="m/s²"),
+     Key("s_min", "number", "Soft safe spacing: s >= s_min + t_gap v (absolute).", 5.0,
+         lo=0.0, unit="m"),
+     Key("t_gap", "number", "Time gap of that bound.", 0.8, lo=0.0, unit="s"),
+     Key("margin", "number", "The QP enforces the bound this much tighter.", 0.1, lo=0.0,
+         unit="m")),
+    variant=_DEEP,
+)
+DEEP_LCC_SOLVER = Table(
+    f"{_C}.solver", "OSQP settings of DeeP-LCC's reduced QP.", _CMDS, MPC_SOLVER.keys,
+    variant=_DEEP,
+)
+DEEP_LCC_DATA = Table(
+    f"{_C}.data", "DeeP-LCC's offline data: collected in the nonlinear simulator on the "
+    "run's scenario (HDVs, noise, delays), perturbations replaced by the excitation.", _CMDS,
+    (Key("T", "integer", "Number of data samples.", 2000, lo=1),
+     Key("dt", "number", "Sample time of the data and period of the controller (a multiple "
+         "of [scenario].dt).", 0.05, lo=0.0, lo_open=True, unit="s"),
+     Key("seed", "integer", "Seed of the excitation.", 0, lo=0),
+     Key("u_amplitude", "number", "CAV inputs i.i.d. U[-a, a].", 1.0, lo=0.0, lo_open=True,
+         unit="m/s²"),
+     Key("e_amplitude", "number", "Head velocity v* + U[-a, a].", 1.0, lo=0.0, lo_open=True,
+         unit="m/s"),
+     Key("v_star", "number", "Equilibrium velocity of the collection; absent: [system]."
+         "v_star.", None, lo=0.0, lo_open=True, unit="m/s"),
+     Key("hdv_accel_noise", "number", "HDV acceleration noise during collection; absent: "
+         "[scenario].hdv_accel_noise.", None, lo=0.0, unit="m/s²"),
+     Key("cache", "boolean", "Reuse / write the .npz data cache.", True),
+     Key("cache_dir", "string", "Folder of the cache (relative to the working directory).",
+         "results/deeplcc")),
+    variant=_DEEP,
+)
+
 #: Meaning and unit of every baseline parameter (defaults and sources: the dataclasses of
 #: lcc_synth.controllers.baselines, one source).
 _BASELINE_MEANING = {
@@ -215,4 +286,5 @@ def _baseline_table(kind: str, cls) -> Table:
 BASELINES = tuple(_baseline_table(k, c) for k, c in BASELINE_TYPES.items())
 
 TABLES = (GENERIC, SUITE, HDV, STATIC, GAINS_FILE, H2, LAYOUT_OVERRIDE, MPC, MPC_WEIGHTS,
-          MPC_CONSTRAINTS, MPC_PREDICTION, MPC_SOLVER, *BASELINES)  # fmt: skip
+          MPC_CONSTRAINTS, MPC_PREDICTION, MPC_SOLVER, DEEP_LCC, DEEP_LCC_WEIGHTS,
+          DEEP_LCC_CONSTRAINTS, DEEP_LCC_SOLVER, DEEP_LCC_DATA, *BASELINES)  # fmt: skip

@@ -1,0 +1,447 @@
+"""DeeP-LCC: data-enabled predictive leading cruise control (Wang, Zheng, Li, Chen et al.,
+IEEE T-CST 2023), a controller of :mod:`lcc_synth.controllers.base` for one or several CAVs.
+
+At every sample (the data's ``dt``; the simulator holds the command in between):
+
+1. **Equilibrium.** ``v_eq`` is the moving average (``equilibrium_window``) of the head
+   vehicle's velocity (``equilibrium = "fixed"``, the default for FD-LCC: the system's
+   ``v*``), ``s_eq`` the nominal HDV model's equilibrium spacing at ``v_eq`` plus each CAV's
+   offset ``s_ref - s*`` from the context.
+2. **Past window.** The last ``Tini`` pairs ``(u_{k-1}, e_{k-1}, y_k)``
+   (:mod:`lcc_synth.deeplcc.hankel`) from ABSOLUTE measurements kept in a ring, re-expressed
+   as errors from the current ``v_eq`` / ``s_eq``; ``u_{k-1}`` is the CAV's own velocity change
+   over the sample divided by ``dt`` (the acceleration the simulator APPLIED, limits and
+   emergency braking included). Before ``Tini`` samples exist the string is taken to have
+   cruised at its first measured state (as the simulator's history before ``t_start``).
+3. **Future head error** 0 after the current sample; the current one, ``e_t``, is measured.
+4. **QP** (:mod:`lcc_synth.deeplcc.qp`) on the exact reduction of the QP in ``g``, solved by
+   OSQP (one workspace per batch member set up at :meth:`reset`, vectors updated per step,
+   warm start from the shifted previous solution, status checked:
+   :class:`lcc_synth.mpc.solver.OSQPSolver`).
+5. **Fallback chain** as the MPC's (:mod:`lcc_synth.mpc.controller`): when the QP is not
+   solved (any status but ``solved``, non-finite data, an exception) the previous plan shifted
+   by one step while it lasts, then a static gain: the paper's Section V-B gain
+   (:func:`lcc_synth.mpc.settings.paper_fallback_gains`) applied around each CAV (``s_0, v_0``
+   its own errors, ``s_i, v_i`` those ``i`` vehicles behind it), clipped to the limits; the
+   simulator's emergency braking is the last layer. Nothing raises inside the loop.
+
+The CAVs are ``ctx.cavs`` when the context has them (several CAVs: the command is
+``(batch, n_c)``), else the single CAV ``ctx.m + 1`` (command ``(batch,)``). The CAV's whole
+acceleration is the input (as in the data).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from lcc_synth.controllers.base import ControlContext, Observation
+from lcc_synth.deeplcc.data import ExcitationReport, check_excitation
+from lcc_synth.deeplcc.hankel import DataSet, ReducedQP, reduce, spacing_rows, windows
+from lcc_synth.deeplcc.qp import DeepQP, formulate
+from lcc_synth.deeplcc.settings import DeePLCCSettings
+from lcc_synth.errors import ConfigError
+from lcc_synth.models.hdv import CarFollowingModel, free_speed
+from lcc_synth.mpc.report import new_step_record, step_statistics
+from lcc_synth.mpc.settings import paper_fallback_gains
+from lcc_synth.mpc.solver import POLISH_NAMES, OSQPSolver
+
+__all__ = ["DeePLCCController", "STATUS_CODES"]
+
+#: Per-step outcome codes stored in ``history()["status"]`` (as the MPC's).
+STATUS_CODES = {0: "qp", 1: "shifted_plan", 2: "static_gain", 3: "hold"}
+
+
+@dataclass
+class _Member:
+    """Solver and loop state of one batch member."""
+
+    solver: OSQPSolver
+    s_off: np.ndarray
+    v_buf: np.ndarray
+    vel: np.ndarray  # (Tini + 1, nv) absolute velocities, oldest first
+    spc: np.ndarray  # (Tini + 1, n_c) absolute CAV spacings
+    u: np.ndarray  # (Tini, n_c) applied accelerations u_{t-Tini} .. u_{t-1}
+    started: bool = False
+    v_buf_n: int = 0
+    v_buf_i: int = 0
+    v_eq: float = 0.0
+    cmd_prev: np.ndarray | None = None
+    plan: np.ndarray | None = None
+    plan_age: int = 0
+    warm: tuple | None = None
+    hist: dict[str, list] = field(default_factory=dict)
+
+
+class DeePLCCController:
+    """DeeP-LCC on one data set (module docstring).
+
+    Parameters
+    ----------
+    name : str
+    settings : DeePLCCSettings
+    data : DataSet
+        The offline data (:func:`lcc_synth.deeplcc.data.load_or_collect`).
+    kind : str
+        The system's kind (fixes the equilibrium default and the fallback gain).
+    hdv : CarFollowingModel
+        Nominal HDV model (equilibrium spacing at ``v_eq``).
+    v_star : float
+        Design equilibrium velocity.
+    n_vehicles : int
+        Vehicles of the string, head included.
+    cavs : tuple of int
+        Array columns of the CAVs (the data's input order).
+    data_key : str
+        Cache key of the data (for :meth:`describe`).
+    record : bool
+        Keep the per-step history.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        settings: DeePLCCSettings,
+        data: DataSet,
+        kind: str,
+        hdv: CarFollowingModel,
+        v_star: float,
+        n_vehicles: int,
+        cavs: tuple[int, ...],
+        data_key: str = "",
+        record: bool = True,
+    ):
+        self.name = name
+        self.settings = settings
+        self.sample_time = settings.sample_time
+        self.kind = kind
+        self.hdv = hdv
+        self.v_star = float(v_star)
+        self.nv = int(n_vehicles)
+        self.cavs = tuple(int(c) for c in cavs)
+        self.n_c = len(self.cavs)
+        self.p = self.nv - 1 + self.n_c
+        self.data_key = data_key
+        self.record = record
+        f = settings.data.field
+        if data.n_c != self.n_c or data.p != self.p:
+            raise ConfigError(f, f"the data have {data.n_c} inputs and {data.p} outputs; the "
+                              f"string needs {self.n_c} and {self.p}")  # fmt: skip
+        if abs(data.dt - self.sample_time) > 1e-9 * self.sample_time:
+            raise ConfigError(f"{f}.dt", f"the data were sampled at {data.dt} s, not "
+                              f"{self.sample_time} s")  # fmt: skip
+        Tini, N = settings.t_ini, settings.horizon
+        n_x = 2 * (self.nv - 1)
+        self.excitation: ExcitationReport = check_excitation(data, Tini + N + n_x, f)
+        t0 = time.perf_counter()
+        w = settings.weights
+        q = np.concatenate([np.full(self.nv - 1, w.velocity), np.full(self.n_c, w.spacing)])
+        r = np.full(self.n_c, w.input)
+        W = spacing_rows(N, self.p, [c - 1 for c in self.cavs], settings.constraints.t_gap)
+        self.reduced: ReducedQP = reduce(windows(data, Tini, N), q, r, w.lambda_g, w.lambda_y,
+                                         W)  # fmt: skip
+        self.qp: DeepQP = formulate(self.reduced, w.slack, w.slack_quadratic)
+        self.data = data
+        self.spacing_rows = W
+        self.setup_time = time.perf_counter() - t0
+        self.data_columns = data.T - Tini - N + 1
+        self._shift_z, self._shift_y = self.qp.shift_indices(self.n_c)
+        fb_kind = "fd_lcc" if kind == "fd_lcc" else "cf_lcc"
+        # the paper's gain reaches two vehicles behind; columns past the tail are skipped
+        self.fallback = paper_fallback_gains(fb_kind, 2)
+        self._fb = [(name[0], int(name.split("_")[1]), float(g))
+                    for name, g in self.fallback.gains.items()]  # fmt: skip
+        self._v_hi = free_speed(hdv)
+        self._members: list[_Member] = []
+        self._ctx: ControlContext | None = None
+        self._st = new_step_record()
+        self._t: list[float] = []
+        self.force_failure = False  # test hook: every solve reports a failure
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Picklable without the run state (OSQP workspaces); call :meth:`reset` after."""
+        state = dict(self.__dict__)
+        state["_members"] = []
+        state["_ctx"] = None
+        return state
+
+    # ---------------------------------------------------------------- protocol
+
+    def reset(self, ctx: ControlContext) -> None:
+        """Check the string, set up one OSQP workspace per batch member."""
+        if getattr(ctx, "ring", False):
+            raise ConfigError(f"controllers.{self.name}", "DeeP-LCC needs an open string with a "
+                              "head vehicle (its external input); the ring has none")  # fmt: skip
+        cavs = tuple(int(c) for c in getattr(ctx, "cavs", (ctx.m + 1,)))
+        if cavs != self.cavs or ctx.n_vehicles != self.nv:
+            raise ConfigError(f"controllers.{self.name}", f"the data are of a string of {self.nv} "
+                              f"vehicles with CAVs at columns {list(self.cavs)}; the scenario "
+                              f"has {ctx.n_vehicles} with {list(cavs)}")  # fmt: skip
+        self._ctx = ctx
+        c = self.settings.constraints
+        self._a_min = max(c.a_min, ctx.a_min)
+        self._a_max = min(c.a_max, ctx.a_max)
+        self._st = new_step_record()
+        self._t = []
+        Tini = self.settings.t_ini
+        Wn = max(1, int(round(self.settings.equilibrium_window / self.sample_time)))
+        self._members = []
+        n_w = self.qp.n_w
+        for b in range(ctx.batch):
+            q, lo, hi = self.qp.vectors(np.zeros(2 * n_w), self._a_min, self._a_max,
+                                        np.full(n_w, -np.inf))  # fmt: skip
+            solver = OSQPSolver(self.qp.qp, q, lo, hi, self.settings.solver)
+            s_off = np.asarray(ctx.spacing_reference()[b], float) - float(ctx.s_star[b])
+            s_off = np.nan_to_num(s_off, nan=0.0)[list(self.cavs)]
+            mem = _Member(solver, s_off, np.zeros(Wn), np.zeros((Tini + 1, self.nv)),
+                          np.zeros((Tini + 1, self.n_c)), np.zeros((Tini, self.n_c)),
+                          v_eq=float(ctx.v_star[b]))  # fmt: skip
+            mem.hist = {k: [] for k in ("u", "status", "v_eq", "slack", "plan")}
+            self._members.append(mem)
+
+    def __call__(self, obs: Observation) -> np.ndarray:
+        ctx = self._ctx
+        if ctx is None:
+            raise RuntimeError("DeePLCCController: call reset(ctx) before the first step")
+        out = np.zeros((ctx.batch, self.n_c))
+        self._t.append(float(obs.t))
+        for b, mem in enumerate(self._members):
+            t0 = time.perf_counter()
+            try:
+                out[b] = self._step(b, mem, obs)
+            except Exception as err:  # never raise inside the loop
+                self._st["errors"] += 1
+                if len(self._st["error_messages"]) < 5:
+                    self._st["error_messages"].append(f"t={obs.t:g}: {type(err).__name__}: {err}")
+                out[b] = self._hold(mem)
+                self._record(mem, out[b], 3, None, 0.0)
+            mem.cmd_prev = out[b].copy()
+            self._st["step_time"].append(time.perf_counter() - t0)
+        self._st["steps"] += 1
+        return out[:, 0] if self.n_c == 1 else out
+
+    # ---------------------------------------------------------------- one member, one step
+
+    def _clip_v(self, v: float) -> float:
+        return float(np.clip(v, 1.0, self._v_hi - 1.0))
+
+    def _observe(self, b: int, mem: _Member, obs: Observation) -> None:
+        """Push the sample into the rings and update ``v_eq``."""
+        vel = np.asarray(obs.velocity[b], float)
+        spc = np.asarray(obs.spacing[b], float)[list(self.cavs)]
+        if not mem.started:
+            mem.vel[:] = vel
+            mem.spc[:] = spc
+            mem.u[:] = 0.0
+            mem.started = True
+        else:
+            u_prev = (vel[list(self.cavs)] - mem.vel[-1, list(self.cavs)]) / self.sample_time
+            mem.u[:-1] = mem.u[1:]
+            mem.u[-1] = u_prev
+            mem.vel[:-1] = mem.vel[1:]
+            mem.vel[-1] = vel
+            mem.spc[:-1] = mem.spc[1:]
+            mem.spc[-1] = spc
+        v_head = float(vel[0])
+        if self.settings.equilibrium_mode(self.kind) == "fixed":
+            mem.v_eq = float(self._ctx.v_star[b])
+        elif math.isfinite(v_head):
+            W = mem.v_buf.size
+            if mem.v_buf_n == 0:
+                mem.v_buf[:] = v_head
+                mem.v_buf_n = W
+            else:
+                mem.v_buf[mem.v_buf_i] = v_head
+            mem.v_buf_i = (mem.v_buf_i + 1) % W
+            mem.v_eq = float(mem.v_buf.mean())
+
+    def parameters(self, mem: _Member) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(b, y_ini, s_eq)`` of the QP from a member's rings (module docstring)."""
+        v_eq = mem.v_eq
+        s_eq = float(self.hdv.equilibrium_spacing(self._clip_v(v_eq))) + mem.s_off
+        e = mem.vel[:, 0] - v_eq  # samples t-Tini .. t
+        N = self.settings.horizon
+        e_f = np.zeros(N)
+        e_f[0] = e[-1]
+        b = np.concatenate([mem.u.ravel(), e[:-1], e_f])
+        y = np.column_stack([mem.vel[1:, 1:] - v_eq, mem.spc[1:] - s_eq])
+        return b, y.ravel(), s_eq
+
+    def _step(self, b: int, mem: _Member, obs: Observation) -> np.ndarray:
+        st = self._st
+        self._observe(b, mem, obs)
+        c = self.settings.constraints
+        v_c = np.asarray(obs.velocity[b], float)[list(self.cavs)]
+        s_c = mem.spc[-1]
+        with np.errstate(invalid="ignore"):
+            viol = np.nanmax(c.s_min + c.t_gap * v_c - s_c, initial=-np.inf)
+        if viol > 1e-6:
+            st["violation_steps"] += 1
+            st["max_violation"] = max(st["max_violation"], float(viol))
+        bvec, y_ini, s_eq = self.parameters(mem)
+        if not (np.all(np.isfinite(bvec)) and np.all(np.isfinite(y_ini))):
+            return self._fallback(mem, obs, b, s_eq, "nonfinite_state")
+        red, qp = self.reduced, self.qp
+        cvec = red.Cb @ bvec + red.Cy @ y_ini
+        N = self.settings.horizon
+        b_w = np.tile(c.s_min + c.margin + c.t_gap * mem.v_eq - s_eq, N)
+        q, lo, hi = qp.vectors(cvec, self._a_min, self._a_max, b_w)
+        warm = mem.warm
+        mem.solver.force_failure = self.force_failure
+        res = mem.solver.solve(
+            q, lo, hi,
+            None if warm is None else warm[0][self._shift_z],
+            None if warm is None else warm[1][self._shift_y],
+        )  # fmt: skip
+        st["solves"] += 1
+        st["osqp_time"].append(res.run_time)
+        st["iterations"].append(res.iterations)
+        pname = POLISH_NAMES.get(res.polish, str(res.polish))
+        st["polish"][pname] = st["polish"].get(pname, 0) + 1
+        if not res.ok:
+            st["qp_failures"][res.status] = st["qp_failures"].get(res.status, 0) + 1
+            return self._fallback(mem, obs, b, s_eq, res.status)
+        z = res.z
+        mem.warm = (z, res.y)
+        plan = qp.plan(z).reshape(N, self.n_c)
+        slack = float(qp.slack(z).max())
+        if slack > 1e-6:
+            st["slack_steps"] += 1
+            st["max_slack"] = max(st["max_slack"], slack)
+        mem.plan = plan
+        mem.plan_age = 0
+        cmd = np.clip(plan[0], self._a_min, self._a_max)
+        self._record(mem, cmd, 0, plan, slack)
+        return cmd
+
+    def _static(self, mem: _Member, obs: Observation, b: int, s_eq) -> np.ndarray:
+        """The static fallback gain around every CAV (module docstring)."""
+        ctx = self._ctx
+        vel = np.asarray(obs.velocity[b], float)
+        spc = np.asarray(obs.spacing[b], float)
+        s_ref = np.asarray(ctx.spacing_reference()[b], float) - float(ctx.s_star[b])
+        s_nom = float(self.hdv.equilibrium_spacing(self._clip_v(mem.v_eq)))
+        out = np.zeros(self.n_c)
+        for j, col in enumerate(self.cavs):
+            u = 0.0
+            for what, i, g in self._fb:
+                k = col + i
+                if k >= self.nv:
+                    continue
+                if what == "v":
+                    u += g * (vel[k] - mem.v_eq)
+                elif i == 0:
+                    u += g * (spc[k] - s_eq[j])
+                else:
+                    u += g * (spc[k] - s_nom - np.nan_to_num(s_ref[k]))
+            out[j] = u
+        return out
+
+    def _fallback(self, mem: _Member, obs: Observation, b: int, s_eq, why: str) -> np.ndarray:
+        st = self._st
+        N = self.settings.horizon
+        if mem.plan is not None and mem.plan_age + 1 < N:
+            mem.plan_age += 1
+            cmd = np.clip(mem.plan[mem.plan_age], self._a_min, self._a_max)
+            st["fallback_shifted"] += 1
+            self._record(mem, cmd, 1, None, 0.0)
+            return cmd
+        cmd = self._static(mem, obs, b, s_eq)
+        if not np.all(np.isfinite(cmd)):
+            cmd = self._hold(mem)
+            self._record(mem, cmd, 3, None, 0.0)
+            return cmd
+        mem.plan = None
+        st["fallback_static"] += 1
+        cmd = np.clip(cmd, self._a_min, self._a_max)
+        self._record(mem, cmd, 2, None, 0.0)
+        return cmd
+
+    def _hold(self, mem: _Member) -> np.ndarray:
+        self._st["fallback_hold"] += 1
+        prev = mem.cmd_prev if mem.cmd_prev is not None else np.zeros(self.n_c)
+        prev = np.where(np.isfinite(prev), prev, 0.0)
+        return np.clip(prev, self._a_min, self._a_max)
+
+    # ---------------------------------------------------------------- history and reports
+
+    def _record(self, mem: _Member, cmd, code: int, plan, slack: float) -> None:
+        if not self.record:
+            return
+        h = mem.hist
+        N = self.settings.horizon
+        h["u"].append(np.array(cmd, float).reshape(self.n_c))
+        h["status"].append(code)
+        h["v_eq"].append(mem.v_eq)
+        h["slack"].append(slack)
+        h["plan"].append(np.full((N, self.n_c), np.nan) if plan is None else plan.copy())
+
+    def history(self) -> dict[str, np.ndarray]:
+        """Per-sample record of the last run, leading axes ``(batch, samples)``: ``t (S,)``,
+        ``u`` applied command, ``status`` (:data:`STATUS_CODES`), ``v_eq``, ``slack`` (largest
+        spacing slack, m), ``step_time`` (s), ``pred_time (N,)`` and the planned inputs: for
+        one CAV ``u (B, S)`` and ``plan (B, S, N)`` (the MPC's layout), for several
+        ``u (B, S, n_c)`` and ``plan_cavs (B, S, N, n_c)``."""
+        if not self._members or not self.record:
+            return {}
+        B = len(self._members)
+        S = min(len(m.hist["u"]) for m in self._members)
+        out: dict[str, Any] = {"t": np.array(self._t[:S])}
+        for key in ("u", "status", "v_eq", "slack", "plan"):
+            out[key] = np.array([np.array(m.hist[key][:S]) for m in self._members])
+        out["step_time"] = np.array(self._st["step_time"][: S * B]).reshape(S, B).T
+        if self.n_c == 1:  # the MPC's layout (recordings plot it): (B, S) and (B, S, N)
+            out["u"] = out["u"][..., 0]
+            out["plan"] = out["plan"][..., 0]
+        else:
+            out["plan_cavs"] = out.pop("plan")
+        out["pred_time"] = np.arange(self.settings.horizon) * self.sample_time
+        return out
+
+    def describe(self) -> dict[str, Any]:
+        """Settings, data size and excitation, QP size, fallback gain."""
+        import osqp
+
+        d = self.settings.as_dict()
+        d.update({
+            "type": "deep_lcc",
+            "name": self.name,
+            "kind": self.kind,
+            "cavs": list(self.cavs),
+            "sample_time": self.sample_time,
+            "equilibrium": self.settings.equilibrium_mode(self.kind),
+            "data_key": self.data_key,
+            "excitation": self.excitation.as_dict(),
+            "qp": {
+                "formulation": "exact reduction of the QP in g (lcc_synth.deeplcc.hankel), "
+                               "CasADi, built once",
+                "g_columns": self.data_columns,
+                "variables": self.qp.n_var,
+                "constraints": 3 * self.qp.n_w,
+                "setup_time_s": self.setup_time,
+                "solver": f"osqp {osqp.__version__}",
+            },
+            "fallback": {"source": "paper", "semantics": self.fallback.semantics,
+                         "gains": dict(self.fallback.gains)},
+        })  # fmt: skip
+        return d
+
+    def as_dict(self) -> dict[str, Any]:
+        """What defines the controller (settings, string, data key), without run-time facts
+        such as the set-up time: two loads of one problem file give equal dicts."""
+        return {"type": "deep_lcc", "name": self.name, "kind": self.kind,
+                "cavs": list(self.cavs), "n_vehicles": self.nv, "data_key": self.data_key,
+                **self.settings.as_dict()}  # fmt: skip
+
+    def toml_table(self) -> dict[str, Any]:
+        """The ``[controllers.NAME]`` table that builds this controller."""
+        return self.settings.toml_table()
+
+    def stats(self) -> dict[str, Any]:
+        """Step and solve times (ms), fallbacks, QP failures, slack use, measured violations
+        (as :meth:`lcc_synth.mpc.controller.MPCController.stats`)."""
+        return step_statistics(self._st)

@@ -1,0 +1,261 @@
+"""Hankel matrices of DeeP-LCC data, the fundamental-lemma predictor and the exact reduction
+of the data-enabled QP to its few constrained directions.
+
+**Data and windows.** A data set holds ``T`` samples of the CAV inputs ``u_k`` (``n_c``),
+the head velocity error ``e_k`` and the outputs ``y_{k+1}`` (``p``: velocity errors of every
+vehicle behind the head, then the spacing errors of the CAVs), paired so that ``u_k`` and
+``e_k`` act over ``[t_k, t_{k+1})`` and ``y_{k+1}`` is measured at its end (the simulator's
+Euler step, :mod:`lcc_synth.simulation.engine`: the pair is an LTI system with direct
+feed-through near the equilibrium). A Hankel matrix of depth ``L = Tini + N`` stacks ``L``
+consecutive samples per column, time-major (``K = T - L + 1`` columns); ``U_p, E_p, Y_p``
+are its first ``Tini`` block rows, ``U_f, E_f, Y_f`` the last ``N``.
+
+**Fundamental lemma** (Willems et al. 2005): for an LTI system of order ``n_x`` whose inputs
+are persistently exciting of order ``L + n_x``, every length-``L`` trajectory is ``H g`` for
+some ``g``; with ``Tini`` at least the lag, ``(u_ini, e_ini, y_ini, u_f, e_f)`` fix ``y_f``
+(:func:`predict`; ``tests/test_deeplcc.py`` reproduces a linear model's outputs to 1e-9).
+
+**The QP in g** (Wang et al. 2023, eq. 23): minimise
+``sum ||y_f||_Q^2 + ||u_f||_R^2 + lambda_g ||g||^2 + lambda_y ||Y_p g - y_ini||^2`` over ``g``
+subject to ``U_p g = u_ini``, ``E_p g = e_ini``, ``E_f g = e_f`` and inequality constraints
+on ``C g``, ``C = [U_f; W_f]``: the future inputs (acceleration limits) and, per CAV and step,
+``w = s~ - t_gap v~`` of its predicted spacing and velocity errors (the absolute safe spacing
+``s >= s_min + t_gap v`` is a lower bound on ``w``). With ``A = [U_p; E_p; E_f]`` and
+``b = [u_ini; e_ini; e_f]`` this is ``min 1/2 g'Hg + f'g`` with
+``H = 2 (Y_f'QY_f + U_f'RU_f + lambda_g I + lambda_y Y_p'Y_p)`` (positive definite) and
+``f = -2 lambda_y Y_p' y_ini``.
+
+**Exact reduction** (:func:`reduce`). By the KKT conditions the optimal ``g`` satisfies
+``H g + f = A' lambda + C' nu`` for some multipliers, and ``A g = b`` fixes ``lambda`` given
+``nu``; so the optimum lies on ``g(nu) = g0(b, y_ini) + G nu``, on which the cost equals
+``1/2 nu' Gamma nu`` plus a constant and ``C g(nu) = c(b, y_ini) + Gamma nu`` (the linear term
+vanishes because ``G' (H g0 + f) = G' A' lambda0 = 0``). In whitened coordinates
+(``H = L L'``, ``Z_X = L^-1 X'``) with ``Q_A`` an orthonormal basis of ``Z_A`` (``Z_A = Q_A R_A``)
+and ``M = (I - Q_A Q_A') Z_C``:
+
+    Gamma = M' M,   c = Z_C' Q_A R_A^-T b - M' Z_f y_ini,   G = L^-T M,
+    g0 = L^-T (Q_A R_A^-T b - (I - Q_A Q_A') Z_f y_ini),   Z_f = L^-1 (-2 lambda_y Y_p').
+
+So the online QP needs at most ``dim C = 2 N n_c`` unknowns (plus the spacing slacks) instead
+of ``K`` (1931 for T = 2000), with constant matrices; ``Gamma`` is a Gram matrix (positive
+semidefinite by construction, possibly singular: with exact noise-free data the future
+outputs are determined and ``Gamma`` has rank ``N n_c + min(n_x, N n_c)``; the ``nu``-form
+needs no rank decision, unlike a value function in ``C g``, which would be infinite off a
+subspace). :mod:`lcc_synth.deeplcc.qp` solves it in the future inputs and the spacings'
+deviation from what they imply, the variables in which it is well conditioned.
+Only ``A`` must have full row rank: the persistency-of-excitation
+check (:mod:`lcc_synth.deeplcc.data`) guarantees it.
+
+Numerical limits (measured): for the head-brake data (T = 2000, n = 10, default weights) ``H``
+has eigenvalues from ``2 lambda_g`` = 200 to 3.7e10 (condition number 1.8e8), so the
+Cholesky factor's solves lose up to about 8 of 16 digits; on the test case (T = 160) the
+reduced QP's plan matched the full QP in ``g`` (cvxpy + Clarabel at 1e-11) to 3e-11 (exact
+data) and 6e-11 (noisy data). With exact data and ``lambda_g`` below about 1e-5 ``H`` is
+singular to working precision (``B'B`` has rank below ``K``): :func:`reduce` refuses it by
+name (``weights.lambda_g``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+
+from lcc_synth.errors import ConfigError
+
+__all__ = ["DataSet", "hankel", "Windows", "windows", "predict", "ReducedQP", "reduce",
+           "spacing_rows"]
+
+
+@dataclass(frozen=True, eq=False)
+class DataSet:
+    """Input/output data of DeeP-LCC, paired as in the module docstring.
+
+    Attributes
+    ----------
+    u : numpy.ndarray
+        ``(T, n_c)`` applied CAV accelerations (m/s^2).
+    e : numpy.ndarray
+        ``(T,)`` head velocity errors (m/s).
+    y : numpy.ndarray
+        ``(T, p)`` outputs one sample later (m/s, then m).
+    dt : float
+        Sample time (s).
+    """
+
+    u: np.ndarray
+    e: np.ndarray
+    y: np.ndarray
+    dt: float
+
+    @property
+    def T(self) -> int:
+        """Number of samples."""
+        return int(self.u.shape[0])
+
+    @property
+    def n_c(self) -> int:
+        """Number of CAV inputs."""
+        return int(self.u.shape[1])
+
+    @property
+    def p(self) -> int:
+        """Number of outputs."""
+        return int(self.y.shape[1])
+
+
+def hankel(w: np.ndarray, depth: int) -> np.ndarray:
+    """Block Hankel matrix of depth ``depth`` of the samples ``w`` (``(T, d)`` or ``(T,)``):
+    ``(depth * d, T - depth + 1)``, column ``j`` = ``[w_j; w_{j+1}; ...]`` (time-major)."""
+    w = np.asarray(w, dtype=float)
+    if w.ndim == 1:
+        w = w[:, None]
+    T, d = w.shape
+    if depth < 1 or depth > T:
+        raise ValueError(f"depth {depth} needs 1 <= depth <= T = {T}")
+    view = np.lib.stride_tricks.sliding_window_view(w, depth, axis=0)  # (K, d, depth)
+    return np.ascontiguousarray(view.transpose(2, 1, 0).reshape(depth * d, T - depth + 1))
+
+
+@dataclass(frozen=True, eq=False)
+class Windows:
+    """Past and future block rows of the Hankel matrices (module docstring)."""
+
+    Up: np.ndarray
+    Ep: np.ndarray
+    Yp: np.ndarray
+    Uf: np.ndarray
+    Ef: np.ndarray
+    Yf: np.ndarray
+
+
+def windows(data: DataSet, t_ini: int, horizon: int) -> Windows:
+    """Split the depth-``t_ini + horizon`` Hankel matrices of ``data`` into past and future."""
+    L = t_ini + horizon
+    Hu, He, Hy = hankel(data.u, L), hankel(data.e, L), hankel(data.y, L)
+    nc, p = data.n_c, data.p
+    return Windows(Hu[: t_ini * nc], He[:t_ini], Hy[: t_ini * p],
+                   Hu[t_ini * nc:], He[t_ini:], Hy[t_ini * p:])  # fmt: skip
+
+
+def predict(win: Windows, u_ini, e_ini, y_ini, u_f, e_f) -> np.ndarray:
+    """Outputs ``y_f`` ``(N, p)`` of the trajectory through the past window
+    ``(u_ini, e_ini, y_ini)`` with future inputs ``(u_f, e_f)`` (arrays of samples, time
+    first): ``Y_f g`` with the least-norm ``g`` solving the stacked Hankel equations (the
+    fundamental lemma; exact for data of an LTI system)."""
+    D = np.vstack([win.Up, win.Ep, win.Yp, win.Uf, win.Ef])
+    rhs = np.concatenate([np.ravel(u_ini), np.ravel(e_ini), np.ravel(y_ini), np.ravel(u_f),
+                          np.ravel(e_f)])  # fmt: skip
+    g = np.linalg.lstsq(D, rhs, rcond=None)[0]
+    N = np.ravel(e_f).size
+    return (win.Yf @ g).reshape(N, -1)
+
+
+@dataclass(frozen=True, eq=False)
+class ReducedQP:
+    """The constant matrices of the reduced QP (module docstring).
+
+    Attributes
+    ----------
+    Gamma : numpy.ndarray
+        ``(nC, nC)`` Hessian of the reduced cost ``1/2 nu' Gamma nu``; ``C g = c + Gamma nu``.
+    Cb : numpy.ndarray
+        ``(nC, nb)``: ``c`` from ``b = [u_ini; e_ini; e_f]``.
+    Cy : numpy.ndarray
+        ``(nC, Tini p)``: ``c`` from ``y_ini``.
+    G, G0b, G0y : numpy.ndarray
+        ``g = G0b b + G0y y_ini + G nu`` (``(K, ...)``; for checks and predictions).
+    B : numpy.ndarray
+        ``(nC, r)`` factor ``Gamma = B B'`` on its range (``B = V sqrt(Lambda)`` over the
+        eigenvalues above round-off, ``nC eps lambda_max``): ``B B'`` is the exactly positive
+        semidefinite ``Gamma`` the online QP is built from (:mod:`lcc_synth.deeplcc.qp`).
+    n_u : int
+        Rows of ``C`` that are future inputs (``N n_c``); the rest are the ``w`` rows.
+    """
+
+    Gamma: np.ndarray
+    Cb: np.ndarray
+    Cy: np.ndarray
+    G: np.ndarray
+    G0b: np.ndarray
+    G0y: np.ndarray
+    n_u: int
+    B: np.ndarray
+
+
+def spacing_rows(N: int, p: int, cav_velocity: list[int], t_gap: float) -> np.ndarray:
+    """``(N n_c, N p)`` map of ``y_f`` to ``w = s~ - t_gap v~`` per step and CAV: CAV ``j``'s
+    spacing error is output ``p - n_c + j``, its velocity error output ``cav_velocity[j]``."""
+    n_c = len(cav_velocity)
+    W = np.zeros((N * n_c, N * p))
+    for k in range(N):
+        for j, vj in enumerate(cav_velocity):
+            W[k * n_c + j, k * p + p - n_c + j] = 1.0
+            W[k * n_c + j, k * p + vj] -= t_gap
+    return W
+
+
+def reduce(
+    win: Windows,
+    q: np.ndarray,
+    r: np.ndarray,
+    lambda_g: float,
+    lambda_y: float,
+    W_rows: np.ndarray,
+) -> ReducedQP:
+    """The exact reduction of the QP in ``g`` (module docstring).
+
+    Parameters
+    ----------
+    win : Windows
+    q : numpy.ndarray
+        ``(p,)`` diagonal output weight ``Q`` (per step).
+    r : numpy.ndarray
+        ``(n_c,)`` diagonal input weight ``R``.
+    lambda_g, lambda_y : float
+        Regularisation of ``g`` and of the past-output slack.
+    W_rows : numpy.ndarray
+        ``(n_w, N p)`` maps ``y_f`` to the constrained output combinations ``w``.
+    """
+    N = win.Ef.shape[0]
+    K = win.Up.shape[1]
+    qf = np.tile(np.asarray(q, float), N)
+    rf = np.tile(np.asarray(r, float), N)
+    # H = 2 (lambda_g I + B'B) with the weighted rows B
+    B = np.vstack([np.sqrt(qf)[:, None] * win.Yf, np.sqrt(rf)[:, None] * win.Uf,
+                   np.sqrt(lambda_y) * win.Yp])  # fmt: skip
+    H = B.T @ B
+    H[np.diag_indices(K)] += lambda_g
+    H *= 2.0
+    try:
+        Lc = sla.cholesky(H, lower=True, check_finite=False)
+    except np.linalg.LinAlgError:
+        raise ConfigError(
+            "weights.lambda_g",
+            f"{lambda_g:g} is too small for these data: 2 (lambda_g I + ...) is singular to "
+            "working precision (the Hessian of the QP in g); raise lambda_g",
+        ) from None
+    A = np.vstack([win.Up, win.Ep, win.Ef])
+    C = np.vstack([win.Uf, W_rows @ win.Yf])
+    Fy = -2.0 * lambda_y * win.Yp.T
+    nA, nC = A.shape[0], C.shape[0]
+    Z = sla.solve_triangular(Lc, np.hstack([A.T, C.T, Fy]), lower=True, check_finite=False)
+    ZA, ZC, ZF = Z[:, :nA], Z[:, nA:nA + nC], Z[:, nA + nC:]
+    QA, RA = np.linalg.qr(ZA)
+    M = ZC - QA @ (QA.T @ ZC)
+    Gamma = M.T @ M
+    Gamma = 0.5 * (Gamma + Gamma.T)
+    RinvT = sla.solve_triangular(RA, np.eye(nA), trans="T", check_finite=False)  # R_A^-T
+    QR = QA @ RinvT  # (K, nA)
+    Cb = ZC.T @ QR
+    Cy = -(M.T @ ZF)
+    PF = ZF - QA @ (QA.T @ ZF)
+    LT = Lc.T
+    G = sla.solve_triangular(LT, M, lower=False, check_finite=False)
+    G0b = sla.solve_triangular(LT, QR, lower=False, check_finite=False)
+    G0y = -sla.solve_triangular(LT, PF, lower=False, check_finite=False)
+    lam, V = np.linalg.eigh(Gamma)
+    keep = lam > nC * np.finfo(float).eps * max(float(lam[-1]), 0.0)
+    Bf = V[:, keep] * np.sqrt(lam[keep])
+    return ReducedQP(Gamma, Cb, Cy, G, G0b, G0y, win.Uf.shape[0], Bf)

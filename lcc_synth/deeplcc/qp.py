@@ -1,0 +1,150 @@
+"""DeeP-LCC's online QP, formulated once with CasADi on the reduced data matrices.
+
+The reduced problem (:mod:`lcc_synth.deeplcc.hankel`) is ``min 1/2 nu' Gamma nu`` with the
+constrained quantities ``v = C g = c + Gamma nu``: the future CAV inputs ``v_u`` and, per CAV
+and step, ``v_w = s~ - t_gap v~`` of its predicted spacing and velocity errors. It is solved in
+the variables that the data make well conditioned: the future inputs themselves and the
+deviation of the predicted spacings from what the inputs imply. With the blocks of ``Gamma``
+(``Gamma_uu`` positive definite: the inputs are free), ``K = Gamma_wu Gamma_uu^-1`` and the
+Schur complement ``S = Gamma_ww - K Gamma_uw = V diag(s) V'`` (its eigenvalues above round-off,
+``S^1/2 = V diag(sqrt(s))``), every ``v`` in ``c + range(Gamma)`` is
+``v_w = c_w + K (v_u - c_u) + S^1/2 beta`` and the cost is
+``1/2 (v_u - c_u)' Gamma_uu^-1 (v_u - c_u) + 1/2 ||beta||^2`` (the block factorisation of the
+pseudo-inverse; the minimum-norm ``beta`` is optimal). Decision vector
+``x = [v_u (N n_c), beta (rank S), sigma (N n_c)]``::
+
+    min  1/2 (v_u - c_u)' Gamma_uu^-1 (v_u - c_u) + 1/2 ||beta||^2
+         + rho_1 sum sigma + rho_2 sum sigma^2
+    s.t. a_min <= v_u <= a_max                                  (hard, every CAV and step)
+         c_w + K (v_u - c_u) + S^1/2 beta + sigma >= s_min + margin + t_gap v_eq - s_eq
+         sigma >= 0                                             (soft, absolute metres)
+
+so the bound is ``s >= s_min + margin + t_gap v`` with ``s = s_eq + s~``, ``v = v_eq + v~`` (the
+MPC's definition, :class:`lcc_synth.mpc.settings.Constraints`), its l1 penalty exact. Only the
+vectors change between steps (``c`` is affine in the measured past); the Hessian, the
+constraint matrix and the maps of ``c`` into ``q`` and the bounds are extracted from the
+CasADi expressions once (:func:`formulate`).
+
+Why these variables (measured, OSQP at eps 1e-6): with noisy nonlinear data ``Gamma`` has
+``N n_c`` eigenvalues of order 1 (the inputs) and ``N n_c`` from 3e-3 down to 1e-6 (the
+spacings the data nearly determine). Solved in ``nu`` (Hessian ``Gamma``) or in its
+eigen-coordinates, ADMM needed up to 10000 iterations on the two-CAV platoon brake (4 and 13
+failures in 800 steps, p99 285 / 800 ms CPU); in these variables p99 81 ms and 2 failures, and
+on the one-CAV head brake p99 0.6 ms (``nu``: 2.8 ms).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from lcc_synth.deeplcc.hankel import ReducedQP
+from lcc_synth.errors import ConfigError
+from lcc_synth.mpc.formulation import QPMatrices
+
+__all__ = ["DeepQP", "formulate"]
+
+
+@dataclass(frozen=True, eq=False)
+class DeepQP:
+    """The QP of one DeeP-LCC controller (module docstring).
+
+    Attributes
+    ----------
+    qp : QPMatrices
+        ``P`` (upper triangle) and ``A`` for OSQP.
+    q0 : numpy.ndarray
+        Constant part of the linear term.
+    Qc, Gc : numpy.ndarray
+        Dependence of the linear term and of the constraint offsets on ``c``.
+    n_w : int
+        Future inputs (= spacing rows = slacks), ``N n_c``.
+    n_beta : int
+        Rank of ``S``.
+    """
+
+    qp: QPMatrices
+    q0: np.ndarray
+    Qc: np.ndarray
+    Gc: np.ndarray
+    n_w: int
+    n_beta: int
+
+    @property
+    def n_var(self) -> int:
+        """Number of decision variables."""
+        return 2 * self.n_w + self.n_beta
+
+    def vectors(self, c: np.ndarray, a_min: float, a_max: float, b_w: np.ndarray):
+        """``(q, l, u)`` of OSQP for ``c`` and the spacing bounds ``b_w`` (``(n_w,)``)."""
+        n = self.n_w
+        off = self.Gc @ c
+        lo = np.empty(3 * n)
+        hi = np.empty(3 * n)
+        lo[:n], hi[:n] = a_min, a_max
+        lo[n:2 * n], hi[n:2 * n] = b_w, np.inf
+        lo[2 * n:], hi[2 * n:] = 0.0, np.inf
+        return self.Qc @ c + self.q0, lo - off, hi - off
+
+    def plan(self, x: np.ndarray) -> np.ndarray:
+        """The planned inputs ``v_u`` of a solution (``(n_w,)``, step-major)."""
+        return x[: self.n_w]
+
+    def slack(self, x: np.ndarray) -> np.ndarray:
+        """The spacing slacks of a solution."""
+        return x[self.n_w + self.n_beta:]
+
+    def shift_indices(self, n_c: int) -> tuple[np.ndarray, np.ndarray]:
+        """Index arrays shifting a primal / dual solution by one step (warm start; ``beta``,
+        which has no time order, is kept)."""
+        n = self.n_w
+        N = n // n_c
+        k = np.minimum(np.arange(N) + 1, N - 1)
+        base = (k[:, None] * n_c + np.arange(n_c)[None, :]).ravel()
+        z = np.concatenate([base, n + np.arange(self.n_beta), n + self.n_beta + base])
+        y = np.concatenate([base, base + n, base + 2 * n])
+        return z, y
+
+
+def formulate(red: ReducedQP, slack: float, slack_quadratic: float) -> DeepQP:
+    """Build the QP of the module docstring with CasADi and extract its matrices once."""
+    import casadi as ca
+
+    G = red.B @ red.B.T
+    n = red.n_u
+    Guu, Guw, Gww = G[:n, :n], G[:n, n:], G[n:, n:]
+    try:
+        Luu = np.linalg.cholesky(Guu)
+    except np.linalg.LinAlgError:
+        raise ConfigError("data", "the data do not leave the future inputs free (Gamma_uu is "
+                          "singular): collect richer data") from None  # fmt: skip
+    Gi = np.linalg.inv(Luu)
+    Gi = Gi.T @ Gi
+    K = np.linalg.solve(Guu, Guw).T
+    S = Gww - K @ Guw
+    s, V = np.linalg.eigh(0.5 * (S + S.T))
+    keep = s > G.shape[0] * np.finfo(float).eps * max(float(np.abs(s).max(initial=0.0)),
+                                                     float(np.linalg.norm(G, 2)))  # fmt: skip
+    Sh = V[:, keep] * np.sqrt(s[keep])
+    nb = Sh.shape[1]
+    nz = 2 * n + nb
+    x = ca.MX.sym("x", nz)
+    c = ca.MX.sym("c", 2 * n)
+    vu, beta, sigma = x[:n], x[n:n + nb], x[n + nb:]
+    du = vu - c[:n]
+    cost = (0.5 * ca.dot(du, ca.DM(Gi) @ du) + 0.5 * ca.dot(beta, beta)
+            + slack * ca.sum1(sigma) + slack_quadratic * ca.dot(sigma, sigma))  # fmt: skip
+    vw = c[n:] + ca.DM(K) @ du + (ca.DM(Sh) @ beta if nb else 0)
+    g = ca.vertcat(vu, vw + sigma, sigma)
+    H, grad = ca.hessian(cost, x)
+    grad0 = ca.substitute(grad, x, ca.DM.zeros(nz))
+    fun = ca.Function("deep_qp", [x, c], [H, ca.jacobian(g, x), ca.jacobian(g, c),
+                                          ca.jacobian(grad0, c), grad0])  # fmt: skip
+    Hn, An, Gcn, Qcn, q0 = (np.array(m) for m in fun(np.zeros(nz), np.zeros(2 * n)))
+    P = sp.csc_matrix(np.triu(0.5 * (Hn + Hn.T)))
+    A = sp.csc_matrix(An)
+    empty = np.zeros((0, 0))
+    qp = QPMatrices(P, A, empty, empty, np.zeros(0), np.zeros(0))
+    return DeepQP(qp, q0.reshape(-1), Qcn, Gcn, n, nb)
