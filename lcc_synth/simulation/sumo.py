@@ -4,24 +4,29 @@ car-following models, the CAV by any lcc_synth controller, stepped in-process wi
 :func:`simulate_sumo` is the ``backend = "sumo"`` counterpart of
 :func:`lcc_synth.simulation.engine.simulate`: the same arguments, the same
 :class:`~lcc_synth.simulation.results.SimResult` (metrics, tables, figures and recordings are
-unchanged), the open straight road with one CAV (the built-in simulator's layout: column 0 the
-head, ``1..m`` the HDVs ahead, ``m + 1`` the CAV, the HDVs behind).
+unchanged), for every layout of the built-in simulator: the open straight road with one CAV
+(column 0 the head, ``1..m`` the HDVs ahead, ``m + 1`` the CAV, the HDVs behind), a mixed
+platoon with several CAVs (column ``i`` position ``i``), and the ring road (column ``j``
+position ``j + 1``, column 0 following column N-1; the ring, the vehicles' loops and the lap
+tracking are :mod:`.sumo_road`'s).
 
 Per scenario of the batch (one SUMO run each: ``libsumo.start`` / ``close``, one at a time per
 process):
 
 * a straight single-lane road built by ``netconvert`` (long enough for the head's prescribed
-  motion plus the string; :mod:`.sumo_net`), one vehicle type per HDV with its drawn
-  parameters (:func:`~lcc_synth.simulation.sumo_net.vehicle_types`), every vehicle inserted at
+  motion plus the string; :mod:`.sumo_net`) or the ring (:mod:`.sumo_road`), one vehicle
+  type per HDV with its drawn parameters
+  (:func:`~lcc_synth.simulation.sumo_net.vehicle_types`), every vehicle inserted at
   time 0 at the built-in simulator's initial state (equilibrium spacings at ``v*``, every speed
   ``v*``), SUMO's step = the scenario's ``dt``;
-* the head, the CAV, and every HDV while a perturbation drives it, are commanded: speed mode
+* the head, every CAV, and every HDV while a perturbation drives it, are commanded: speed mode
   0 and lane-change mode 0 (SUMO's safety checks off), ``vehicle.setSpeed(v_k + dt a_k)`` each
   step with ``a_k`` computed exactly as the built-in kernel does (perturbation overrides,
-  speed-profile tracking within the limits, the CAV's command clipped to ``[a_min, a_max]``
-  then emergency braking eq. 29 on the state read from SUMO, speeds kept >= 0); an HDV is
-  released to SUMO's model when its perturbation ends;
-* the CAV's controller sees what it would see in the built-in simulator: the same V2V model
+  speed-profile tracking within the limits, each CAV's command (its column of the
+  controller's ``(batch, n_cav)``) clipped to ``[a_min, a_max]`` then its emergency braking
+  eq. 29 on the state read from SUMO, towards its own predecessor, speeds kept >= 0); an HDV
+  is released to SUMO's model when its perturbation ends;
+* the controller sees what it would see in the built-in simulator: the same V2V model
   (loss, latency, noise; the built-in simulator's compiled observation routine and its random
   streams), at its sample time with zero-order hold;
 * collisions are SUMO's (``--collision.action warn``, ``collisionMinGapFactor = 0``:
@@ -54,6 +59,11 @@ string, v* = 15 m/s, the CAV and 10 HDVs behind, the head-brake profile, dt = 0.
   bumper-to-bumper gap as the spacing (the vehicle length changes the run by < 1e-12).
 * Deceleration bound. SUMO never brakes harder than ``emergencyDecel`` (set to ``|a_min|``,
   the built-in clip) and accelerates at most ``accel`` (the IDM ``a <= a_max``).
+
+On the ring the same holds (SUMO's ring reproduces its own scheme to 1e-12 m over laps), but
+the all-HDV ring is unstable and each scheme gives its stop-and-go modes their own growth rate
+(first order in dt; explicit Euler the fastest), so the difference grows with the wave
+(``tests/test_sumo_ring.py``, ``benchmarks/bench_sumo_ring.py``, README).
 
 Wall time: about 35 us per step for 12 vehicles at low load (0.25 s for the 70 s all-HDV run,
 0.42 s with a static gain called from Python every step; the built-in compiled loop takes
