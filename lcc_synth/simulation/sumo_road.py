@@ -32,9 +32,10 @@ from pathlib import Path
 
 import numpy as np
 
+from lcc_synth.models.records import Record
 from lcc_synth.simulation.sumo_net import ring_road, straight_road
 
-__all__ = ["RING_EDGES", "SumoRoad", "place_string"]
+__all__ = ["RING_EDGES", "MARGIN", "SumoRoad", "place_string", "work_dir"]
 
 #: Edges of the SUMO ring.
 RING_EDGES = 4
@@ -64,8 +65,8 @@ def _net(kind: str, length: float, speed: float) -> Path:
     return _NETS[key]
 
 
-@dataclass(frozen=True)
-class SumoRoad:
+@dataclass(frozen=True, repr=False)
+class SumoRoad(Record):
     """One scenario's road in SUMO and the map back to the built-in frame.
 
     Attributes
