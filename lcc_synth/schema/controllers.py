@@ -156,7 +156,10 @@ MPC_PREDICTION = Table(
      Key("delay", "any", "HDV reaction delay in the prediction model (delay states, "
          "lcc_synth.mpc.delay): a number in [0, 5] for every HDV, or a list with one per "
          "HDV the MPC models, front to tail (single-CAV MPC only); 0: none.", 0.0,
-         unit="s")),
+         unit="s"),
+     Key("cav_lag", "number", "The CAV's first-order actuator lag in the prediction model "
+         "(state a_0, lcc_synth.mpc.lag; single-CAV MPC, not with delay); 0: none.", 0.0,
+         lo=0.0, unit="s")),
     variant=_MPC,
 )
 MPC_SOLVER = Table(
