@@ -24,8 +24,10 @@ process):
   step with ``a_k`` computed exactly as the built-in kernel does (perturbation overrides,
   speed-profile tracking within the limits, each CAV's command (its column of the
   controller's ``(batch, n_cav)``) clipped to ``[a_min, a_max]`` then its emergency braking
-  eq. 29 on the state read from SUMO, towards its own predecessor, speeds kept >= 0); an HDV
-  is released to SUMO's model when its perturbation ends;
+  eq. 29 on the state read from SUMO, towards its own predecessor, then, with an actuator lag
+  (``cav_lag``), the lag's state in its place, updated from the applied acceleration as the
+  built-in kernel does; speeds kept >= 0); an HDV is released to SUMO's model when its
+  perturbation ends;
 * the controller sees what it would see in the built-in simulator: the same V2V model
   (loss, latency, noise; the built-in simulator's compiled observation routine and its random
   streams), at its sample time with zero-order hold;
@@ -238,6 +240,13 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
         commanded[0] = True  # the head
     u_hold = np.zeros(n_cav)
     aeb = np.zeros(n_cav, dtype=bool)
+    # actuator lag per CAV (the built-in kernel's: the clipped / braking command drives the
+    # lag's state, which the CAV applies; the state then follows the applied acceleration)
+    lag_f = np.array([dt / tau if tau > 0 else 0.0 for tau in sc.lags()])
+    lagged = bool(lag_f.any())
+    a_lag = np.zeros(n_cav)
+    cmd = np.zeros(n_cav)
+    applied = np.zeros(n_cav)
     abs_min = abs(a_min)
     j0 = 0 if ring else 1  # first column with a vehicle ahead
     want = (1,) if n_cav == 1 else (1, n_cav)
@@ -291,7 +300,8 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
                              obs_s, obs_v, obs_p, alive)  # fmt: skip
                 u = np.asarray(
                     controller(Observation(float(t[k]), obs_s.copy(), obs_v.copy(),
-                                           obs_p.copy())),
+                                           obs_p.copy(), a_lag[None].copy() if lagged
+                                           else None)),
                     dtype=float,
                 )  # fmt: skip
                 if n_cav == 1 and u.shape == (1, 1):
@@ -319,6 +329,8 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
                     lead = ahead[j]
                     if sc.cav_aeb and (v[j] ** 2 - v[lead] ** 2) / (2.0 * spacing[j]) >= abs_min:
                         a, aeb[kc] = a_min, True
+                    if lag_f[kc] > 0.0:  # actuator lag: the CAV applies the lag's state
+                        cmd[kc], a = a, a_lag[kc]
                 elif driven:
                     a = 0.0
                 else:
@@ -337,6 +349,10 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
                     sumo.vehicle.setSpeedMode(ids[j], 0)
                     commanded[j] = True
                 sumo.vehicle.setSpeed(ids[j], max(v[j] + dt * a, 0.0))
+                if kc >= 0:
+                    applied[kc] = max(a, -v[j] / dt)  # the standstill floor, as built in
+            if lagged:
+                a_lag[:] = np.where(lag_f > 0.0, applied + lag_f * (cmd - applied), 0.0)
             sumo.simulationStep()
             hit_sumo = {ids.index(c.collider) for c in sumo.simulation.getCollisions()
                         if c.collider in ids}  # fmt: skip
