@@ -220,8 +220,6 @@ class Scenario(Record):
                 raise ConfigError(
                     "scenario.cav_lag", f"must be 0 or >= dt = {self.dt} s, got {tau}"
                 )
-        if self.backend == "sumo" and any(self.lags()):
-            raise ConfigError("scenario.cav_lag", "the SUMO backend has no actuator lag: use 0")
         if self.backend == "sumo":
             check_sumo_scenario(self)
 
