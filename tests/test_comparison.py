@@ -342,9 +342,11 @@ def test_default_problem_is_the_showcase_and_reproduces_table_ii():
     path = default_problem()
     assert path == Path(__file__).resolve().parents[1] / "problems" / "showcase.toml"
     full = load_suite(path)
-    assert list(full.scenarios) == ["brake_behind", "head_sine", "head_brake", "heterogeneous"]
+    assert list(full.scenarios) == ["brake_behind", "head_sine", "head_brake", "heterogeneous",
+                                    "platoon_brake", "ring_wave"]
     assert list(full.controllers) == ["all_hdv", "paper", "h2", "mpc"]
-    assert {s.layout for s in full.scenarios.values()} == {"string10", "sec5a"}
+    assert {s.layout for s in full.scenarios.values()} == {"string10", "sec5a", "platoon8",
+                                                            "ring20"}
     suite = load_suite(path, scenarios=["brake_behind"], controllers=["all_hdv", "paper"])
     table = run_suite(suite, progress=False).table["brake_behind"]
     # Table II of the paper: "all HDVs" and CF-LCC columns

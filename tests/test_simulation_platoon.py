@@ -112,7 +112,9 @@ def test_ring_all_hdv_conserves_the_total_spacing_to_round_off(ring_spec):
 
 
 def test_ring_wave_grows_at_the_rate_of_the_linear_rings_unstable_mode(ring_spec):
-    sc = replace(ring_spec.scenario, duration=250.0, hdv_aeb=False, cav_aeb=False,
+    # dt = 0.005 s: Euler's growth rate within 1.7 % of the mode's (the file's 0.01 s: 3.4 %)
+    sc = replace(ring_spec.scenario, duration=250.0, dt=0.005, record_every=10,
+                 hdv_aeb=False, cav_aeb=False,
                  perturbations=(Brake(vehicle=1, start=5.0, duration=1.0, decel=-0.0005),))
     r = simulate(sc, HDVController())
     P = Platoon(tuple([sc.hdv] * 20), (20,), 15.0, True)

@@ -123,12 +123,16 @@ class Observation:
         a ring it is the gap of position 1 to position N.
     position : numpy.ndarray
         ``(batch, n_vehicles)`` positions as received (used by FD-LCC's ``-p_0`` state).
+    cav_acceleration : numpy.ndarray, optional
+        ``(batch, n_cav)``: each CAV's own acceleration, the state of its actuator lag
+        (``[scenario] cav_lag > 0``); ``None`` without lag (the CAV applies its command).
     """
 
     t: float
     spacing: np.ndarray
     velocity: np.ndarray
     position: np.ndarray
+    cav_acceleration: np.ndarray | None = None
 
 
 @runtime_checkable

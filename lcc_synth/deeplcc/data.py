@@ -10,7 +10,10 @@ starts at the equilibrium), imposed through an ``accel_profile`` perturbation of
 from the simulated head velocity. ``T + 1`` samples at ``dt`` give ``T`` pairs
 ``(u_k, e_k, y_{k+1})`` (:mod:`lcc_synth.deeplcc.hankel`). The scenario is the run's own (its
 HDV parameters, heterogeneity, reaction delays, acceleration noise, limits) with the
-perturbations replaced, ``batch = 1`` and the data table's ``dt``, ``seed`` and ``v_star``.
+perturbations replaced, ``batch = 1`` and the data table's ``dt``, ``seed`` and ``v_star``,
+run in the scenario's simulator: with ``[scenario] backend = "sumo"`` the data come from SUMO
+(the HDVs the controller will drive among: SUMO's car-following model and integration), and the
+backend is part of the cache key, so SUMO's and the built-in simulator's data never mix.
 
 **Persistency of excitation.** The fundamental lemma needs the inputs ``(u, e)`` persistently
 exciting of order ``L + n_x`` (``L = Tini + N``, ``n_x = 2`` per vehicle behind the head):
@@ -298,7 +301,7 @@ def collect(scenario, settings: DataSettings) -> DataSet:
     ConfigError
         A vehicle collided, or emergency braking overrode the excitation.
     """
-    from lcc_synth.simulation.engine import simulate
+    from lcc_synth.simulation.backends import run_scenario
     from lcc_synth.simulation.perturbations import Profile
 
     T, dt = int(settings.T), float(scenario.dt)
@@ -315,8 +318,8 @@ def collect(scenario, settings: DataSettings) -> DataSet:
     head = Profile(tuple(times.tolist()), tuple(accel.tolist()), "accel", "step", "head")
     sc = replace(scenario, perturbations=(head,))
     progress(f"deep_lcc: collecting {T} data samples at dt = {dt:g} s (seed {settings.seed})")
-    with collection_bar(steps) as bar:
-        res = simulate(sc, Excitation(u_cmd, bar))
+    with collection_bar(steps) as bar:  # in the scenario's simulator (SUMO too)
+        res = run_scenario(sc, Excitation(u_cmd, bar))
     if res.collided.any():
         who = "; ".join(res.collision_report())
         raise ConfigError(settings.field, f"the data collection collided ({who}): lower "

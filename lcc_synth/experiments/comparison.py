@@ -16,7 +16,14 @@ A *suite* problem file (``lcc-synth run``, e.g. ``problems/showcase.toml``) desc
   ``sample_time``, ``equilibrium``, ``equilibrium_tau`` and ``measurement_filter`` of the
   static controller.
   ``[controllers.NAME.layouts.LAYOUT]`` overrides keys for one layout (merged recursively),
-  e.g. the paper's gains, which differ between the Table II string and the Section V-A string.
+  e.g. the paper's gains, which differ between the Table II string and the Section V-A string;
+  ``only_layouts = [...]`` names the layouts a controller is for (absent: every layout; on
+  the others it has no row, :func:`applies`).
+
+A layout may be a mixed platoon or a ring (``kind = "platoon" | "ring"``, ``size``, ``cavs``,
+``circumference``, ``[layouts.NAME.hdv_values]``): its ``h2`` controllers are platoon designs
+(:mod:`lcc_synth.synthesis.platoon_design`, a gain row per CAV), its MPCs the joint MPC of
+every CAV, an MPC's ``fallback`` the platoon gain table.
 
 Every controller runs on every scenario with the same random draws (``simulate(..., draws)``);
 the metrics are those of :func:`lcc_synth.metrics.summary` (:data:`SUITE_METRICS`).
@@ -33,8 +40,9 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.controllers.base import Controller
-from lcc_synth.controllers.registry import CONTROLLER_TYPES, STATIC_RUN_KEYS, build_controller
+from lcc_synth.controllers.registry import CONTROLLER_TYPES, build_controller
 from lcc_synth.errors import ConfigError
+from lcc_synth.experiments.h2_tables import synthesize_table
 from lcc_synth.experiments.tables import SUITE_METRICS, rank_failed_last
 from lcc_synth.metrics import MetricsConfig, metrics_from
 from lcc_synth.models.records import Record, system_tables, toml_text
@@ -53,6 +61,7 @@ __all__ = [
     "select_names",
     "controller_table",
     "synthesize_table",
+    "applies",
     "prepare_controllers",
     "fallback_names",
     "build_controllers",
@@ -157,10 +166,6 @@ def fallback_names(tables: Mapping[str, Any], names: Sequence[str]) -> list[str]
     return out
 
 
-def _system_data(system: System) -> dict[str, Any]:
-    return {"kind": system.kind, "m": system.m, "n": system.n, "v_star": system.v_star}
-
-
 def load_suite(
     path: str | Path | Problem,
     scenarios: Sequence[str] | None = None,
@@ -238,6 +243,14 @@ def load_suite(
             if not isinstance(table, dict):
                 raise ConfigError(f, "must be a table")
             C.get(table, "type", f)
+            only = C.raw(table, "only_layouts")
+            if only is not None and (not isinstance(only, list) or not only):
+                raise ConfigError(f"{f}.only_layouts", f"must be a non-empty list of layout "
+                                  f"names {list(layouts)}, got {only!r}")  # fmt: skip
+            for lname in only or ():
+                if lname not in layouts:
+                    raise ConfigError(f"{f}.only_layouts", f"unknown layout {lname!r}; "
+                                      f"available: {list(layouts)}")  # fmt: skip
             over = C.get(table, "layouts", f)
             for lname, t in over.items():
                 if lname not in layouts:
@@ -280,68 +293,17 @@ def _merge(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
 
 def controller_table(table: Mapping[str, Any], layout: str) -> dict[str, Any]:
     """The controller table for ``layout``: the base keys merged with its ``layouts`` entry."""
-    base = {k: v for k, v in table.items() if k != "layouts"}
+    base = {k: v for k, v in table.items() if k not in ("layouts", "only_layouts")}
     over = table.get("layouts", {}).get(layout, {})
     return _merge(base, over)
 
 
-def synthesize_table(
-    name: str,
-    table: Mapping[str, Any],
-    system: System,
-    hdv_table: Mapping[str, Any],
-    label: str,
-    source: str | None = None,
-):
-    """Synthesise an ``h2`` controller for ``system``.
-
-    Returns ``(static_table, report)``: a ``type = "static"`` controller table holding the
-    synthesised gain (plain data: it can be sent to Dask workers) and the
-    :class:`~lcc_synth.synthesis.report.SynthesisReport`.
-
-    Raises
-    ------
-    ConfigError
-        A bad synthesis key (named ``controllers.NAME...``).
-    lcc_synth.synthesis.SynthesisError
-        Solver failure, infeasibility or an unusable result.
-    """
-    from lcc_synth.synthesis.config import spec_from_problem
-    from lcc_synth.synthesis.design import synthesize
-
-    synth = {k: v for k, v in table.items() if k != "type" and k not in STATIC_RUN_KEYS}
-    if synth.get("as_run") not in (None, False):  # design the loop the controller runs
-        ar = {} if synth["as_run"] is True else dict(synth["as_run"])
-        for key in STATIC_RUN_KEYS:
-            if key in table and key not in ar:
-                ar[key] = table[key]
-        synth["as_run"] = ar
-    data = {
-        "name": label,
-        "hdv": dict(hdv_table),
-        "system": _system_data(system),
-        "synthesis": synth,
-    }
-    problem = Problem(Path(source) if source else Path(f"{label}.toml"), data)
-    try:
-        spec = spec_from_problem(problem)
-    except ConfigError as err:
-        fld = err.field
-        fld = f"controllers.{name}" + fld[len("synthesis") :] if fld.startswith("synthesis") else (
-            f"controllers.{name} ({fld})"
-        )
-        raise ConfigError(fld, err.message, source) from None
-    rep = synthesize(spec)
-    out: dict[str, Any] = {
-        "type": "static",
-        "kind": rep.kind,
-        "semantics": rep.semantics,
-        "gains": dict(rep.gains),
-    }
-    for key in STATIC_RUN_KEYS:
-        if key in table:
-            out[key] = table[key]
-    return out, rep
+def applies(table: Mapping[str, Any], layout: str) -> bool:
+    """Does the controller of ``table`` run on ``layout``? (``only_layouts``: the layouts it
+    is for, e.g. the paper's gains, written for two single-CAV strings; absent: every
+    layout.) A controller left out of a layout has no row in that layout's scenarios."""
+    only = table.get("only_layouts")
+    return only is None or layout in only
 
 
 def prepare_controllers(
@@ -359,12 +321,16 @@ def prepare_controllers(
 
     Returns ``(tables, designs)``: ``{name: table}`` with only the types of
     :data:`lcc_synth.controllers.registry.CONTROLLER_TYPES`, and ``{name: SynthesisReport}``,
-    for the names of ``controllers`` (``fallbacks``: more tables, designed only to resolve
-    the MPCs' fallbacks, :attr:`Suite.fallbacks`).
+    for the names of ``controllers`` that apply to ``layout`` (:func:`applies`;
+    ``fallbacks``: more tables, designed only to resolve the MPCs' fallbacks,
+    :attr:`Suite.fallbacks`).
     """
     tables: dict[str, dict[str, Any]] = {}
     designs: dict[str, Any] = {}
+    controllers = {k: t for k, t in controllers.items() if applies(t, layout)}
     for name, raw in {**controllers, **(fallbacks or {})}.items():
+        if not applies(raw, layout):
+            continue
         if on_step is not None and name in controllers:
             on_step(name)
         table = controller_table(raw, layout)
@@ -479,13 +445,13 @@ def run_suite(
             raise err from None
     timings: dict[str, float] = {}
     layouts = suite.layouts_used()
-    n_ctrl = len(suite.controllers)
     tables: dict[str, dict[str, dict[str, Any]]] = {}
     designs: dict[str, dict[str, Any]] = {}
     built: dict[str, dict[str, Controller]] = {}
     t0 = time.perf_counter()
     what = "controllers (synthesis, MPC set-up)"
-    with progress_bar(len(layouts) * n_ctrl, what, progress) as bar:
+    n_built = sum(applies(t, lname) for lname in layouts for t in suite.controllers.values())
+    with progress_bar(n_built, what, progress) as bar:
         for lname in layouts:
             system = suite.layouts[lname]
 
@@ -518,7 +484,7 @@ def run_suite(
     table: dict[str, dict[str, dict[str, Any]]] = {}
     results: dict[str, dict[str, SimResult]] = {}
     t0 = time.perf_counter()
-    total = len(suite.scenarios) * n_ctrl
+    total = sum(len(built[ss.layout]) for ss in suite.scenarios.values())
     with progress_bar(total, "simulations", progress) as bar:
         for sname, ss in suite.scenarios.items():
             draws = ss.scenario.draw()
@@ -562,12 +528,15 @@ def gamma_curves(
 
 
 def gamma_settings(suite: Suite) -> dict[str, list[tuple[str, float, float, list[str]]]]:
-    """Per layout with a head vehicle, the distinct ``(dt, V2V latency)`` of its scenarios:
+    """Per single-CAV layout with a head vehicle (not ``fd_lcc``; a ring has no head and a
+    platoon's head-to-tail Γ is ``lcc-synth analyze``'s,
+    :mod:`lcc_synth.analysis.platoon_string`), the distinct ``(dt, V2V latency)`` of its
+    scenarios:
     ``{layout: [(label suffix, dt, latency, scenario names)]}``; the suffix is ``""`` for the
     first (ideal links first), else e.g. ``" @ 0.1 s latency"``."""
     out: dict[str, list[tuple[str, float, float, list[str]]]] = {}
     for lname in suite.layouts_used():
-        if suite.layouts[lname].kind == "fd_lcc":
+        if suite.layouts[lname].kind in ("fd_lcc", "ring", "platoon"):  # no head / several CAVs
             continue
         pairs: dict[tuple[float, float], list[str]] = {}
         for sname, ss in suite.scenarios.items():

@@ -11,6 +11,7 @@ from typing import Any
 from lcc_synth.controllers.base import Controller
 from lcc_synth.controllers.registry import build_controller
 from lcc_synth.errors import ConfigError
+from lcc_synth.experiments.h2_tables import synthesize_h2_tables
 from lcc_synth.metrics import MetricsConfig, metrics_from
 from lcc_synth.models.records import Record, system_tables, toml_text
 from lcc_synth.problem import Problem, System, load_problem, system_from
@@ -41,7 +42,8 @@ class SimulationSpec(Record):
             "name": self.name,
             **system_tables(self.system),
             "scenario": self.scenario.toml_table(),
-            "controllers": {k: c.toml_table() for k, c in self.controllers.items()},
+            "controllers": {k: getattr(c, "source_table", None) or c.toml_table()
+                            for k, c in self.controllers.items()},  # fmt: skip
             "metrics": self.metrics.toml_table(),
         }
 
@@ -77,6 +79,13 @@ def fallback_target(
     return target
 
 
+def _nonzero(gains: Mapping[str, Any]) -> dict[str, Any]:
+    """The non-zero gains of a single-CAV table ``{state: g}`` or a platoon table
+    ``{u_i: {state: g}}`` (one row per CAV, every row kept)."""
+    return {k: _nonzero(v) if isinstance(v, Mapping) else float(v) for k, v in gains.items()
+            if isinstance(v, Mapping) or float(v) != 0.0}  # fmt: skip
+
+
 def resolve_fallbacks(
     tables: Mapping[str, Mapping[str, Any]], system: System, source: str | None = None
 ) -> dict[str, dict[str, Any]]:
@@ -84,8 +93,9 @@ def resolve_fallbacks(
 
     NAME is a ``static`` controller of the same file, or an ``h2`` one once synthesised (``run``
     and ``sweep`` replace it by a static table first). The gain becomes plain data in the MPC's
-    table (``{"controller", "kind", "semantics", "gains"}``, zero gains dropped; Dask workers
-    need no other table) and :mod:`lcc_synth.mpc.build` makes it the MPC's static fallback:
+    table (``{"controller", "kind", "semantics", "gains"}``, zero gains dropped; a platoon or
+    ring: the platoon form ``{u_i: {state: gain}}`` that :mod:`lcc_synth.mpc.build` reads; Dask
+    workers need no other table) and :mod:`lcc_synth.mpc.build` makes it the MPC's static fallback:
     applied to the MPC's own error state when the QP fails and no previous plan is left.
 
     Raises
@@ -114,18 +124,34 @@ def resolve_fallbacks(
             "controller": target,
             "kind": kind,
             "semantics": gain.get("semantics", "added"),
-            "gains": {k: float(v) for k, v in gain["gains"].items() if float(v) != 0.0},
+            "gains": _nonzero(gain["gains"]),
         }
     return out
 
 
-def controllers_from(data: Mapping[str, Any], system: System, source: str | None = None):
-    """Every ``[controllers.NAME]`` table, built in file order (MPC fallbacks resolved)."""
+def controllers_from(
+    data: Mapping[str, Any], system: System, source: str | None = None, label: str = "problem"
+):
+    """Every ``[controllers.NAME]`` table, built in file order: ``type = "h2"`` synthesised
+    for ``system`` first (:func:`lcc_synth.experiments.h2_tables.synthesize_h2_tables`, the
+    code path of ``run``; problem names ``LABEL_NAME``), then the MPC fallbacks resolved. A
+    synthesised controller, and an MPC with ``fallback = "NAME"``, keep the table the file
+    states as ``source_table`` (what :meth:`SimulationSpec.toml_tables` writes back)."""
     tables = declared("").get(data, "controllers", "")
     if not tables:
         raise ConfigError("controllers", "needs at least one [controllers.NAME] table")
     if all(isinstance(t, Mapping) for t in tables.values()):
+        hdv_table = declared("").get(data, "hdv", "")
+        given = tables
+        tables, designs = synthesize_h2_tables(tables, system, hdv_table, source, label)
         tables = resolve_fallbacks(tables, system, source)
+        built = {name: build_controller(name, t, system, source) for name, t in tables.items()}
+        for name in designs:  # written back as stated (a reload synthesises the same gain)
+            built[name].source_table = dict(given[name])
+        for name, t in given.items():  # an MPC's fallback = "NAME" is written back as stated
+            if t.get("type") == "mpc" and isinstance(t.get("fallback"), str):
+                built[name].source_table = {**built[name].toml_table(), "fallback": t["fallback"]}
+        return built
     return {name: build_controller(name, t, system, source) for name, t in tables.items()}
 
 
@@ -140,7 +166,7 @@ def load_spec(path: str | Path | Problem, seeds: int | None = None) -> Simulatio
             if seeds < 1:
                 raise ConfigError("--seeds", f"must be >= 1, got {seeds}")
             scenario = replace(scenario, batch=int(seeds))
-        controllers = controllers_from(problem.data, system, source)
+        controllers = controllers_from(problem.data, system, source, problem.name)
         check_time_step(scenario, controllers)
         metrics = metrics_from(problem.data, system, controllers, scenario)
         return SimulationSpec(problem.name, system, scenario, controllers, metrics, source)

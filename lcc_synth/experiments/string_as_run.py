@@ -85,8 +85,10 @@ def measured_ratio(
     amplitude: float = MEASURE_AMPLITUDE,
     settle: float = MEASURE_SETTLE,
     periods: int = MEASURE_PERIODS,
+    cav_lag: float = 0.0,
 ) -> np.ndarray:
-    """Tail/head velocity amplitude ratio of ``ctrl`` in the simulator at each ``omega``.
+    """Tail/head velocity amplitude ratio of ``ctrl`` in the simulator at each ``omega``
+    (``cav_lag``: the CAV's actuator lag, :class:`~lcc_synth.simulation.scenario.Scenario`).
 
     One run with all the frequencies at once (a multisine: head velocity
     ``v* + sum_i (a / sqrt(k)) sin(w_i t + phi_i)``, Schroeder phases ``phi_i = -pi i (i-1)/k``
@@ -111,7 +113,7 @@ def measured_ratio(
     head = Profile(tuple(t), tuple(accel), target="accel", interpolation="step")
     sc = Scenario(
         m=system.m, n=system.n, hdv=system.hdv, v_star=system.v_star, dt=dt,
-        duration=duration, perturbations=(head,), v2v=V2V(latency=latency),
+        duration=duration, perturbations=(head,), v2v=V2V(latency=latency), cav_lag=cav_lag,
     )  # fmt: skip
     res = simulate(sc, ctrl)
     tt = res.t

@@ -31,8 +31,9 @@ def plot_profiles(results, path: str | Path, title: str | None = None, run: int 
     run : int
         Batch member to draw.
 
-    Head vehicle yellow, CAV blue (drawn on top), HDVs grey (:func:`vehicle_style`); the rows
-    share their y-axes (velocity, spacing) so that controllers compare by eye.
+    Head vehicle yellow, CAV(s) blue (drawn on top), HDVs grey (:func:`vehicle_style`; a ring:
+    no head, every vehicle's spacing); the rows share their y-axes (velocity, spacing) so
+    that controllers compare by eye.
     """
     import numpy as np
 
@@ -44,10 +45,12 @@ def plot_profiles(results, path: str | Path, title: str | None = None, run: int 
         squeeze=False, constrained_layout=True,
     )  # fmt: skip
     for row, (name, res) in enumerate(items):
+        ring = bool(getattr(res, "ring", False))
+        cavs = getattr(res, "cavs", None)
         for j in range(res.n_vehicles):
-            kw = vehicle_style(j, res.cav)
+            kw = vehicle_style(j, res.cav, cavs, ring)
             axes[row, 0].plot(res.t, res.velocity[run, :, j], **kw)
-            if j > 0:
+            if j > 0 or ring:  # a ring's column 0 is vehicle 1, whose gap is to vehicle N
                 axes[row, 1].plot(res.t, res.spacing[run, :, j], **kw)
         v_star = float(np.asarray(res.v_star).reshape(-1)[run])
         axes[row, 0].axhline(v_star, color="k", lw=0.6, ls=":")

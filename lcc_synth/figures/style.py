@@ -70,11 +70,33 @@ def controller_colors(names) -> dict:
     return out
 
 
-def vehicle_style(j: int, cav: int) -> dict:
+def vehicle_style(
+    j: int, cav: int, cavs: tuple[int, ...] | None = None, ring: bool = False
+) -> dict:
     """Line style of vehicle column ``j`` (0 head, ``cav`` the CAV): colour, width, dash, layer
-    and legend label (one label per group: head, HDVs ahead, CAV, HDVs behind)."""
+    and legend label (one label per group: head, HDVs ahead, CAV, HDVs behind).
+
+    Several CAVs (``cavs``, array columns): every one blue (label ``CAVs``), HDVs ahead of the
+    first one dashed, the others grey. A ring (``ring``): no head; column 0 is vehicle 1, an
+    HDV like the others (``HDVs``), the CAVs blue.
+    """
+    if ring:
+        if j in (cavs or (cav,)):
+            return {"color": PALETTE.cav, "lw": 2.0, "ls": "-", "zorder": 4,
+                    "label": "AV" if j == min(cavs or (cav,)) else None}  # fmt: skip
+        return {"color": PALETTE.hdv, "lw": 0.9, "ls": "-", "zorder": 2,
+                "label": "HDVs" if j == 0 else None}  # fmt: skip
     if j == 0:
         return {"color": PALETTE.head, "lw": 1.8, "ls": "-", "zorder": 3, "label": "head vehicle"}
+    if cavs is not None and len(cavs) > 1:
+        if j in cavs:
+            return {"color": PALETTE.cav, "lw": 2.0, "ls": "-", "zorder": 4,
+                    "label": "CAVs" if j == cavs[0] else None}  # fmt: skip
+        cav = cavs[0]
+        if j > cav:
+            first = min(k for k in range(cav + 1, j + 1) if k not in cavs)
+            return {"color": PALETTE.hdv, "lw": 0.9, "ls": "-", "zorder": 2,
+                    "label": "HDVs behind" if j == first else None}  # fmt: skip
     if j == cav:
         return {"color": PALETTE.cav, "lw": 2.0, "ls": "-", "zorder": 4, "label": "CAV"}
     if j < cav:

@@ -110,14 +110,17 @@ def toml_text(tables: Mapping[str, Any]) -> str:
 
 def system_tables(system: Any) -> dict[str, Any]:
     """The ``[hdv]`` and ``[system]`` tables of a :class:`lcc_synth.problem.System` (a platoon
-    or ring: ``size``, ``cavs``, ``v_star`` and every position's ``[system.hdv_values]``)."""
+    or ring: ``size``, ``cavs``, ``v_star`` (a ring given by its ``circumference``: that) and
+    every position's ``[system.hdv_values]``)."""
     P = getattr(system, "platoon", None)
     if P is not None:
         hdv = system.hdv.toml_table()
         params = [k for k in hdv if k != "model"]
+        given = {"circumference": float(P.circumference)} if P.circumference is not None else (
+            {"v_star": float(system.v_star)})  # a ring given by its length keeps it
         sys_t = {
             "kind": system.kind, "size": int(P.size), "cavs": [int(c) for c in P.cavs],
-            "v_star": float(system.v_star),
+            **given,
             "hdv_values": {k: [float(getattr(h, k)) for h in P.hdv] for k in params},
         }  # fmt: skip
         if P.vehicle_length:

@@ -123,6 +123,9 @@ def _platoon_mpc(name, settings, system, named, source, field_name):
         raise ConfigError(f"{field_name}.prediction.delay", "HDV delays in the prediction are "
                           "implemented for the single-CAV MPC only; give 0 for a platoon or "
                           "ring")  # fmt: skip
+    if settings.prediction.cav_lag:
+        raise ConfigError(f"{field_name}.prediction.cav_lag", "the actuator lag in the "
+                          "prediction is implemented for the single-CAV MPC only")  # fmt: skip
     model = system.linear_model(warn=False)
     fallback, fb_source = None, "hdv_law"
     if named is not None:

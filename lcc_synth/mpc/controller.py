@@ -57,7 +57,7 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains, cav_feedback
 from lcc_synth.models.hdv import free_speed
 from lcc_synth.mpc.comfort import jerk_bound, solve_prioritised
-from lcc_synth.mpc.delay import StateHistory, pad
+from lcc_synth.mpc.delay import pad
 from lcc_synth.mpc.formulation import (
     Family,
     Formulation,
@@ -98,7 +98,7 @@ class _Member:
     plan_age: int = 0
     warm: tuple | None = None
     past: np.ndarray = field(default_factory=lambda: np.zeros(1))  # commands, newest first
-    delay: StateHistory | None = None  # prediction.delay: the observed states the HDVs see
+    delay: Any = None  # delay.StateHistory (past observed states) or lag.LagState (a_0)
     hist: dict[str, list] = field(default_factory=dict)
 
 
@@ -153,7 +153,7 @@ class MPCController:
         try:
             self._lin0 = linearize(self.kind, self.m, n_model, system.hdv, v0, settings)
         except ConfigError as err:
-            where = err.field if err.field == "prediction.delay" else f"weights ({err.field})"
+            where = err.field if err.field.startswith("prediction.") else f"weights ({err.field})"
             raise ConfigError(where, err.message) from None
         model = self._lin0.model
         self._families = self._make_families(model)
@@ -256,7 +256,7 @@ class MPCController:
             mem = _Member(solver, lin, qp, K, kh, np.zeros(W), s_off, v_eq=float(ctx.v_star[b]))
             mem.hist = {k: [] for k in _HIST_KEYS}
             mem.past = np.zeros(max(1, self.formulation.W))
-            mem.delay = None if lin.delay is None else StateHistory(lin.delay)
+            mem.delay = None if lin.delay is None else lin.delay.history()  # delay, lag
             self._members.append(mem)
 
     def __call__(self, obs: Observation) -> np.ndarray:
@@ -334,7 +334,7 @@ class MPCController:
             d_model = d
         s0 = float(obs.spacing[b, cav])
         if mem.delay is not None:
-            x = mem.delay.push(x, d0, s_eq, v_eq)
+            x = mem.delay.push(x, d0, s_eq, v_eq, obs=obs, b=b, u_prev=float(mem.past[0]))
         return x, xi, d, d_model, s_eq, s0
 
     def _family_bounds(self, mem: _Member, x0, d, s_eq, s0) -> np.ndarray:

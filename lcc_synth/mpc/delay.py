@@ -109,6 +109,10 @@ class DelayModel:
     columns: np.ndarray
     depth: int
 
+    def history(self) -> StateHistory:
+        """The per-member register of past observations (:class:`StateHistory`)."""
+        return StateHistory(self)
+
     @property
     def nz(self) -> int:
         """Size of the augmented state."""
@@ -299,8 +303,9 @@ class StateHistory:
         self._spacing = spacing[self.columns]
         self._buf: np.ndarray | None = None
 
-    def push(self, x: np.ndarray, d: float, s_eq: float, v_eq: float) -> np.ndarray:
-        """The augmented state of this sample (see the class docstring)."""
+    def push(self, x: np.ndarray, d: float, s_eq: float, v_eq: float, **_) -> np.ndarray:
+        """The augmented state of this sample (see the class docstring; other keywords, the
+        observation of :class:`lcc_synth.mpc.lag.LagState`, are ignored)."""
         eq = np.where(self._spacing, s_eq, v_eq)
         w_abs = np.append(x, d)[self.columns] + eq
         if self._buf is None:

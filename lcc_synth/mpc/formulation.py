@@ -71,7 +71,8 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains, cav_feedback
 from lcc_synth.models.hdv import CarFollowingModel
 from lcc_synth.models.linear import LCCModel, discretize, model_from_hdv
-from lcc_synth.mpc.delay import DelayModel, lcc_delay_model, pad
+from lcc_synth.mpc.delay import DelayModel, pad
+from lcc_synth.mpc.lag import prediction_extension
 from lcc_synth.mpc.settings import MPCSettings
 
 __all__ = [
@@ -244,8 +245,8 @@ def _linearize(kind, m, n, hdv, v_lin, settings) -> Linearization:
     else:
         K_law, k_h = np.zeros(model.nx), 0.0
     total = settings.weights.input_on == "total"
-    x_dir, dm = steady_direction(model), lcc_delay_model(model, settings.prediction.delay, Ts)
-    if dm is not None:  # delay states (lcc_synth.mpc.delay)
+    x_dir, dm = steady_direction(model), prediction_extension(model, settings.prediction, Ts)
+    if dm is not None:  # delay states (lcc_synth.mpc.delay) or the CAV's lag (mpc.lag)
         Ad, Bd, Hd = dm.Ad, dm.Bd[:, 0], dm.Hd[:, 0]
         q, K_law, x_dir = pad(q, dm.nz), pad(K_law, dm.nz), pad(x_dir, dm.nz)
     P = terminal_cost(model, Ad, Bd, q, settings.weights.input, K_law if total else None)

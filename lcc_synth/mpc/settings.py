@@ -45,6 +45,7 @@ A problem file selects the MPC with a controller table (every key optional)::
     relinearize_threshold = 1.0     # ... by more than this (m/s)
     delay = 0.0                # HDV reaction delay (s) in the prediction: one for every HDV
                                #   or a list, one per modelled HDV front to tail (mpc.delay)
+    cav_lag = 0.0              # the CAV's actuator lag (s) in the prediction (mpc.lag)
 
     [controllers.mpc.solver]   # OSQP
     eps_abs = 1.0e-6
@@ -65,6 +66,7 @@ from typing import Any
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.lag import check_lag
 from lcc_synth.models.records import Record
 from lcc_synth.schema import declared
 
@@ -131,6 +133,7 @@ class Prediction(Record):
     relinearize: bool = False
     relinearize_threshold: float = 1.0
     delay: float | tuple[float, ...] = 0.0
+    cav_lag: float = 0.0
 
     def equilibrium_mode(self, kind: str) -> str:
         """The estimator used for a model of ``kind``."""
@@ -274,6 +277,7 @@ def validate(s: MPCSettings, field_prefix: str = "") -> None:
             raise ConfigError(f"{pre}prediction.delay", f"must be <= 5 s, got {tau}")
     if isinstance(p.delay, tuple) and not p.delay:
         raise ConfigError(f"{pre}prediction.delay", "must be a number or a non-empty list")
+    check_lag(p.cav_lag, f"{pre}prediction.cav_lag")
     o = s.solver
     _pos(o.eps_abs, f"{pre}solver.eps_abs", strict=True)
     _pos(o.eps_rel, f"{pre}solver.eps_rel")

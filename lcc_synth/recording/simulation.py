@@ -388,28 +388,35 @@ def record_mpc_history(
             rec, f"{base}/mpc/solve_time_ms", tcol, vals, [f"{k} time (ms)" for k, _ in times],
             _PALETTE[: len(times)],
         )  # fmt: skip
-    status = history.get("status")
-    if status is not None and np.ndim(status) == 3:  # (B, S, n_cav): the joint MPC's per CAV
-        status = np.asarray(status)[run].max(axis=1)[:S]  # the worst outcome of the step
-    else:
-        status = member("status", 0)
+    # the joint MPC of a platoon or ring (lcc_synth.mpc.platoon): a status per CAV, plans
+    # (B, S, N, n_cav), predicted error states (B, S, N+1, nx) on s_1, v_1, ..., s_N, v_N
+    joint = "predicted_states" in history and "predicted_velocity" not in history
+    status = member("status", 1 if joint else 0)
     if status is not None:
-        code = status.astype(np.float64)
-        vals = np.column_stack([code, (code > 0).astype(np.float64)])
-        names = ["status (" + ", ".join(f"{k} {v}" for k, v in _MPC_STATUS.items()) + ")",
-                 "fallback used"]  # fmt: skip
-        _send_series(rec, f"{base}/mpc/status", tcol, vals, names, [(90, 90, 90), (214, 39, 40)])
+        code = status.astype(np.float64).reshape(status.shape[0], -1)
+        vals = np.column_stack([code, (code > 0).any(axis=1).astype(np.float64)])
+        legend = ", ".join(f"{k} {v}" for k, v in _MPC_STATUS.items())
+        names = ([f"status of CAV {j + 1} ({legend})" for j in range(code.shape[1])]
+                 if joint else [f"status ({legend})"]) + ["fallback used"]  # fmt: skip
+        colors = [_PALETTE[j % len(_PALETTE)] for j in range(code.shape[1])] if joint else [
+            (90, 90, 90)]
+        _send_series(rec, f"{base}/mpc/status", tcol, vals, names, [*colors, (214, 39, 40)])
+    if joint:
+        X = member("predicted_states", 2)
+        history = {k: v for k, v in history.items() if k not in ("predicted_velocity",
+                                                                  "predicted_spacing")}
+        if X is not None:  # run's (S, N+1, nx): spacing and velocity errors per vehicle
+            history["predicted_spacing"], history["predicted_velocity"] = X[..., 0::2], X[..., 1::2]
+        if "pred_time" not in history and "dt" not in history and "plan" in history:
+            Ts = float(np.median(np.diff(t))) if S > 1 else 0.1
+            history["dt"] = Ts
 
     every = plan_every or max(1, S // 200)
     steps = np.arange(0, S, every)
     offsets = history.get("pred_time")
-    if offsets is None and "dt" not in history and np.ndim(history.get("plan")) == 4:
-        # the joint MPC (lcc_synth.mpc.platoon) predicts at its own period: t's spacing
-        offsets = (t[1] - t[0] if S > 1 else 0.0) * np.arange(np.shape(history["plan"])[2])
     for key, label in (("plan", "u"), ("predicted_velocity", "velocity"),
                        ("predicted_spacing", "spacing")):  # fmt: skip
-        # a plan is (B, S, N) or, the joint MPC's, (B, S, N, n_cav): one strip per CAV
-        pred = member(key, 1 if key == "plan" and np.ndim(history.get(key)) < 4 else 2)
+        pred = member(key, 2 if key == "plan" and joint else 1 if key == "plan" else 2)
         if pred is None:
             continue
         pred = np.asarray(pred, dtype=np.float64)[steps]

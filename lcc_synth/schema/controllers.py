@@ -37,7 +37,8 @@ _GAINS = Key("gains", "table", "State name (s_i, v_i, -p_0) -> gain; missing sta
              "kind = platoon / ring: one table per CAV input, [controllers.NAME.gains.u_i] "
              "with state name (s_j, v_j of positions) -> gain.", REQUIRED)
 
-GENERIC = Table(_C, "A CAV controller of simulate: its type selects the keys (below).",
+GENERIC = Table(_C, "A CAV controller of simulate: its type selects the keys (below); "
+                'type = "h2" is synthesised for the [system] first (the h2 table).',
                 ("simulate",), (_TYPE,))
 SUITE = Table(
     _C,
@@ -45,7 +46,9 @@ SUITE = Table(
     ("sweep", "run"),
     (_SUITE_TYPE,
      Key("layouts", "table", "Per-layout overrides [controllers.NAME.layouts.LAYOUT] (run "
-         "only).", {})),
+         "only).", {}),
+     Key("only_layouts", "any", "The layouts this controller is for (run only); "
+         "absent: every layout. On the others it has no row.", None)),
     variant="suite",
 )
 LAYOUT_OVERRIDE = Table(
@@ -74,8 +77,8 @@ GAINS_FILE = Table(
     variant="gains_file",
 )
 H2 = Table(
-    _C, 'type = "h2" (run and sweep): an H2 gain synthesised for each layout from the keys of '
-    "[synthesis], then run as a static gain with these keys.", ("sweep", "run"),
+    _C, 'type = "h2": an H2 gain synthesised (simulate: for [system]; run and sweep: for each '
+    "layout) from the keys of [synthesis], then run as a static gain with these keys.", _CMDS,
     (_SUITE_TYPE, _SAMPLE_TIME, _EQUILIBRIUM, _EQ_TAU, _FILTER, _START),
     variant="h2", includes=("synthesis",),
 )
@@ -159,7 +162,10 @@ MPC_PREDICTION = Table(
      Key("delay", "any", "HDV reaction delay in the prediction model (delay states, "
          "lcc_synth.mpc.delay): a number in [0, 5] for every HDV, or a list with one per "
          "HDV the MPC models, front to tail (single-CAV MPC only); 0: none.", 0.0,
-         unit="s")),
+         unit="s"),
+     Key("cav_lag", "number", "The CAV's first-order actuator lag in the prediction model "
+         "(state a_0, lcc_synth.mpc.lag; single-CAV MPC, not with delay); 0: none.", 0.0,
+         lo=0.0, unit="s")),
     variant=_MPC,
 )
 MPC_SOLVER = Table(

@@ -154,6 +154,9 @@ SCENARIO = Table(
         Key("accel_noise_uniform", "number", "Half width w of a uniform acceleration noise "
             "U[-w, w] on every vehicle but the head (CAVs included), added after the limits "
             "and emergency braking (the DeeP-LCC paper's scheme).", 0.0, lo=0.0, unit="m/s²"),
+        Key("cav_lag", "number", "First-order actuator lag tau of every CAV's acceleration, "
+            "da/dt = (u - a) / tau: limits and emergency braking act on the command u, the CAV "
+            "applies a (0: no lag, else >= dt).", 0.0, lo=0.0, unit="s"),
         Key("heterogeneity", "table", "Per-HDV parameter draws: [scenario.heterogeneity].", {}),
         Key("delay", "table", "HDV reaction delay: [scenario.delay].", {}),
         Key("v2v", "table", "What the CAV receives: [scenario.v2v].", {}),

@@ -28,6 +28,10 @@ Per step:
 * CAVs: each CAV's command (held between controller samples: zero-order hold) clipped to
   ``[a_min, a_max]``, then emergency braking, eq. (29): ``a_min`` when
   ``(v_0^2 - v_-1^2) / (2 s_0) >= |a_min|`` on that CAV's exact state (per CAV).
+  Optional actuator lag ``tau`` (``[scenario] cav_lag``): that clipped command, or the
+  braking command, is the input of ``da/dt = (u - a) / tau`` (Euler at ``dt``; braking goes
+  through the same brake actuator), and the CAV applies ``a``, the lag's state, which then
+  takes every change made to the applied acceleration below (noise, overrides, floor).
 * Optional uniform acceleration noise ``U[-w, w]`` (``accel_noise_uniform``) on every vehicle
   but the head, added after the limits and emergency braking (the DeeP-LCC reference scheme).
 * Perturbations override the acceleration of their vehicle while active (not clipped: they are
@@ -259,6 +263,9 @@ def simulate(
     collided = np.zeros((B, nv), dtype=np.bool_)
     ctime = np.full((B, nv), np.nan)
     u_hold = np.zeros((B, n_cav))
+    lag_f = np.array([dt / tau if tau > 0 else 0.0 for tau in sc.lags()])  # per CAV
+    a_lag = np.zeros((B, n_cav))  # the lagged CAVs' accelerations (cruise: 0)
+    lagged = bool(lag_f.any())  # else the kernel runs without the lag (None)
 
     v_hat = v_star.copy()
     est = (-1.0, 0.0, 0.0)  # (decay, v_lo, v_hi); decay < 0: errors from the fixed v*
@@ -285,6 +292,7 @@ def simulate(
             v_star, s_ref, p_ref, est[0], est[1], est[2], v_hat, meas_decay, f_s, f_v,
             loss, lat, obs_noise, obs_s, obs_v, obs_p,
             alive, collided, ctime, stride, out_p, out_v, out_a, out_s, out_u, out_aeb,
+            lag_f if lagged else None, a_lag if lagged else None,
         )  # fmt: skip
 
     n_threads = _threads(B, (T if law is not None else ratio) * nv)
@@ -316,7 +324,8 @@ def simulate(
                          int(sc.first_index), is_cav, ring, circ,
                          obs_s, obs_v, obs_p, alive)  # fmt: skip
             tk = float(t[k0])
-            obs = Observation(tk, obs_s.copy(), obs_v.copy(), obs_p.copy())
+            obs = Observation(tk, obs_s.copy(), obs_v.copy(), obs_p.copy(),
+                              a_lag.copy() if lagged else None)
             u = np.asarray(controller(obs), dtype=float)
             want = (B,) if n_cav == 1 else (B, n_cav)
             if n_cav == 1 and u.ndim == 2 and u.shape == (B, 1):

@@ -165,7 +165,7 @@ def _advance(
     acc_ovr, spd_ovr, mode, ratio, u_hold, Ks, Kv, Kp, hdv_law, v_star, s_ref, p_ref,
     est_decay, v_lo, v_hi, v_hat, meas_decay, f_s, f_v,
     loss, lat, obs_noise, obs_s, obs_v, obs_p, alive, collided, ctime,
-    stride, out_p, out_v, out_a, out_s, out_u, out_aeb,
+    stride, out_p, out_v, out_a, out_s, out_u, out_aeb, lag_f, a_lag,
 ):  # fmt: skip
     """Advance scenarios ``b0 .. b1 - 1`` from sample ``k0`` to ``k1`` (exclusive).
 
@@ -185,6 +185,12 @@ def _advance(
     received spacing and velocity; ``meas_decay < 0`` the values as received.
     ``noise_std``: Gaussian acceleration noise on every HDV before the limits;
     ``unif_noise``: ``U[-w, w]`` on every vehicle but the head after the limits.
+    ``lag_f[c] = dt / tau_c`` (0: no lag; ``lag_f = a_lag = None``: no CAV has one, and the
+    kernel is compiled without the lag) puts CAV ``c`` behind a first-order actuator lag:
+    its command (clipped, or ``a_min`` from emergency braking) drives the acceleration state
+    ``a_lag[b, c]``, which is what the vehicle applies (then noise, overrides and the
+    standstill floor as for every vehicle); the state is then Euler-updated from the applied
+    acceleration, ``a <- a + dt / tau (command - a)``.
     """
     nv = p.shape[1]
     n_cav = cavs.shape[0]
@@ -194,6 +200,7 @@ def _advance(
     ys = np.empty(nv)  # spacings and velocities the law reads at a sample
     yv = np.empty(nv)
     aeb = np.zeros(n_cav, dtype=np.bool_)
+    cmd = np.zeros(n_cav)  # the lagged CAVs' commands at this sample
     for b in range(b0, b1):
         for k in range(k0, k1):
             rec = k % stride == 0
@@ -321,6 +328,10 @@ def _advance(
                         s = p[b, j - 1] - p[b, j]
                         if (v[b, j] ** 2 - v[b, j - 1] ** 2) / (2.0 * s) >= abs_min:
                             a = a_min
+                if lag_f is not None:  # None: compiled without (numba prunes the branch)
+                    if kc >= 0 and lag_f[kc] > 0.0:  # actuator lag: apply the state
+                        cmd[kc] = a
+                        a = a_lag[b, kc]
                 if unif_noise > 0.0 and (j > 0 or ring):
                     a += unif_noise * (2.0 * _u01(seed, sid0 + b, j, k, 9) - 1.0)
                 ov = acc_ovr[k, j]
@@ -342,6 +353,11 @@ def _advance(
                 for c in range(n_cav):
                     out_u[b, r, c] = u_hold[b, c]
                     out_aeb[b, r, c] = aeb[c]
+            if lag_f is not None:
+                for c in range(n_cav):
+                    if lag_f[c] > 0.0:
+                        al = acc[cavs[c]]
+                        a_lag[b, c] = al + lag_f[c] * (cmd[c] - al)
             for j in range(nv):
                 p[b, j] += dt * v[b, j]
                 v[b, j] += dt * acc[j]

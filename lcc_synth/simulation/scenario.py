@@ -120,6 +120,11 @@ class Scenario(Record):
         vehicle but the head (CAVs included), added after the limits and emergency braking
         (the DeeP-LCC paper's scheme; ``hdv_accel_noise`` is Gaussian, HDVs only, before the
         limits).
+    cav_lag : float or tuple of float
+        First-order actuator lag ``tau`` (s) of the CAVs' acceleration, ``da/dt = (u - a) /
+        tau``: one for every CAV or one per CAV; 0 (default) is no lag, else ``tau >= dt``
+        (the Euler step of the lag stays monotone). Limits and emergency braking act on the
+        command ``u`` (see :mod:`~lcc_synth.simulation.engine`).
     """
 
     m: int
@@ -154,6 +159,7 @@ class Scenario(Record):
     circumference: float | None = None
     accel_noise_uniform: float = 0.0
     vehicle_length: float = 0.0
+    cav_lag: float | tuple[float, ...] = 0.0
 
     def __post_init__(self) -> None:
         self._check_layout()
@@ -217,8 +223,25 @@ class Scenario(Record):
                     f"scenario.hdv_values.{key}",
                     f"not a parameter of the {self.hdv.name} model; allowed: {list(allowed)}",
                 )
+        for tau in self.lags():
+            if 0.0 < tau < self.dt:
+                raise ConfigError(
+                    "scenario.cav_lag", f"must be 0 or >= dt = {self.dt} s, got {tau}"
+                )
         if self.backend == "sumo":
             check_sumo_scenario(self)
+
+    def lags(self) -> tuple[float, ...]:
+        """The actuator lag ``tau`` (s) of each CAV (:attr:`cav_lag` per CAV)."""
+        lag = self.cav_lag
+        if np.ndim(lag) == 0:
+            return tuple(_num("scenario.cav_lag", lag, lo=0.0) for _ in self.cav_columns)
+        if len(lag) != len(self.cav_columns):
+            raise ConfigError(
+                "scenario.cav_lag",
+                f"needs one value or one per CAV ({len(self.cav_columns)}), got {len(lag)}",
+            )
+        return tuple(_num("scenario.cav_lag", x, lo=0.0) for x in lag)
 
     def _check_layout(self) -> None:
         if self.cavs is None:
@@ -295,6 +318,10 @@ class Scenario(Record):
         out["v2v"] = self.v2v.toml_table()
         if self.accel_noise_uniform:
             out["accel_noise_uniform"] = float(self.accel_noise_uniform)
+        if any(self.lags()):
+            if len(set(self.lags())) > 1:
+                raise ConfigError("scenario.cav_lag", "a per-CAV lag has no problem-file form")
+            out["cav_lag"] = self.lags()[0]
         if self.hdv_values and self.cavs is None:  # a platoon's come from [system.hdv_values]
             hdv = self.is_hdv()
             out["hdv_values"] = {}

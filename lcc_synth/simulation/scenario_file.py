@@ -155,6 +155,7 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
         sumo=_sumo_from(S.get(sc, "sumo", f), f"{f}.sumo"),
         spacing_reference=spacing_reference,
         accel_noise_uniform=S.get(sc, "accel_noise_uniform", f),
+        cav_lag=S.get(sc, "cav_lag", f),
         **layout,
     )
 

@@ -4,24 +4,31 @@ car-following models, the CAV by any lcc_synth controller, stepped in-process wi
 :func:`simulate_sumo` is the ``backend = "sumo"`` counterpart of
 :func:`lcc_synth.simulation.engine.simulate`: the same arguments, the same
 :class:`~lcc_synth.simulation.results.SimResult` (metrics, tables, figures and recordings are
-unchanged), the open straight road with one CAV (the built-in simulator's layout: column 0 the
-head, ``1..m`` the HDVs ahead, ``m + 1`` the CAV, the HDVs behind).
+unchanged), for every layout of the built-in simulator: the open straight road with one CAV
+(column 0 the head, ``1..m`` the HDVs ahead, ``m + 1`` the CAV, the HDVs behind), a mixed
+platoon with several CAVs (column ``i`` position ``i``), and the ring road (column ``j``
+position ``j + 1``, column 0 following column N-1; the ring, the vehicles' loops and the lap
+tracking are :mod:`.sumo_road`'s).
 
 Per scenario of the batch (one SUMO run each: ``libsumo.start`` / ``close``, one at a time per
 process):
 
 * a straight single-lane road built by ``netconvert`` (long enough for the head's prescribed
-  motion plus the string; :mod:`.sumo_net`), one vehicle type per HDV with its drawn
-  parameters (:func:`~lcc_synth.simulation.sumo_net.vehicle_types`), every vehicle inserted at
+  motion plus the string; :mod:`.sumo_net`) or the ring (:mod:`.sumo_road`), one vehicle
+  type per HDV with its drawn parameters
+  (:func:`~lcc_synth.simulation.sumo_net.vehicle_types`), every vehicle inserted at
   time 0 at the built-in simulator's initial state (equilibrium spacings at ``v*``, every speed
   ``v*``), SUMO's step = the scenario's ``dt``;
-* the head, the CAV, and every HDV while a perturbation drives it, are commanded: speed mode
+* the head, every CAV, and every HDV while a perturbation drives it, are commanded: speed mode
   0 and lane-change mode 0 (SUMO's safety checks off), ``vehicle.setSpeed(v_k + dt a_k)`` each
   step with ``a_k`` computed exactly as the built-in kernel does (perturbation overrides,
-  speed-profile tracking within the limits, the CAV's command clipped to ``[a_min, a_max]``
-  then emergency braking eq. 29 on the state read from SUMO, speeds kept >= 0); an HDV is
-  released to SUMO's model when its perturbation ends;
-* the CAV's controller sees what it would see in the built-in simulator: the same V2V model
+  speed-profile tracking within the limits, each CAV's command (its column of the
+  controller's ``(batch, n_cav)``) clipped to ``[a_min, a_max]`` then its emergency braking
+  eq. 29 on the state read from SUMO, towards its own predecessor, then, with an actuator lag
+  (``cav_lag``), the lag's state in its place, updated from the applied acceleration as the
+  built-in kernel does; speeds kept >= 0); an HDV is released to SUMO's model when its
+  perturbation ends;
+* the controller sees what it would see in the built-in simulator: the same V2V model
   (loss, latency, noise; the built-in simulator's compiled observation routine and its random
   streams), at its sample time with zero-order hold;
 * collisions are SUMO's (``--collision.action warn``, ``collisionMinGapFactor = 0``:
@@ -55,6 +62,11 @@ string, v* = 15 m/s, the CAV and 10 HDVs behind, the head-brake profile, dt = 0.
 * Deceleration bound. SUMO never brakes harder than ``emergencyDecel`` (set to ``|a_min|``,
   the built-in clip) and accelerates at most ``accel`` (the IDM ``a <= a_max``).
 
+On the ring the same holds (SUMO's ring reproduces its own scheme to 1e-12 m over laps), but
+the all-HDV ring is unstable and each scheme gives its stop-and-go modes their own growth rate
+(first order in dt; explicit Euler the fastest), so the difference grows with the wave
+(``tests/test_sumo_ring.py``, ``benchmarks/bench_sumo_ring.py``, README).
+
 Wall time: about 35 us per step for 12 vehicles at low load (0.25 s for the 70 s all-HDV run,
 0.42 s with a static gain called from Python every step; the built-in compiled loop takes
 3 ms); SUMO's own step is about a quarter of it, the rest this module's Python loop.
@@ -77,30 +89,13 @@ from lcc_synth.simulation.kernels import _observe_all
 from lcc_synth.simulation.perturbations import overrides
 from lcc_synth.simulation.results import SimResult
 from lcc_synth.simulation.scenario import MODEL_PARAMS, Draws, Scenario
-from lcc_synth.simulation.sumo_net import (
-    require_sumo,
-    route_file,
-    straight_road,
-    vehicle_types,
-)
+from lcc_synth.simulation.sumo_net import require_sumo, route_file, vehicle_types
+from lcc_synth.simulation.sumo_road import place_string, work_dir
 
 __all__ = ["simulate_sumo", "head_travel", "merge_stats"]
 
 #: libsumo holds one simulation per process: runs from several threads take turns.
 _LOCK = threading.Lock()
-#: Road lengths already built in this process (netconvert once per length).
-_NETS: dict[tuple[float, float], Path] = {}
-_DIR: tempfile.TemporaryDirectory | None = None
-
-#: Free road (m) before the tail and after the head's furthest position.
-_MARGIN = 50.0
-
-
-def _work_dir() -> Path:
-    global _DIR
-    if _DIR is None:
-        _DIR = tempfile.TemporaryDirectory(prefix="lcc-sumo-")
-    return Path(_DIR.name)
 
 
 def head_travel(acc_ovr: np.ndarray, spd_ovr: np.ndarray, v0: float, dt: float,
@@ -117,13 +112,6 @@ def head_travel(acc_ovr: np.ndarray, spd_ovr: np.ndarray, v0: float, dt: float,
         v = max(v + dt * a, 0.0)
         dist += dt * v
     return dist
-
-
-def _road(length: float, speed: float) -> Path:
-    key = (float(np.ceil(length / 100.0) * 100.0), float(speed))
-    if key not in _NETS:
-        _NETS[key] = straight_road(key[0], key[1], _work_dir() / f"road_{len(_NETS)}")
-    return _NETS[key]
 
 
 def merge_stats(stats: Sequence[dict[str, Any]]) -> dict[str, Any]:
@@ -180,23 +168,31 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
     from lcc_synth.simulation.engine import _steps_of
 
     sumo = require_sumo()
-    nv, T, dt, cav = sc.n_vehicles, sc.steps, float(sc.dt), sc.cav
+    nv, T, dt = sc.n_vehicles, sc.steps, float(sc.dt)
+    cavs = np.asarray(sc.cav_columns, dtype=np.int64)
+    n_cav = len(cavs)
     is_cav = np.full(nv, -1, dtype=np.int64)  # the observation kernel's CAV index per column
-    is_cav[cav] = 0
+    is_cav[cavs] = np.arange(n_cav)
+    ring = bool(sc.ring)
+    circ = float(sc.circumference) if ring else 0.0
+    ahead = np.arange(nv) - 1
+    ahead[0] = nv - 1  # the ring's column 0 follows the last column
     t = sc.times()
     L_veh = float(sc.sumo.vehicle_length)
     a_min, a_max = float(sc.a_min), float(sc.a_max)
     v_star = float(sc.v_star)
 
     s0 = np.nan_to_num(draws.initial_spacing[b], nan=0.0)
-    p = -np.cumsum(s0)  # built-in frame: head at 0
+    if ring:  # column 0 at 0; its spacing is what the others leave of the circumference
+        s0[0] = 0.0
+    p = -np.cumsum(s0)  # built-in frame: column 0 at 0
     v = np.full(nv, v_star)
-    origin = _MARGIN - float(p[-1]) + nv * L_veh  # SUMO lane position of the head's front
-    travel = head_travel(acc_ovr, spd_ovr, v_star, dt, a_min, a_max)
     names = MODEL_PARAMS["idm"]
     params = {k: draws.hdv_values[k][b] for k in names}
     vmax = max(float(np.max(params["v0"])), v_star, float(np.nanmax(spd_ovr, initial=0.0)))
-    net = _road(origin + travel + 2 * _MARGIN, 2.0 * vmax + 10.0)
+    travel = 0.0 if ring else head_travel(acc_ovr, spd_ovr, v_star, dt, a_min, a_max)
+    road = place_string(p, L_veh, circ if ring else None, travel, 2.0 * vmax + 10.0,
+                        T * dt)  # fmt: skip
     hdv_mask = sc.is_hdv()
     types = []
     for j in range(nv):
@@ -204,9 +200,9 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
         if not hdv_mask[j]:  # commanded vehicles: no speed cap from their type
             idm["v0"] = 2.0 * vmax + 10.0
         types.append(vehicle_types(sc.sumo, idm, dt, a_min))
-    departures = [(origin + float(p[j]) - j * L_veh, v_star) for j in range(nv)]
-    run_dir = Path(tempfile.mkdtemp(prefix="run_", dir=_work_dir()))
-    routes = route_file(run_dir / "string.rou.xml", types, departures)
+    run_dir = Path(tempfile.mkdtemp(prefix="run_", dir=work_dir()))
+    routes = route_file(run_dir / "string.rou.xml", types,
+                        [(x, v_star) for x in road.lane_pos], routes=road.routes)  # fmt: skip
     ids = [f"v{j}" for j in range(nv)]
     seed = int(np.random.default_rng([int(sc.seed), int(sc.first_index) + b]).integers(2**31 - 1))
 
@@ -228,17 +224,10 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
     noise = np.array([sc.v2v.spacing_noise, sc.v2v.velocity_noise, sc.v2v.position_noise])
     obs_p, obs_v = P.copy(), V.copy()
     obs_s = np.concatenate([np.full((1, 1), np.nan), P[:, :-1] - P[:, 1:]], axis=1)
+    if ring:
+        obs_s[:, 0] = P[:, -1] + circ - P[:, 0]
     alive = np.ones(1, dtype=np.bool_)
-
-    s_star = np.array([sc.s_star])
-    if sc.spacing_reference == "own_equilibrium":
-        s_ref = draws.initial_spacing[b].copy()
-        s_ref[0] = sc.s_star
-    else:
-        s_ref = np.full(nv, sc.s_star)
-    ctx = ControlContext(sc.m, sc.n, 1, dt, np.array([v_star]), s_star, a_min, a_max, sc.hdv,
-                         s_ref=s_ref[None].copy())  # fmt: skip
-    controller.reset(ctx)
+    controller.reset(_context(sc, draws, b))
 
     stride = sc.record_every
     o_p, o_v, o_a, o_s = (out[k][b] for k in ("position", "velocity", "acceleration", "spacing"))
@@ -246,38 +235,55 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
     o_p[:], o_v[:], o_a[:], o_s[:], o_u[:] = np.nan, np.nan, np.nan, np.nan, np.nan
     collided, ctime = out["collided"][b], out["collision_time"][b]
     commanded = np.zeros(nv, dtype=bool)
-    commanded[0] = commanded[cav] = True
-    u_hold = 0.0
+    commanded[cavs] = True
+    if not ring:
+        commanded[0] = True  # the head
+    u_hold = np.zeros(n_cav)
+    aeb = np.zeros(n_cav, dtype=bool)
+    # actuator lag per CAV (the built-in kernel's: the clipped / braking command drives the
+    # lag's state, which the CAV applies; the state then follows the applied acceleration)
+    lag_f = np.array([dt / tau if tau > 0 else 0.0 for tau in sc.lags()])
+    lagged = bool(lag_f.any())
+    a_lag = np.zeros(n_cav)
+    cmd = np.zeros(n_cav)
+    applied = np.zeros(n_cav)
     abs_min = abs(a_min)
+    j0 = 0 if ring else 1  # first column with a vehicle ahead
+    want = (1,) if n_cav == 1 else (1, n_cav)
 
     var_pos, var_speed = sumo.constants.VAR_LANEPOSITION, sumo.constants.VAR_SPEED
-    shift = np.arange(nv) * L_veh - origin  # SUMO lane position -> built-in position
-    # the columns commanded at some step: head, CAV, every HDV a perturbation drives
+    var_idx = sumo.constants.VAR_ROUTE_INDEX
+    variables = (var_pos, var_speed, var_idx) if road.ring else (var_pos, var_speed)
+    # the columns commanded at some step: head, CAVs, every vehicle a perturbation drives
     ever = np.isfinite(acc_ovr) | np.isfinite(spd_ovr)
-    cols = sorted({0, cav} | set(np.flatnonzero(ever.any(axis=0)).tolist()))
+    cols = sorted(set(np.flatnonzero(commanded).tolist())
+                  | set(np.flatnonzero(ever.any(axis=0)).tolist()))  # fmt: skip
 
     def read() -> tuple[np.ndarray, np.ndarray]:
         got = sumo.vehicle.getAllSubscriptionResults()
         x = np.array([got[i][var_pos] for i in ids])
-        return x + shift, np.array([got[i][var_speed] for i in ids])
+        idx = np.array([got[i][var_idx] for i in ids]) if road.ring else 0
+        return road.to_builtin(idx, x), np.array([got[i][var_speed] for i in ids])
 
-    sumo.start(_start_args(sc, net, routes, seed))
+    sumo.start(_start_args(sc, road.net, routes, seed))
     try:
         sumo.simulationStep()  # inserts every vehicle at its departure state: sample 0
         for j in np.flatnonzero(commanded):
             sumo.vehicle.setSpeedMode(ids[j], 0)
         for i in ids:
             sumo.vehicle.setLaneChangeMode(i, 0)
-            sumo.vehicle.subscribe(i, (var_pos, var_speed))
+            sumo.vehicle.subscribe(i, variables)
         p, v = read()
         hit_sumo: set[int] = set()
         for k in range(T):
             rec = k % stride == 0
             r = k // stride
             spacing = np.concatenate([[np.nan], p[:-1] - p[1:]])
+            if ring:
+                spacing[0] = p[-1] + circ - p[0]
             hit = set(hit_sumo)
-            if np.any(spacing[1:] <= 0.0):
-                hit |= set((np.flatnonzero(spacing[1:] <= 0.0) + 1).tolist())
+            if np.any(spacing[j0:] <= 0.0):
+                hit |= set((np.flatnonzero(spacing[j0:] <= 0.0) + j0).tolist())
             if rec:
                 o_p[r], o_v[r], o_s[r] = p, v, spacing
             if hit:
@@ -290,32 +296,41 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
                 hp[k % L, 0], hv[k % L, 0] = p, v
             if k % ratio == 0:
                 _observe_all(k, P, V, hp, hv, L, lat, loss, noise, int(sc.seed),
-                             int(sc.first_index) + b, is_cav, False, 0.0,
+                             int(sc.first_index) + b, is_cav, ring, circ,
                              obs_s, obs_v, obs_p, alive)  # fmt: skip
                 u = np.asarray(
-                    controller(Observation(float(t[k]), obs_s.copy(), obs_v.copy(), obs_p.copy())),
+                    controller(Observation(float(t[k]), obs_s.copy(), obs_v.copy(),
+                                           obs_p.copy(), a_lag[None].copy() if lagged
+                                           else None)),
                     dtype=float,
-                ).reshape(-1)
-                if u.shape != (1,):
+                )  # fmt: skip
+                if n_cav == 1 and u.shape == (1, 1):
+                    u = u[:, 0]
+                if u.shape != want:
                     raise RuntimeError(
-                        f"controller {controller.name!r} returned shape {u.shape}, expected (1,)"
+                        f"controller {controller.name!r} returned shape {u.shape}, expected "
+                        f"{want}"
                     )
-                if not np.isfinite(u[0]):
+                if not np.isfinite(u).all():
                     raise RuntimeError(
                         f"controller {controller.name!r} returned a non-finite command at "
                         f"t = {t[k]:g} s for scenario {b}"
                     )
-                u_hold = float(u[0])
-            aeb = False
+                u_hold[:] = u.reshape(n_cav)
+            aeb[:] = False
             for j in cols:
                 ov, sv = acc_ovr[k, j], spd_ovr[k, j]
                 driven = bool(ever[k, j])
-                if j == 0:
-                    a = 0.0
-                elif j == cav:
-                    a = min(max(u_hold, a_min), a_max)
-                    if sc.cav_aeb and (v[j] ** 2 - v[j - 1] ** 2) / (2.0 * spacing[j]) >= abs_min:
-                        a, aeb = a_min, True
+                kc = int(is_cav[j])
+                if j == 0 and not ring:
+                    a = 0.0  # the head: cruising unless a perturbation drives it
+                elif kc >= 0:
+                    a = min(max(u_hold[kc], a_min), a_max)
+                    lead = ahead[j]
+                    if sc.cav_aeb and (v[j] ** 2 - v[lead] ** 2) / (2.0 * spacing[j]) >= abs_min:
+                        a, aeb[kc] = a_min, True
+                    if lag_f[kc] > 0.0:  # actuator lag: the CAV applies the lag's state
+                        cmd[kc], a = a, a_lag[kc]
                 elif driven:
                     a = 0.0
                 else:
@@ -328,12 +343,16 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
                     a = float(ov)
                 if sv == sv:
                     a = min(max((float(sv) - v[j]) / dt, a_min), a_max)
-                if driven and j == cav:
-                    aeb = False
+                if driven and kc >= 0:
+                    aeb[kc] = False
                 if driven and not commanded[j]:
                     sumo.vehicle.setSpeedMode(ids[j], 0)
                     commanded[j] = True
                 sumo.vehicle.setSpeed(ids[j], max(v[j] + dt * a, 0.0))
+                if kc >= 0:
+                    applied[kc] = max(a, -v[j] / dt)  # the standstill floor, as built in
+            if lagged:
+                a_lag[:] = np.where(lag_f > 0.0, applied + lag_f * (cmd - applied), 0.0)
             sumo.simulationStep()
             hit_sumo = {ids.index(c.collider) for c in sumo.simulation.getCollisions()
                         if c.collider in ids}  # fmt: skip
@@ -347,6 +366,25 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
         sumo.close()
         shutil.rmtree(run_dir, ignore_errors=True)
     return controller.stats()
+
+
+def _context(sc: Scenario, draws: Draws, b: int) -> ControlContext:
+    """Scenario ``b``'s :class:`ControlContext` (a batch of one), as the built-in simulator
+    builds it."""
+    s_star = np.array([sc.s_star])
+    ring = bool(sc.ring)
+    if sc.spacing_reference == "own_equilibrium":
+        s_ref = draws.initial_spacing[b].copy()
+        if not ring:
+            s_ref[0] = sc.s_star
+    else:
+        s_ref = np.full(sc.n_vehicles, sc.s_star)
+    return ControlContext(
+        sc.m, sc.n, 1, float(sc.dt), np.array([float(sc.v_star)]), s_star, sc.a_min, sc.a_max,
+        sc.hdv, s_ref=s_ref[None].copy(), cavs=tuple(int(c) for c in sc.cav_columns),
+        ring=ring, circumference=float(sc.circumference) if ring else float("nan"),
+        cav_models=sc.cav_models(),
+    )  # fmt: skip
 
 
 def simulate_sumo(
@@ -385,15 +423,16 @@ def simulate_sumo(
     ratio = 1 if ts is None else _steps_of(
         ts, dt, f"controllers.{controller.name}.sample_time", multiple=True
     )
-    acc_ovr, spd_ovr = overrides(sc.perturbations, sc.times(), dt, sc.m, sc.n)
+    acc_ovr, spd_ovr = overrides(sc.perturbations, sc.times(), dt, sc.m, sc.n, sc.layout)
+    n_cav = len(sc.cav_columns)
     Tr = (T - 1) // sc.record_every + 1
     out = {
         "position": np.empty((B, Tr, nv)),
         "velocity": np.empty((B, Tr, nv)),
         "acceleration": np.empty((B, Tr, nv)),
         "spacing": np.empty((B, Tr, nv)),
-        "u_cmd": np.empty((B, Tr)),
-        "aeb_active": np.zeros((B, Tr), dtype=np.bool_),
+        "u_cmd": np.empty((B, Tr, n_cav)),
+        "aeb_active": np.zeros((B, Tr, n_cav), dtype=np.bool_),
         "collided": np.zeros((B, nv), dtype=np.bool_),
         "collision_time": np.full((B, nv), np.nan),
     }
@@ -401,12 +440,17 @@ def simulate_sumo(
     with _LOCK:
         for b in range(B):
             stats.append(_one(sc, controller, draws, b, acc_ovr, spd_ovr, ratio, out))
+    if n_cav == 1:  # one CAV: (batch, samples), as the built-in simulator
+        out["u_cmd"], out["aeb_active"] = out["u_cmd"][:, :, 0], out["aeb_active"][:, :, 0]
     return SimResult(
         t=sc.times()[:: sc.record_every].copy(),
         **out,
         m=sc.m,
         n=sc.n,
         cav=sc.cav,
+        cavs=tuple(int(c) for c in sc.cav_columns),
+        ring=bool(sc.ring),
+        circumference=float(sc.circumference) if sc.ring else float("nan"),
         v_star=np.full(B, float(sc.v_star)),
         s_star=np.full(B, sc.s_star),
         controller=controller.name,

@@ -140,12 +140,6 @@ def check_sumo_scenario(sc) -> None:
     """
     import numpy as np
 
-    if getattr(sc, "ring", False) or len(getattr(sc, "cav_columns", (sc.cav,))) > 1:
-        raise ConfigError(
-            "scenario.backend",
-            'SUMO runs one CAV on an open road for now (a ring or several CAVs: backend = '
-            '"builtin")',
-        )
     if getattr(sc, "accel_noise_uniform", 0.0) > 0.0:
         raise ConfigError(
             "scenario.accel_noise_uniform",
@@ -214,7 +208,7 @@ def netconvert_binary() -> str:
     return path
 
 
-def _netconvert(directory: Path, stem: str, nodes: str, edges: str) -> Path:
+def _netconvert(directory: Path, stem: str, nodes: str, edges: str, *extra: str) -> Path:
     directory.mkdir(parents=True, exist_ok=True)
     nod, edg = directory / f"{stem}.nod.xml", directory / f"{stem}.edg.xml"
     net = directory / f"{stem}.net.xml"
@@ -222,7 +216,7 @@ def _netconvert(directory: Path, stem: str, nodes: str, edges: str) -> Path:
     edg.write_text(f"<edges>\n{edges}</edges>\n")
     cmd = [netconvert_binary(), "--node-files", str(nod), "--edge-files", str(edg),
            "--output-file", str(net), "--no-turnarounds", "true", "--offset.disable-normalization",
-           "true", "--no-warnings", "true"]  # fmt: skip
+           "true", "--no-warnings", "true", *extra]  # fmt: skip
     done = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if done.returncode != 0 or not net.is_file():
         raise RuntimeError(f"netconvert failed ({done.returncode}): {done.stderr.strip()}")
@@ -243,7 +237,11 @@ def ring_road(circumference: float, speed: float, directory: str | Path, segment
     """A single-lane ring road of ``circumference`` m (``segments`` edges ``ring0..``, joined
     end to end on a circle), built by ``netconvert`` in ``directory``; returns the
     ``.net.xml`` path. The length of each edge is set to ``circumference / segments`` (the
-    chord geometry is only drawn), so distances along the ring are exact."""
+    chord geometry is only drawn; written to 1e-9 m: ``--precision 9``, netconvert's default
+    is 0.01 m) and the junctions have no internal lanes
+    (``--no-internal-links``: netconvert would otherwise add a 2.6 m curve per junction, with a
+    turning-radius speed limit), so distances along the ring are exact: a vehicle leaves the end
+    of edge ``ring<i>`` onto the start of ``ring<i+1>``."""
     if not (circumference > 0 and speed > 0) or segments < 2:
         raise ValueError("ring_road needs circumference > 0, speed > 0 and segments >= 2")
     r = circumference / (2.0 * math.pi)
@@ -255,10 +253,11 @@ def ring_road(circumference: float, speed: float, directory: str | Path, segment
     seg = circumference / segments
     edges = "".join(
         f'  <edge id="ring{i}" from="n{i}" to="n{(i + 1) % segments}" numLanes="1" '
-        f'speed="{speed:.3f}" length="{seg:.6f}"/>\n'
+        f'speed="{speed:.3f}" length="{seg:.9f}"/>\n'
         for i in range(segments)
     )
-    return _netconvert(Path(directory), "ring", nodes, edges)
+    return _netconvert(Path(directory), "ring", nodes, edges, "--no-internal-links", "true",
+                       "--precision", "9")
 
 
 def _attrs(values: dict[str, Any]) -> str:
@@ -298,20 +297,31 @@ def route_file(
     types: list[dict[str, Any]],
     departures: list[tuple[float, float]],
     edges: str = "road",
+    routes: list[tuple[str, int]] | None = None,
 ) -> Path:
     """Write a route file: vehicle ``j`` (id ``v<j>``, type ``t<j>`` with attributes
     ``types[j]``) departs at time 0 at lane position ``departures[j][0]`` (its front bumper,
     m) with speed ``departures[j][1]`` (m/s) on the route ``edges``, without SUMO's insertion
-    checks (the scenario's initial state is inserted as it is)."""
+    checks (the scenario's initial state is inserted as it is).
+
+    ``routes`` (one per vehicle) gives each vehicle its own route instead: ``(edges, repeat)``,
+    the edges from the one it departs on, driven ``1 + repeat`` times over (SUMO's route
+    ``repeat`` attribute, the maintainers' way of looping a vehicle on a closed route:
+    eclipse/sumo#7127); a ring's vehicles loop with it."""
     lines = ["<routes>"]
     for j, attrs in enumerate(types):
         lines.append(f'  <vType id="t{j}" {_attrs(attrs)}/>')
-    lines.append(f'  <route id="route" edges="{edges}"/>')
+    if routes is None:
+        lines.append(f'  <route id="route" edges="{edges}"/>')
     for j, (pos, speed) in enumerate(departures):
-        lines.append(
-            f'  <vehicle id="v{j}" type="t{j}" route="route" depart="0" '
-            f'departPos="{pos:.17g}" departSpeed="{speed:.17g}" insertionChecks="none"/>'
-        )
+        head = (f'  <vehicle id="v{j}" type="t{j}" depart="0" departPos="{pos:.17g}" '
+                f'departSpeed="{speed:.17g}" insertionChecks="none"')  # fmt: skip
+        if routes is None:
+            lines.append(f'{head} route="route"/>')
+        else:
+            own, repeat = routes[j]
+            lines.append(f'{head}>\n    <route edges="{own}" repeat="{int(repeat)}"/>\n'
+                         "  </vehicle>")  # fmt: skip
     lines.append("</routes>")
     path = Path(path)
     path.write_text("\n".join(lines) + "\n")

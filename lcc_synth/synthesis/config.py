@@ -11,6 +11,7 @@
     method = "lmi"            # structured: "lmi" (convex restriction + polish) | "direct"
                               # full_state: "riccati" | "lmi"
     cross_check = true        # full_state: also solve the other method and compare
+    cav_lag = 0.0             # the CAV's actuator lag tau (s) in the plant (lag_design.py)
     tol = 1e-7                # polishing tolerance (relative gradient norm), in (0, 1e-2]
     max_iter = 500            # polishing iterations, >= 1
     band = 4                  # structured "lmi": coupling range (vehicles) of the non-heard
@@ -70,6 +71,7 @@ from lcc_synth.models.records import Record, system_tables, toml_text
 from lcc_synth.problem import Problem, System, check_top_level, system_from, warn_large_gains
 from lcc_synth.schema import declared
 from lcc_synth.synthesis.h2 import Weights
+from lcc_synth.synthesis.lag_design import check_lag_design
 from lcc_synth.synthesis.platoon_config import PlatoonSynthesisSpec, platoon_spec
 
 __all__ = ["DESIGNS", "SynthesisSpec", "spec_from_problem"]
@@ -100,6 +102,7 @@ class SynthesisSpec(Record):
     baseline: tuple[str, StaticGains] | None = None
     source: str | None = None
     as_run: Any = None  # lcc_synth.synthesis.as_run.AsRunSettings
+    cav_lag: float = 0.0  # the CAV's actuator lag (s), lcc_synth.synthesis.lag_design
 
     def toml_tables(self) -> dict[str, Any]:
         """``name``, ``[hdv]``, ``[system]`` and ``[synthesis]``: the tables
@@ -121,6 +124,8 @@ class SynthesisSpec(Record):
         if self.baseline is not None:
             bname, gains = self.baseline
             t["baseline"] = {"name": bname, "semantics": gains.semantics, "gains": gains.gains}
+        if self.cav_lag:
+            t["cav_lag"] = self.cav_lag
         if self.as_run is not None:
             t["as_run"] = {
                 "equilibrium": "fixed" if self.as_run.equilibrium_tau is None else "estimated",
@@ -200,6 +205,7 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec | PlatoonSynthesisSpec:
         t = declared("").get(problem.data, "synthesis", "")
         T.check(t, "synthesis")
         if system.platoon is not None:
+            check_lag_design(T.get(t, "cav_lag", "synthesis"), "", None, system.kind)
             return platoon_spec(problem.name, system, t, src)
         for key in ("comm_range", "patterns", "robust"):
             if key in t:
@@ -278,7 +284,10 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec | PlatoonSynthesisSpec:
                 raise ConfigError(f"synthesis.baseline.{err.field}", err.message) from None
             baseline = (bname, gains)
         as_run = _as_run(t, system, design)
+        cav_lag = check_lag_design(T.get(t, "cav_lag", "synthesis"), design, as_run,
+                                   system.kind)  # fmt: skip
         return SynthesisSpec(
+            cav_lag=cav_lag,
             as_run=as_run,
             name=problem.name,
             system=system,

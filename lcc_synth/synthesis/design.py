@@ -20,6 +20,7 @@ from lcc_synth.synthesis.h2 import (
     riccati_gain,
     single_thread_blas,
 )
+from lcc_synth.synthesis.lag_design import lag_note
 from lcc_synth.synthesis.platoon_config import PlatoonSynthesisSpec
 from lcc_synth.synthesis.platoon_design import synthesize_platoon
 from lcc_synth.synthesis.report import SynthesisReport, check_gain, evaluate_gain
@@ -88,7 +89,7 @@ def design_gain_of(plant: H2Plant, gains) -> np.ndarray:
     dropped = np.setdiff1d(np.arange(plant.model.nx), plant.keep)
     if np.any(g_full[dropped] != 0):
         raise SynthesisError("baseline has a gain on a state the design drops (-p_0)")
-    return g_full[plant.keep]
+    return np.append(g_full[plant.keep], 0.0) if plant.lag > 0 else g_full[plant.keep]
 
 
 def baseline_check(spec: SynthesisSpec, plant: H2Plant) -> dict:
@@ -96,7 +97,7 @@ def baseline_check(spec: SynthesisSpec, plant: H2Plant) -> dict:
     name, gains = spec.baseline
     bplant = plant
     if gains.semantics != plant.semantics:
-        bplant = make_plant(plant.model, gains.semantics, plant.weights)
+        bplant = make_plant(plant.model, gains.semantics, plant.weights, plant.lag)
     g = design_gain_of(bplant, gains)
     chk = evaluate_gain(bplant, g)
     return {
@@ -122,7 +123,7 @@ def synthesize(spec: SynthesisSpec | PlatoonSynthesisSpec) -> SynthesisReport:
         return synthesize_platoon(spec)
     t_start = time.perf_counter()
     model = spec.system.linear_model(warn=False)
-    plant = make_plant(model, spec.semantics, spec.weights)
+    plant = make_plant(model, spec.semantics, spec.weights, spec.cav_lag)
     check_size(spec, plant.nx)
     progress(f"synthesis: {spec.design} design, {plant.nx} states ({model.kind}, m = "
              f"{model.m}, n = {model.n})")
@@ -157,7 +158,15 @@ def synthesize(spec: SynthesisSpec | PlatoonSynthesisSpec) -> SynthesisReport:
             "vehicles ahead are uncontrollable but stable: their gains act as feed-forward"
         )
 
-    if spec.design == "full_state":
+    if spec.cav_lag > 0:
+        notes.append(lag_note(spec))
+    if spec.design == "full_state" and spec.cav_lag > 0:  # every state but the lag's a_0
+        res = structured_h2(plant, vehicles, "direct", tol=spec.tol, max_iter=spec.max_iter)
+        g, mask = res.g, res.mask
+        pol = {"start": res.start, "iterations": res.polish.iterations,
+               "converged": res.polish.converged, "grad_norm": res.polish.grad_norm}  # fmt: skip
+        timings.update(res.timings)
+    elif spec.design == "full_state":
         mask = np.ones(plant.nx, bool)
         g = g_ric
         if spec.method == "lmi" or spec.cross_check:
@@ -184,8 +193,9 @@ def synthesize(spec: SynthesisSpec | PlatoonSynthesisSpec) -> SynthesisReport:
             if spec.method == "lmi":
                 g = lmi.g
     elif spec.design == "structured":
+        method = "direct" if spec.cav_lag > 0 else spec.method  # lag: no convex restriction
         res = structured_h2(
-            plant, vehicles, spec.method, tol=spec.tol, max_iter=spec.max_iter, band=spec.band
+            plant, vehicles, method, tol=spec.tol, max_iter=spec.max_iter, band=spec.band
         )
         g, mask = res.g, res.mask
         bound, restr = (res.h2_lmi_bound, res.h2_restriction) if res.lmi else (None, None)
@@ -232,8 +242,12 @@ def synthesize(spec: SynthesisSpec | PlatoonSynthesisSpec) -> SynthesisReport:
             f"unstructured optimum ({chosen.count} heard besides the CAV)"
         )
     elif spec.design == "string_stable":
+        start = None
+        if spec.cav_lag > 0:  # the LMI is infeasible with a_0 outside the pattern
+            start = structured_h2(plant, vehicles, "direct", tol=spec.tol,
+                                  max_iter=spec.max_iter).g  # fmt: skip
         res = string_aware_h2(
-            plant, vehicles, spec.string_gamma, spec.polish_steps, spec.string_margin
+            plant, vehicles, spec.string_gamma, spec.polish_steps, spec.string_margin, start
         )
         g, mask = res.g, res.mask
         bound, restr = res.h2_lmi_bound, res.h2_restriction

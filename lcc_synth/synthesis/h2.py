@@ -209,6 +209,10 @@ class H2Plant:
         ``(model.nx,)`` input feedback of the zero gain under the semantics.
     kh0 : float
         Head-velocity feed-through of the zero gain under the semantics.
+    lag : float
+        The CAV's actuator lag ``tau`` (s; 0: none). With ``tau > 0`` the design state ends with
+        the CAV's acceleration ``a_0`` (:mod:`lcc_synth.models.lag`; not weighted, not in any
+        pattern: the gain acts on the model's states, as the simulator's linear laws do).
     """
 
     model: LCCModel
@@ -226,20 +230,26 @@ class H2Plant:
     K0: np.ndarray
     kh0: float
     meta: dict = field(default_factory=dict)
+    lag: float = 0.0
 
     @property
     def nx(self) -> int:
         return self.A.shape[0]
 
     def vehicle_of_state(self) -> np.ndarray:
-        """Vehicle index (-m..n) of each design state."""
+        """Vehicle index (-m..n) of each design state (the lag state ``a_0``: ``n + 1``, a
+        vehicle no pattern names)."""
         veh = np.repeat(np.array(self.model.vehicles), 2)
+        if self.lag > 0:
+            return np.append(veh[self.keep], self.model.n + 1)
         return veh[self.keep]
 
     def to_model_gain(self, g: np.ndarray) -> np.ndarray:
-        """Gain row on the model's full state (dropped states get 0)."""
+        """Gain row on the model's full state (dropped states get 0; the lag state's entry,
+        0 on every pattern, is left out)."""
         full = np.zeros(self.model.nx)
-        full[self.keep] = np.asarray(g, dtype=float).ravel()
+        g = np.asarray(g, dtype=float).ravel()
+        full[self.keep] = g[: self.keep.size] if self.lag > 0 else g
         return full
 
     def gains(self, g: np.ndarray) -> StaticGains:
@@ -253,8 +263,12 @@ class H2Plant:
         return self.to_model_gain(g) + self.K0, self.kh0
 
 
-def make_plant(model: LCCModel, semantics: str = "replace", weights: Weights | None = None):
-    """Build the :class:`H2Plant` of ``model`` under ``semantics`` and ``weights``."""
+def make_plant(
+    model: LCCModel, semantics: str = "replace", weights: Weights | None = None, lag: float = 0.0
+):
+    """Build the :class:`H2Plant` of ``model`` under ``semantics`` and ``weights`` (``lag``:
+    the CAV's actuator lag, :func:`lcc_synth.models.lag.with_actuator_lag` on the design
+    plant; the acceleration noise stays on the velocity rows, after the actuator)."""
     weights = weights or Weights()
     if semantics not in SEMANTICS:
         raise ConfigError("semantics", f"must be one of {list(SEMANTICS)}, got {semantics!r}")
@@ -275,14 +289,21 @@ def make_plant(model: LCCModel, semantics: str = "replace", weights: Weights | N
         raise ConfigError("weights.q_p", "must be > 0 when weights.position = 'weight'")
     A = A_full[np.ix_(keep, keep)]
     B = model.B[keep]
+    H_d = H_eff[keep]
+    nd = len(keep)
+    if lag > 0:
+        from lcc_synth.models.lag import with_actuator_lag
+
+        aug = with_actuator_lag(A, B, H_d, [list(keep).index(model.index("v_0"))], lag)
+        A, B, H_d, nd = aug.A, aug.B, aug.H.ravel(), aug.nx
     cols, w_names = [], []
-    if weights.head > 0 and np.any(H_eff != 0):
-        cols.append(weights.head * H_eff[keep])
+    if weights.head > 0 and np.any(H_d != 0):
+        cols.append(weights.head * H_d)
         w_names.append("v_h")
     if weights.accel > 0:
         for j, i in enumerate(keep):
             if names[i].startswith("v_"):
-                col = np.zeros(len(keep))
+                col = np.zeros(nd)
                 col[j] = weights.accel
                 cols.append(col)
                 w_names.append(f"a_{names[i][2:]}")
@@ -300,7 +321,7 @@ def make_plant(model: LCCModel, semantics: str = "replace", weights: Weights | N
             return weights.cav_spacing
         return weights.q_s if nm.startswith("s_") else weights.q_v
 
-    q = np.array([state_weight(names[i]) for i in keep])
+    q = np.array([state_weight(names[i]) for i in keep] + [0.0] * (nd - len(keep)))
     Q = np.diag(q)
     if weights.q_a > 0:
         veh = np.repeat(np.array(model.vehicles), 2)[keep]
@@ -312,7 +333,7 @@ def make_plant(model: LCCModel, semantics: str = "replace", weights: Weights | N
         semantics=semantics,
         weights=weights,
         keep=keep,
-        state_names=tuple(names[i] for i in keep),
+        state_names=tuple(names[i] for i in keep) + ("a_0",) * (nd - len(keep)),
         A=A,
         B=B,
         Bw=Bw,
@@ -322,6 +343,7 @@ def make_plant(model: LCCModel, semantics: str = "replace", weights: Weights | N
         w_names=tuple(w_names),
         K0=K0,
         kh0=float(kh0),
+        lag=float(lag),
     )
 
 

@@ -54,12 +54,18 @@ def evaluate_gain(plant: H2Plant, g: np.ndarray) -> GainCheck:
     h2 = h2_norm(plant, g) if math.isfinite(mre) else math.inf
     model = plant.model
     K, kh = plant.input_feedback(g)
-    mre_model = max_real_eig(model.A + model.B @ K.reshape(1, -1)) if math.isfinite(mre) else mre
+    A_cl = model.A + model.B @ K.reshape(1, -1)
+    if plant.lag > 0:  # the CAV's actuator lag: the loop with the lag state
+        from lcc_synth.analysis.lag_string import lag_string_stability, lagged_lcc
+
+        A_cl = lagged_lcc(model, plant.lag).closed_loop(K)[0]
+    mre_model = max_real_eig(A_cl) if math.isfinite(mre) else mre
     ps = ss = peak = peak_w = verdict = margin = None
     if model.kind != "fd_lcc" and math.isfinite(mre):
         from lcc_synth.analysis.string_stability import string_stability
 
-        rep = string_stability(model, K, kh)
+        rep = (lag_string_stability(model, K, kh, plant.lag) if plant.lag > 0
+               else string_stability(model, K, kh))  # fmt: skip
         ps, ss = bool(rep.plant_stable), bool(rep.string_stable)
         peak, peak_w = float(rep.gamma_peak), float(rep.gamma_peak_omega)
         verdict = rep.verdict

@@ -61,6 +61,10 @@ def string_check(plant: H2Plant, g: np.ndarray):
     from lcc_synth.analysis.string_stability import string_stability
 
     K, kh = plant.input_feedback(g)
+    if plant.lag > 0:  # the CAV's actuator lag in the loop
+        from lcc_synth.analysis.lag_string import lag_string_stability
+
+        return lag_string_stability(plant.model, K, kh, plant.lag)
     return string_stability(plant.model, K, kh)
 
 
@@ -70,7 +74,13 @@ def _head_tail(plant: H2Plant) -> tuple[np.ndarray, np.ndarray]:
         raise ConfigError(
             "system.kind", "fd_lcc has no head vehicle: string stability is undefined"
         )
-    h = (model.H + model.B * plant.kh0).ravel()[plant.keep]
+    if plant.lag > 0:  # design state: the kept states, then the lag state a_0
+        from lcc_synth.analysis.lag_string import lagged_lcc
+
+        lag = lagged_lcc(model, plant.lag)
+        h = (lag.H + lag.B * plant.kh0).ravel()[[*plant.keep, model.nx]]
+    else:
+        h = (model.H + model.B * plant.kh0).ravel()[plant.keep]
     c = np.zeros(plant.nx)
     c[list(plant.keep).index(model.tail_velocity_index)] = 1.0
     return h, c
@@ -160,12 +170,15 @@ def string_aware_h2(
     gamma: float = 1.0,
     polish_steps: int = 200,
     margin: float = DESIGN_MARGIN,
+    start: np.ndarray | None = None,
 ) -> StringResult:
     """String-stable structured H2 design (LMI, then string-stable-feasible polishing).
 
     ``margin``: the relative string-stability margin every accepted polishing step keeps
     (``StringStabilityReport.margin``; default :data:`DESIGN_MARGIN`), capped at the LMI
-    gain's own margin.
+    gain's own margin. ``start``: a design gain to start from instead of the LMI's (with the
+    actuator lag the LMI, its lag state outside the pattern, is infeasible:
+    :mod:`lcc_synth.synthesis.lag_design`); it must be string stable.
 
     Raises
     ------
@@ -174,7 +187,11 @@ def string_aware_h2(
     """
     mask = pattern_mask(plant, vehicles)
     t0 = time.perf_counter()
-    lmi = string_lmi(plant, mask, gamma)
+    if start is None:
+        lmi = string_lmi(plant, mask, gamma)
+    else:
+        g0 = np.where(mask, np.asarray(start, dtype=float), 0.0)
+        lmi = LMIResult(g0, math.nan, "not solved (start given)", 0.0, math.nan, {})
     t_lmi = time.perf_counter() - t0
     J0, _, _ = h2_cost(plant, lmi.g)
     rep = string_check(plant, lmi.g)

@@ -1,0 +1,147 @@
+"""``type = "h2"`` controller tables: the gain synthesised for one system, as a static table.
+
+``lcc-synth run`` and ``sweep`` synthesise every ``h2`` controller per layout
+(:func:`lcc_synth.experiments.comparison.prepare_controllers`), ``lcc-synth simulate`` for its
+``[system]`` (:func:`lcc_synth.experiments.spec.controllers_from`): both through
+:func:`synthesize_table`, which builds the ``[hdv]`` / ``[system]`` / ``[synthesis]`` problem
+of ``lcc-synth synthesize`` from the controller's keys and runs
+:func:`lcc_synth.synthesis.design.synthesize` on it. So a synthesised controller equals the
+gain ``lcc-synth synthesize`` writes for the same tables, bit for bit.
+
+* single-CAV kinds (``lcc``, ``cf_lcc``, ``fd_lcc``, ``ccc``): a ``type = "static"`` table
+  with the kind, semantics and the gains by state name (``s_0, v_0, s_1, ...``);
+* ``kind = "platoon" | "ring"``: a ``type = "static"`` table in the platoon form that
+  :class:`~lcc_synth.controllers.static.PlatoonGainController` reads, one row per CAV
+  (``gains = {u_i: {s_j: g, v_j: g}}``, :meth:`~lcc_synth.models.platoon.PlatoonGains.as_table`
+  of the report's gain; on a ring the gain is defined modulo the conserved total-spacing
+  direction, as the report says).
+
+The table is plain data: it can be sent to Dask workers, and an MPC's ``fallback = "NAME"``
+inlines it (:func:`lcc_synth.experiments.spec.resolve_fallbacks`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from lcc_synth.controllers.registry import STATIC_RUN_KEYS
+from lcc_synth.errors import ConfigError
+from lcc_synth.models.records import system_tables
+from lcc_synth.problem import Problem, System
+
+__all__ = ["synthesize_table", "synthesize_h2_tables"]
+
+
+def _system_data(system: System) -> dict[str, Any]:
+    if system.platoon is not None:  # size, cavs, v_star or circumference, hdv_values
+        return system_tables(system)["system"]
+    return {"kind": system.kind, "m": system.m, "n": system.n, "v_star": system.v_star}
+
+
+def synthesize_table(
+    name: str,
+    table: Mapping[str, Any],
+    system: System,
+    hdv_table: Mapping[str, Any],
+    label: str,
+    source: str | None = None,
+):
+    """Synthesise an ``h2`` controller for ``system``.
+
+    Parameters
+    ----------
+    name : str
+        The controller's name (errors name ``controllers.NAME``).
+    table : mapping
+        Its table for this system (``type = "h2"``, the keys of ``[synthesis]`` and the
+        :data:`~lcc_synth.controllers.registry.STATIC_RUN_KEYS`).
+    system : lcc_synth.problem.System
+    hdv_table : mapping
+        The problem's ``[hdv]`` table.
+    label : str
+        The name of the synthesis problem (the report's ``problem``).
+    source : str, optional
+        The problem file (errors name it).
+
+    Returns
+    -------
+    tuple
+        ``(static_table, report)``: a ``type = "static"`` controller table holding the
+        synthesised gain (plain data) and the
+        :class:`~lcc_synth.synthesis.report.SynthesisReport` (platoon / ring:
+        :class:`~lcc_synth.synthesis.platoon_report.PlatoonReport`).
+
+    Raises
+    ------
+    ConfigError
+        A bad synthesis key (named ``controllers.NAME...``).
+    lcc_synth.synthesis.SynthesisError
+        Solver failure, infeasibility or an unusable result.
+    """
+    from lcc_synth.synthesis.config import spec_from_problem
+    from lcc_synth.synthesis.design import synthesize
+
+    synth = {k: v for k, v in table.items() if k != "type" and k not in STATIC_RUN_KEYS}
+    if synth.get("as_run") not in (None, False):  # design the loop the controller runs
+        ar = {} if synth["as_run"] is True else dict(synth["as_run"])
+        for key in STATIC_RUN_KEYS:
+            if key in table and key not in ar:
+                ar[key] = table[key]
+        synth["as_run"] = ar
+    data = {
+        "name": label,
+        "hdv": dict(hdv_table),
+        "system": _system_data(system),
+        "synthesis": synth,
+    }
+    problem = Problem(Path(source) if source else Path(f"{label}.toml"), data)
+    try:
+        spec = spec_from_problem(problem)
+    except ConfigError as err:
+        fld = err.field
+        fld = f"controllers.{name}" + fld[len("synthesis") :] if fld.startswith("synthesis") else (
+            f"controllers.{name} ({fld})"
+        )
+        raise ConfigError(fld, err.message, source) from None
+    rep = synthesize(spec)
+    out: dict[str, Any] = {
+        "type": "static",
+        "kind": rep.kind,
+        "semantics": rep.semantics,
+        "gains": {k: dict(v) for k, v in rep.gains.items()} if system.platoon is not None
+        else dict(rep.gains),
+    }
+    for key in STATIC_RUN_KEYS:
+        if key in table:
+            out[key] = table[key]
+    return out, rep
+
+
+def synthesize_h2_tables(
+    tables: Mapping[str, Mapping[str, Any]],
+    system: System,
+    hdv_table: Mapping[str, Any],
+    source: str | None = None,
+    label: str = "problem",
+) -> tuple[dict[str, dict[str, Any]], dict[str, Any]]:
+    """Every ``type = "h2"`` table of ``tables`` replaced by its synthesised static table
+    (:func:`synthesize_table`, problem name ``LABEL_NAME``); the other tables unchanged.
+
+    Returns
+    -------
+    tuple
+        ``(tables, designs)``: ``{name: table}`` in the order of ``tables`` and
+        ``{name: report}`` of the synthesised ones.
+    """
+    out: dict[str, dict[str, Any]] = {}
+    designs: dict[str, Any] = {}
+    for name, table in tables.items():
+        if isinstance(table, Mapping) and table.get("type") == "h2":
+            out[name], designs[name] = synthesize_table(
+                name, table, system, hdv_table, f"{label}_{name}", source
+            )
+        else:
+            out[name] = table
+    return out, designs

@@ -1,0 +1,60 @@
+"""H2 designs with the CAV's actuator lag in the plant (``[synthesis] cav_lag = tau``).
+
+The design plant of :func:`lcc_synth.synthesis.h2.make_plant` gets the lag state ``a_0``
+(:mod:`lcc_synth.models.lag`): the gain's command ``u`` drives ``da_0/dt = (u - a_0) / tau``
+and ``dv_0/dt = a_0``. The gain acts on the model's states only: ``a_0`` is in no pattern (its
+entry is 0), because the simulator's linear laws (static and H2 gains) read spacings and
+velocities, not the CAV's acceleration. (The CACC literature feeds back the measured
+acceleration; that would be a gain on ``a_0``, not implemented.) Consequences:
+
+* ``design = "full_state"`` is the structured design over every vehicle (``method =
+  "direct"``: polishing from the truncated Riccati gain of the lagged plant), since the
+  Riccati / LMI optimum feeds back ``a_0``; no Riccati-vs-LMI cross-check.
+* ``"structured"`` runs with ``method = "direct"`` whatever the file says: the convex
+  restriction (and the string-stability LMI) puts ``a_0`` in a block of ``X`` of its own,
+  uncoupled from ``v_0``, and is infeasible (measured: m = n = 2 at ``tau`` = 0.6 s, CF-LCC
+  n = 10 with the showcase's pattern at 0.3 s).
+* ``"string_stable"`` starts its string-stable-feasible polishing from that direct structured
+  gain instead of the LMI's (it must be string stable with the lag, else SynthesisError).
+* Every check of the report (stability, H2, string stability) is of the lagged loop
+  (:func:`lcc_synth.analysis.lag_string.lag_string_stability`).
+* ``"sparsity"`` and ``[synthesis.as_run]`` are refused with a lag (their loops do not model
+  it).
+
+Measured figures: README ("CAV actuator lag") and ``tests/test_actuator_lag.py``.
+"""
+
+from __future__ import annotations
+
+from lcc_synth.errors import ConfigError
+from lcc_synth.models.lag import check_lag
+
+__all__ = ["check_lag_design", "lag_note"]
+
+
+def check_lag_design(tau, design: str, as_run, kind: str) -> float:
+    """``tau`` of ``[synthesis] cav_lag`` if the design supports it; else a ConfigError."""
+    tau = check_lag(tau, "synthesis.cav_lag")
+    if tau == 0.0:
+        return tau
+    if design == "sparsity":
+        raise ConfigError("synthesis.cav_lag", "design = 'sparsity' has no actuator lag: use 0")
+    if as_run is not None:
+        raise ConfigError("synthesis.cav_lag", "[synthesis.as_run] has no actuator lag: use 0")
+    if kind in ("platoon", "ring"):
+        raise ConfigError("synthesis.cav_lag", f"kind = {kind!r} has no actuator lag: use 0")
+    return tau
+
+
+def lag_note(spec) -> str:
+    """The report's note on a design with ``spec.cav_lag > 0``."""
+    extra = (
+        "; full_state = structured over every vehicle (direct), a_0 not fed back"
+        if spec.design == "full_state" else
+        "; structured: method = 'direct'" if spec.design == "structured" else
+        "; string_stable: polished from the direct structured gain (no LMI)"
+    )
+    return (
+        f"CAV actuator lag tau = {spec.cav_lag:g} s in the plant (state a_0, not in the "
+        f"gain){extra}; every check is of the lagged loop"
+    )
