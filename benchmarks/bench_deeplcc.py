@@ -15,7 +15,8 @@ Run:  python benchmarks/bench_deeplcc.py [--full-steps 5] [--no-two-cav]
    simulator is not needed), head braking -5 m/s^2 for 2 s, 800 steps.
 4. The same platoon in the nonlinear simulator: ``problems/platoon_deeplcc_brake.toml`` (its
    scenario: heterogeneous OVM HDVs, uniform acceleration noise) with a default ``deep_lcc``
-   controller, data collected on that scenario; per-step times and the metrics against the
+   controller, data collected on that scenario; per-step wall and CPU times, how many steps
+   OSQP stopped at its iteration cap and DAQP solved exactly, and the metrics against the
    file's all-HDV baseline.
 """
 
@@ -194,8 +195,8 @@ def two_cav(steps: int = 800) -> None:
     print("   deep_lcc step ms ", dist(np.array(ctrl._st["step_time"]) * 1e3))
     print("   deep_lcc CPU ms  ", dist(cpu))
     print(f"   iterations median {stt['iterations']['median']:.0f} max "
-          f"{stt['iterations']['max']}, QP failures {stt['qp_failures']}, fallbacks "
-          f"{stt['fallbacks']}")
+          f"{stt['iterations']['max']}, OSQP stopped {stt['qp_failures']}, solved exactly by "
+          f"DAQP {stt['exact_solves']}, fallbacks {stt['fallbacks']}")
 
 
 def two_cav_nonlinear() -> None:
@@ -209,7 +210,20 @@ def two_cav_nonlinear() -> None:
     ctrl = deep_lcc_controller_from_table("deep_lcc", {"type": "deep_lcc"}, spec.system,
                                           str(path))  # fmt: skip
     draws = spec.scenario.draw()
-    res = simulate(spec.scenario, ctrl, draws)
+    cpu: list[float] = []
+    call = type(ctrl).__call__
+
+    def timed(self, obs):  # the controller's CPU time per step (the wall time is shared)
+        c0 = time.thread_time()
+        out = call(self, obs)
+        cpu.append((time.thread_time() - c0) * 1e3)
+        return out
+
+    type(ctrl).__call__ = timed
+    try:
+        res = simulate(spec.scenario, ctrl, draws)
+    finally:
+        type(ctrl).__call__ = call
     base = simulate(spec.scenario, spec.controllers["all_hdv"], draws)
     st = res.controller_stats
     m, b = summary(res, spec.metrics), summary(base, spec.metrics)
@@ -218,8 +232,10 @@ def two_cav_nonlinear() -> None:
           f"{m['fuel_ml']:.1f} ({b['fuel_ml']:.1f}) mL, min spacing {m['min_spacing']:.2f} m, "
           f"collisions {m['collisions']}")
     print("   deep_lcc step ms ", dist(np.array(ctrl._st["step_time"]) * 1e3))
+    print("   deep_lcc CPU ms  ", dist(cpu))
     print(f"   iterations median {st['iterations']['median']:.0f} max {st['iterations']['max']}"
-          f", QP failures {st['qp_failures']}, fallbacks {st['fallbacks']}")
+          f", OSQP stopped {st['qp_failures']}, solved exactly by DAQP {st['exact_solves']}, "
+          f"fallbacks {st['fallbacks']}")
 
 
 def main() -> None:
