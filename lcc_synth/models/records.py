@@ -120,6 +120,9 @@ def system_tables(system: Any) -> dict[str, Any]:
             "v_star": float(system.v_star),
             "hdv_values": {k: [float(getattr(h, k)) for h in P.hdv] for k in params},
         }  # fmt: skip
+        if P.ring and P.circumference is not None:  # given: the road's length (v* follows)
+            del sys_t["v_star"]
+            sys_t["circumference"] = float(P.circumference)
         if P.vehicle_length:
             sys_t["vehicle_length"] = float(P.vehicle_length)
         return {"hdv": hdv, "system": sys_t}
