@@ -31,6 +31,14 @@ Several CAVs: the command, jerk and emergency-braking metrics cover every CAV �
 over all of them, the RMS jerk of the worst CAV, the 1 s jerk's worst case, margin and time
 over the limit over every CAV (times summed over the CAVs), AEB samples summed.
 
+Wave metrics (the Sugiyama ring benchmark, Stern et al. 2018), over the window and vehicle set:
+``velocity_std`` the standard deviation of the pooled speeds, every vehicle of the set at every
+recorded sample of the window (one population, ``ddof = 0``: ``sqrt(mean (v - mean v)^2)``),
+``mean_speed`` their mean, ``braking_events`` the number of downward crossings of
+``BRAKING_THRESHOLD = -1`` m/s² by a vehicle's recorded acceleration (a pair of consecutive
+samples in the window with ``a_{k-1} >= -1 > a_k``), summed over the vehicles. NaN (the
+counts: as computed until the stop) for a scenario with a collision, as AAVE.
+
 Fuel of the DeeP-LCC paper (Wang et al. 2023, the platoon brake test): the same Bowyer rate
 (:func:`bowyer_fuel_rate`) on accelerations first smoothed by a centred moving average of
 ``accel_smoothing = 9`` recorded samples (:func:`smooth_acceleration`; the window shrinks at
@@ -77,6 +85,12 @@ __all__ = [
     "jerk_limit_violation_time",
     "aeb_activations",
     "collisions",
+    "BRAKING_THRESHOLD",
+    "velocity_std",
+    "mean_speed",
+    "braking_events",
+    "WAVE_METRICS",
+    "wave_metrics",
     "summary",
     "evaluate",
     "per_scenario",
@@ -378,6 +392,51 @@ def collisions(result) -> np.ndarray:
     return result.collided.sum(axis=1)
 
 
+#: Deceleration (m/s²) below which a vehicle brakes (:func:`braking_events`).
+BRAKING_THRESHOLD = -1.0
+
+
+def velocity_std(result, window=(20.0, 40.0), vehicles="all") -> np.ndarray:
+    """Standard deviation (m/s) of every speed of the vehicle set over the window, pooled over
+    vehicles and samples (``ddof = 0``); NaN for a scenario with a collision."""
+    v, _, _ = _slice(result, result.velocity, window, vehicles)
+    out = v.reshape(v.shape[0], -1).std(axis=1)
+    return np.where(result.collided.any(axis=1), np.nan, out)
+
+
+def mean_speed(result, window=(20.0, 40.0), vehicles="all") -> np.ndarray:
+    """Mean (m/s) of every speed of the vehicle set over the window (pooled as
+    :func:`velocity_std`); NaN for a scenario with a collision."""
+    v, _, _ = _slice(result, result.velocity, window, vehicles)
+    out = v.reshape(v.shape[0], -1).mean(axis=1)
+    return np.where(result.collided.any(axis=1), np.nan, out)
+
+
+def braking_events(
+    result, window=(20.0, 40.0), vehicles="all", threshold: float = BRAKING_THRESHOLD
+) -> np.ndarray:
+    """Downward crossings of ``threshold`` (m/s²) by the recorded accelerations of the vehicle
+    set in the window (``a_{k-1} >= threshold > a_k``, both samples in it), summed over the
+    vehicles; an integer per scenario (NaN samples after a collision never count)."""
+    a, _, _ = _slice(result, result.acceleration, window, vehicles)
+    cross = (a[:, :-1] >= threshold) & (a[:, 1:] < threshold)
+    return cross.sum(axis=(1, 2))
+
+
+#: The wave metrics (:func:`wave_metrics`) -> label.
+WAVE_METRICS = {"velocity_std": "velocity std (m/s)", "mean_speed": "mean speed (m/s)",
+                "braking_events": "braking events"}  # fmt: skip
+
+
+def wave_metrics(result, config: MetricsConfig | None = None) -> dict[str, np.ndarray]:
+    """:data:`WAVE_METRICS` of every scenario (``(batch,)`` each) over the config's window and
+    vehicle set."""
+    cfg = config or MetricsConfig()
+    return {"velocity_std": velocity_std(result, cfg.window, cfg.vehicles),
+            "mean_speed": mean_speed(result, cfg.window, cfg.vehicles),
+            "braking_events": braking_events(result, cfg.window, cfg.vehicles)}  # fmt: skip
+
+
 def _stat(x: np.ndarray, fn=np.nanmean) -> float:
     """Batch statistic over the scenarios where ``x`` is defined (NaN when none is)."""
     x = np.asarray(x, dtype=float)
@@ -402,6 +461,7 @@ def _per_scenario(result, cfg: MetricsConfig) -> dict[str, np.ndarray]:
     return {
         "aave": aave(result, cfg.window, cfg.vehicles),
         "fuel_ml": fuel(result, cfg.window, cfg.vehicles, cfg.accel_smoothing),
+        **wave_metrics(result, cfg),
         "min_spacing": min_spacing(result),
         "min_ttc": min_time_to_collision(result),
         "max_abs_velocity_error": max_abs_velocity_error(result),
@@ -433,6 +493,9 @@ def aggregate(per: dict[str, np.ndarray]) -> dict[str, Any]:
             "fuel_ml": _stat(f),
             "fuel_ml_std": _stat(f, np.nanstd),
             "fuel_ml_all": f.tolist(),
+            "velocity_std": _stat(per["velocity_std"]),
+            "mean_speed": _stat(per["mean_speed"]),
+            "braking_events": int(per["braking_events"].sum()),
             "scenarios_with_collision": int((per["collisions"] > 0).sum()),
             "min_spacing": float(np.nanmin(ms)),  # the head's is NaN
             "collisions": int(per["collisions"].sum()),
@@ -459,6 +522,7 @@ def summary(result, config: MetricsConfig | None = None) -> dict[str, Any]:
     scenario); ``min_spacing`` and ``collisions``/``aeb_activations`` are the worst case /
     totals. A scenario that collided has NaN AAVE and fuel: the means and deviations are over
     the other scenarios, and ``scenarios_with_collision`` counts them (NaN when all collided).
+    ``velocity_std`` and ``mean_speed`` are means over the batch, ``braking_events`` the total.
     The CAV's jerk: ``rms_jerk_cav`` is the mean, ``max_jerk_1s_cav`` (:func:`max_jerk_1s`)
     the worst case, ``jerk_1s_margin_cav`` the least margin to ISO 15622's limit (negative:
     exceeded), ``jerk_1s_over_limit_s`` the total time above it (0: within the limit).

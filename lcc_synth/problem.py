@@ -241,7 +241,7 @@ def system_from(data: Mapping[str, Any], source: str | None = None) -> System:
                 )
         if kind in PLATOON_KINDS:
             return _platoon_system(kind, sys_t, hdv)
-        for key in ("size", "cavs", "circumference", "hdv_values"):
+        for key in ("size", "cavs", "circumference", "hdv_values", "vehicle_length"):
             if key in sys_t:
                 if key != "cavs":  # a value out of range: that error first
                     _SYSTEM.get(sys_t, key, "system")
@@ -305,6 +305,7 @@ def _platoon_system(kind: str, sys_t: Mapping[str, Any], hdv: OVM | IDM) -> Syst
             raise ConfigError(
                 f"system.hdv_values.{err.field}", f"vehicle {i + 1}: {err.message}"
             ) from None
-    platoon = Platoon(tuple(models), tuple(cavs), v_star, ring, circumference)
+    length = _SYSTEM.get(sys_t, "vehicle_length", "system")
+    platoon = Platoon(tuple(models), tuple(cavs), v_star, ring, circumference, length)
     first = platoon.cavs[0] if platoon.cavs else size + 1
     return System(kind, first - 1, size + 1 - first, float(platoon.v_star), hdv, platoon)

@@ -5,7 +5,8 @@
 ``"mpc"`` the controller of :mod:`lcc_synth.mpc` (imported only then), ``"deep_lcc"`` that of
 :mod:`lcc_synth.deeplcc` (likewise), ``"follower_stopper"``,
 ``"pi_saturation"``, ``"acc"`` and ``"cacc"`` the field's baselines
-(:mod:`lcc_synth.controllers.baselines`).
+(:mod:`lcc_synth.controllers.baselines`). Any type takes ``start`` (s): the controller switches
+on then, the CAVs driving with their HDV law before (:mod:`lcc_synth.controllers.switch`).
 
 For ``[system] kind = "platoon" | "ring"`` a ``static`` table gives one gain table per CAV
 input (``[controllers.NAME.gains.u_3]``, ``s_3 = ...``: states ``s_i, v_i`` of positions, the
@@ -28,6 +29,7 @@ from lcc_synth.controllers.static import (
     PlatoonGainController,
     StaticGainController,
 )
+from lcc_synth.controllers.switch import SwitchedOn
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains
 from lcc_synth.models.linear import KINDS, model_from_hdv
@@ -67,6 +69,16 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
         The problem file (for error messages and relative paths).
     """
     field = f"controllers.{name}"
+    ctrl = _build(name, table, system, source, field)
+    if isinstance(table, dict) and "start" in table:
+        ctype = table["type"]
+        start = declared(f"controllers.NAME:{ctype}").get(table, "start", field)
+        if start is not None:
+            ctrl = SwitchedOn(ctrl, start)
+    return ctrl
+
+
+def _build(name: str, table, system, source: str | None, field: str) -> Controller:
     try:
         if not isinstance(table, dict):
             raise ConfigError(field, f"must be a table, got {table!r}")

@@ -47,7 +47,7 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.metrics import MetricsConfig
+from lcc_synth.metrics import WAVE_METRICS, MetricsConfig
 from lcc_synth.models.records import Record, system_tables
 from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
 from lcc_synth.schema import declared
@@ -68,12 +68,11 @@ SWEEP_METRICS: dict[str, str] = {
     "min_ttc": "min TTC (s)",
     "max_abs_command": "max |u| (m/s²)",
     "rms_jerk_cav": "CAV RMS jerk (m/s³)",
-    "max_jerk_1s_cav": "CAV max 1 s jerk (m/s³)",
+    "max_jerk_1s_cav": "CAV max 1 s jerk (m/s³)", **WAVE_METRICS,
 }
 #: Per-scenario counts of a sweep (summed over the scenarios).
 SWEEP_COUNTS = ("collisions", "aeb_activations", "fallbacks")
-#: Metrics whose distributions leave out the runs with a collision (a failed run is no
-#: efficiency to average).
+#: Metrics whose distributions leave out the runs with a collision (no efficiency to average).
 _EFFICIENCY = ("aave", "fuel_ml")
 #: Largest ``[sweep].count`` and ``batch_size`` (declared in :mod:`lcc_synth.schema`).
 MAX_COUNT = int(declared("sweep").key("count").hi)
@@ -225,6 +224,7 @@ def _one(result, config: MetricsConfig) -> dict[str, float | int]:
         "jerk_1s_over_limit_s": mt.jerk_limit_violation_time(result)[0],
         "collisions": mt.collisions(result)[0],
         "aeb_activations": mt.aeb_activations(result)[0],
+        **{k: x[0] for k, x in mt.wave_metrics(result, config).items()},  # the ring benchmark's
     }
 
 
@@ -582,7 +582,7 @@ def format_summary(summary: Mapping[str, Mapping[str, Any]]) -> str:
     rows = []
     for name, e in summary.items():
         rows.append(
-            [name, *(cell(e[k], fmt[k]) for k in SWEEP_METRICS),
+            [name, *(cell(e[k], fmt.get(k, ".3g")) for k in SWEEP_METRICS),
              f"{e['collisions']} ({e['collision_scenarios']})",
              f"{e['aeb_activations']} ({e['aeb_scenarios']})", str(e["jerk_scenarios"]),
              str(e["fallbacks"])]

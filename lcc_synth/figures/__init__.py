@@ -18,6 +18,7 @@ from lcc_synth.figures.analysis import (
     plot_pareto_front,
     plot_region_maps,
 )
+from lcc_synth.figures.ring import plot_time_space
 from lcc_synth.figures.simulation import (
     plot_case_grid,
     plot_metric_bars,
@@ -44,4 +45,5 @@ __all__ = [
     "plot_metric_bars",
     "plot_region_maps",
     "plot_mpc_predictions",
+    "plot_time_space",
 ]

@@ -178,7 +178,15 @@ class Platoon(Record):
     ring : bool
         A ring road (no head vehicle) instead of an open platoon behind a head.
     circumference : float, optional
-        Ring length (m); default the sum of the equilibrium spacings at ``v_star``.
+        Ring length (m) of the road, front bumpers' path; default the sum of the equilibrium
+        spacings at ``v_star`` plus ``size * vehicle_length``.
+    vehicle_length : float
+        Length (m, >= 0) of every vehicle. The dynamics run in gap coordinates: every
+        spacing of the model and the simulator is the bumper-to-bumper gap, and a ring of
+        circumference ``C`` behaves exactly as a ring of point vehicles of circumference
+        ``C - size * vehicle_length`` (:attr:`length`), for every gap-based law (OVM, IDM, the
+        baselines, linear feedback on the spacings). Only what a user sees (positions in the
+        simulator's result, recording, figures) shows the road of length :attr:`road_length`.
     """
 
     hdv: tuple[CarFollowingModel, ...]
@@ -186,6 +194,7 @@ class Platoon(Record):
     v_star: float | None = 15.0
     ring: bool = False
     circumference: float | None = None
+    vehicle_length: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "hdv", tuple(self.hdv))
@@ -201,6 +210,12 @@ class Platoon(Record):
         if len(set(cavs)) != len(cavs):
             raise ConfigError("system.cavs", f"has a repeated position: {list(cavs)}")
         object.__setattr__(self, "cavs", tuple(sorted(int(c) for c in cavs)))
+        length = float(self.vehicle_length)
+        if not (math.isfinite(length) and length >= 0):
+            raise ConfigError(
+                "system.vehicle_length", f"must be >= 0 m, got {self.vehicle_length!r}"
+            )
+        object.__setattr__(self, "vehicle_length", length)
         if self.ring:
             if N < 2:
                 raise ConfigError("system.size", f"a ring needs >= 2 vehicles, got {N}")
@@ -213,7 +228,13 @@ class Platoon(Record):
                 c = float(self.circumference)
                 if not (math.isfinite(c) and c > 0):
                     raise ConfigError("system.circumference", f"must be > 0 m, got {c!r}")
-                object.__setattr__(self, "v_star", ring_velocity(self.hdv, c))
+                if c <= N * length:
+                    raise ConfigError(
+                        "system.circumference",
+                        f"must exceed size x vehicle_length = {N} x {length:g} = "
+                        f"{N * length:g} m (the vehicles must fit on the ring), got {c:g}",
+                    )
+                object.__setattr__(self, "v_star", ring_velocity(self.hdv, c - N * length))
         elif self.circumference is not None:
             raise ConfigError("system.circumference", "only a ring (kind = 'ring') has one")
         v = self.v_star
@@ -242,13 +263,20 @@ class Platoon(Record):
 
     @property
     def length(self) -> float:
-        """Ring circumference (m): given, or the sum of the equilibrium spacings; NaN for an
-        open platoon."""
+        """Ring circumference (m) in gap coordinates, the one the dynamics see: the given
+        circumference minus ``size * vehicle_length``, or the sum of the equilibrium spacings
+        (gaps); NaN for an open platoon."""
         if not self.ring:
             return math.nan
         if self.circumference is not None:
-            return float(self.circumference)
+            return float(self.circumference) - self.size * self.vehicle_length
         return float(self.equilibrium_spacings.sum())
+
+    @property
+    def road_length(self) -> float:
+        """Ring circumference (m) of the road a user sees: :attr:`length` plus
+        ``size * vehicle_length``; NaN for an open platoon."""
+        return self.length + self.size * self.vehicle_length
 
 
 @dataclass(frozen=True, eq=False, repr=False)

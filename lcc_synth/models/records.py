@@ -118,11 +118,14 @@ def system_tables(system: Any) -> dict[str, Any]:
         params = [k for k in hdv if k != "model"]
         given = {"circumference": float(P.circumference)} if P.circumference is not None else (
             {"v_star": float(system.v_star)})  # a ring given by its length keeps it
-        return {"hdv": hdv, "system": {
+        sys_t = {
             "kind": system.kind, "size": int(P.size), "cavs": [int(c) for c in P.cavs],
             **given,
             "hdv_values": {k: [float(getattr(h, k)) for h in P.hdv] for k in params},
-        }}  # fmt: skip
+        }  # fmt: skip
+        if P.vehicle_length:
+            sys_t["vehicle_length"] = float(P.vehicle_length)
+        return {"hdv": hdv, "system": sys_t}
     return {
         "hdv": system.hdv.toml_table(),
         "system": {"kind": system.kind, "m": int(system.m), "n": int(system.n),

@@ -21,6 +21,9 @@ _SUITE_TYPE = Key("type", "string", "The controller; h2 is synthesised for each 
                   REQUIRED, choices=(*_TYPES, "h2"))
 _SAMPLE_TIME = Key("sample_time", "number", "Controller period (zero-order hold; a multiple of "
                    "[scenario].dt); absent: every step.", None, lo=0.0, lo_open=True, unit="s")
+_START = Key("start", "number", "Switch-on time: before it every CAV drives with its HDV law "
+              "(lcc_synth.controllers.switch); absent: from the start of the run.", None,
+              unit="s")
 _EQUILIBRIUM = Key("equilibrium", "string", "Errors from the nominal v*, s* (fixed) or from a "
                    "low-pass estimate of the speed of the vehicle ahead (not fd_lcc).", "fixed",
                    choices=("fixed", "estimated"))
@@ -56,27 +59,27 @@ LAYOUT_OVERRIDE = Table(
     any_key=Key("KEY", "any", "A key of this controller's type.", None),
 )
 HDV = Table(_C, 'type = "hdv": the CAV drives with the nominal [hdv] law.', _CMDS,
-            (_TYPE, _SAMPLE_TIME), variant="hdv")
+            (_TYPE, _SAMPLE_TIME, _START), variant="hdv")
 STATIC = Table(
     _C, 'type = "static": static state feedback, eq. (23).', _CMDS,
     (_TYPE,
      Key("kind", "string", "Linear model whose state names the gains use.",
          Derived("[system].kind"),
          choices=("lcc", "cf_lcc", "fd_lcc", "ccc", "platoon", "ring")),
-     _SEMANTICS, _GAINS, _SAMPLE_TIME, _EQUILIBRIUM, _EQ_TAU, _FILTER),
+     _SEMANTICS, _GAINS, _SAMPLE_TIME, _EQUILIBRIUM, _EQ_TAU, _FILTER, _START),
     variant="static",
 )
 GAINS_FILE = Table(
     _C, 'type = "gains_file": static gains from a JSON file of lcc-synth synthesize.', _CMDS,
     (_TYPE,
      Key("file", "string", "The gains file, relative to the problem file.", REQUIRED),
-     _SAMPLE_TIME, _EQUILIBRIUM, _EQ_TAU, _FILTER),
+     _SAMPLE_TIME, _EQUILIBRIUM, _EQ_TAU, _FILTER, _START),
     variant="gains_file",
 )
 H2 = Table(
     _C, 'type = "h2": an H2 gain synthesised (simulate: for [system]; run and sweep: for each '
     "layout) from the keys of [synthesis], then run as a static gain with these keys.", _CMDS,
-    (_SUITE_TYPE, _SAMPLE_TIME, _EQUILIBRIUM, _EQ_TAU, _FILTER),
+    (_SUITE_TYPE, _SAMPLE_TIME, _EQUILIBRIUM, _EQ_TAU, _FILTER, _START),
     variant="h2", includes=("synthesis",),
 )
 
@@ -97,7 +100,7 @@ MPC = Table(
      Key("weights", "table", "Stage cost: [controllers.NAME.weights].", {}),
      Key("constraints", "table", "Bounds: [controllers.NAME.constraints].", {}),
      Key("prediction", "table", "Prediction model: [controllers.NAME.prediction].", {}),
-     Key("solver", "table", "OSQP settings: [controllers.NAME.solver].", {})),
+     Key("solver", "table", "OSQP settings: [controllers.NAME.solver].", {}), _START),
     variant=_MPC,
 )
 MPC_WEIGHTS = Table(
@@ -285,7 +288,7 @@ def _baseline_table(kind: str, cls) -> Table:
     return Table(
         _C, f'type = "{kind}": {cls.__doc__.split(";")[0].split(":")[0]} (a baseline of '
         "the field, lcc_synth.controllers.baselines).", _CMDS,
-        (_TYPE, *keys, _SAMPLE_TIME, _LENGTH), variant=kind,
+        (_TYPE, *keys, _SAMPLE_TIME, _LENGTH, _START), variant=kind,
     )
 
 

@@ -101,10 +101,15 @@ SYSTEM = Table(
             "for platoon and ring).", None, lo=1, hi=400),
         Key("cavs", "any", "Positions (1..size) of the CAVs of a platoon or ring, front to "
             "tail; [] for all HDVs.", []),
-        Key("circumference", "number", "Ring length; default the sum of the equilibrium "
-            "spacings at v_star (give one of the two).", None, lo=0.0, lo_open=True, unit="m"),
+        Key("circumference", "number", "Ring length (vehicle lengths included); default the "
+            "sum of the equilibrium spacings at v_star plus size x vehicle_length (give one of "
+            "the two).", None, lo=0.0, lo_open=True, unit="m"),
         Key("hdv_values", "table", "Per-vehicle [hdv] parameters of a platoon or ring: "
             "[system.hdv_values].", {}),
+        Key("vehicle_length", "number", "Length of every vehicle of a platoon or ring: the "
+            "dynamics run in gap coordinates (a ring of circumference C as point vehicles on "
+            "C - size x vehicle_length, exact for gap-based laws); positions in results, "
+            "recordings and figures show the road of length C.", 0.0, lo=0.0, unit="m"),
     ),
 )
 

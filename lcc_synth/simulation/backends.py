@@ -8,6 +8,7 @@ call it, so every command runs in either.
 from __future__ import annotations
 
 from lcc_synth.controllers.base import Controller
+from lcc_synth.errors import ConfigError
 from lcc_synth.simulation.results import SimResult
 from lcc_synth.simulation.scenario import BACKENDS, Draws, Scenario
 
@@ -47,6 +48,9 @@ def run_scenario(
         ``scenario.backend = "sumo"`` without SUMO installed (``pip install -e ".[sumo]"``).
     """
     if scenario.backend == "sumo":
+        if getattr(controller, "start", None) is not None:  # controllers.switch.SwitchedOn
+            raise ConfigError(f"controllers.{controller.name}.start",
+                              'switching on at a time needs backend = "builtin" for now')
         from lcc_synth.simulation.sumo import simulate_sumo
 
         return simulate_sumo(scenario, controller, draws)

@@ -50,7 +50,9 @@ The stepping loop is compiled with numba. Controllers with a fixed linear law (t
 HDV, static gains, with the fixed or the estimated equilibrium and the optional measurement
 filter; see :class:`~lcc_synth.controllers.static.LinearLaw`) are evaluated inside the compiled
 loop; any other controller is called from Python once per controller sample and the compiled
-loop advances the scenarios between samples.
+loop advances the scenarios between samples. A controller switched on at a time
+(:class:`~lcc_synth.controllers.switch.SwitchedOn`, ``start``) has the CAVs drive with their
+HDV law in the compiled loop until the switch sample, then runs as above.
 """
 
 from __future__ import annotations
@@ -63,6 +65,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from lcc_synth.controllers.base import ControlContext, Controller, Observation
+from lcc_synth.controllers.switch import switch_step
 from lcc_synth.errors import ConfigError
 from lcc_synth.resources import require_memory
 from lcc_synth.simulation.kernels import _advance, _observe_all
@@ -278,7 +281,7 @@ def simulate(
     f_s = np.full((B, nv), np.nan)  # measurement filter states (NaN: not started)
     f_v = np.full((B, nv), np.nan)
 
-    def advance_range(b0, b1, k0, k1, mode, Ks, Kv, Kp, hdv_law):
+    def advance_range(b0, b1, k0, k1, mode, Ks, Kv, Kp, hdv_law, ratio=ratio):
         _advance(
             b0, b1, k0, k1, p, v, hp, hv, L, delay_steps, sc.delay_model == "full", code,
             params, code, law_params,
@@ -294,25 +297,29 @@ def simulate(
 
     n_threads = _threads(B, (T if law is not None else ratio) * nv)
 
-    def advance(k0, k1, mode, Ks, Kv, Kp, hdv_law):
+    def advance(k0, k1, mode, Ks, Kv, Kp, hdv_law, r=ratio):
         if n_threads == 1:
-            advance_range(0, B, k0, k1, mode, Ks, Kv, Kp, hdv_law)
+            advance_range(0, B, k0, k1, mode, Ks, Kv, Kp, hdv_law, r)
             return
         edges = np.linspace(0, B, n_threads + 1).astype(int)
         futures = [
-            _executor().submit(advance_range, b0, b1, k0, k1, mode, Ks, Kv, Kp, hdv_law)
+            _executor().submit(advance_range, b0, b1, k0, k1, mode, Ks, Kv, Kp, hdv_law, r)
             for b0, b1 in zip(edges[:-1], edges[1:], strict=True)
         ]
         for f in futures:
             f.result()
 
+    zeros = np.zeros((n_cav, nv))
+    kp0 = np.zeros(n_cav)
+    start = getattr(controller, "start", None)  # controllers.switch.SwitchedOn
+    k_on = 0 if start is None else switch_step(start, float(sc.t_start), dt, ratio, T)
+    if k_on > 0:  # before the switch: every CAV's HDV law, every step, compiled
+        advance(0, k_on, 1, zeros, zeros, kp0, True, 1)
     if law is not None:
         Ks, Kv, Kp = _law_arrays(law, n_cav, nv, ring, controller.name)
-        advance(0, T, 1, Ks, Kv, Kp, law.hdv_law)
+        advance(k_on, T, 1, Ks, Kv, Kp, law.hdv_law)
     else:
-        zeros = np.zeros((n_cav, nv))
-        kp0 = np.zeros(n_cav)
-        for k0 in range(0, T, ratio):
+        for k0 in range(k_on, T, ratio):
             _observe_all(k0, p, v, hp, hv, L, lat, loss, obs_noise, int(sc.seed),
                          int(sc.first_index), is_cav, ring, circ,
                          obs_s, obs_v, obs_p, alive)  # fmt: skip
@@ -337,6 +344,8 @@ def simulate(
             u_hold[:] = np.where(alive[:, None], u, 0.0)
             advance(k0, min(k0 + ratio, T), 0, zeros, zeros, kp0, False)
 
+    if sc.vehicle_length > 0:  # gap coordinates -> the road's front-bumper positions
+        out_p -= sc.vehicle_length * np.arange(nv)
     return SimResult(
         t=t[::stride].copy(),
         position=out_p,
@@ -352,7 +361,8 @@ def simulate(
         cav=cav,
         cavs=tuple(int(c) for c in cavs),
         ring=ring,
-        circumference=float(sc.circumference) if ring else float("nan"),
+        circumference=float(sc.circumference) + nv * sc.vehicle_length if ring else float("nan"),
+        vehicle_length=float(sc.vehicle_length),
         v_star=v_star,
         s_star=s_star,
         controller=controller.name,

@@ -52,7 +52,11 @@ class SimResult(Record):
     ring : bool
         A ring road (no head; column 0 follows the last column).
     circumference : float
-        Ring length (m); NaN on an open road.
+        Ring length (m) of the road, vehicle lengths included; NaN on an open road.
+    vehicle_length : float
+        Length (m) of every vehicle: ``spacing`` is the bumper-to-bumper gap and ``position``
+        the front bumper on the road (column ``j`` is ``j * vehicle_length`` behind where the
+        gap coordinates put it).
     """
 
     t: np.ndarray
@@ -81,6 +85,7 @@ class SimResult(Record):
     cavs: tuple[int, ...] | None = field(default=None, repr=False)
     ring: bool = field(default=False, repr=False)
     circumference: float = field(default=float("nan"), repr=False, compare=False)
+    vehicle_length: float = field(default=0.0, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.cavs is None:

@@ -108,7 +108,13 @@ class Scenario(Record):
     ring : bool
         A ring road: no head vehicle, column 0 follows the last column (needs ``cavs``).
     circumference : float, optional
-        Ring length (m), > 0; ``None`` on an open road.
+        Ring length (m), > 0, in gap coordinates (what the dynamics see: the road's length
+        minus ``N * vehicle_length``); ``None`` on an open road.
+    vehicle_length : float
+        Length (m, >= 0) of every vehicle; display only. Every spacing the simulator
+        integrates and records is the bumper-to-bumper gap (exact for gap-based laws); the
+        result's positions put column ``j`` ``j * vehicle_length`` further back and its
+        circumference is ``circumference + N * vehicle_length`` (the road a user sees).
     accel_noise_uniform : float
         Half width ``w`` (m/s^2, >= 0) of a uniform acceleration noise ``U[-w, w]`` on every
         vehicle but the head (CAVs included), added after the limits and emergency braking
@@ -153,6 +159,7 @@ class Scenario(Record):
     circumference: float | None = None
     accel_noise_uniform: float = 0.0
     cav_lag: float | tuple[float, ...] = 0.0
+    vehicle_length: float = 0.0
 
     def __post_init__(self) -> None:
         self._check_layout()
@@ -188,6 +195,7 @@ class Scenario(Record):
         _num("scenario.a_max", self.a_max, lo=0.0, lo_open=True)
         _num("scenario.hdv_accel_noise", self.hdv_accel_noise, lo=0.0)
         _num("scenario.accel_noise_uniform", self.accel_noise_uniform, lo=0.0)
+        _num("system.vehicle_length", self.vehicle_length, lo=0.0)
         _num("scenario.delay_spread", self.delay_spread, lo=0.0)
         delay = np.asarray(self.delay, dtype=float)
         if not np.all(np.isfinite(delay)) or np.any(delay < 0):

@@ -42,6 +42,7 @@ def _platoon_layout(system: System) -> dict[str, Any]:
     return {
         "m": cols[0] - 1, "n": nv - 1 - cols[0], "cavs": cols, "hdv_values": values,
         "ring": bool(P.ring), "circumference": P.length if P.ring else None,
+        "vehicle_length": P.vehicle_length,
     }  # fmt: skip
 
 

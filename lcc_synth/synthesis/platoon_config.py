@@ -231,7 +231,8 @@ def robust_members(system: System, robust: RobustSettings) -> list[Platoon]:
             models = tuple(replace(h, **{k: float(x) for k, x in zip(keys, row, strict=True)})
                            for h, row in zip(base.hdv, draw, strict=True))  # fmt: skip
             v_star = None if base.circumference is not None else base.v_star
-            out.append(Platoon(models, base.cavs, v_star, base.ring, base.circumference))
+            out.append(Platoon(models, base.cavs, v_star, base.ring, base.circumference,
+                               base.vehicle_length))
         except ConfigError as err:
             raise ConfigError("synthesis.robust", f"member {s}: {err.field}: {err.message}"
                               ) from None  # fmt: skip
