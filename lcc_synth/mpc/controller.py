@@ -56,6 +56,7 @@ from lcc_synth.controllers.base import ControlContext, Observation
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains, cav_feedback
 from lcc_synth.models.hdv import free_speed
+from lcc_synth.mpc.active_set import make_solver, solver_label
 from lcc_synth.mpc.comfort import jerk_bound, solve_prioritised
 from lcc_synth.mpc.delay import StateHistory, pad
 from lcc_synth.mpc.formulation import (
@@ -254,7 +255,7 @@ class MPCController:
             q, lo, hi = self.formulation.bounds(
                 qp, p, self._a_min, self._a_max, np.full((F, N), -np.inf)
             )
-            solver = OSQPSolver(qp, q, lo, hi, self.settings.solver)
+            solver = make_solver(qp, q, lo, hi, self.settings.solver)
             s_off = np.asarray(ctx.spacing_reference()[b], float) - float(ctx.s_star[b])
             s_off = np.nan_to_num(s_off, nan=0.0)
             mem = _Member(solver, lin, qp, K, kh, np.zeros(W), s_off, v_eq=float(ctx.v_star[b]))
@@ -544,8 +545,6 @@ class MPCController:
 
     def describe(self) -> dict[str, Any]:
         """Horizon, weights, constraints, prediction, solver and fallback settings."""
-        import osqp
-
         s = self.settings
         d = s.as_dict()
         d.update(
@@ -562,7 +561,7 @@ class MPCController:
                     "variables": self.formulation.nz,
                     "constraints": self.formulation.nc,
                     "spacing_families": [f.vehicle for f in self._families],
-                    "solver": f"osqp {osqp.__version__}",
+                    "solver": solver_label(s.solver),
                 },
                 "fallback": {
                     "source": self.fallback_source,
@@ -571,7 +570,7 @@ class MPCController:
                 },
             }
         )
-        d["solver"]["name"] = "osqp"
+        d["solver"]["name"] = s.solver.method
         return d
 
     def toml_table(self) -> dict[str, Any]:
