@@ -36,6 +36,7 @@ RUNS = {
     "synthesis_vs_paper.py --json": ["--json"],
     "table2.py": [],
     "paper_walkthrough.py": [],
+    "ring_sugiyama.py": ["--controllers", "all_hdv,follower_stopper,h2"],  # the MPC takes 80 s
 }
 
 

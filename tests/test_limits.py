@@ -141,14 +141,22 @@ def test_osqp_interrupt_flag_is_read_after_a_converged_solve():
     class _Solved:
         status_val, status, status_polish, iter, run_time = 1, "solved", 1, 3, 1e-4
 
-    class _Res:
-        x, y, info = np.zeros(2), np.zeros(2), _Solved()
+    class _Solution:
+        x, y = np.zeros(2), np.zeros(2)
+
+    class _Ext:  # the extension's workspace, which OSQPSolver.solve calls directly
+        info, solution = _Solved(), _Solution()
+
+        def update_data_vec(self, q=None, l=None, u=None):
+            pass
+
+        def solve(self):
+            pass
 
     s = mpc_solver.OSQPSolver.__new__(mpc_solver.OSQPSolver)
     s.settings = type("S", (), {"warm_start": False})()
-    s._silent, s.force_failure = None, False
-    s._solver = type("O", (), {"update": lambda self, **k: None,
-                               "solve": lambda self, raise_error: _Res()})()
+    s._silent, s.force_failure, s._infty = None, False, 1e30
+    s._solver = type("O", (), {"_solver": _Ext()})()
     s._interrupted = lambda: 1
     with pytest.raises(KeyboardInterrupt):
         s.solve(np.zeros(2), np.zeros(2), np.zeros(2))

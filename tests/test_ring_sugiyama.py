@@ -4,7 +4,6 @@ switched on at a time, the wave metrics, the wave in simulation and the benchmar
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
@@ -202,13 +201,6 @@ def test_benchmark_ordering_claims():
     assert fs["velocity_std"] < 0.1 * base["velocity_std"]  # FollowerStopper damps it too
     assert fs["fuel_ml"] < h2["fuel_ml"]  # ... driving slower: the goal on fuel_ml is missed
     assert all(r["collisions"] == 0 for r in rows.values())
-
-
-def test_sumo_file_is_the_benchmark_with_the_sumo_backend():
-    a = tomllib.loads(BENCH.read_text())
-    b = tomllib.loads((PROBLEMS / "sumo_ring_sugiyama.toml").read_text())
-    assert a["scenario"].pop("backend") == "builtin" and b["scenario"].pop("backend") == "sumo"
-    assert a == b
 
 
 # ------------------------------------------------------------------------------------------

@@ -37,8 +37,12 @@ def leaves(d, prefix=""):
     return out
 
 
+def _load(path: Path):
+    return lcc.load_problem(path)
+
+
 def round_trip(path: Path, tmp_path: Path):
-    first = lcc.load_problem(path)
+    first = _load(path)
     text = first.to_toml()
     copy = tmp_path / path.name
     copy.write_text(text)
@@ -47,7 +51,7 @@ def round_trip(path: Path, tmp_path: Path):
 
 def test_every_problem_file_is_covered():
     assert len(FILES) >= 15
-    kinds = {f.name: lcc.load_problem(f) for f in FILES}
+    kinds = {f.name: _load(f) for f in FILES}
     for name, objs in kinds.items():
         parts = [objs.simulation, objs.synthesis, objs.sweep, objs.suite, objs.analysis,
                  objs.regions]  # fmt: skip
@@ -65,7 +69,7 @@ def test_load_to_toml_load_gives_equal_objects(path, tmp_path):
 def test_every_stated_value_is_written_back(path, tmp_path):
     original = leaves(tomllib.loads(path.read_text()))
     written = leaves(tomllib.loads(round_trip(path, tmp_path)[2]))
-    objs = lcc.load_problem(path)
+    objs = _load(path)
     for key, value in original.items():
         if objs.suite is not None and key.startswith("metrics."):
             # a suite's top-level [metrics] is each scenario's default: written per scenario

@@ -311,6 +311,17 @@ class BaselineController:
         return {"type": self.kind, "params": self.params.as_dict(),
                 "sample_time": self.sample_time, "length": self.length}  # fmt: skip
 
+    def toml_table(self) -> dict[str, Any]:
+        """The ``[controllers.NAME]`` table that builds this controller."""
+        params = {k: list(v) if isinstance(v, tuple) else v
+                  for k, v in self.params.as_dict().items()}  # fmt: skip
+        return {"type": self.kind, **params, "sample_time": self.sample_time,
+                "length": self.length}  # fmt: skip
+
+    def as_dict(self) -> dict[str, Any]:
+        """Name and :meth:`BaselineController.describe`."""
+        return {"name": self.name, **self.describe()}
+
     def stats(self) -> dict[str, Any]:
         """Number of controller samples of the last run."""
         return {"samples": self._calls}

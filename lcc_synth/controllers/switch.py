@@ -91,6 +91,10 @@ class SwitchedOn:
         """The wrapped controller's ``[controllers.NAME]`` table plus ``start``."""
         return {**self.inner.toml_table(), "start": self.start}
 
+    def as_dict(self) -> dict[str, Any]:
+        """Name and :meth:`SwitchedOn.describe`."""
+        return {"name": self.name, **self.describe()}
+
     def stats(self) -> dict[str, Any]:
         """The wrapped controller's statistics."""
         return self.inner.stats()

@@ -224,7 +224,7 @@ def _one(result, config: MetricsConfig) -> dict[str, float | int]:
         "jerk_1s_over_limit_s": mt.jerk_limit_violation_time(result)[0],
         "collisions": mt.collisions(result)[0],
         "aeb_activations": mt.aeb_activations(result)[0],
-        **{k: x[0] for k, x in mt.wave_metrics(result, config).items()},  # issue 22's ring
+        **{k: x[0] for k, x in mt.wave_metrics(result, config).items()},  # the ring benchmark's
     }
 
 

@@ -1,5 +1,5 @@
 """Time-space diagram of a ring road: every vehicle's position on the ring against time,
-coloured by its speed (the Sugiyama ring benchmark, issue 22; house style: :mod:`.style`)."""
+coloured by its speed (the Sugiyama ring benchmark; house style: :mod:`.style`)."""
 
 from __future__ import annotations
 

@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-from lcc_synth.metrics import iso15622_jerk_limit
+from lcc_synth.metrics import _ISO_JERK  # the limit's (speed, jerk) corners
 
 __all__ = ["SLACK_TOL", "jerk_bound", "solve_prioritised"]
 
@@ -42,7 +42,8 @@ def jerk_bound(scale: float, v: float) -> float:
     when the rows are off or the speed is unknown)."""
     if scale <= 0 or not math.isfinite(v):
         return math.inf
-    return float(scale * iso15622_jerk_limit(max(v, 0.0)))
+    # = scale * iso15622_jerk_limit(max(v, 0)) for a finite scalar, without its NaN mask
+    return float(scale * np.interp(max(v, 0.0), *_ISO_JERK))
 
 
 def _slack(form, z: np.ndarray) -> float:

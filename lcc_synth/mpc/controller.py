@@ -56,6 +56,7 @@ from lcc_synth.controllers.base import ControlContext, Observation
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains, cav_feedback
 from lcc_synth.models.hdv import free_speed
+from lcc_synth.mpc.active_set import make_solver, solver_label
 from lcc_synth.mpc.comfort import jerk_bound, solve_prioritised
 from lcc_synth.mpc.delay import pad
 from lcc_synth.mpc.formulation import (
@@ -69,6 +70,7 @@ from lcc_synth.mpc.formulation import (
 from lcc_synth.mpc.report import new_step_record, predicted_states, step_statistics
 from lcc_synth.mpc.settings import MPCSettings, paper_fallback_gains
 from lcc_synth.mpc.solver import POLISH_NAMES, OSQPSolver
+from lcc_synth.mpc.step_cache import LastValue, clip
 
 __all__ = ["MPCController", "STATUS_CODES"]
 
@@ -99,6 +101,8 @@ class _Member:
     warm: tuple | None = None
     past: np.ndarray = field(default_factory=lambda: np.zeros(1))  # commands, newest first
     delay: Any = None  # delay.StateHistory (past observed states) or lag.LagState (a_0)
+    s_off_cols: np.ndarray | None = None  # s_off of the modelled vehicles (state order)
+    s_eq: LastValue = field(default_factory=LastValue)
     hist: dict[str, list] = field(default_factory=dict)
 
 
@@ -190,7 +194,7 @@ class MPCController:
     # ---------------------------------------------------------------- setup helpers
 
     def _clip_v(self, v: float) -> float:
-        return float(np.clip(v, 1.0, self._v_hi - 1.0))
+        return clip(v, 1.0, self._v_hi - 1.0)
 
     def _make_families(self, model) -> list[Family]:
         c = self.settings.constraints
@@ -244,17 +248,19 @@ class MPCController:
         F = len(self._families)
         W = max(1, int(round(self.settings.prediction.equilibrium_window / self.sample_time)))
         self._members = []
+        self._cols = np.arange(-self.m, self.n_model + 1) + self.m + 1
         for b in range(ctx.batch):
             lin, qp, K, kh = self._linearization(float(ctx.v_star[b]))
             p = self.formulation.param(np.zeros(lin.Ad.shape[0]), np.zeros(N), 0.0)
             q, lo, hi = self.formulation.bounds(
                 qp, p, self._a_min, self._a_max, np.full((F, N), -np.inf)
             )
-            solver = OSQPSolver(qp, q, lo, hi, self.settings.solver)
+            solver = make_solver(qp, q, lo, hi, self.settings.solver)
             s_off = np.asarray(ctx.spacing_reference()[b], float) - float(ctx.s_star[b])
             s_off = np.nan_to_num(s_off, nan=0.0)
             mem = _Member(solver, lin, qp, K, kh, np.zeros(W), s_off, v_eq=float(ctx.v_star[b]))
             mem.hist = {k: [] for k in _HIST_KEYS}
+            mem.s_off_cols = s_off[self._cols]
             mem.past = np.zeros(max(1, self.formulation.W))
             mem.delay = None if lin.delay is None else lin.delay.history()  # delay, lag
             self._members.append(mem)
@@ -305,10 +311,10 @@ class MPCController:
             mem.v_buf_i = (mem.v_buf_i + 1) % W
             mem.v_eq = float(mem.v_buf.mean())
         v_eq = mem.v_eq
-        s_eq = float(self.system.hdv.equilibrium_spacing(self._clip_v(v_eq)))
-        cols = np.arange(-m, self.n_model + 1) + m + 1
+        s_eq = mem.s_eq.get(self.system.hdv, self._clip_v(v_eq))
+        cols = self._cols
         x = np.empty(2 * cols.size)
-        x[0::2] = obs.spacing[b, cols] - s_eq - mem.s_off[cols]
+        x[0::2] = obs.spacing[b, cols] - s_eq - mem.s_off_cols  # (spacing - s_eq) - s_off
         x[1::2] = obs.velocity[b, cols] - v_eq
         # FD-LCC: -p_0 relative to a reference moving at v_eq
         p0 = float(obs.position[b, cav])
@@ -319,8 +325,7 @@ class MPCController:
         if self.kind == "fd_lcc":
             x[0] = xi if self.settings.weights.position > 0 else 0.0
         # head prediction
-        N = self.settings.horizon
-        Ts = self.sample_time
+        N, Ts = self.settings.horizon, self.sample_time
         d0 = (v_ref - v_eq) if math.isfinite(v_ref) else 0.0
         d = np.full(N, d0)
         if pred.head == "accel" and math.isfinite(mem.v_ref_prev) and math.isfinite(v_ref):
@@ -328,10 +333,7 @@ class MPCController:
             d = d0 + a * np.minimum(np.arange(N) * Ts, pred.head_accel_hold)
             d = np.maximum(d, -v_eq)
         mem.v_ref_prev = v_ref
-        if self.kind == "fd_lcc":
-            d_model = np.zeros(N)  # FD-LCC's model has no head input
-        else:
-            d_model = d
+        d_model = np.zeros(N) if self.kind == "fd_lcc" else d  # FD-LCC: no head input
         s0 = float(obs.spacing[b, cav])
         if mem.delay is not None:
             x = mem.delay.push(x, d0, s_eq, v_eq, obs=obs, b=b, u_prev=float(mem.past[0]))
@@ -386,10 +388,8 @@ class MPCController:
                 st["violation_steps"] += 1
                 st["max_violation"] = max(st["max_violation"], viol)
         self._relinearize(mem)
-        lin = mem.lin
-        form = self.formulation
-        N = self.settings.horizon
-        if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(d_model))):
+        lin, form, N = mem.lin, self.formulation, self.settings.horizon
+        if not (np.isfinite(x0).all() and np.isfinite(d_model).all()):
             return self._fallback(mem, x0, xi, d_model, "nonfinite_state")
         p = form.param(x0, d_model, mem.u_prev, mem.past)
         fb = self._family_bounds(mem, x0, d, s_eq, s0)
@@ -430,7 +430,7 @@ class MPCController:
         u = u_model
         if self.kind == "cf_lcc":
             u += float(lin.K_law @ x0) + lin.k_h * d0
-        return float(np.clip(u, self._a_min, self._a_max))
+        return clip(u, self._a_min, self._a_max)
 
     def _fallback(self, mem: _Member, x0, xi, d_model, why: str) -> float:
         st = self._st
@@ -545,8 +545,6 @@ class MPCController:
 
     def describe(self) -> dict[str, Any]:
         """Horizon, weights, constraints, prediction, solver and fallback settings."""
-        import osqp
-
         s = self.settings
         d = s.as_dict()
         d.update(
@@ -563,7 +561,7 @@ class MPCController:
                     "variables": self.formulation.nz,
                     "constraints": self.formulation.nc,
                     "spacing_families": [f.vehicle for f in self._families],
-                    "solver": f"osqp {osqp.__version__}",
+                    "solver": solver_label(s.solver),
                 },
                 "fallback": {
                     "source": self.fallback_source,
@@ -572,7 +570,7 @@ class MPCController:
                 },
             }
         )
-        d["solver"]["name"] = "osqp"
+        d["solver"]["name"] = s.solver.method
         return d
 
     def toml_table(self) -> dict[str, Any]:

@@ -469,19 +469,22 @@ class Formulation:
         """
         N, F = self.N, len(self.families)
         off = qp.Gp @ p + qp.g0
-        lo = np.empty(self.nc)
-        hi = np.empty(self.nc)
-        lo[:N] = a_min
-        hi[:N] = a_max
+        key = (a_min, a_max)
+        if getattr(self, "_rows_key", None) != key:  # the rows that do not change per step
+            lo_t, hi_t = np.empty(self.nc), np.empty(self.nc)
+            lo_t[:N], hi_t[:N] = a_min, a_max
+            hi_t[N:N + F * N] = np.inf
+            lo_t[N + F * N:], hi_t[N + F * N:] = 0.0, np.inf
+            self._rows, self._rows_key = (lo_t, hi_t), key
+        lo, hi = self._rows[0].copy(), self._rows[1].copy()
         lo[N:N + F * N] = np.asarray(fam_bounds, float).reshape(-1)
-        hi[N:N + F * N] = np.inf
-        lo[N + F * N:] = 0.0
-        hi[N + F * N:] = np.inf
         if self.W:
             r = self.jerk_rows
             lo[r] = -jerk * self.window
             hi[r] = jerk * self.window
-        return qp.Qp @ p + qp.q0, lo - off, hi - off
+        np.subtract(lo, off, out=lo)
+        np.subtract(hi, off, out=hi)
+        return qp.Qp @ p + qp.q0, lo, hi
 
     def shift_indices(self) -> tuple[np.ndarray, np.ndarray]:
         """Index arrays that shift a primal / dual solution by one step (warm start)."""

@@ -61,6 +61,7 @@ import numpy as np
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import free_speed
 from lcc_synth.models.platoon import PlatoonGains
+from lcc_synth.mpc.active_set import make_solver, solver_label
 from lcc_synth.mpc.comfort import jerk_bound, solve_prioritised
 from lcc_synth.mpc.formulation import Family, check_horizon
 from lcc_synth.mpc.platoon_qp import PlatoonFormulation, linearize_platoon, platoon_state_weights
@@ -243,7 +244,7 @@ class PlatoonMPCController:
             p = form.param(np.zeros(form.nx), np.zeros(N), np.zeros(self.nu))
             q, lo, hi = form.bounds(entry[1], p, self._a_min, self._a_max,
                                     np.full((F, N), -np.inf))
-            solver = OSQPSolver(entry[1], q, lo, hi, self.settings.solver)
+            solver = make_solver(entry[1], q, lo, hi, self.settings.solver)
             self._members.append(_Member(solver, entry, self.nu, W, form.W, v0))
 
     def __call__(self, obs) -> np.ndarray:
@@ -478,8 +479,6 @@ class PlatoonMPCController:
 
     def describe(self) -> dict[str, Any]:
         """Horizon, weights, constraints, prediction, solver, the CAVs and their fallbacks."""
-        import osqp
-
         s = self.settings
         d = s.as_dict()
         model = self._lin0.model
@@ -499,7 +498,7 @@ class PlatoonMPCController:
                 "variables": self.formulation.nz,
                 "constraints": self.formulation.nc,
                 "spacing_families": [f.vehicle for f in self._families],
-                "solver": f"osqp {osqp.__version__}",
+                "solver": solver_label(s.solver),
             },
             "fallback": {
                 "source": self.fallback_source,
@@ -507,7 +506,7 @@ class PlatoonMPCController:
                 "gains": self.fallback.as_table(model),
             },
         })  # fmt: skip
-        d["solver"]["name"] = "osqp"
+        d["solver"]["name"] = s.solver.method
         return d
 
     def toml_table(self) -> dict[str, Any]:

@@ -47,8 +47,9 @@ A problem file selects the MPC with a controller table (every key optional)::
                                #   or a list, one per modelled HDV front to tail (mpc.delay)
     cav_lag = 0.0              # the CAV's actuator lag (s) in the prediction (mpc.lag)
 
-    [controllers.mpc.solver]   # OSQP
-    eps_abs = 1.0e-6
+    [controllers.mpc.solver]
+    method = "osqp"            # or "daqp": exact dense active set (lcc_synth.mpc.active_set)
+    eps_abs = 1.0e-6           # OSQP's tolerances and polish (not DAQP's)
     eps_rel = 1.0e-6
     max_iter = 10000
     polish = true
@@ -83,6 +84,7 @@ __all__ = [
 HEAD_PREDICTIONS = ("constant", "accel")
 INPUT_ON = ("total", "model")
 EQUILIBRIA = ("moving_average", "fixed")
+SOLVER_METHODS = ("osqp", "daqp")
 
 
 @dataclass(frozen=True, repr=False)
@@ -144,8 +146,10 @@ class Prediction(Record):
 
 @dataclass(frozen=True, repr=False)
 class SolverSettings(Record):
-    """OSQP settings (tight by default: the applied input must match an exact QP solution)."""
+    """QP solver settings: OSQP (tight by default: the applied input must match an exact QP
+    solution) or DAQP (``method = "daqp"``, :mod:`lcc_synth.mpc.active_set`)."""
 
+    method: str = "osqp"
     eps_abs: float = 1.0e-6
     eps_rel: float = 1.0e-6
     max_iter: int = 10000
@@ -279,6 +283,9 @@ def validate(s: MPCSettings, field_prefix: str = "") -> None:
         raise ConfigError(f"{pre}prediction.delay", "must be a number or a non-empty list")
     check_lag(p.cav_lag, f"{pre}prediction.cav_lag")
     o = s.solver
+    if o.method not in SOLVER_METHODS:
+        raise ConfigError(f"{pre}solver.method",
+                          f"must be one of {', '.join(SOLVER_METHODS)}, got {o.method!r}")
     _pos(o.eps_abs, f"{pre}solver.eps_abs", strict=True)
     _pos(o.eps_rel, f"{pre}solver.eps_rel")
     if o.eps_abs > 1e-3 or o.eps_rel > 1e-3:

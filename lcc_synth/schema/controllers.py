@@ -169,12 +169,15 @@ MPC_PREDICTION = Table(
     variant=_MPC,
 )
 MPC_SOLVER = Table(
-    f"{_C}.solver", "OSQP settings of the MPC's QP.", _CMDS,
-    (Key("eps_abs", "number", "Absolute tolerance.", 1.0e-6, lo=0.0, lo_open=True),
-     Key("eps_rel", "number", "Relative tolerance.", 1.0e-6, lo=0.0),
+    f"{_C}.solver", "QP solver of the MPC: OSQP (default) or DAQP, and OSQP's settings.", _CMDS,
+    (Key("method", "string", "QP solver: osqp (ADMM, the published results) or daqp (exact "
+         "dense active set, lcc_synth.mpc.active_set).", "osqp", choices=("osqp", "daqp")),
+     Key("eps_abs", "number", "Absolute tolerance (OSQP).", 1.0e-6, lo=0.0, lo_open=True),
+     Key("eps_rel", "number", "Relative tolerance (OSQP).", 1.0e-6, lo=0.0),
      Key("max_iter", "integer", "Iteration limit.", 10000, lo=1),
-     Key("polish", "boolean", "Polish the solution.", True),
-     Key("warm_start", "boolean", "Warm-start from the previous solve.", True),
+     Key("polish", "boolean", "Polish the solution (OSQP).", True),
+     Key("warm_start", "boolean", "Warm-start from the previous solve (OSQP; DAQP always "
+         "starts from the previous active set).", True),
      Key("time_limit", "number", "Wall-clock limit per solve (0: none).", 0.0, lo=0.0,
          unit="s")),
     variant=_MPC,

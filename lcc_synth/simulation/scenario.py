@@ -158,8 +158,8 @@ class Scenario(Record):
     ring: bool = False
     circumference: float | None = None
     accel_noise_uniform: float = 0.0
-    vehicle_length: float = 0.0
     cav_lag: float | tuple[float, ...] = 0.0
+    vehicle_length: float = 0.0
 
     def __post_init__(self) -> None:
         self._check_layout()
