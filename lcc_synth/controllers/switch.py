@@ -92,8 +92,11 @@ class SwitchedOn:
         return {**self.inner.toml_table(), "start": self.start}
 
     def as_dict(self) -> dict[str, Any]:
-        """Name and :meth:`SwitchedOn.describe`."""
-        return {"name": self.name, **self.describe()}
+        """The wrapped controller's ``as_dict`` (what defines it, without run-time facts such
+        as a set-up time) plus ``start``; :meth:`SwitchedOn.describe` when it has none."""
+        inner = getattr(self.inner, "as_dict", None)
+        base = inner() if callable(inner) else {"name": self.name, **self.inner.describe()}
+        return {**base, "start": self.start}
 
     def stats(self) -> dict[str, Any]:
         """The wrapped controller's statistics."""
