@@ -443,5 +443,5 @@ class PlatoonGainController(_LinearController):
         return out
 
     def as_dict(self) -> dict[str, Any]:
-        """Name, :meth:`describe` and the CAV positions."""
+        """Name, :meth:`PlatoonGainController.describe` and the CAV positions."""
         return {"name": self.name, "cavs": list(self.model.cavs), **self.describe()}

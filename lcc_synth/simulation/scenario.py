@@ -232,7 +232,7 @@ class Scenario(Record):
             check_sumo_scenario(self)
 
     def lags(self) -> tuple[float, ...]:
-        """The actuator lag ``tau`` (s) of each CAV (:attr:`cav_lag` per CAV)."""
+        """The actuator lag ``tau`` (s) of each CAV (``cav_lag`` per CAV)."""
         lag = self.cav_lag
         if np.ndim(lag) == 0:
             return tuple(_num("scenario.cav_lag", lag, lo=0.0) for _ in self.cav_columns)
