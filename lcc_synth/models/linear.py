@@ -30,7 +30,13 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import CarFollowingModel, LinearCoefficients, linear_coefficients
-from lcc_synth.models.platoon import HEAD, chain_matrices, discretize
+from lcc_synth.models.platoon import (
+    HEAD,
+    chain_matrices,
+    discretize,
+    selection_matrix,
+    state_index,
+)
 from lcc_synth.models.records import Record
 
 __all__ = [
@@ -94,12 +100,7 @@ class LCCModel(Record):
 
     def index(self, name: str) -> int:
         """Position of state ``name`` (e.g. ``"v_2"``)."""
-        try:
-            return self.state_names.index(name)
-        except ValueError:
-            raise ConfigError(
-                "state", f"unknown state {name!r}; this model has {list(self.state_names)}"
-            ) from None
+        return state_index(self.state_names, name)
 
     def block(self, vehicle: int) -> slice:
         """Slice of the two states of ``vehicle`` (index -m..n)."""
@@ -117,10 +118,7 @@ class LCCModel(Record):
 
     def output_matrix(self, names: Sequence[str]) -> np.ndarray:
         """Selection matrix ``C`` whose rows pick the named states."""
-        C = np.zeros((len(names), self.nx))
-        for r, name in enumerate(names):
-            C[r, self.index(name)] = 1.0
-        return C
+        return selection_matrix(self.state_names, names)
 
     def to_statespace(self, outputs: Sequence[str] | None = None):
         """``control.StateSpace`` with inputs ``(u, v_h)`` and the chosen state outputs.

@@ -55,6 +55,8 @@ __all__ = [
     "PlatoonModel",
     "platoon_model",
     "ring_velocity",
+    "state_index",
+    "selection_matrix",
     "discretize",
     "SEMANTICS",
     "PlatoonGains",
@@ -120,6 +122,25 @@ def chain_matrices(
         elif pred is not None:
             A[r, 2 * pred + 1] = ahead
     return A, B, H
+
+
+def state_index(state_names: Sequence[str], name: str) -> int:
+    """Position of state ``name`` in ``state_names``; an unknown name is a ConfigError listing
+    the model's states (shared by :class:`PlatoonModel` and the paper's ``LCCModel``)."""
+    try:
+        return list(state_names).index(name)
+    except ValueError:
+        raise ConfigError(
+            "state", f"unknown state {name!r}; this model has {list(state_names)}"
+        ) from None
+
+
+def selection_matrix(state_names: Sequence[str], names: Sequence[str]) -> np.ndarray:
+    """Selection matrix ``C`` (``len(names) x len(state_names)``) whose rows pick ``names``."""
+    C = np.zeros((len(names), len(state_names)))
+    for r, name in enumerate(names):
+        C[r, state_index(state_names, name)] = 1.0
+    return C
 
 
 def ring_velocity(models: Sequence[CarFollowingModel], circumference: float) -> float:
@@ -326,12 +347,7 @@ class PlatoonModel(Record):
 
     def index(self, name: str) -> int:
         """Position of state ``name`` (e.g. ``"v_3"``)."""
-        try:
-            return self.state_names.index(name)
-        except ValueError:
-            raise ConfigError(
-                "state", f"unknown state {name!r}; this model has {list(self.state_names)}"
-            ) from None
+        return state_index(self.state_names, name)
 
     def block(self, position: int) -> slice:
         """Slice of the two states of the vehicle at ``position`` (1..N)."""
@@ -372,10 +388,7 @@ class PlatoonModel(Record):
 
     def output_matrix(self, names: Sequence[str]) -> np.ndarray:
         """Selection matrix ``C`` whose rows pick the named states."""
-        C = np.zeros((len(names), self.nx))
-        for r, name in enumerate(names):
-            C[r, self.index(name)] = 1.0
-        return C
+        return selection_matrix(self.state_names, names)
 
     def to_statespace(self, outputs: Sequence[str] | None = None):
         """``control.StateSpace`` with inputs ``(u_i..., v_h)`` (ring: ``u_i...``).

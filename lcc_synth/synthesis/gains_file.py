@@ -170,16 +170,8 @@ def read_gains(path: str | Path) -> tuple[StaticGains, dict[str, Any]]:
     ConfigError
         Missing file, invalid JSON, a missing key, or inconsistent contents.
     """
-    p = Path(path)
-    src = str(p)
-    if not p.is_file():
-        raise ConfigError("file", "no such gains file", src)
-    try:
-        doc = json.loads(p.read_text())
-    except json.JSONDecodeError as err:
-        raise ConfigError("file", f"not valid JSON: {err}", src) from None
-    if not isinstance(doc, dict):
-        raise ConfigError("file", "must hold a JSON object", src)
+    src = str(Path(path))
+    doc = _load_json(path)
     if doc.get("kind") in ("platoon", "ring"):
         raise ConfigError("kind", f"{doc['kind']!r}: a platoon gains file (one row per CAV); "
                           "read it with read_platoon_gains", src)  # fmt: skip
