@@ -94,8 +94,10 @@ def test_persistency_of_excitation_refuses_short_and_periodic_data():
         D.check_excitation(periodic, 35, "controllers.d.data")
 
 
-def _full_qp_first_moves(win, q, r, lam_g, lam_y, W, b_parts, y_ini, a, b_w, slack):
-    """The QP in g of Wang et al. (2023) solved by cvxpy + Clarabel (tight tolerances)."""
+def _full_qp_first_moves(win, q, r, lam_g, lam_y, W, b_parts, y_ini, a, b_w, slack,
+                         exact_past=False):
+    """The QP in g of Wang et al. (2023) solved by cvxpy + Clarabel (tight tolerances);
+    ``exact_past``: ``Y_p g = y_ini`` as an equality instead of the lambda_y slack."""
     import cvxpy as cp
 
     u_ini, e_ini, e_f = b_parts
@@ -107,20 +109,29 @@ def _full_qp_first_moves(win, q, r, lam_g, lam_y, W, b_parts, y_ini, a, b_w, sla
     uf = win.Uf @ g
     cost = (cp.sum_squares(cp.multiply(np.sqrt(np.tile(q, N)), yf))
             + cp.sum_squares(cp.multiply(np.sqrt(np.tile(r, N)), uf))
-            + lam_g * cp.sum_squares(g) + lam_y * cp.sum_squares(win.Yp @ g - y_ini)
+            + lam_g * cp.sum_squares(g)
+            + (0 if exact_past else lam_y * cp.sum_squares(win.Yp @ g - y_ini))
             + slack[0] * cp.sum(sig) + slack[1] * cp.sum_squares(sig))  # fmt: skip
     cons = [win.Up @ g == u_ini, win.Ep @ g == e_ini, win.Ef @ g == e_f, uf >= a[0],
             uf <= a[1], W @ yf + sig >= b_w, sig >= 0]  # fmt: skip
+    if exact_past:
+        cons.append(win.Yp @ g == y_ini)
     cp.Problem(cp.Minimize(cost), cons).solve(
         solver="CLARABEL", tol_gap_abs=1e-11, tol_gap_rel=1e-11, tol_feas=1e-11
     )
     return np.asarray(uf.value), np.asarray(sig.value)
 
 
-@pytest.mark.parametrize("noise", [0.0, 1e-3])
-def test_reduced_qp_equals_the_full_qp_in_g(noise):
-    """Exact for noise-free data (singular Gamma) and noisy data (full rank); the spacing and
-    acceleration bounds are both active."""
+@pytest.mark.parametrize("noise, lam_g, exact_past",
+                         [(0.0, 100.0, False), (1e-3, 100.0, False), (0.0, 0.0, False),
+                          (1e-3, 100.0, True)],
+                         ids=["exact", "noisy", "exact_lambda_g_0", "noisy_exact_past"])
+def test_reduced_qp_equals_the_full_qp_in_g(noise, lam_g, exact_past):
+    """Exact for noise-free data (singular Gamma) and noisy data (full rank), with the
+    defaults' regularisation, unregularised on exact data (g restricted to the data's row
+    space) and with the past outputs as equalities; the spacing and acceleration bounds are
+    both active. (Exact data with exact past outputs repeat equality rows, which Clarabel
+    cannot take; that case is checked against the model-based MPC below.)"""
     from lcc_synth.mpc.solver import solve_exact
 
     rng = np.random.default_rng(3)
@@ -129,9 +140,9 @@ def test_reduced_qp_equals_the_full_qp_in_g(noise):
     Tini, N = 4, 6
     win = windows(data, Tini, N)
     q, r = np.array([1.0, 1.0, 1.0, 0.5]), np.array([0.1])
-    lam_g, lam_y, slack = 100.0, 1e4, (100.0, 1.0)
+    lam_y, slack = 1e4, (100.0, 1.0)
     W = spacing_rows(N, data.p, [0], 0.8)
-    red = reduce(win, q, r, lam_g, lam_y, W)
+    red = reduce(win, q, r, lam_g, lam_y, W, exact_past=exact_past)
     dqp = formulate(red, *slack)
     traj, _ = linear_data(model, Tini + 1, rng, noise=noise, x0=rng.normal(size=model.nx))
     u_ini, e_ini, y_ini = traj.u[:Tini].ravel(), traj.e[:Tini], traj.y[1:].ravel()
@@ -144,7 +155,7 @@ def test_reduced_qp_equals_the_full_qp_in_g(noise):
     x = solve_exact(dqp.qp, qv, lo, hi)
     u_red, sig_red = dqp.plan(x), dqp.slack(x)
     u_full, sig_full = _full_qp_first_moves(win, q, r, lam_g, lam_y, W, (u_ini, e_ini, e_f),
-                                            y_ini, a, b_w, slack)  # fmt: skip
+                                            y_ini, a, b_w, slack, exact_past)  # fmt: skip
     assert np.isclose(u_full.min(), a[0], atol=1e-6) or np.isclose(u_full.max(), a[1], atol=1e-6)
     assert sig_full.max() > 1e-3
     # Clarabel at 1e-11 and daqp (exact active set): agreement limited by H's conditioning
@@ -163,49 +174,108 @@ def test_reduced_qp_equals_the_full_qp_in_g(noise):
     assert res.ok and np.max(np.abs(u_osqp - u_red)) < tol
 
 
-def test_first_move_converges_to_the_model_based_mpc_on_the_same_cost():
-    """Exact linear data: as lambda_g -> 0 DeeP-LCC's QP becomes the model-based finite-horizon
-    QP on the same cost (the fundamental lemma). Measured first-move distance 1.5e-2, 1.1e-3,
-    3.0e-4 at lambda_g = 1e-2, 1e-3, 1e-4 (lambda_y = 1e4; the regularisation's bias, O(lambda_g)
-    plus O(lambda_g / lambda_y) through sigma_y). 1e-6 is out of reach: below lambda_g ~ 1e-5
-    the Hessian in g, 2 (lambda_g I + B'B) with rank(B'B) < K, is singular to working
-    precision, which reduce() refuses by name."""
+def _mpc_first_plan(model, x_t, q, r, N, a_lim=None):
+    """The model-based finite-horizon QP on DeeP-LCC's cost (future head error 0), solved by
+    cvxpy + Clarabel at 1e-12: the independent truth of the fundamental-lemma tests."""
     import cvxpy as cp
 
-    from lcc_synth.mpc.solver import solve_exact
-
-    rng = np.random.default_rng(5)
-    model = platoon(4, (1,))
-    data, _ = linear_data(model, 800, rng)
-    Tini, N = 10, 15
-    win = windows(data, Tini, N)
-    q, r = np.array([1.0, 1.0, 1.0, 1.0, 0.5]), np.array([0.1])
-    W = spacing_rows(N, data.p, [0], 0.8)
-    traj, x_t = linear_data(model, Tini, rng, x0=0.5 * rng.normal(size=model.nx))
     Ad, Bd, _ = model.discretize(TS)
     C = model.output_matrix(["v_1", "v_2", "v_3", "v_4", "s_1"])
     u = cp.Variable(N)
     x, cost = x_t, 0
-    for k in range(N):  # future head error 0
+    for k in range(N):
         x = Ad @ x + Bd[:, 0] * u[k]
         cost += cp.sum_squares(cp.multiply(np.sqrt(q), C @ x)) + r[0] * cp.square(u[k])
-    cp.Problem(cp.Minimize(cost)).solve(solver="CLARABEL", tol_gap_abs=1e-12,
-                                        tol_gap_rel=1e-12, tol_feas=1e-12)  # fmt: skip
-    u_mpc = np.asarray(u.value)
+    cons = [] if a_lim is None else [u >= a_lim[0], u <= a_lim[1]]
+    cp.Problem(cp.Minimize(cost), cons).solve(solver="CLARABEL", tol_gap_abs=1e-12,
+                                              tol_gap_rel=1e-12, tol_feas=1e-12)  # fmt: skip
+    return np.asarray(u.value)
+
+
+def _deep_first_plan(win, traj, q, r, N, lam_g, exact_past, a_lim=(-50.0, 50.0)):
+    from lcc_synth.mpc.solver import solve_exact
+
+    W = spacing_rows(N, win.Yf.shape[0] // N, [0], 0.8)
+    red = reduce(win, q, r, lam_g, 1e4, W, exact_past=exact_past)
+    dqp = formulate(red, 100.0, 1.0)
     b = np.concatenate([traj.u.ravel(), traj.e, np.zeros(N)])
-    diff = {}
-    for lam_g in (1e-2, 1e-3, 1e-4):
-        red = reduce(win, q, r, lam_g, 1e4, W)
-        dqp = formulate(red, 100.0, 1.0)
-        c = red.Cb @ b + red.Cy @ traj.y.ravel()
-        qv, lo, hi = dqp.vectors(c, -50.0, 50.0, np.full(N, -1e3))  # no active constraint
-        z = solve_exact(dqp.qp, qv, lo, hi)
-        diff[lam_g] = abs(dqp.plan(z)[0] - u_mpc[0])
+    c = red.Cb @ b + red.Cy @ traj.y.ravel()
+    qv, lo, hi = dqp.vectors(c, a_lim[0], a_lim[1], np.full(N, -1e3))  # spacing bound inactive
+    return dqp.plan(solve_exact(dqp.qp, qv, lo, hi))[:N]
+
+
+@pytest.fixture(scope="module")
+def lemma_case():
+    """Exact linear data of a CAV and 3 HDVs, a past window from a random state, the MPC."""
+    rng = np.random.default_rng(5)
+    model = platoon(4, (1,))
+    data, _ = linear_data(model, 800, rng)
+    Tini, N = 10, 15
+    traj, x_t = linear_data(model, Tini, rng, x0=0.5 * rng.normal(size=model.nx))
+    q, r = np.array([1.0, 1.0, 1.0, 1.0, 0.5]), np.array([0.1])
+    return model, data, windows(data, Tini, N), traj, x_t, q, r, N
+
+
+@pytest.mark.parametrize("a_lim", [None, (-1.0, 1.0)], ids=["free", "input_bound_active"])
+def test_noise_free_deeplcc_is_the_model_based_mpc(lemma_case, a_lim):
+    """The fundamental lemma: with exact data, lambda_g = 0 and the past outputs as equalities
+    (past_outputs = "exact"), DeeP-LCC's plan is the model-based finite-horizon QP's on the
+    same cost, unconstrained and with the input bound active (measured 6e-13)."""
+    model, data, win, traj, x_t, q, r, N = lemma_case
+    u_mpc = _mpc_first_plan(model, x_t, q, r, N, a_lim)
+    lim = (-50.0, 50.0) if a_lim is None else a_lim
+    u_deep = _deep_first_plan(win, traj, q, r, N, 0.0, True, lim)
+    if a_lim is not None:
+        assert np.isclose(u_mpc.max(), a_lim[1], atol=1e-9)  # the bound binds
+    assert abs(u_deep[0] - u_mpc[0]) < 1e-6
+    assert np.max(np.abs(u_deep - u_mpc)) < 1e-6
+
+
+def test_noise_free_plan_does_not_depend_on_which_data_were_recorded(lemma_case):
+    """A second, independent exact data set (other excitation, other length) describes the
+    same system: the same plan (the Hankel matrices differ entirely, the answer may not)."""
+    model, data, win, traj, x_t, q, r, N = lemma_case
+    other, _ = linear_data(model, 500, np.random.default_rng(11))
+    u1 = _deep_first_plan(win, traj, q, r, N, 0.0, True)
+    u2 = _deep_first_plan(windows(other, 10, N), traj, q, r, N, 0.0, True)
+    assert np.max(np.abs(u1 - u2)) < 1e-9 * max(1.0, np.abs(u1).max())
+
+
+def test_regularised_first_move_converges_to_the_model_based_mpc(lemma_case):
+    """With the defaults' soft past (slack) the regularisation biases the plan: the distance
+    to the MPC falls as lambda_g falls, 1.5e-2, 1.1e-3, 3.0e-4 at lambda_g = 1e-2, 1e-3, 1e-4
+    (O(lambda_g) plus O(1 / lambda_y) through sigma_y), and is 4.6e-4 at lambda_g = 0 (the
+    lambda_y = 1e4 slack alone): the 1e-6 agreement needs both limits."""
+    model, data, win, traj, x_t, q, r, N = lemma_case
+    u_mpc = _mpc_first_plan(model, x_t, q, r, N)
+    diff = {lg: abs(_deep_first_plan(win, traj, q, r, N, lg, False)[0] - u_mpc[0])
+            for lg in (1e-2, 1e-3, 1e-4, 0.0)}  # fmt: skip
     assert diff[1e-2] > diff[1e-3] > diff[1e-4]
     assert diff[1e-4] < 1e-3 * abs(u_mpc[0]) and diff[1e-2] < 2e-2 * abs(u_mpc[0])
+    assert 1e-5 < diff[0.0] < 1e-3 * abs(u_mpc[0])
+
+
+def test_unregularised_form_refuses_what_the_data_cannot_decide():
+    """lambda_g = 0 needs exact data: noisy data give a Hankel matrix of full row rank, so
+    every future would fit the past (the unregularised QP plans u = y = 0, measured), refused
+    by name, as are data without information; a tiny positive lambda_g on exact data is
+    singular to working precision and refused too (the regularised path's Cholesky)."""
+    rng = np.random.default_rng(5)
+    exact_data, _ = linear_data(platoon(4, (1,)), 800, rng)
+    q, r = np.array([1.0, 1.0, 1.0, 1.0, 0.5]), np.array([0.1])
+    W = spacing_rows(15, exact_data.p, [0], 0.8)
     with pytest.raises(ConfigError) as err:
-        reduce(win, q, r, 1e-9, 1e4, W)
+        reduce(windows(exact_data, 10, 15), q, r, 1e-9, 1e4, W)
     assert err.value.field == "weights.lambda_g"
+    noisy, _ = linear_data(platoon(4, (1,)), 800, rng, noise=1e-3)
+    for exact_past in (False, True):  # full row rank: every future fits the past
+        with pytest.raises(ConfigError) as err:
+            reduce(windows(noisy, 10, 15), q, r, 0.0, 1e4, W, exact_past=exact_past)
+        assert err.value.field == "weights.lambda_g" and "noise-free" in err.value.message
+    zero = DataSet(np.zeros((800, 1)), np.zeros(800), np.zeros((800, 5)), TS)
+    with pytest.raises(ConfigError) as err:
+        reduce(windows(zero, 10, 15), q, r, 0.0, 1e4, W)
+    assert err.value.field == "weights.lambda_g" and "no information" in err.value.message
 
 
 @dataclass(frozen=True)
@@ -331,6 +401,10 @@ def test_bad_settings_are_named_field_errors():
     sc = Scenario(m=0, n=2, dt=TS)
     for table, field in (
         ({"weights": {"lambda_g": -1.0}}, "controllers.d.weights.lambda_g"),
+        ({"weights": {"past_outputs": "hard"}}, "controllers.d.weights.past_outputs"),
+        # the nonlinear simulator's data are not noise-free: no unregularised form
+        ({"weights": {"lambda_g": 0.0}, "data": {"T": 400, "cache": False}},
+         "controllers.d.weights.lambda_g"),
         ({"constraints": {"a_min": 1.0}}, "controllers.d.constraints.a_min"),
         ({"data": {"T": 0}}, "controllers.d.data.T"),
         ({"horizon": 0}, "controllers.d.horizon"),

@@ -152,7 +152,7 @@ class DeePLCCController:
         r = np.full(self.n_c, w.input)
         W = spacing_rows(N, self.p, [c - 1 for c in self.cavs], settings.constraints.t_gap)
         self.reduced: ReducedQP = reduce(windows(data, Tini, N), q, r, w.lambda_g, w.lambda_y,
-                                         W)  # fmt: skip
+                                         W, exact_past=w.past_outputs == "exact")  # fmt: skip
         self.qp: DeepQP = formulate(self.reduced, w.slack, w.slack_quadratic)
         self.data = data
         self.spacing_rows = W

@@ -46,13 +46,32 @@ deviation from what they imply, the variables in which it is well conditioned.
 Only ``A`` must have full row rank: the persistency-of-excitation
 check (:mod:`lcc_synth.deeplcc.data`) guarantees it.
 
+**The noise-free limit** (``lambda_g = 0``, ``past_outputs = "exact"``; :func:`reduce` with
+``exact_past``). With exact data of an LTI system the Hankel matrix ``D`` of all six windows
+has rank ``L (n_c + 1) + n_x`` (58 of 175 rows on the test case, the next singular value
+5e-16 of the largest against 9e-6 for the last kept one), and the cost and every constraint
+see ``g`` only through ``D g``: ``g = V z`` on its row space (the SVD's right singular
+vectors, a rank decision that refuses a gap too close to call) loses nothing and makes the
+problem strictly convex on the equalities. Those (``A_V z = b``, with ``Y_p`` among them
+when the past outputs are exact) repeat rows (``y_ini`` is fixed by ``u_ini, e_ini`` and the
+initial state), so the equalities are handled by their own SVD: ``z = A_V^+ b + N xi`` with
+``N`` an orthonormal basis of their null space, ``H_N = N' H N = L_N L_N'`` and
+``M = L_N^-1 N' C'`` in place of the whitened projection above (the same ``Gamma = M' M``
+and a vanishing linear term in ``nu``). This is the fundamental lemma's form of the
+model-based MPC: on the test case DeeP-LCC's plan equals the finite-horizon QP of the model on
+the same cost to 6e-13, with and without an active input bound, and two independent data
+sets give the same plan. Noisy or nonlinear data give ``D`` full row rank (every future fits
+the past: the unregularised QP plans ``u = y = 0``), so ``lambda_g = 0`` is refused by name
+there; with the slack kept (``lambda_y = 1e4``) the plan stays 4.6e-4 from the MPC's. The
+default path (``lambda_g > 0``, soft past) is the whitened one above, unchanged.
+
 Numerical limits (measured): for the head-brake data (T = 2000, n = 10, default weights) ``H``
 has eigenvalues from ``2 lambda_g`` = 200 to 3.7e10 (condition number 1.8e8), so the
 Cholesky factor's solves lose up to about 8 of 16 digits; on the test case (T = 160) the
 reduced QP's plan matched the full QP in ``g`` (cvxpy + Clarabel at 1e-11) to 3e-11 (exact
 data) and 6e-11 (noisy data). With exact data and ``lambda_g`` below about 1e-5 ``H`` is
 singular to working precision (``B'B`` has rank below ``K``): :func:`reduce` refuses it by
-name (``weights.lambda_g``).
+name (``weights.lambda_g``): the noise-free limit is ``lambda_g = 0`` itself.
 """
 
 from __future__ import annotations
@@ -196,6 +215,24 @@ def spacing_rows(N: int, p: int, cav_velocity: list[int], t_gap: float) -> np.nd
     return W
 
 
+def _row_basis(X: np.ndarray, what: str, field: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Thin SVD ``X = U diag(s) W'`` of ``X`` cut at its numerical rank, a rank decision that
+    does not depend on rounding: the kept singular values must exceed ``max(X.shape) eps
+    s_max`` by a factor ``1e4`` and the dropped ones stay below it (exact data have a gap of
+    many orders of magnitude), otherwise a :class:`ConfigError` for ``field``."""
+    U, s, Wt = np.linalg.svd(X, full_matrices=False)
+    if s.size == 0 or s[0] == 0.0:
+        raise ConfigError(field, f"{what} is zero: the data carry no information")
+    tol = max(X.shape) * np.finfo(float).eps * s[0]
+    r = int(np.count_nonzero(s > tol))
+    if s[r - 1] < 1e4 * tol:
+        raise ConfigError(field, f"the rank of {what} is too close to call (singular value "
+                          f"{s[r - 1] / s[0]:.1e} of the largest, round-off {tol / s[0]:.1e}); "
+                          "this needs exact (noise-free) data, or lambda_g > 0 and "
+                          'past_outputs = "slack"')  # fmt: skip
+    return U[:, :r], s[:r], Wt[:r].T
+
+
 def reduce(
     win: Windows,
     q: np.ndarray,
@@ -203,6 +240,7 @@ def reduce(
     lambda_g: float,
     lambda_y: float,
     W_rows: np.ndarray,
+    exact_past: bool = False,
 ) -> ReducedQP:
     """The exact reduction of the QP in ``g`` (module docstring).
 
@@ -214,14 +252,19 @@ def reduce(
     r : numpy.ndarray
         ``(n_c,)`` diagonal input weight ``R``.
     lambda_g, lambda_y : float
-        Regularisation of ``g`` and of the past-output slack.
+        Regularisation of ``g`` (``>= 0``; ``0`` needs exact data, module docstring) and
+        penalty of the past-output slack (unused with ``exact_past``).
     W_rows : numpy.ndarray
         ``(n_w, N p)`` maps ``y_f`` to the constrained output combinations ``w``.
+    exact_past : bool
+        ``Y_p g = y_ini`` as an equality (no slack): the noise-free form of the QP.
     """
     N = win.Ef.shape[0]
     K = win.Up.shape[1]
     qf = np.tile(np.asarray(q, float), N)
     rf = np.tile(np.asarray(r, float), N)
+    if lambda_g == 0.0 or exact_past:
+        return _reduce_exact(win, qf, rf, lambda_g, lambda_y, W_rows, exact_past)
     # H = 2 (lambda_g I + B'B) with the weighted rows B
     B = np.vstack([np.sqrt(qf)[:, None] * win.Yf, np.sqrt(rf)[:, None] * win.Uf,
                    np.sqrt(lambda_y) * win.Yp])  # fmt: skip
@@ -255,7 +298,70 @@ def reduce(
     G = sla.solve_triangular(LT, M, lower=False, check_finite=False)
     G0b = sla.solve_triangular(LT, QR, lower=False, check_finite=False)
     G0y = -sla.solve_triangular(LT, PF, lower=False, check_finite=False)
+    return ReducedQP(Gamma, Cb, Cy, G, G0b, G0y, win.Uf.shape[0], _range_factor(Gamma))
+
+
+def _range_factor(Gamma: np.ndarray) -> np.ndarray:
+    """``B`` with ``B B' = Gamma`` over the eigenvalues above round-off (:class:`ReducedQP`)."""
     lam, V = np.linalg.eigh(Gamma)
-    keep = lam > nC * np.finfo(float).eps * max(float(lam[-1]), 0.0)
-    Bf = V[:, keep] * np.sqrt(lam[keep])
-    return ReducedQP(Gamma, Cb, Cy, G, G0b, G0y, win.Uf.shape[0], Bf)
+    keep = lam > Gamma.shape[0] * np.finfo(float).eps * max(float(lam[-1]), 0.0)
+    return V[:, keep] * np.sqrt(lam[keep])
+
+
+def _reduce_exact(
+    win: Windows,
+    qf: np.ndarray,
+    rf: np.ndarray,
+    lambda_g: float,
+    lambda_y: float,
+    W_rows: np.ndarray,
+    exact_past: bool,
+) -> ReducedQP:
+    """:func:`reduce` for ``lambda_g = 0`` or ``Y_p g = y_ini`` (module docstring, "The
+    noise-free limit"): ``g = V z`` on the row space of the data, ``z = A_V^+ b + N xi`` on
+    the equalities ``A_V z = b`` (``N`` an orthonormal basis of their null space), and the
+    inequality multipliers ``nu`` as in the default path."""
+    D = np.vstack([win.Up, win.Ep, win.Yp, win.Uf, win.Ef, win.Yf])
+    if lambda_g == 0.0:  # the cost and every constraint see g through D g only
+        V = _row_basis(D, "the Hankel matrix", "weights.lambda_g")[2]
+        if V.shape[1] == min(D.shape):
+            raise ConfigError("weights.lambda_g", "0 needs noise-free data: the Hankel matrix "
+                              f"has full rank {V.shape[1]}, so every future fits the past "
+                              "(noisy or nonlinear data); use lambda_g > 0")  # fmt: skip
+    else:
+        V = np.eye(D.shape[1])
+    rows = [np.sqrt(qf)[:, None] * win.Yf, np.sqrt(rf)[:, None] * win.Uf]
+    if not exact_past:
+        rows.append(np.sqrt(lambda_y) * win.Yp)
+    BV = np.vstack(rows) @ V
+    H = 2.0 * (BV.T @ BV + lambda_g * np.eye(V.shape[1]))
+    A = np.vstack([win.Up, win.Ep, win.Ef] + ([win.Yp] if exact_past else [])) @ V
+    C = np.vstack([win.Uf, W_rows @ win.Yf]) @ V
+    Fy = np.zeros((V.shape[1], 0)) if exact_past else -2.0 * lambda_y * (win.Yp @ V).T
+    UA, sA, WA = _row_basis(A.T, "the equality constraints", "weights.past_outputs")
+    Ap = UA @ (WA / sA).T  # the pseudo-inverse of A on its range: z_p = Ap b
+    Nq = np.linalg.qr(UA, mode="complete")[0][:, UA.shape[1]:]  # null space of A
+    Hn = Nq.T @ H @ Nq
+    try:
+        Ln = sla.cholesky(0.5 * (Hn + Hn.T), lower=True, check_finite=False)
+    except np.linalg.LinAlgError:
+        raise ConfigError(
+            "weights.lambda_g",
+            f"{lambda_g:g} is too small for these data: the cost does not fix g on the "
+            "equality constraints (its Hessian there is singular); raise lambda_g",
+        ) from None
+    M = sla.solve_triangular(Ln, Nq.T @ C.T, lower=True, check_finite=False)
+    Gamma = M.T @ M
+    Gamma = 0.5 * (Gamma + Gamma.T)
+    # z(nu) = (I - N Hn^-1 N' H) Ap b - N Hn^-1 N' Fy y_ini + N Ln^-T M nu
+    LnT = Ln.T
+    NHi = Nq @ sla.cho_solve((Ln, True), Nq.T, check_finite=False)  # N Hn^-1 N'
+    P0 = Ap - NHi @ (H @ Ap)
+    nb = win.Up.shape[0] + win.Ep.shape[0] + win.Ef.shape[0]
+    if exact_past:
+        Z0b, Z0y = P0[:, :nb], P0[:, nb:]
+    else:
+        Z0b, Z0y = P0, -NHi @ Fy
+    G = V @ (Nq @ sla.solve_triangular(LnT, M, lower=False, check_finite=False))
+    return ReducedQP(Gamma, C @ Z0b, C @ Z0y, G, V @ Z0b, V @ Z0y, win.Uf.shape[0],
+                     _range_factor(Gamma))

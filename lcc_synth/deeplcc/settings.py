@@ -13,6 +13,7 @@
     input = 0.1                # R on every CAV acceleration
     lambda_g = 100.0
     lambda_y = 1.0e4
+    past_outputs = "slack"     # or "exact": Y_p g = y_ini (noise-free data, lambda_g = 0)
     slack = 100.0              # exact l1 penalty of the soft spacing bound (per m and step)
     slack_quadratic = 1.0
 
@@ -62,6 +63,7 @@ class DeepWeights(Record):
     input: float = 0.1
     lambda_g: float = 100.0
     lambda_y: float = 1.0e4
+    past_outputs: str = "slack"
     slack: float = 100.0
     slack_quadratic: float = 1.0
 

@@ -208,9 +208,13 @@ DEEP_LCC_WEIGHTS = Table(
          1.0, lo=0.0, lo_open=True, unit="(m/s)⁻²"),
      Key("spacing", "number", "Q on the spacing error of every CAV.", 0.5, lo=0.0, unit="m⁻²"),
      Key("input", "number", "R on every CAV acceleration.", 0.1, lo=0.0, lo_open=True),
-     Key("lambda_g", "number", "Regularisation of g.", 100.0, lo=0.0, lo_open=True),
+     Key("lambda_g", "number", "Regularisation of g; 0 (noise-free data only) restricts g to "
+         "the data's row space instead.", 100.0, lo=0.0),
      Key("lambda_y", "number", "Penalty on the past-output slack sigma_y.", 1.0e4, lo=0.0,
          lo_open=True),
+     Key("past_outputs", "string", "slack: Y_p g = y_ini + sigma_y (penalised by lambda_y); "
+         "exact: Y_p g = y_ini, no slack (the noise-free form).", "slack",
+         choices=("slack", "exact")),
      Key("slack", "number", "Exact (l1) penalty on spacing-constraint violation, per m and "
          "step.", 100.0, lo=0.0),
      Key("slack_quadratic", "number", "Small quadratic slack term (keeps the QP strictly "
