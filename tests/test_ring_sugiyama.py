@@ -179,7 +179,8 @@ def test_all_hdv_idm_ring_forms_a_wave_in_simulation():
 def test_benchmark_ordering_claims():
     """What holds of the benchmark (the issue's goals, measured): the H2 AV cuts velocity_std
     by more than Stern et al.'s 80.8 %, beats PI with saturation on velocity_std and fuel,
-    keeps the ring at its equilibrium speed (mean speed above all-HDV's and FollowerStopper's)
+    beats FollowerStopper on velocity_std on this draw, keeps the ring at its equilibrium
+    speed (mean speed above all-HDV's and FollowerStopper's)
     and burns less fuel per km than both field controllers; no run collides. FollowerStopper
     with U = the wave's mean speed (2.3 m/s, Stern et al.'s choice) damps the wave as well but
     holds the ring 1 m/s slower: over a fixed window it burns less fuel in total."""
@@ -199,6 +200,8 @@ def test_benchmark_ordering_claims():
     assert h2["per_km"] < fs["per_km"] and h2["per_km"] < pi["per_km"]
     assert h2["braking_events"] < 0.05 * base["braking_events"]
     assert fs["velocity_std"] < 0.1 * base["velocity_std"]  # FollowerStopper damps it too
+    # on the shipped draw (15 of the next 19 draws too, README) h2 damps it further
+    assert h2["velocity_std"] < fs["velocity_std"]
     assert fs["fuel_ml"] < h2["fuel_ml"]  # ... driving slower: the goal on fuel_ml is missed
     assert all(r["collisions"] == 0 for r in rows.values())
 
