@@ -9,6 +9,9 @@ results) the benchmark table: ``velocity_std``, ``mean_speed``, ``fuel_ml``,
 reductions against all-HDV, the issue's goals as verdicts, and the time-space diagram of
 all-HDV and of the best lcc_synth controller (h2 or mpc by ``velocity_std``).
 
+``--problem problems/sumo_ring_sugiyama.toml`` runs its SUMO twin (``pip install -e
+".[sumo]"``); the files written are named after the problem file.
+
 Usage: python examples/ring_sugiyama.py [--problem PATH] [--out DIR]
 """
 
@@ -87,14 +90,16 @@ def main() -> int:
         print(f"{name:18s}" + "".join(f"{r[k]:16.4g}" for k in (*KEYS, "fuel_ml_per_km", "wall_s")))
     verdicts = goals(rows)
     print(json.dumps(verdicts, indent=1))
-    js = out / "ring_sugiyama.json"
+    stem = Path(args.problem).stem
+    js = out / f"{stem}.json"
     js.write_text(json.dumps({"table": rows, "goals": verdicts}, indent=1))
     print(f"wrote {js}")
     shown = {"all_hdv": results["all_hdv"]}
     if verdicts["best"]:
         shown[verdicts["best"]] = results[verdicts["best"]]
-    png = plot_time_space(shown, out / "ring_sugiyama_time_space.png",
-                          title="Sugiyama ring: 22 vehicles, 230 m", every=5)  # fmt: skip
+    where = " (SUMO)" if results["all_hdv"].scenario.backend == "sumo" else ""
+    png = plot_time_space(shown, out / f"{stem}_time_space.png",
+                          title=f"Sugiyama ring{where}: 22 vehicles, 230 m", every=5)  # fmt: skip
     print(f"wrote {png}")
     return 0
 

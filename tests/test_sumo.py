@@ -338,14 +338,17 @@ def test_bad_car_following_model_is_named(tmp_path):
     [
         ({"hdv": OVM()}, "hdv.model"),
         ({"delay": 0.3}, "scenario.delay.mean"),
-        ({"hdv_accel_noise": 0.1}, "scenario.hdv_accel_noise"),
+        ({"hdv_accel_noise": 0.1, "sumo": SumoSettings(car_following="Krauss")},
+         "scenario.hdv_accel_noise"),  # with SUMO's IDM it runs (tests/test_sumo_sugiyama.py)
+        ({"dt": 0.0125}, "scenario.dt"),  # SUMO steps in whole milliseconds
         ({"hdv_aeb": True}, "scenario.hdv_aeb"),
         ({"backend": "vissim"}, "scenario.backend"),
     ],
 )
 def test_what_sumo_cannot_reproduce_is_an_error(keys, field):
-    """Reaction delays, white acceleration noise, HDV emergency braking and the OVM have no
-    SUMO counterpart: an error naming the field, never silently ignored."""
+    """Reaction delays, white acceleration noise with a SUMO model other than the IDM, HDV
+    emergency braking, the OVM and a step SUMO cannot take have no SUMO counterpart: an error
+    naming the field, never silently ignored."""
     with pytest.raises(ConfigError) as err:
         _head_brake(**keys)
     assert err.value.field == field

@@ -8,7 +8,6 @@ call it, so every command runs in either.
 from __future__ import annotations
 
 from lcc_synth.controllers.base import Controller
-from lcc_synth.errors import ConfigError
 from lcc_synth.simulation.results import SimResult
 from lcc_synth.simulation.scenario import BACKENDS, Draws, Scenario
 
@@ -46,11 +45,14 @@ def run_scenario(
     ------
     ConfigError
         ``scenario.backend = "sumo"`` without SUMO installed (``pip install -e ".[sumo]"``).
+
+    Notes
+    -----
+    A controller switched on at a time (``start``) runs in either simulator: before the switch
+    the CAV drives as an HDV, built in with its HDV law, in SUMO released to SUMO's
+    car-following model (:mod:`lcc_synth.simulation.sumo_drive`).
     """
     if scenario.backend == "sumo":
-        if getattr(controller, "start", None) is not None:  # controllers.switch.SwitchedOn
-            raise ConfigError(f"controllers.{controller.name}.start",
-                              'switching on at a time needs backend = "builtin" for now')
         from lcc_synth.simulation.sumo import simulate_sumo
 
         return simulate_sumo(scenario, controller, draws)

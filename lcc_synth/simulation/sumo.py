@@ -28,6 +28,9 @@ process):
   (``cav_lag``), the lag's state in its place, updated from the applied acceleration as the
   built-in kernel does; speeds kept >= 0); an HDV is released to SUMO's model when its
   perturbation ends;
+* with ``hdv_accel_noise > 0`` every HDV is commanded too, with SUMO's own IDM speed plus the
+  built-in simulator's noise draws; a controller switched on at a time (``start``) leaves its
+  CAVs to SUMO's model until the switch (:mod:`.sumo_drive`);
 * the controller sees what it would see in the built-in simulator: the same V2V model
   (loss, latency, noise; the built-in simulator's compiled observation routine and its random
   streams), at its sample time with zero-order hold;
@@ -85,10 +88,12 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.controllers.base import ControlContext, Controller, Observation
+from lcc_synth.controllers.switch import switch_step
 from lcc_synth.simulation.kernels import _observe_all
 from lcc_synth.simulation.perturbations import overrides
 from lcc_synth.simulation.results import SimResult
 from lcc_synth.simulation.scenario import MODEL_PARAMS, Draws, Scenario
+from lcc_synth.simulation.sumo_drive import cav_law_params, hdv_noise, lift_speed_cap
 from lcc_synth.simulation.sumo_net import require_sumo, route_file, vehicle_types
 from lcc_synth.simulation.sumo_road import place_string, work_dir
 
@@ -194,11 +199,17 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
     road = place_string(p, L_veh, circ if ring else None, travel, 2.0 * vmax + 10.0,
                         T * dt)  # fmt: skip
     hdv_mask = sc.is_hdv()
+    start = getattr(controller, "start", None)  # controllers.switch.SwitchedOn
+    k_on = 0 if start is None else switch_step(start, float(sc.t_start), dt, ratio, T)
+    sigma = float(sc.hdv_accel_noise)  # > 0: every HDV commanded with SUMO's speed + noise
+    cap = 2.0 * vmax + 10.0
     types = []
     for j in range(nv):
         idm = {k: float(params[k][j]) for k in names}
-        if not hdv_mask[j]:  # commanded vehicles: no speed cap from their type
-            idm["v0"] = 2.0 * vmax + 10.0
+        if k_on > 0 and is_cav[j] >= 0:  # an HDV of SUMO until the switch (.sumo_drive)
+            idm = cav_law_params(sc, params, j)
+        elif not hdv_mask[j]:  # commanded vehicles: no speed cap from their type
+            idm["v0"] = cap
         types.append(vehicle_types(sc.sumo, idm, dt, a_min))
     run_dir = Path(tempfile.mkdtemp(prefix="run_", dir=work_dir()))
     routes = route_file(run_dir / "string.rou.xml", types,
@@ -235,7 +246,12 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
     o_p[:], o_v[:], o_a[:], o_s[:], o_u[:] = np.nan, np.nan, np.nan, np.nan, np.nan
     collided, ctime = out["collided"][b], out["collision_time"][b]
     commanded = np.zeros(nv, dtype=bool)
-    commanded[cavs] = True
+    commanded[cavs] = k_on == 0
+    if sigma > 0.0:
+        commanded[hdv_mask] = True
+    a_noise = np.zeros(nv)
+    min_gap = np.array([float(params["s0"][j]) for j in range(nv)])
+    decel = np.array([float(params["b"][j]) for j in range(nv)])
     if not ring:
         commanded[0] = True  # the head
     u_hold = np.zeros(n_cav)
@@ -256,7 +272,7 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
     variables = (var_pos, var_speed, var_idx) if road.ring else (var_pos, var_speed)
     # the columns commanded at some step: head, CAVs, every vehicle a perturbation drives
     ever = np.isfinite(acc_ovr) | np.isfinite(spd_ovr)
-    cols = sorted(set(np.flatnonzero(commanded).tolist())
+    cols = sorted(set(np.flatnonzero(commanded).tolist()) | set(cavs.tolist())
                   | set(np.flatnonzero(ever.any(axis=0)).tolist()))  # fmt: skip
 
     def read() -> tuple[np.ndarray, np.ndarray]:
@@ -294,10 +310,13 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
             P[0], V[0] = p, v
             if L > 1:
                 hp[k % L, 0], hv[k % L, 0] = p, v
-            if k % ratio == 0:
+            if k == k_on and k > 0 and lagged:  # the lag starts from SUMO's acceleration
+                a_lag[:] = np.where(lag_f > 0.0, u_hold, 0.0)
+            if k % ratio == 0 or k < k_on:  # before a switch: observed every step, as built in
                 _observe_all(k, P, V, hp, hv, L, lat, loss, noise, int(sc.seed),
                              int(sc.first_index) + b, is_cav, ring, circ,
                              obs_s, obs_v, obs_p, alive)  # fmt: skip
+            if k % ratio == 0 and k >= k_on:
                 u = np.asarray(
                     controller(Observation(float(t[k]), obs_s.copy(), obs_v.copy(),
                                            obs_p.copy(), a_lag[None].copy() if lagged
@@ -318,13 +337,15 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
                     )
                 u_hold[:] = u.reshape(n_cav)
             aeb[:] = False
+            if sigma > 0.0:
+                hdv_noise(sigma, int(sc.seed), int(sc.first_index) + b, k, hdv_mask, a_noise)
             for j in cols:
                 ov, sv = acc_ovr[k, j], spd_ovr[k, j]
                 driven = bool(ever[k, j])
                 kc = int(is_cav[j])
                 if j == 0 and not ring:
                     a = 0.0  # the head: cruising unless a perturbation drives it
-                elif kc >= 0:
+                elif kc >= 0 and k >= k_on:
                     a = min(max(u_hold[kc], a_min), a_max)
                     lead = ahead[j]
                     if sc.cav_aeb and (v[j] ** 2 - v[lead] ** 2) / (2.0 * spacing[j]) >= abs_min:
@@ -333,6 +354,11 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
                         cmd[kc], a = a, a_lag[kc]
                 elif driven:
                     a = 0.0
+                elif sigma > 0.0 and kc < 0:  # SUMO's follow speed plus the noise
+                    lead = ahead[j]
+                    v_cf = sumo.vehicle.getFollowSpeed(ids[j], v[j], spacing[j] - min_gap[j],
+                                                       v[lead], decel[lead], ids[lead])
+                    a = min(max((v_cf - v[j]) / dt + a_noise[j], a_min), a_max)
                 else:
                     if commanded[j]:  # its perturbation ended: back to SUMO's model
                         sumo.vehicle.setSpeed(ids[j], -1.0)
@@ -345,9 +371,11 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
                     a = min(max((float(sv) - v[j]) / dt, a_min), a_max)
                 if driven and kc >= 0:
                     aeb[kc] = False
-                if driven and not commanded[j]:
+                if not commanded[j]:
                     sumo.vehicle.setSpeedMode(ids[j], 0)
                     commanded[j] = True
+                    if kc >= 0 and k >= k_on:  # switched on
+                        lift_speed_cap(sumo, ids[j], cap)
                 sumo.vehicle.setSpeed(ids[j], max(v[j] + dt * a, 0.0))
                 if kc >= 0:
                     applied[kc] = max(a, -v[j] / dt)  # the standstill floor, as built in
@@ -357,6 +385,8 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
             hit_sumo = {ids.index(c.collider) for c in sumo.simulation.getCollisions()
                         if c.collider in ids}  # fmt: skip
             p_next, v_next = read()
+            if k < k_on:  # the CAVs' acceleration under SUMO's model (recorded as u)
+                u_hold[:] = (v_next[cavs] - v[cavs]) / dt
             if rec:
                 o_a[r] = (v_next - v) / dt
                 o_u[r] = u_hold
@@ -442,6 +472,9 @@ def simulate_sumo(
             stats.append(_one(sc, controller, draws, b, acc_ovr, spd_ovr, ratio, out))
     if n_cav == 1:  # one CAV: (batch, samples), as the built-in simulator
         out["u_cmd"], out["aeb_active"] = out["u_cmd"][:, :, 0], out["aeb_active"][:, :, 0]
+    L_sys = float(sc.vehicle_length)  # [system] vehicle_length: the road's positions, built in
+    if L_sys > 0:
+        out["position"] -= L_sys * np.arange(nv)
     return SimResult(
         t=sc.times()[:: sc.record_every].copy(),
         **out,
@@ -450,7 +483,8 @@ def simulate_sumo(
         cav=sc.cav,
         cavs=tuple(int(c) for c in sc.cav_columns),
         ring=bool(sc.ring),
-        circumference=float(sc.circumference) if sc.ring else float("nan"),
+        circumference=float(sc.circumference) + nv * L_sys if sc.ring else float("nan"),
+        vehicle_length=L_sys,
         v_star=np.full(B, float(sc.v_star)),
         s_star=np.full(B, sc.s_star),
         controller=controller.name,

@@ -132,14 +132,24 @@ class SumoSettings(Record):
 def check_sumo_scenario(sc) -> None:
     """Raise :class:`ConfigError` for what a scenario asks and SUMO cannot reproduce.
 
-    SUMO's car-following models need the ``[hdv]`` IDM parameters (no OVM in SUMO), react to
-    the current state (no reaction delay: ``[scenario.delay] mean = 0``), have no white
-    acceleration noise (``hdv_accel_noise = 0``; SUMO's own imperfection is
-    ``[scenario.sumo] sigma`` with Krauss or EIDM) and brake by their own rules
+    SUMO steps in whole milliseconds (``scenario.dt``: 0.0125 s would silently run at
+    0.013 s), its car-following models need the ``[hdv]`` IDM parameters (no OVM in SUMO), react to
+    the current state (no reaction delay: ``[scenario.delay] mean = 0``), take the HDVs'
+    white acceleration noise (``hdv_accel_noise``) with SUMO's IDM only
+    (:mod:`lcc_synth.simulation.sumo_drive`; Krauss and EIDM have their own imperfection,
+    ``[scenario.sumo] sigma``) and brake by their own rules
     (``hdv_aeb = false``: eq. 29 is the CAV's). Nothing is ignored silently.
     """
     import numpy as np
 
+    steps_ms = float(sc.dt) * 1000.0
+    if abs(steps_ms - round(steps_ms)) > 1e-9 * max(1.0, steps_ms):
+        raise ConfigError(
+            "scenario.dt",
+            f'must be a whole number of milliseconds with scenario.backend = "sumo" (SUMO '
+            f"steps in ms: {sc.dt!r} s would run at {round(steps_ms) / 1000.0:g} s), e.g. "
+            f"{math.floor(steps_ms) / 1000.0:g} or {math.ceil(steps_ms) / 1000.0:g}",
+        )
     if getattr(sc, "accel_noise_uniform", 0.0) > 0.0:
         raise ConfigError(
             "scenario.accel_noise_uniform",
@@ -158,12 +168,12 @@ def check_sumo_scenario(sc) -> None:
             'must be 0 with scenario.backend = "sumo": SUMO\'s car-following models react to '
             "the current state (no reaction delay to reproduce)",
         )
-    if sc.hdv_accel_noise > 0.0:
+    if sc.hdv_accel_noise > 0.0 and sc.sumo.car_following != "IDM":
         raise ConfigError(
             "scenario.hdv_accel_noise",
-            'must be 0 with scenario.backend = "sumo" (SUMO adds no white acceleration noise); '
-            'SUMO\'s own driver imperfection is [scenario.sumo] sigma with car_following = '
-            '"Krauss" or "EIDM"',
+            'must be 0 with scenario.backend = "sumo" unless [scenario.sumo] car_following = '
+            f'"IDM" (got {sc.sumo.car_following!r}: its own imperfection, [scenario.sumo] '
+            "sigma, acts after the follow speed the noise is added to)",
         )
     if sc.hdv_aeb:
         raise ConfigError(
