@@ -233,3 +233,58 @@ def test_bad_input_names_the_field_and_exits_2(tmp_path, capsys, old, new, field
     path.write_text(_edit(BENCH.read_text(), old, new))
     assert main(["simulate", str(path), "--no-record"]) == 2
     assert field in capsys.readouterr().err
+
+
+def test_switched_static_law_starts_its_estimate_and_filter_at_the_switch(tmp_path):
+    """Before ``start`` the CAV drives with its HDV law on the values as received, exactly as
+    the all-HDV run: a static law's equilibrium estimate and measurement filter start at the
+    switch (they used to run, and filter the HDV law's inputs, from t = 0)."""
+    path = tmp_path / "switched.toml"
+    path.write_text("""
+[hdv]
+model = "ovm"
+
+[system]
+kind = "cf_lcc"
+m = 0
+n = 4
+v_star = 15.0
+
+[scenario]
+dt = 0.01
+duration = 20.0
+seed = 3
+hdv_accel_noise = 0.1
+v2v = { loss_rate = 0.2, latency = 0.1, spacing_noise = 0.1, velocity_noise = 0.05 }
+
+[[scenario.perturbations]]
+type = "brake"
+vehicle = "head"
+start = 2.0
+duration = 2.0
+decel = -3.0
+
+[metrics]
+window = [0.0, 20.0]
+
+[controllers.all_hdv]
+type = "hdv"
+
+[controllers.p]
+type = "static"
+kind = "cf_lcc"
+semantics = "added"
+gains = { s_0 = 0.1, v_0 = -0.5, s_1 = -0.2, v_1 = 0.05 }
+equilibrium = "estimated"
+equilibrium_tau = 1.0
+measurement_filter = 0.3
+start = 10.0
+""")
+    spec = load_spec(path, seeds=2)
+    sc = spec.scenario
+    draws = sc.draw()
+    hdv = simulate(sc, spec.controllers["all_hdv"], draws)
+    sw = simulate(sc, spec.controllers["p"], draws)
+    k = int(round(10.0 / sc.dt)) // sc.record_every
+    np.testing.assert_array_equal(sw.velocity[:, : k + 1], hdv.velocity[:, : k + 1])
+    assert not np.array_equal(sw.velocity[:, k + 2 :], hdv.velocity[:, k + 2 :])

@@ -281,7 +281,10 @@ def simulate(
     f_s = np.full((B, nv), np.nan)  # measurement filter states (NaN: not started)
     f_v = np.full((B, nv), np.nan)
 
-    def advance_range(b0, b1, k0, k1, mode, Ks, Kv, Kp, hdv_law, ratio=ratio):
+    def advance_range(b0, b1, k0, k1, mode, Ks, Kv, Kp, hdv_law, ratio=ratio, law_state=True):
+        # law_state False (before a switch-on): the HDV law on the exact state, no estimate or
+        # filter (they start at the switch, as the wrapped controller does)
+        e0, md = (est[0], meas_decay) if law_state else (-1.0, -1.0)
         _advance(
             b0, b1, k0, k1, p, v, hp, hv, L, delay_steps, sc.delay_model == "full", code,
             params, code, law_params,
@@ -289,7 +292,7 @@ def simulate(
             ring, circ, bool(sc.cav_aeb), bool(sc.hdv_aeb), float(sc.hdv_accel_noise),
             float(sc.accel_noise_uniform), int(sc.seed), int(sc.first_index),
             acc_ovr, spd_ovr, mode, ratio, u_hold, Ks, Kv, Kp, bool(hdv_law),
-            v_star, s_ref, p_ref, est[0], est[1], est[2], v_hat, meas_decay, f_s, f_v,
+            v_star, s_ref, p_ref, e0, est[1], est[2], v_hat, md, f_s, f_v,
             loss, lat, obs_noise, obs_s, obs_v, obs_p,
             alive, collided, ctime, stride, out_p, out_v, out_a, out_s, out_u, out_aeb,
             lag_f if lagged else None, a_lag if lagged else None,
@@ -297,13 +300,14 @@ def simulate(
 
     n_threads = _threads(B, (T if law is not None else ratio) * nv)
 
-    def advance(k0, k1, mode, Ks, Kv, Kp, hdv_law, r=ratio):
+    def advance(k0, k1, mode, Ks, Kv, Kp, hdv_law, r=ratio, law_state=True):
         if n_threads == 1:
-            advance_range(0, B, k0, k1, mode, Ks, Kv, Kp, hdv_law, r)
+            advance_range(0, B, k0, k1, mode, Ks, Kv, Kp, hdv_law, r, law_state)
             return
         edges = np.linspace(0, B, n_threads + 1).astype(int)
         futures = [
-            _executor().submit(advance_range, b0, b1, k0, k1, mode, Ks, Kv, Kp, hdv_law, r)
+            _executor().submit(advance_range, b0, b1, k0, k1, mode, Ks, Kv, Kp, hdv_law, r,
+                               law_state)
             for b0, b1 in zip(edges[:-1], edges[1:], strict=True)
         ]
         for f in futures:
@@ -314,7 +318,7 @@ def simulate(
     start = getattr(controller, "start", None)  # controllers.switch.SwitchedOn
     k_on = 0 if start is None else switch_step(start, float(sc.t_start), dt, ratio, T)
     if k_on > 0:  # before the switch: every CAV's HDV law, every step, compiled
-        advance(0, k_on, 1, zeros, zeros, kp0, True, 1)
+        advance(0, k_on, 1, zeros, zeros, kp0, True, 1, False)
     if law is not None:
         Ks, Kv, Kp = _law_arrays(law, n_cav, nv, ring, controller.name)
         advance(k_on, T, 1, Ks, Kv, Kp, law.hdv_law)
