@@ -208,3 +208,24 @@ def test_bad_input_names_the_field(tmp_path, capsys):
                                             'car_following = "EIDM"'))  # fmt: skip
     assert main(["simulate", str(bad), "--json", "--no-record"]) == 2
     assert "scenario.hdv_accel_noise" in capsys.readouterr().err
+
+
+def test_time_step_check_judges_the_built_in_scheme_only(tmp_path):
+    """The step check's verdicts are about explicit Euler (the built-in simulator): the same
+    ring at dt = 0.025 s warns built in and stays silent in SUMO (its own scheme)."""
+    import warnings
+
+    from lcc_synth.simulation.timestep import TimeStepWarning
+
+    def load(src, name):
+        text = src.read_text().replace("dt = 0.01\n", "dt = 0.025\n", 1)
+        text = text.replace("record_every = 10\n", "record_every = 4\n", 1)
+        path = tmp_path / name
+        path.write_text(text)
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter("always")
+            load_spec(path)
+        return [w for w in seen if issubclass(w.category, TimeStepWarning)]
+
+    assert load(BUILTIN, "builtin.toml")  # explicit Euler: the wave grows 21 % too fast
+    assert not load(TWIN, "sumo.toml")
