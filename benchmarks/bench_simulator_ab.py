@@ -5,8 +5,7 @@ Run: ``python benchmarks/bench_simulator_ab.py [REV] [--repeat R]`` (default REV
 The earlier ``lcc_synth/simulation/{kernels,engine}.py`` are extracted with ``git show`` into a
 temporary folder and loaded as separate modules (everything else comes from this tree); both
 must give identical Table II and Appendix C results (checked) before anything is timed.
-Prints the minimum and median of ``R`` single Table II runs per controller and their ratio,
-and the median CPU time of the Appendix C batch (40 draws with reaction delays).
+Prints the minimum and median of ``R`` single Table II runs per controller and their ratio.
 """
 
 from __future__ import annotations
@@ -74,22 +73,6 @@ def main() -> None:
                 t0 = time.thread_time()
                 fn(spec.scenario, c)
                 times.setdefault((which, name), []).append(time.thread_time() - t0)
-    # the heterogeneous batch with reaction delays (the throughput benchmark's batch, 40 draws),
-    # in process CPU time (the batch may run on several threads)
-    ctrl_c = spec_c.controllers["fd_lcc"]
-    for _ in range(max(3, args.repeat // 10)):
-        for which, fn in (("old", old.simulate), ("new", simulate)):
-            t0 = time.process_time()
-            fn(spec_c.scenario, ctrl_c)
-            times.setdefault((which, "appendix_c"), []).append(time.process_time() - t0)
-    o, n = np.array(times[("old", "appendix_c")]), np.array(times[("new", "appendix_c")])
-    work = spec_c.scenario.batch * spec_c.scenario.n_vehicles * spec_c.scenario.steps
-    print(
-        f"Appendix C batch of {spec_c.scenario.batch} (delays) [fd_lcc]: {args.rev} median "
-        f"{np.median(o) * 1e3:.1f} ms CPU ({work / np.median(o) / 1e6:.1f} M vehicle-steps per "
-        f"CPU-s) | this tree {np.median(n) * 1e3:.1f} ms CPU ({work / np.median(n) / 1e6:.1f} M) "
-        f"(ratio of medians {np.median(n) / np.median(o):.3f})"
-    )
     for name in spec.controllers:
         o, n = np.array(times[("old", name)]), np.array(times[("new", name)])
         print(
