@@ -216,7 +216,6 @@ def _advance(
                         out_u[b, r, c] = _NAN
                 continue
             t = t_start + k * dt
-            slot = 0
             if L > 1:
                 slot = k % L
                 for j in range(nv):
@@ -314,9 +313,7 @@ def _advance(
                         ds = v[b, j - 1] - v[b, j]
                         vv = v[b, j]
                     else:
-                        sl = slot - d  # (k - d) mod L without a division: 0 < d < L
-                        if sl < 0:
-                            sl += L
+                        sl = (k - d + L) % L
                         s = hp[sl, b, j - 1] - hp[sl, b, j]
                         ds = hv[sl, b, j - 1] - hv[sl, b, j]
                         vv = hv[sl, b, j] if delay_own else v[b, j]
