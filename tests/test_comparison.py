@@ -354,3 +354,47 @@ def test_default_problem_is_the_showcase_and_reproduces_table_ii():
     assert round(table["all_hdv"]["fuel_ml"], 2) == 392.86
     assert round(table["paper"]["aave"], 2) == 0.81
     assert round(table["paper"]["fuel_ml"], 2) == 340.56
+
+
+# ------------------------------------------------------------------------- only_scenarios
+ONLY = SHORT + """
+[controllers.hdv_noisy]
+type = "hdv"
+only_scenarios = ["noisy"]
+"""
+
+
+def test_only_scenarios_runs_the_controller_in_those_scenarios_only(tmp_path):
+    path = tmp_path / "only.toml"
+    path.write_text(ONLY)
+    suite = load_suite(path, controllers=["all_hdv", "hdv_noisy"])
+    run = run_suite(suite, progress=False)
+    assert list(run.table["noisy"]) == ["all_hdv", "hdv_noisy"]
+    assert list(run.table["brake"]) == ["all_hdv"] and list(run.table["sine"]) == ["all_hdv"]
+    # the same law on the same draws: the same row, bit for bit
+    assert run.table["noisy"]["hdv_noisy"] == run.table["noisy"]["all_hdv"]
+    # built only for the layouts of its scenarios
+    assert "hdv_noisy" in run.controllers["tail3"] and "hdv_noisy" not in run.controllers["mid"]
+    other = run_suite(load_suite(path, scenarios=["brake", "sine"]), progress=False)
+    assert all("hdv_noisy" not in per for per in other.controllers.values())
+    assert all("hdv_noisy" not in per for per in other.table.values())
+    assert other.table["brake"]["all_hdv"] == run.table["brake"]["all_hdv"]
+
+
+@pytest.mark.parametrize(
+    ("new", "match"),
+    [
+        ('only_scenarios = "noisy"', "non-empty list"),
+        ("only_scenarios = []", "non-empty list"),
+        ('only_scenarios = ["noisy", "nowhere"]', "unknown scenario 'nowhere'"),
+        ('only_scenarios = ["sine"]\nonly_layouts = ["tail3"]', "scenario 'sine' is on layout"),
+    ],
+)
+def test_only_scenarios_errors_name_the_field(tmp_path, new, match):
+    path = tmp_path / "bad.toml"
+    path.write_text(ONLY.replace('only_scenarios = ["noisy"]', new))
+    with pytest.raises(ConfigError, match=match) as info:
+        load_suite(path)
+    assert info.value.field == "controllers.hdv_noisy.only_scenarios"
+    assert info.value.source == str(path)
+    assert main(["run", str(path), "--no-record", "--out", str(tmp_path)]) == 2
