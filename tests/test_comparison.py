@@ -398,3 +398,36 @@ def test_only_scenarios_errors_name_the_field(tmp_path, new, match):
     assert info.value.field == "controllers.hdv_noisy.only_scenarios"
     assert info.value.source == str(path)
     assert main(["run", str(path), "--no-record", "--out", str(tmp_path)]) == 2
+
+
+def test_showcase_heterogeneous_gains_the_predictive_rows_only(tmp_path, monkeypatch):
+    """``mpc_delay`` and ``deep_lcc`` run in ``heterogeneous`` only (only_scenarios); the
+    rows of the other controllers are those of a run without them, bit for bit; the new rows
+    are pinned (README's showcase table)."""
+    from lcc_synth.cli.run import default_problem
+
+    monkeypatch.chdir(tmp_path)  # deep_lcc's data cache: results/deeplcc of the working dir
+    path = default_problem()
+    full = load_suite(path)
+    assert list(full.controllers) == ["all_hdv", "paper", "h2", "mpc", "mpc_delay", "deep_lcc"]
+    for name in ("mpc_delay", "deep_lcc"):
+        assert full.controllers[name]["only_scenarios"] == ["heterogeneous"]
+    new = run_suite(load_suite(path, scenarios=["heterogeneous"],
+                               controllers=["h2", "mpc", "mpc_delay", "deep_lcc"]),
+                    progress=False).table["heterogeneous"]  # fmt: skip
+    old = run_suite(load_suite(path, scenarios=["heterogeneous"], controllers=["h2", "mpc"]),
+                    progress=False).table["heterogeneous"]  # fmt: skip
+    assert new["h2"] == old["h2"] and new["mpc"] == old["mpc"]
+    assert list((tmp_path / "results" / "deeplcc").glob("deeplcc-*.npz"))  # cached there
+    pins = {  # AAVE (m/s), fuel (mL), min spacing (m), RMS jerk (m/s^3)
+        "mpc_delay": (2.33696743290055, 808.0796740429348, 8.901991470416192, 8.744364382058116),
+        "deep_lcc": (2.4564786582815095, 820.4635510170015, 8.744036008923416, 3.2804467885341424),
+    }
+    for name, (aave_, fuel_, gap, jerk) in pins.items():
+        row = new[name]
+        got = (row["aave"], row["fuel_ml"], row["min_spacing"], row["rms_jerk_cav"])
+        assert got == pytest.approx((aave_, fuel_, gap, jerk), rel=1e-6), name
+        assert (row["aeb_activations"], row["collisions"], row["collided"]) == (0, 0, False)
+    # the delay-aware MPC beats both h2 and the delay-free MPC here; DeeP-LCC does not
+    assert new["mpc_delay"]["aave"] < min(new["h2"]["aave"], new["mpc"]["aave"])
+    assert new["deep_lcc"]["aave"] > new["h2"]["aave"]

@@ -18,7 +18,7 @@ reduce them (the controller's set-up) and 1.8 s to drive the 40 s run (800 QPs);
 data file is 0.2 MB per scenario.
 
 The rest is unchanged: :func:`scenario_controllers` builds every other table as
-:func:`lcc_synth.experiments.comparison.build_controllers` does and a
+:func:`lcc_synth.controllers.registry.build_controller` does and a
 :class:`ScenarioDeePLCC` for each ``deep_lcc`` table (its settings checked, named-field errors,
 before any task); :func:`run_scenario` builds its controller for the scenario it runs;
 :func:`scenario_runs` runs scenarios one by one when a :class:`ScenarioDeePLCC` is among the
@@ -126,14 +126,12 @@ class ScenarioDeePLCC:
 def scenario_controllers(tables: Mapping[str, Mapping[str, Any]], system,
                          source: str | None = None):  # fmt: skip
     """The controllers of a sweep or of a suite's layout: :class:`ScenarioDeePLCC` for
-    ``deep_lcc`` tables, the others as
-    :func:`lcc_synth.experiments.comparison.build_controllers`."""
-    from lcc_synth.experiments.comparison import build_controllers
+    ``deep_lcc`` tables, the others by
+    :func:`lcc_synth.controllers.registry.build_controller`."""
+    from lcc_synth.controllers.registry import build_controller
 
-    deep = {k for k, t in tables.items() if t.get("type") == "deep_lcc"}
-    out = build_controllers({k: t for k, t in tables.items() if k not in deep}, system, source)
-    out.update({k: ScenarioDeePLCC(k, tables[k], system, source) for k in deep})
-    return {k: out[k] for k in tables}
+    return {k: ScenarioDeePLCC(k, t, system, source) if t.get("type") == "deep_lcc"
+            else build_controller(k, dict(t), system, source) for k, t in tables.items()}
 
 
 def scenario_runs(scenario, ranges, start: int, stop: int, controllers) -> list:
