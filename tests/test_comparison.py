@@ -344,7 +344,7 @@ def test_default_problem_is_the_showcase_and_reproduces_table_ii():
     full = load_suite(path)
     assert list(full.scenarios) == ["brake_behind", "head_sine", "head_brake", "heterogeneous",
                                     "platoon_brake", "ring_wave"]
-    assert list(full.controllers) == ["all_hdv", "paper", "h2", "mpc"]
+    assert list(full.controllers) == ["all_hdv", "paper", "h2", "mpc", "mpc_delay", "deep_lcc"]
     assert {s.layout for s in full.scenarios.values()} == {"string10", "sec5a", "platoon8",
                                                             "ring20"}
     suite = load_suite(path, scenarios=["brake_behind"], controllers=["all_hdv", "paper"])
