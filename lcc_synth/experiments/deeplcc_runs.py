@@ -12,10 +12,12 @@ delay spread left to draw) and its drawn noise level. The collection's own rando
 (excitation, noise) are those of the data table's ``seed``; the data cache key
 (:func:`lcc_synth.deeplcc.data.data_key`) hashes the explicit HDVs, so it is per scenario.
 
-Measured on ``problems/sweep_robustness.toml`` (10-HDV string, T = 2000 at 0.05 s, one
-process of the loaded 2-core machine): per scenario 0.6 s to collect the data, 0.2 s to
-reduce them (the controller's set-up) and 1.8 s to drive the 40 s run (800 QPs); a cached
-data file is 0.2 MB per scenario.
+Measured on ``problems/sweep_robustness.toml`` (10-HDV string, T = 2000 at 0.05 s, CPU time
+of one process with one BLAS thread, as a Dask worker has, 4 draws on the loaded 2-core
+machine): per scenario 0.05 s to collect the data (0.6 s for the first, compiling the
+simulator), 0.3-1.0 s to set up the controller (mostly the exact reduction of the data,
+:func:`lcc_synth.deeplcc.hankel.reduce`; 2.0-3.2 s with two BLAS threads on the loaded
+machine) and 0.5-1.0 s to drive the 40 s run (800 QPs); a cached data file is 0.22 MB.
 
 The rest is unchanged: :func:`scenario_controllers` builds every other table as
 :func:`lcc_synth.controllers.registry.build_controller` does and a
