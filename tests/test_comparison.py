@@ -379,6 +379,12 @@ def test_only_scenarios_runs_the_controller_in_those_scenarios_only(tmp_path):
     assert all("hdv_noisy" not in per for per in other.controllers.values())
     assert all("hdv_noisy" not in per for per in other.table.values())
     assert other.table["brake"]["all_hdv"] == run.table["brake"]["all_hdv"]
+    # a selection that leaves a scenario without any controller is refused, naming the option
+    assert list(load_suite(path, ["noisy"], ["hdv_noisy"]).scenarios) == ["noisy"]
+    with pytest.raises(ConfigError, match="no controller of \\['hdv_noisy'\\] runs in scenario "
+                       "'brake'") as info:
+        load_suite(path, controllers=["hdv_noisy"])
+    assert info.value.field == "--controllers"
 
 
 @pytest.mark.parametrize(

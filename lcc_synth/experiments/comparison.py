@@ -56,25 +56,11 @@ from lcc_synth.simulation.scenario import Scenario
 from lcc_synth.simulation.scenario_file import scenario_from
 
 __all__ = [
-    "SUITE_TYPES",
-    "SuiteScenario",
-    "Suite",
-    "SuiteRun",
-    "load_suite",
-    "select_names",
-    "controller_table",
-    "synthesize_table",
-    "applies",
-    "layout_controllers",
-    "prepare_controllers",
-    "fallback_names",
-    "build_controllers",
-    "metrics_row",
-    "run_suite",
-    "gamma_curves",
-    "gamma_settings",
-    "progress_bar",
-]
+    "SUITE_TYPES", "SuiteScenario", "Suite", "SuiteRun", "load_suite", "select_names",
+    "controller_table", "synthesize_table", "applies", "layout_controllers",
+    "prepare_controllers", "fallback_names", "build_controllers", "metrics_row", "run_suite",
+    "gamma_curves", "gamma_settings", "progress_bar",
+]  # fmt: skip
 
 #: Controller types of a suite file: those of ``lcc-synth simulate`` plus synthesised ``h2``.
 SUITE_TYPES = (*CONTROLLER_TYPES, "h2")
@@ -285,6 +271,11 @@ def load_suite(
                 if "type" in t and t["type"] != table["type"]:
                     raise ConfigError(f"{f}.layouts.{lname}.type", "cannot change the type")
             ctrls[cname] = dict(table)
+        for sname, ss in suite_scenarios.items():  # only_layouts / only_scenarios leave none
+            if not any(applies(ctrls[c], ss.layout, sname) for c in names):
+                raise ConfigError("--controllers" if controllers else f"scenarios.{sname}",
+                                  f"no controller of {names} runs in scenario {sname!r} "
+                                  "(only_layouts, only_scenarios): select --scenarios too")
         return Suite(
             name=problem.name,
             description=str(top.raw(data, "description")),
