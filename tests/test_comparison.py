@@ -368,6 +368,12 @@ def test_only_scenarios_runs_the_controller_in_those_scenarios_only(tmp_path):
     path = tmp_path / "only.toml"
     path.write_text(ONLY)
     suite = load_suite(path, controllers=["all_hdv", "hdv_noisy"])
+    from lcc_synth.experiments.comparison import applies
+
+    # its layouts are those of its scenarios: applies() knows it without the scenario too
+    t = suite.controllers["hdv_noisy"]
+    assert applies(t, "tail3") and not applies(t, "mid")
+    assert applies(t, "tail3", "noisy") and not applies(t, "tail3", "brake")
     run = run_suite(suite, progress=False)
     assert list(run.table["noisy"]) == ["all_hdv", "hdv_noisy"]
     assert list(run.table["brake"]) == ["all_hdv"] and list(run.table["sine"]) == ["all_hdv"]

@@ -124,11 +124,11 @@ class Suite(Record):
         return [name for name in self.layouts if name in used]
 
 
-def _check_only_scenarios(only, layouts, scenarios: Mapping[str, Any], f: str) -> None:
+def _check_only_scenarios(only, layouts, scenarios: Mapping[str, Any], f: str):
     """``only_scenarios``: a non-empty list of the file's scenario names, each on a layout of
-    ``only_layouts`` (when given)."""
+    ``only_layouts`` (when given). Returns the layouts of those scenarios (or None)."""
     if only is None:
-        return
+        return None
     if not isinstance(only, list) or not only:
         raise ConfigError(f"{f}.only_scenarios", f"must be a non-empty list of scenario names "
                           f"{list(scenarios)}, got {only!r}")  # fmt: skip
@@ -140,6 +140,8 @@ def _check_only_scenarios(only, layouts, scenarios: Mapping[str, Any], f: str) -
         if layouts is not None and lname not in layouts:
             raise ConfigError(f"{f}.only_scenarios", f"scenario {sname!r} is on layout "
                               f"{lname!r}, which only_layouts {layouts} leaves out")  # fmt: skip
+    named = [scenarios[s].get("layout") if isinstance(scenarios[s], dict) else None for s in only]
+    return list(dict.fromkeys(lname for lname in named if isinstance(lname, str)))
 
 
 def select_names(available: Sequence[str], wanted: Sequence[str] | None, field: str) -> list[str]:
@@ -259,7 +261,9 @@ def load_suite(
                 if lname not in layouts:
                     raise ConfigError(f"{f}.only_layouts", f"unknown layout {lname!r}; "
                                       f"available: {list(layouts)}")  # fmt: skip
-            _check_only_scenarios(C.raw(table, "only_scenarios"), only, scen_t, f)
+            lay = _check_only_scenarios(C.raw(table, "only_scenarios"), only, scen_t, f)
+            if only is None and lay is not None:  # applies(table, layout) knows them too
+                table = {**table, "only_layouts": lay}
             over = C.get(table, "layouts", f)
             for lname, t in over.items():
                 if lname not in layouts:
