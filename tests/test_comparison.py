@@ -344,7 +344,7 @@ def test_default_problem_is_the_showcase_and_reproduces_table_ii():
     full = load_suite(path)
     assert list(full.scenarios) == ["brake_behind", "head_sine", "head_brake", "heterogeneous",
                                     "platoon_brake", "ring_wave"]
-    assert list(full.controllers) == ["all_hdv", "paper", "h2", "mpc"]
+    assert list(full.controllers) == ["all_hdv", "paper", "h2", "mpc", "mpc_delay", "deep_lcc"]
     assert {s.layout for s in full.scenarios.values()} == {"string10", "sec5a", "platoon8",
                                                             "ring20"}
     suite = load_suite(path, scenarios=["brake_behind"], controllers=["all_hdv", "paper"])
@@ -354,3 +354,92 @@ def test_default_problem_is_the_showcase_and_reproduces_table_ii():
     assert round(table["all_hdv"]["fuel_ml"], 2) == 392.86
     assert round(table["paper"]["aave"], 2) == 0.81
     assert round(table["paper"]["fuel_ml"], 2) == 340.56
+
+
+# ------------------------------------------------------------------------- only_scenarios
+ONLY = SHORT + """
+[controllers.hdv_noisy]
+type = "hdv"
+only_scenarios = ["noisy"]
+"""
+
+
+def test_only_scenarios_runs_the_controller_in_those_scenarios_only(tmp_path):
+    path = tmp_path / "only.toml"
+    path.write_text(ONLY)
+    suite = load_suite(path, controllers=["all_hdv", "hdv_noisy"])
+    from lcc_synth.experiments.comparison import applies
+
+    # its layouts are those of its scenarios: applies() knows it without the scenario too
+    t = suite.controllers["hdv_noisy"]
+    assert applies(t, "tail3") and not applies(t, "mid")
+    assert applies(t, "tail3", "noisy") and not applies(t, "tail3", "brake")
+    run = run_suite(suite, progress=False)
+    assert list(run.table["noisy"]) == ["all_hdv", "hdv_noisy"]
+    assert list(run.table["brake"]) == ["all_hdv"] and list(run.table["sine"]) == ["all_hdv"]
+    # the same law on the same draws: the same row, bit for bit
+    assert run.table["noisy"]["hdv_noisy"] == run.table["noisy"]["all_hdv"]
+    # built only for the layouts of its scenarios
+    assert "hdv_noisy" in run.controllers["tail3"] and "hdv_noisy" not in run.controllers["mid"]
+    other = run_suite(load_suite(path, scenarios=["brake", "sine"]), progress=False)
+    assert all("hdv_noisy" not in per for per in other.controllers.values())
+    assert all("hdv_noisy" not in per for per in other.table.values())
+    assert other.table["brake"]["all_hdv"] == run.table["brake"]["all_hdv"]
+    # a selection that leaves a scenario without any controller is refused, naming the option
+    assert list(load_suite(path, ["noisy"], ["hdv_noisy"]).scenarios) == ["noisy"]
+    with pytest.raises(ConfigError, match="no controller of \\['hdv_noisy'\\] runs in scenario "
+                       "'brake'") as info:
+        load_suite(path, controllers=["hdv_noisy"])
+    assert info.value.field == "--controllers"
+
+
+@pytest.mark.parametrize(
+    ("new", "match"),
+    [
+        ('only_scenarios = "noisy"', "non-empty list"),
+        ("only_scenarios = []", "non-empty list"),
+        ('only_scenarios = ["noisy", "nowhere"]', "unknown scenario 'nowhere'"),
+        ('only_scenarios = ["sine"]\nonly_layouts = ["tail3"]', "scenario 'sine' is on layout"),
+    ],
+)
+def test_only_scenarios_errors_name_the_field(tmp_path, new, match):
+    path = tmp_path / "bad.toml"
+    path.write_text(ONLY.replace('only_scenarios = ["noisy"]', new))
+    with pytest.raises(ConfigError, match=match) as info:
+        load_suite(path)
+    assert info.value.field == "controllers.hdv_noisy.only_scenarios"
+    assert info.value.source == str(path)
+    assert main(["run", str(path), "--no-record", "--out", str(tmp_path)]) == 2
+
+
+def test_showcase_heterogeneous_gains_the_predictive_rows_only(tmp_path, monkeypatch):
+    """``mpc_delay`` and ``deep_lcc`` run in ``heterogeneous`` only (only_scenarios); the
+    rows of the other controllers are those of a run without them, bit for bit; the new rows
+    are pinned (README's showcase table)."""
+    from lcc_synth.cli.run import default_problem
+
+    monkeypatch.chdir(tmp_path)  # deep_lcc's data cache: results/deeplcc of the working dir
+    path = default_problem()
+    full = load_suite(path)
+    assert list(full.controllers) == ["all_hdv", "paper", "h2", "mpc", "mpc_delay", "deep_lcc"]
+    for name in ("mpc_delay", "deep_lcc"):
+        assert full.controllers[name]["only_scenarios"] == ["heterogeneous"]
+    new = run_suite(load_suite(path, scenarios=["heterogeneous"],
+                               controllers=["h2", "mpc", "mpc_delay", "deep_lcc"]),
+                    progress=False).table["heterogeneous"]  # fmt: skip
+    old = run_suite(load_suite(path, scenarios=["heterogeneous"], controllers=["h2", "mpc"]),
+                    progress=False).table["heterogeneous"]  # fmt: skip
+    assert new["h2"] == old["h2"] and new["mpc"] == old["mpc"]
+    assert list((tmp_path / "results" / "deeplcc").glob("deeplcc-*.npz"))  # cached there
+    pins = {  # AAVE (m/s), fuel (mL), min spacing (m), RMS jerk (m/s^3)
+        "mpc_delay": (2.33696743290055, 808.0796740429348, 8.901991470416192, 8.744364382058116),
+        "deep_lcc": (2.4564786582815095, 820.4635510170015, 8.744036008923416, 3.2804467885341424),
+    }
+    for name, (aave_, fuel_, gap, jerk) in pins.items():
+        row = new[name]
+        got = (row["aave"], row["fuel_ml"], row["min_spacing"], row["rms_jerk_cav"])
+        assert got == pytest.approx((aave_, fuel_, gap, jerk), rel=1e-6), name
+        assert (row["aeb_activations"], row["collisions"], row["collided"]) == (0, 0, False)
+    # the delay-aware MPC beats both h2 and the delay-free MPC here; DeeP-LCC does not
+    assert new["mpc_delay"]["aave"] < min(new["h2"]["aave"], new["mpc"]["aave"])
+    assert new["deep_lcc"]["aave"] > new["h2"]["aave"]

@@ -87,6 +87,7 @@ def run(args: argparse.Namespace) -> int:
 
     from lcc_synth.analysis.string_stability import verdict_text
     from lcc_synth.experiments.comparison import (
+        applies,
         gamma_curves,
         gamma_settings,
         load_suite,
@@ -164,8 +165,10 @@ def run(args: argparse.Namespace) -> int:
         curves: dict[str, dict] = {}  # {layout: {controller + suffix: (|Gamma|, report)}}
         for lname, rows in settings.items():
             curves[lname] = {}
-            for suffix, dt, lat, _ in rows:
-                per = gamma_curves(result.controllers[lname], suite.layouts[lname], omega, dt, lat)
+            for suffix, dt, lat, snames in rows:  # the controllers that run in those scenarios
+                ctrls = {c: k for c, k in result.controllers[lname].items()
+                         if any(applies(suite.controllers[c], lname, s) for s in snames)}
+                per = gamma_curves(ctrls, suite.layouts[lname], omega, dt, lat)
                 curves[lname].update({f"{c}{suffix}": v for c, v in per.items()})
         result.timings["string_stability"] = time.perf_counter() - t0
         if rec is not None:

@@ -18,7 +18,8 @@ A *suite* problem file (``lcc-synth run``, e.g. ``problems/showcase.toml``) desc
   ``[controllers.NAME.layouts.LAYOUT]`` overrides keys for one layout (merged recursively),
   e.g. the paper's gains, which differ between the Table II string and the Section V-A string;
   ``only_layouts = [...]`` names the layouts a controller is for (absent: every layout; on
-  the others it has no row, :func:`applies`).
+  the others it has no row, :func:`applies`), ``only_scenarios = [...]`` the scenarios (absent:
+  every scenario of those layouts; it is built only for the layouts of the selected ones).
 
 A layout may be a mixed platoon or a ring (``kind = "platoon" | "ring"``, ``size``, ``cavs``,
 ``circumference``, ``[layouts.NAME.hdv_values]``): its ``h2`` controllers are platoon designs
@@ -26,7 +27,9 @@ A layout may be a mixed platoon or a ring (``kind = "platoon" | "ring"``, ``size
 every CAV, an MPC's ``fallback`` the platoon gain table.
 
 Every controller runs on every scenario with the same random draws (``simulate(..., draws)``);
-the metrics are those of :func:`lcc_synth.metrics.summary` (:data:`SUITE_METRICS`).
+the metrics are those of :func:`lcc_synth.metrics.summary` (:data:`SUITE_METRICS`). A
+``deep_lcc`` controller collects its data on each scenario it drives (its HDVs, delays, noise;
+:mod:`lcc_synth.experiments.deeplcc_runs`).
 """
 
 from __future__ import annotations
@@ -53,24 +56,11 @@ from lcc_synth.simulation.scenario import Scenario
 from lcc_synth.simulation.scenario_file import scenario_from
 
 __all__ = [
-    "SUITE_TYPES",
-    "SuiteScenario",
-    "Suite",
-    "SuiteRun",
-    "load_suite",
-    "select_names",
-    "controller_table",
-    "synthesize_table",
-    "applies",
-    "prepare_controllers",
-    "fallback_names",
-    "build_controllers",
-    "metrics_row",
-    "run_suite",
-    "gamma_curves",
-    "gamma_settings",
-    "progress_bar",
-]
+    "SUITE_TYPES", "SuiteScenario", "Suite", "SuiteRun", "load_suite", "select_names",
+    "controller_table", "synthesize_table", "applies", "layout_controllers",
+    "prepare_controllers", "fallback_names", "build_controllers", "metrics_row", "run_suite",
+    "gamma_curves", "gamma_settings", "progress_bar",
+]  # fmt: skip
 
 #: Controller types of a suite file: those of ``lcc-synth simulate`` plus synthesised ``h2``.
 SUITE_TYPES = (*CONTROLLER_TYPES, "h2")
@@ -132,6 +122,26 @@ class Suite(Record):
         """Layouts of the selected scenarios, in file order."""
         used = {s.layout for s in self.scenarios.values()}
         return [name for name in self.layouts if name in used]
+
+
+def _check_only_scenarios(only, layouts, scenarios: Mapping[str, Any], f: str):
+    """``only_scenarios``: a non-empty list of the file's scenario names, each on a layout of
+    ``only_layouts`` (when given). Returns the layouts of those scenarios (or None)."""
+    if only is None:
+        return None
+    if not isinstance(only, list) or not only:
+        raise ConfigError(f"{f}.only_scenarios", f"must be a non-empty list of scenario names "
+                          f"{list(scenarios)}, got {only!r}")  # fmt: skip
+    for sname in only:
+        if not isinstance(sname, str) or sname not in scenarios:
+            raise ConfigError(f"{f}.only_scenarios", f"unknown scenario {sname!r}; "
+                              f"available: {list(scenarios)}")  # fmt: skip
+        lname = scenarios[sname].get("layout") if isinstance(scenarios[sname], dict) else None
+        if layouts is not None and lname not in layouts:
+            raise ConfigError(f"{f}.only_scenarios", f"scenario {sname!r} is on layout "
+                              f"{lname!r}, which only_layouts {layouts} leaves out")  # fmt: skip
+    named = [scenarios[s].get("layout") if isinstance(scenarios[s], dict) else None for s in only]
+    return list(dict.fromkeys(lname for lname in named if isinstance(lname, str)))
 
 
 def select_names(available: Sequence[str], wanted: Sequence[str] | None, field: str) -> list[str]:
@@ -251,6 +261,9 @@ def load_suite(
                 if lname not in layouts:
                     raise ConfigError(f"{f}.only_layouts", f"unknown layout {lname!r}; "
                                       f"available: {list(layouts)}")  # fmt: skip
+            lay = _check_only_scenarios(C.raw(table, "only_scenarios"), only, scen_t, f)
+            if only is None and lay is not None:  # applies(table, layout) knows them too
+                table = {**table, "only_layouts": lay}
             over = C.get(table, "layouts", f)
             for lname, t in over.items():
                 if lname not in layouts:
@@ -262,6 +275,11 @@ def load_suite(
                 if "type" in t and t["type"] != table["type"]:
                     raise ConfigError(f"{f}.layouts.{lname}.type", "cannot change the type")
             ctrls[cname] = dict(table)
+        for sname, ss in suite_scenarios.items():  # only_layouts / only_scenarios leave none
+            if not any(applies(ctrls[c], ss.layout, sname) for c in names):
+                raise ConfigError("--controllers" if controllers else f"scenarios.{sname}",
+                                  f"no controller of {names} runs in scenario {sname!r} "
+                                  "(only_layouts, only_scenarios): select --scenarios too")
         return Suite(
             name=problem.name,
             description=str(top.raw(data, "description")),
@@ -293,17 +311,32 @@ def _merge(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
 
 def controller_table(table: Mapping[str, Any], layout: str) -> dict[str, Any]:
     """The controller table for ``layout``: the base keys merged with its ``layouts`` entry."""
-    base = {k: v for k, v in table.items() if k not in ("layouts", "only_layouts")}
+    base = {k: v for k, v in table.items() if k not in ("layouts", "only_layouts",
+                                                        "only_scenarios")}
     over = table.get("layouts", {}).get(layout, {})
     return _merge(base, over)
 
 
-def applies(table: Mapping[str, Any], layout: str) -> bool:
-    """Does the controller of ``table`` run on ``layout``? (``only_layouts``: the layouts it
-    is for, e.g. the paper's gains, written for two single-CAV strings; absent: every
-    layout.) A controller left out of a layout has no row in that layout's scenarios."""
+def applies(table: Mapping[str, Any], layout: str, scenario: str | None = None) -> bool:
+    """Does the controller of ``table`` run on ``layout`` (and in ``scenario``, when given)?
+    (``only_layouts``: the layouts it is for, e.g. the paper's gains, written for two
+    single-CAV strings; ``only_scenarios``: the scenarios; absent: every one.) A controller
+    left out has no row there."""
     only = table.get("only_layouts")
-    return only is None or layout in only
+    scen = table.get("only_scenarios")
+    return (only is None or layout in only) and (scenario is None or scen is None
+                                                 or scenario in scen)  # fmt: skip
+
+
+def layout_controllers(suite: Suite, layout: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The controllers of ``suite`` that run in at least one of its scenarios on ``layout``
+    (:func:`applies`), and the controllers those MPCs fall back to (``fallback = "NAME"``),
+    as ``(run, fallbacks)``."""
+    names = [s for s, ss in suite.scenarios.items() if ss.layout == layout]
+    run = {k: t for k, t in suite.controllers.items()
+           if any(applies(t, layout, s) for s in names)}  # fmt: skip
+    every = {**suite.controllers, **suite.fallbacks}
+    return run, {k: every[k] for k in fallback_names(every, list(run))}
 
 
 def prepare_controllers(
@@ -435,7 +468,8 @@ def run_suite(
     """
     import time
 
-    from lcc_synth.simulation.backends import check_backend, run_scenario
+    from lcc_synth.experiments.deeplcc_runs import run_scenario, scenario_controllers
+    from lcc_synth.simulation.backends import check_backend
 
     for sname, ss in suite.scenarios.items():  # the simulator is installed: before any design
         try:
@@ -450,7 +484,8 @@ def run_suite(
     built: dict[str, dict[str, Controller]] = {}
     t0 = time.perf_counter()
     what = "controllers (synthesis, MPC set-up)"
-    n_built = sum(applies(t, lname) for lname in layouts for t in suite.controllers.values())
+    per_layout = {lname: layout_controllers(suite, lname) for lname in layouts}
+    n_built = sum(len(run) for run, _ in per_layout.values())
     with progress_bar(n_built, what, progress) as bar:
         for lname in layouts:
             system = suite.layouts[lname]
@@ -459,14 +494,15 @@ def run_suite(
                 bar.set_postfix_str(f"{lname}/{cname}")
 
             tables[lname], designs[lname] = prepare_controllers(
-                suite.controllers, system, lname, suite.hdv_table, suite.source, suite.name,
-                on_step=starting, fallbacks=suite.fallbacks,
+                per_layout[lname][0], system, lname, suite.hdv_table, suite.source, suite.name,
+                on_step=starting, fallbacks=per_layout[lname][1],
             )
             built[lname] = {}
             for cname, table in tables[lname].items():
                 starting(cname)
-                try:
-                    built[lname][cname] = build_controller(cname, dict(table), system, suite.source)
+                try:  # deep_lcc: its settings here, its data per scenario (deeplcc_runs)
+                    built[lname][cname] = scenario_controllers({cname: dict(table)}, system,
+                                                               suite.source)[cname]
                 except ConfigError as err:
                     raise ConfigError(
                         f"{err.field} (layout {lname})", err.message, err.source
@@ -475,22 +511,24 @@ def run_suite(
     timings["controllers"] = time.perf_counter() - t0
     from lcc_synth.simulation.timestep import check_time_step
 
+    runs = {s: {c: k for c, k in built[ss.layout].items() if applies(suite.controllers[c],
+                                                                   ss.layout, s)}
+            for s, ss in suite.scenarios.items()}  # fmt: skip
     for sname, ss in suite.scenarios.items():  # a step too coarse for a loop: before any run
         try:
-            check_time_step(ss.scenario, built[ss.layout], f"scenarios.{sname}.dt")
+            check_time_step(ss.scenario, runs[sname], f"scenarios.{sname}.dt")
         except ConfigError as err:
             raise err.with_source(suite.source) if suite.source else err from None
 
     table: dict[str, dict[str, dict[str, Any]]] = {}
     results: dict[str, dict[str, SimResult]] = {}
     t0 = time.perf_counter()
-    total = sum(len(built[ss.layout]) for ss in suite.scenarios.values())
-    with progress_bar(total, "simulations", progress) as bar:
+    with progress_bar(sum(len(r) for r in runs.values()), "simulations", progress) as bar:
         for sname, ss in suite.scenarios.items():
             draws = ss.scenario.draw()
             table[sname] = {}
             results[sname] = {}
-            for cname, ctrl in built[ss.layout].items():
+            for cname, ctrl in runs[sname].items():
                 bar.set_postfix_str(f"{sname}/{cname}")
                 res = run_scenario(ss.scenario, ctrl, draws)
                 row = metrics_row(res, ss.metrics)

@@ -255,7 +255,7 @@ def _token(*parts: Any) -> str:
 
 def _controllers(tables: Mapping[str, Mapping[str, Any]], system: System, source: str | None):
     """Controllers of ``tables``, built once per process and thread (MPCs hold solver state)."""
-    from lcc_synth.experiments.comparison import build_controllers
+    from lcc_synth.experiments.deeplcc_runs import scenario_controllers as build_controllers
 
     key = (_token(dict(tables), system, source), threading.get_ident())
     with _CACHE_LOCK:
@@ -281,20 +281,17 @@ def run_chunk(
     ranges: Mapping[str, tuple[float, float]] | None = None,
 ) -> dict[str, Any]:
     """Simulate scenarios ``start .. stop - 1`` with every controller (one batch each; with
-    ``ranges``, :attr:`SweepSpec.ranges`, each scenario alone with its drawn settings).
+    ``ranges``, :attr:`SweepSpec.ranges`, each scenario alone with its drawn settings; a
+    ``deep_lcc`` controller on each scenario's own data, :mod:`.deeplcc_runs`).
 
     Returns ``{"start", "stop", "metrics": {controller: {metric: (stop - start,) array}},
     "fallbacks": {controller: int}, "sim_time": {controller: s}, "wall_time": s}``.
     """
-    from lcc_synth.simulation.backends import run_scenario
-    from lcc_synth.simulation.scenario import scenario_variant
+    from lcc_synth.experiments.deeplcc_runs import run_scenario, scenario_runs
 
     t0 = time.perf_counter()
     ctrls = _controllers(tables, system, source)
-    if ranges:
-        runs = [scenario_variant(scenario, ranges, i) for i in range(start, stop)]
-    else:
-        runs = [replace(scenario, batch=stop - start, first_index=start)]
+    runs = scenario_runs(scenario, ranges, start, stop, ctrls)  # deep_lcc: one by one
     draws = [sc.draw() for sc in runs]
     metrics, fallbacks, times = {}, {}, {}
     for name, ctrl in ctrls.items():
@@ -491,8 +488,8 @@ def run_sweep(
         )
     t_design = time.perf_counter() - t_all
     tables = {name: _inline_gains_file(name, t, spec) for name, t in tables.items()}
-    # fail early, in the client, on a controller that cannot be built
-    from lcc_synth.experiments.comparison import build_controllers
+    # fail early, in the client, on a controller that cannot be built (deep_lcc: its settings)
+    from lcc_synth.experiments.deeplcc_runs import scenario_controllers as build_controllers
     from lcc_synth.simulation.backends import check_backend
     from lcc_synth.simulation.timestep import check_time_step
     built = build_controllers(tables, spec.system, spec.source)

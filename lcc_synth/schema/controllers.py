@@ -48,7 +48,10 @@ SUITE = Table(
      Key("layouts", "table", "Per-layout overrides [controllers.NAME.layouts.LAYOUT] (run "
          "only).", {}),
      Key("only_layouts", "any", "The layouts this controller is for (run only); "
-         "absent: every layout. On the others it has no row.", None)),
+         "absent: every layout. On the others it has no row.", None),
+     Key("only_scenarios", "any", "The scenarios this controller is for (run only; on "
+         "layouts of only_layouts); absent: every scenario. In the others it has no row, and "
+         "it is built only for the layouts of the scenarios run.", None)),
     variant="suite",
 )
 LAYOUT_OVERRIDE = Table(
