@@ -332,7 +332,8 @@ def _load_coverage_corpus(tmp: Path) -> None:
     assert spec_from_problem(Problem(tmp / "p.toml", syn)).patterns == {2: (1, 2, 3)}
 
 
-def test_every_declared_key_is_read_by_a_loader(tmp_path):
+def test_every_declared_key_is_read_by_a_loader(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # DeeP-LCC's data cache (results/deeplcc) goes here, not the repo
     for path in sorted(PROBLEMS.glob("*.toml")):
         load_with_every_reader(path)
     _load_coverage_corpus(tmp_path)
