@@ -9,6 +9,7 @@ within the session.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import replace
 from pathlib import Path
 
@@ -24,6 +25,7 @@ def _deeplcc_cache_outside_the_repository(tmp_path_factory):
     repo = Path(__file__).resolve().parents[1]
     original = data.load_or_collect
 
+    @functools.wraps(original)  # the package's docstring checks see the real function's
     def load_or_collect(base, settings):
         where = (Path.cwd() / settings.cache_dir).resolve()
         if where.is_relative_to(repo):
