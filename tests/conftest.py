@@ -1,5 +1,11 @@
-"""Test-session set-up: DeeP-LCC's data cache stays out of the repository.
+"""Test-session set-up: the ``sumo`` marker, and DeeP-LCC's data cache kept out of the
+repository.
 
+**SUMO.** A test marked ``@pytest.mark.sumo`` needs libsumo (the ``sumo`` extra): it is
+skipped when libsumo is not importable, except in CI (``CI=true``), where it runs and a
+missing SUMO fails (:func:`have_sumo`, checked by ``tests/test_sumo.py``).
+
+**DeeP-LCC's data cache.**
 Problem files name the cache relative to the working directory (``results/deeplcc`` by
 default); during the tests a cache directory that would land inside the repository is
 redirected into one temporary directory of the session (a test that changes to its own
@@ -9,11 +15,40 @@ within the session.
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import io
+import os
 from dataclasses import replace
 from pathlib import Path
 
 import pytest
+
+IN_CI = os.environ.get("CI", "").lower() == "true"
+
+
+def have_sumo() -> bool:
+    """Is libsumo importable? (Its import prints a banner: silenced.)"""
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            import libsumo  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", 'sumo: needs libsumo (pip install -e ".[sumo]"); '
+                            "skipped without it, except in CI")  # fmt: skip
+
+
+def pytest_collection_modifyitems(config, items):
+    if IN_CI or have_sumo():
+        return
+    skip = pytest.mark.skip(reason='SUMO not installed (pip install -e ".[sumo]")')
+    for item in items:
+        if "sumo" in item.keywords:
+            item.add_marker(skip)
 
 
 @pytest.fixture(scope="session", autouse=True)

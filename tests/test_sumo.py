@@ -25,10 +25,7 @@ Skipped when libsumo is not importable, except in CI (``CI=true``), where a miss
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
-import os
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -51,18 +48,7 @@ from lcc_synth.simulation.sumo_net import SumoSettings
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 PROBLEM = PROBLEMS / "sumo_head_brake.toml"
 
-try:
-    with contextlib.redirect_stdout(io.StringIO()):
-        import libsumo  # noqa: F401
-    HAVE_SUMO = True
-except ImportError:
-    HAVE_SUMO = False
-IN_CI = os.environ.get("CI", "").lower() == "true"
-
-#: Skipped without SUMO, never in CI (there the test runs and fails).
-needs_sumo = pytest.mark.skipif(
-    not HAVE_SUMO and not IN_CI, reason='SUMO not installed (pip install -e ".[sumo]")'
-)
+needs_sumo = pytest.mark.sumo  # skipped without libsumo, except in CI (conftest.py)
 
 #: Measured tolerances (module docstring): max |dv| m/s, max |ds| m, AAVE and fuel relative.
 TOL = {"euler": (0.03, 0.1, 2e-3, 5e-4), "ballistic": (0.015, 0.05, 1e-3, 2.5e-4)}
@@ -85,8 +71,10 @@ def _diff(a, b) -> tuple[float, float]:
 
 def test_sumo_installed_in_ci():
     """In CI (``.ci/run`` installs the ``sumo`` extra) SUMO must be importable."""
+    from conftest import IN_CI, have_sumo
+
     if IN_CI:
-        assert HAVE_SUMO, 'CI=true but libsumo is not importable: pip install -e ".[sumo]"'
+        assert have_sumo(), 'CI=true but libsumo is not importable: pip install -e ".[sumo]"'
 
 
 @needs_sumo

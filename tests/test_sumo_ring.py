@@ -31,10 +31,7 @@ What is measured here, and why the tolerances:
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
-import os
 from dataclasses import replace
 from pathlib import Path
 
@@ -61,16 +58,7 @@ from lcc_synth.simulation.sumo_net import SumoSettings
 PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 RING_FILE = PROBLEMS / "sumo_ring_stop_and_go.toml"
 
-try:
-    with contextlib.redirect_stdout(io.StringIO()):
-        import libsumo  # noqa: F401
-    HAVE_SUMO = True
-except ImportError:
-    HAVE_SUMO = False
-IN_CI = os.environ.get("CI", "").lower() == "true"
-needs_sumo = pytest.mark.skipif(
-    not HAVE_SUMO and not IN_CI, reason='SUMO not installed (pip install -e ".[sumo]")'
-)
+needs_sumo = pytest.mark.sumo  # skipped without libsumo, except in CI (conftest.py)
 
 #: Sugiyama's ring: 22 vehicles of 5 m on 230 m, i.e. 120 m of gaps for point vehicles.
 N_SUGI, L_CAR = 22, 5.0

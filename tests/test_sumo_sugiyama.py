@@ -22,9 +22,6 @@ What is measured here, and why the tolerances:
 
 from __future__ import annotations
 
-import contextlib
-import io
-import os
 from dataclasses import replace
 from pathlib import Path
 
@@ -49,16 +46,7 @@ PROBLEMS = Path(__file__).resolve().parents[1] / "problems"
 TWIN = PROBLEMS / "sumo_ring_sugiyama.toml"
 BUILTIN = PROBLEMS / "ring_sugiyama.toml"
 
-try:
-    with contextlib.redirect_stdout(io.StringIO()):
-        import libsumo  # noqa: F401
-    HAVE_SUMO = True
-except ImportError:
-    HAVE_SUMO = False
-IN_CI = os.environ.get("CI", "").lower() == "true"
-needs_sumo = pytest.mark.skipif(
-    not HAVE_SUMO and not IN_CI, reason='SUMO not installed (pip install -e ".[sumo]")'
-)
+needs_sumo = pytest.mark.sumo  # skipped without libsumo, except in CI (conftest.py)
 
 IDM_RING = IDM(v0=30.0, T=1.0, s0=2.0, a=1.0, b=1.5, delta=4.0)
 N, C = 22, 230.0 - 22 * 5.0  # Sugiyama's ring: 120 m of gaps for point vehicles
