@@ -197,10 +197,10 @@ def simulate(
     if L > 1:
         back = np.arange(L)  # steps before the first sample
         slots = (-back) % L
-        hp = np.empty((L, B, nv))
-        hv = np.empty((L, B, nv))
-        hp[slots] = p[None] - (back * dt)[:, None, None] * v[None]
-        hv[slots] = v[None]
+        hp = np.empty((B, L, nv))  # scenario-major: one scenario's history is contiguous
+        hv = np.empty((B, L, nv))
+        hp[:, slots] = p[:, None] - (back * dt)[None, :, None] * v[:, None]
+        hv[:, slots] = v[:, None]
     else:
         hp = np.empty((1, 1, 1))
         hv = np.empty((1, 1, 1))
@@ -219,6 +219,7 @@ def simulate(
         law_params = np.ascontiguousarray(params[:, cavs, :])
 
     acc_ovr, spd_ovr = overrides(sc.perturbations, t, dt, sc.m, sc.n, sc.layout)
+    ovr_cols = ~(np.isnan(acc_ovr).all(axis=0) & np.isnan(spd_ovr).all(axis=0))
 
     v_star = np.full(B, float(sc.v_star))
     s_star = np.full(B, sc.s_star)
@@ -291,7 +292,7 @@ def simulate(
             float(dt), float(sc.t_start), float(sc.a_min), float(sc.a_max), cavs, is_cav,
             ring, circ, bool(sc.cav_aeb), bool(sc.hdv_aeb), float(sc.hdv_accel_noise),
             float(sc.accel_noise_uniform), int(sc.seed), int(sc.first_index),
-            acc_ovr, spd_ovr, mode, ratio, u_hold, Ks, Kv, Kp, bool(hdv_law),
+            acc_ovr, spd_ovr, ovr_cols, mode, ratio, u_hold, Ks, Kv, Kp, bool(hdv_law),
             v_star, s_ref, p_ref, e0, est[1], est[2], v_hat, md, f_s, f_v,
             loss, lat, obs_noise, obs_s, obs_v, obs_p,
             alive, collided, ctime, stride, out_p, out_v, out_a, out_s, out_u, out_aeb,

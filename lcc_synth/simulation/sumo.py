@@ -224,10 +224,10 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
     P, V = p[None].copy(), v[None].copy()
     if L > 1:
         back = np.arange(L)
-        hp = np.empty((L, 1, nv))
-        hv = np.empty((L, 1, nv))
-        hp[(-back) % L] = P[None] - (back * dt)[:, None, None] * V[None]
-        hv[(-back) % L] = V[None]
+        hp = np.empty((1, L, nv))  # the kernels' layout: (scenario, slot, vehicle)
+        hv = np.empty((1, L, nv))
+        hp[:, (-back) % L] = P[:, None] - (back * dt)[None, :, None] * V[:, None]
+        hv[:, (-back) % L] = V[:, None]
     else:
         hp = np.empty((1, 1, 1))
         hv = np.empty((1, 1, 1))
@@ -309,7 +309,7 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
                 break
             P[0], V[0] = p, v
             if L > 1:
-                hp[k % L, 0], hv[k % L, 0] = p, v
+                hp[0, k % L], hv[0, k % L] = p, v
             if k == k_on and k > 0 and lagged:  # the lag starts from SUMO's acceleration
                 a_lag[:] = np.where(lag_f > 0.0, u_hold, 0.0)
             if k % ratio == 0 or k < k_on:  # before a switch: observed every step, as built in
