@@ -1,11 +1,15 @@
 """Throughput of a Monte Carlo sweep on a local Dask cluster (``lcc-synth sweep``).
 
-Runs ``problems/sweep_robustness.toml`` (4 controllers: all_hdv, paper, h2, mpc; 10 HDVs behind
-a CF-LCC CAV; 40 s at dt = 0.01 s; the MPC at 0.1 s with horizon 50) on a LocalCluster of
-2 single-threaded worker processes and prints the wall time, scenarios per second and, per
-controller, the simulation time summed over the workers.
+Runs ``problems/sweep_robustness.toml`` (by default issue 14's four controllers: all_hdv,
+paper, h2, mpc; 10 HDVs behind a CF-LCC CAV; 40 s at dt = 0.01 s; the MPC at 0.1 s with
+horizon 50) on a LocalCluster of 2 single-threaded worker processes and prints the wall time,
+scenarios per second and, per controller, the simulation time summed over the workers.
+``--controllers all`` runs every controller of the file (also mpc_delay and deep_lcc);
+``--mpc-solver daqp`` switches the MPCs' QP solver from OSQP (the file's) to the exact
+active-set option (``[controllers.mpc.solver] method``).
 
 Usage: python benchmarks/bench_sweep.py [--count 1000] [--batch-size 50] [--workers 2]
+       [--controllers all_hdv,paper,h2,mpc | all] [--mpc-solver osqp | daqp]
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from pathlib import Path
 from dask.distributed import Client
 
 from lcc_synth.experiments.sweep import load_sweep, local_cluster, run_sweep
+from lcc_synth.problem import load_problem
 
 PROBLEM = Path(__file__).resolve().parents[1] / "problems" / "sweep_robustness.toml"
 
@@ -26,8 +31,16 @@ def main() -> None:
     ap.add_argument("--count", type=int, default=1000)
     ap.add_argument("--batch-size", type=int, default=50)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--controllers", default="all_hdv,paper,h2,mpc")
+    ap.add_argument("--mpc-solver", choices=("osqp", "daqp"), default=None)
     args = ap.parse_args()
-    spec = load_sweep(PROBLEM, count=args.count, batch_size=args.batch_size)
+    problem = load_problem(PROBLEM)
+    if args.mpc_solver:
+        for table in problem.data["controllers"].values():
+            if table.get("type") in ("mpc", "mpc_delay"):
+                table.setdefault("solver", {})["method"] = args.mpc_solver
+    names = None if args.controllers == "all" else args.controllers.split(",")
+    spec = load_sweep(problem, count=args.count, batch_size=args.batch_size, controllers=names)
     t0 = time.perf_counter()
     cluster = local_cluster(args.workers)
     client = Client(cluster)
