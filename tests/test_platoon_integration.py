@@ -31,7 +31,7 @@ PLATOON = PROBLEMS / "platoon_deeplcc_brake.toml"
 
 def _synthesized_gains(tmp_path, problem: Path) -> dict:
     out = tmp_path / f"{problem.stem}.json"
-    assert main(["synthesize", str(problem), "--out", str(out)]) == 0
+    assert main(["synthesize", str(problem), "--no-record", "--out", str(out)]) == 0
     return json.loads(out.read_text())
 
 

@@ -12,6 +12,7 @@ import pytest
 pytest.importorskip("rerun")
 
 from rerun.chunk import RrdReader  # noqa: E402
+from test_recording import _static  # noqa: E402  (tests/ is on sys.path)
 
 from lcc_synth import recording as R  # noqa: E402
 from lcc_synth.experiments.spec import load_spec  # noqa: E402
@@ -96,3 +97,59 @@ def test_platoon_recording_has_one_command_per_cav_and_coloured_cavs(tmp_path):
     np.testing.assert_array_equal(
         road[..., 0], (res.position[0] - res.position[0, :, 3:4]).astype(np.float32)
     )
+
+
+def test_synthesize_records_a_two_cav_ring_design_with_its_range_front(tmp_path, capsys):
+    """``lcc-synth synthesize`` of a ring with two CAVs (design = "sparsity") writes a
+    recording: each CAV's bar chart is its row of the gains file, the report names the chosen
+    point of the range front, and the front's bars are each point's loss against the
+    unstructured optimum recomputed from the JSON report (H2 / H2* - 1)."""
+    import json
+
+    from lcc_synth.cli.main import main
+
+    text = (ROOT / "problems" / "ring_n20_cr5.toml").read_text()
+    text = text.replace("cavs = [20]", "cavs = [10, 20]").replace("comm_range = 5\n", "")
+    text = text.replace('design = "structured"', 'design = "sparsity"')
+    problem = tmp_path / "ring2.toml"
+    problem.write_text(text + "\n[synthesis.sparsity]\nmax_loss = 0.05\n")
+    path, gains = tmp_path / "ring2.rrd", tmp_path / "gains.json"
+    assert main(["synthesize", str(problem), "--rrd", str(path), "--out", str(gains),
+                 "--json", "--no-progress"]) == 0  # fmt: skip
+    cap = capsys.readouterr()
+    doc, file_doc = json.loads(cap.out), json.loads(gains.read_text())
+    assert f"recording: {path}" in cap.err
+    chunks = _chunks(path)
+    name = R.entity_name(doc["problem"])
+    assert set(file_doc["gains"]) == {"u_10", "u_20"}
+    for cav, row in file_doc["gains"].items():
+        bars = np.array(_static(chunks, f"/synthesis/{name}/{cav}/gains", "BarChart:values")[0]
+                        ["buffer"]).ravel()  # fmt: skip
+        np.testing.assert_array_equal(bars, [row.get(s, 0.0) for s in doc["state_names"]])
+        report = _static(chunks, f"/synthesis/{name}/{cav}/report", "TextDocument:text")
+        assert "heard positions" in report
+    loss = np.array(_static(chunks, f"/synthesis/{name}/pareto/loss_percent",
+                            "BarChart:values")[0]["buffer"]).ravel()  # fmt: skip
+    expected = [100.0 * (p["h2"] / doc["h2_unstructured"] - 1.0) for p in doc["pareto"]]
+    np.testing.assert_allclose(loss, expected, rtol=1e-9)
+    assert loss[-1] < 0.5 and np.all(np.diff(loss) <= 0)  # the greedy front never gets worse
+    report = _static(chunks, f"/synthesis/{name}/report", "TextDocument:text")
+    [chosen] = [k for k, p in enumerate(doc["pareto"]) if p["chosen"]]
+    assert "range front" in report and f"| {chosen} | u_10 " in report
+    assert report.count("| yes |") == 1 and "h2_unstructured" in report
+    summary = R.summarize_recording(path)
+    assert f"/synthesis/{name}/u_20/gains" in summary.entities
+
+
+def test_synthesize_platoon_refuses_figure_and_records_by_default(tmp_path, monkeypatch):
+    """``--figure`` is refused for a platoon design (exit 2, the flag named); without ``--rrd``
+    the recording goes to ``logs/<problem>-<UTC time>.rrd`` as for one CAV."""
+    from lcc_synth.cli.main import main
+
+    problem = ROOT / "problems" / "ring_n20_cr5.toml"
+    monkeypatch.chdir(tmp_path)
+    assert main(["synthesize", str(problem), "--figure", "x.png"]) == 2
+    assert not (tmp_path / "x.png").exists()
+    assert main(["synthesize", str(problem), "--no-progress"]) == 0
+    [rrd] = (tmp_path / "logs").glob("ring_n20_cr5-*.rrd")
+    assert "/synthesis/ring_n20_cr5/u_20/gains" in R.summarize_recording(rrd).entities

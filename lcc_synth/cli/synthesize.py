@@ -31,13 +31,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from lcc_synth.errors import ConfigError
     from lcc_synth.problem import check_top_level, load_problem
-    from lcc_synth.recording import record_synthesis_file, recording_path
-    from lcc_synth.resources import set_progress
+    from lcc_synth.recording import (
+        record_platoon_synthesis_file,
+        record_synthesis_file,
+        recording_path,
+    )
     from lcc_synth.synthesis.config import spec_from_problem
     from lcc_synth.synthesis.design import synthesize
     from lcc_synth.synthesis.gains_file import write_gains
-    from lcc_synth.synthesis.h2 import SynthesisError
     from lcc_synth.synthesis.platoon_config import PlatoonSynthesisSpec
+    from lcc_synth.synthesis.platoon_design import synthesize_platoon
+    from lcc_synth.synthesis.platoon_report import format_platoon_report
     from lcc_synth.synthesis.report import format_report
 
     problem = load_problem(args.problem)
@@ -52,27 +56,20 @@ def run(args: argparse.Namespace) -> int:
             "problems/synth_cf_lcc_pattern.toml)", src,
         )  # fmt: skip
     spec = spec_from_problem(problem)
-    if isinstance(spec, PlatoonSynthesisSpec):
-        return _run_platoon(args, spec, src)
-    if args.figure and spec.design != "sparsity":
-        raise ConfigError(
-            "--figure", f"only design = 'sparsity' draws a Pareto front; this one is "
-            f"{spec.design!r}", src,
-        )  # fmt: skip
+    platoon = isinstance(spec, PlatoonSynthesisSpec)
+    if args.figure and (platoon or spec.design != "sparsity"):
+        why = (f"not available for kind = {spec.system.kind!r} yet" if platoon else
+               f"only design = 'sparsity' draws a Pareto front; this one is {spec.design!r}")
+        raise ConfigError("--figure", why, src)
     rrd = recording_path(args, spec.name)  # bad --rrd fails before the synthesis runs
-    set_progress(not args.no_progress)
-    try:
-        rep = synthesize(spec)
-    except SynthesisError as err:
-        if args.json:
-            print(json.dumps({"ok": False, "error": str(err), "details": err.details},
-                             default=str))
-        print(f"lcc-synth synthesize: synthesis failed: {err}", file=sys.stderr)
+    rep = _design(args, synthesize_platoon if platoon else synthesize, spec)
+    if rep is None:
         return 1
-    finally:
-        set_progress(False)  # the switch is process-wide: back to off for later in-process calls
     if rrd is not None:
-        record_synthesis_file(rrd, rep, spec.system)
+        if platoon:
+            record_platoon_synthesis_file(rrd, rep)
+        else:
+            record_synthesis_file(rrd, rep, spec.system)
         print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
     written = []
     if args.out:
@@ -83,43 +80,28 @@ def run(args: argparse.Namespace) -> int:
         written.append(str(plot_pareto_front(rep.pareto, rep.h2_unstructured, args.figure,
                                             title=rep.problem)))
     if args.json:
-        doc = {"ok": True, **rep.as_dict(), "written": written}
-        print(json.dumps(doc))
+        print(json.dumps({"ok": True, **rep.as_dict(), "written": written}))
     else:
-        print(format_report(rep))
+        print(format_platoon_report(rep) if platoon else format_report(rep))
         for w in written:
             print(f"wrote {w}")
     return 0
 
 
-def _run_platoon(args: argparse.Namespace, spec, src: str) -> int:
-    """The platoon / ring branch (:mod:`lcc_synth.synthesis.platoon_design`)."""
-    from lcc_synth.errors import ConfigError
+def _design(args: argparse.Namespace, design, spec):
+    """``design(spec)`` with progress lines as asked; ``None`` (reported on stdout as JSON with
+    ``--json``, and on stderr) when the synthesis fails."""
     from lcc_synth.resources import set_progress
-    from lcc_synth.synthesis.gains_file import write_gains
     from lcc_synth.synthesis.h2 import SynthesisError
-    from lcc_synth.synthesis.platoon_design import synthesize_platoon
-    from lcc_synth.synthesis.platoon_report import format_platoon_report
 
-    for opt, flag in (("figure", "--figure"), ("rrd", "--rrd")):
-        if getattr(args, opt, None):
-            raise ConfigError(flag, f"not available for kind = {spec.system.kind!r} yet", src)
     set_progress(not args.no_progress)
     try:
-        rep = synthesize_platoon(spec)
+        return design(spec)
     except SynthesisError as err:
         if args.json:
             print(json.dumps({"ok": False, "error": str(err), "details": err.details},
                              default=str))
         print(f"lcc-synth synthesize: synthesis failed: {err}", file=sys.stderr)
-        return 1
+        return None
     finally:
-        set_progress(False)
-    written = [str(write_gains(args.out, rep))] if args.out else []
-    if args.json:
-        print(json.dumps({"ok": True, **rep.as_dict(), "written": written}))
-    else:
-        print(format_platoon_report(rep))
-        for w in written:
-            print(f"wrote {w}")
-    return 0
+        set_progress(False)  # the switch is process-wide: back to off for later in-process calls

@@ -55,7 +55,10 @@ annotation context naming them) and ``regions/<name>/report`` (markdown: axes an
 Synthesis (:func:`record_synthesis`, :func:`record_gains`) under ``/synthesis/<name>/``:
 ``gains`` (``BarChart`` of the gain on every state), ``report`` (markdown: state names, gains,
 true H2, LMI bound, verdicts, solver), ``pareto/front`` and ``pareto/patterns`` (sparsity
-designs: x = vehicles heard, y = true H2); the |Gamma| curve of the gain as above.
+designs: x = vehicles heard, y = true H2); the |Gamma| curve of the gain as above. A platoon or
+ring design (:func:`record_platoon_synthesis`) records each CAV's gain under
+``/synthesis/<name>/<u_col>/`` (``gains``, ``report``), the whole report at
+``/synthesis/<name>/report`` and its range front's H2 losses at ``pareto/loss_percent``.
 
 Interrupted runs: :func:`open_recording` is a context manager that flushes and finalises the
 file on every exit (exception, ``KeyboardInterrupt``) and records the interruption in
@@ -76,6 +79,8 @@ from lcc_synth.recording.analysis import (
     record_analysis_file,
     record_gains,
     record_gamma,
+    record_platoon_synthesis,
+    record_platoon_synthesis_file,
     record_region_map,
     record_synthesis,
     record_synthesis_file,
@@ -100,6 +105,7 @@ from lcc_synth.recording.core import (
 )
 from lcc_synth.recording.layout import (
     analysis_blueprint,
+    platoon_synthesis_blueprint,
     simulation_blueprint,
     synthesis_blueprint,
 )
@@ -131,6 +137,7 @@ __all__ = [
     "simulation_blueprint",
     "analysis_blueprint",
     "synthesis_blueprint",
+    "platoon_synthesis_blueprint",
     "open_recording",
     "record_simulation",
     "record_metrics",
@@ -142,6 +149,8 @@ __all__ = [
     "record_synthesis",
     "record_analysis_file",
     "record_synthesis_file",
+    "record_platoon_synthesis",
+    "record_platoon_synthesis_file",
     "gamma_grid",
     "record_text",
     "viewer_environment",

@@ -25,7 +25,11 @@ from lcc_synth.recording.core import (
     open_recording,
     record_text,
 )
-from lcc_synth.recording.layout import analysis_blueprint, synthesis_blueprint
+from lcc_synth.recording.layout import (
+    analysis_blueprint,
+    platoon_synthesis_blueprint,
+    synthesis_blueprint,
+)
 
 
 def record_gamma(
@@ -202,6 +206,54 @@ def record_synthesis_file(path: str | Path, rep: Any, system: Any = None) -> Pat
     return path
 
 
+#: Fields of a platoon report left out of its markdown report (the gains are recorded per CAV).
+_PLATOON_BULK = ("state_names", "K", "gains", "input_K", "input_kh", "conserved", "pareto")
+
+
+def record_platoon_synthesis(rec: Any, rep: Any) -> None:
+    """Record a platoon or ring synthesis report
+    (:class:`~lcc_synth.synthesis.platoon_report.PlatoonReport`) under ``/synthesis/<problem>/``.
+
+    Per CAV input ``u_<col>``: ``<u_col>/gains`` (``BarChart`` of its row of ``K`` on every
+    state, in state order) and ``<u_col>/report`` (its gains, heard positions and input
+    gains); ``report``: the whole report but the arrays (design, check, stages, notes, ...),
+    with the range front as a table for ``design = "sparsity"``, whose ``pareto/loss_percent``
+    (``BarChart``, one bar per point of the greedy front in order) is each point's H2 loss
+    against the unstructured optimum, in percent.
+    """
+    rr = _rr()
+    n = entity_name(rep.problem)
+    for i, (cav, row) in enumerate(rep.gains.items()):
+        doc = {"state_names": list(rep.state_names), "gains": dict(row),
+               "heard positions": list(rep.patterns.get(cav, [])),
+               "input_kh": rep.input_kh[i]}  # fmt: skip
+        record_gains(rec, cav, doc, under=rep.problem)
+    summary = {k: v for k, v in _jsonable(rep.as_dict()).items() if k not in _PLATOON_BULK}
+    text = f"# {rep.problem}\n\n" + _mapping_markdown("report", summary)
+    if rep.pareto:
+        loss = np.array([100.0 * p["loss"] for p in rep.pareto], dtype=np.float64)
+        rec.log(f"/synthesis/{n}/pareto/loss_percent", rr.BarChart(loss, color=COLOR_HDV),
+                static=True)  # fmt: skip
+        rows = [f"| {k} | {', '.join(f'{c} {r}' for c, r in p['ranges'].items())} | "
+                f"{p['heard']} | {_fmt(p['h2'])} | {_fmt(100.0 * p['loss'])} | "
+                f"{'yes' if p.get('chosen') else ''} |" for k, p in enumerate(rep.pareto)]
+        text += ("\n\n## range front (greedy, in order; the bars: loss %)\n\n"
+                 "| step | ranges | vehicles heard | true H2 | loss % | chosen |\n"
+                 "|---|---|---|---|---|---|\n" + "\n".join(rows))  # fmt: skip
+    record_text(rec, f"/synthesis/{n}/report", text)
+    _flush_started(rec)
+
+
+def record_platoon_synthesis_file(path: str | Path, rep: Any) -> Path:
+    """Write a platoon / ring synthesis recording to ``path`` (see
+    :func:`record_platoon_synthesis`)."""
+    path = Path(path)
+    blueprint = platoon_synthesis_blueprint(rep.problem, list(rep.gains), bool(rep.pareto))
+    with open_recording(path, rep.problem, blueprint) as rec:
+        record_platoon_synthesis(rec, rep)
+    return path
+
+
 def record_analysis_file(
     path: str | Path,
     name: str,
@@ -242,8 +294,9 @@ def record_analysis_file(
     return path
 
 
-def record_gains(rec: Any, name: str, gains: Mapping[str, Any]) -> None:
-    """Record a synthesised gain under ``/synthesis/<name>/``.
+def record_gains(rec: Any, name: str, gains: Mapping[str, Any], under: str | None = None) -> None:
+    """Record a synthesised gain under ``/synthesis/<name>/`` (``/synthesis/<under>/<name>/``
+    when ``under`` is given: one CAV's gain of a platoon design).
 
     ``gains`` is the gains-file dict (``state_names``, ``gains`` {state: value}, ``K``, norms
     and verdicts...) or simply ``{state_name: value}``. ``gains`` becomes a ``BarChart`` (one bar
@@ -259,7 +312,7 @@ def record_gains(rec: Any, name: str, gains: Mapping[str, Any]) -> None:
         rest = {k: v for k, v in gains.items() if k != "gains"}
     states = list(rest.get("state_names") or g.keys())
     values = np.array([float(g.get(sn, 0.0)) for sn in states], dtype=np.float64)
-    n = entity_name(name)
+    n = entity_name(name) if under is None else f"{entity_name(under)}/{entity_name(name)}"
     rec.log(f"/synthesis/{n}/gains", rr.BarChart(values, color=COLOR_CAV), static=True)
     lines = [f"# {name}", "", "| state | gain |", "|---|---|"]
     lines += [f"| {sn} | {_fmt(v)} |" for sn, v in zip(states, values, strict=True)]

@@ -290,3 +290,25 @@ def synthesis_blueprint(names: Sequence[str], gamma: bool = True, pareto: bool =
     return rrb.Blueprint(
         rrb.Horizontal(rrb.Vertical(*plots), rrb.Tabs(*reports), column_shares=[3, 2])
     )
+
+
+def platoon_synthesis_blueprint(problem: str, cavs: Sequence[str], pareto: bool = False):
+    """Default layout of a platoon / ring synthesis recording: one gains bar chart per CAV,
+    the range front (sparsity designs), the whole report and each CAV's report."""
+    rrb = _rrb()
+    n = entity_name(problem)
+    plots = [
+        rrb.BarChartView(origin=f"/synthesis/{n}/{entity_name(c)}/gains", name=f"{c}: gains")
+        for c in cavs
+    ]
+    if pareto:
+        plots.append(rrb.BarChartView(origin=f"/synthesis/{n}/pareto/loss_percent",
+                                      name="range front: H2 loss % per greedy step"))
+    reports = [rrb.TextDocumentView(origin=f"/synthesis/{n}/report", name=f"{problem}: report")]
+    reports += [
+        rrb.TextDocumentView(origin=f"/synthesis/{n}/{entity_name(c)}/report", name=f"{c}: report")
+        for c in cavs
+    ]
+    return rrb.Blueprint(
+        rrb.Horizontal(rrb.Vertical(*plots), rrb.Tabs(*reports), column_shares=[3, 2])
+    )
