@@ -80,7 +80,7 @@ def test_unknown_command_prints_the_top_level_usage(capsys):
 
 _RECORD = {"--rrd", "--no-record"}
 #: Every command's options (the audit): a simulation records steps (--record-every); analyze,
-#: regions and synthesize record no steps; sweep records nothing; review reads a recording.
+#: regions, synthesize and sweep record no steps; review reads a recording.
 EXPECTED_OPTIONS = {
     "run": {"--json", "--scenarios", "--controllers", "--out", "--no-figures", "--no-progress",
             *_RECORD, "--record-every"},
@@ -89,7 +89,7 @@ EXPECTED_OPTIONS = {
     "simulate": {"--json", "--seeds", "--record-seeds", *_RECORD, "--record-every"},
     "synthesize": {"--json", "--out", "--figure", "--no-progress", *_RECORD},
     "sweep": {"--json", "--count", "--batch-size", "--seed", "--scheduler", "--workers",
-              "--controllers", "--out", "--no-figures", "--no-progress"},
+              "--controllers", "--out", "--no-figures", "--no-progress", *_RECORD},
     "review": {"--summary", "--json", "--web", "--web-port", "--port"},
 }  # fmt: skip
 
@@ -119,8 +119,7 @@ def test_run_options_are_the_ones_readme_lists():
         ["analyze", "p.toml", "--record-every", "5"],
         ["regions", "p.toml", "--record-every", "5"],
         ["synthesize", "p.toml", "--record-every", "5"],
-        ["sweep", "p.toml", "--rrd", "x.rrd"],
-        ["sweep", "p.toml", "--no-record"],
+        ["sweep", "p.toml", "--record-every", "5"],
         ["run", "--seeds", "3"],
         ["review", "x.rrd", "--out", "d"],
     ],

@@ -34,7 +34,7 @@ PROBLEMS = ROOT / "problems"
 BASES = {
     "simulate": ("paper_table2", ["--no-record"]),
     "run": ("showcase", ["--no-record", "--no-figures", "--no-progress"]),
-    "sweep": ("sweep_robustness", ["--no-figures", "--no-progress"]),
+    "sweep": ("sweep_robustness", ["--no-record", "--no-figures", "--no-progress"]),
     "synthesize": ("synth_string_stable_m2n2", ["--no-record"]),
     "analyze": ("paper_fig9_cases", ["--no-record"]),
     "regions": ("paper_fig7_fig8_regions", ["--no-record"]),

@@ -268,12 +268,15 @@ def test_cli_sweep_json_and_files(problem_file, serial, capsys, tmp_path):
 
     from lcc_synth.experiments.tables import json_safe
 
+    rrd = tmp_path / "rec" / "sweep.rrd"
     code = main([
         "sweep", str(problem_file), "--count", "4", "--batch-size", "3", "--workers", "1",
-        "--json", "--no-progress", "--out", str(tmp_path),
+        "--json", "--no-progress", "--out", str(tmp_path / "res"), "--rrd", str(rrd),
     ])
     assert code == 0
-    doc = json.loads(capsys.readouterr().out)  # exactly one JSON object on stdout
+    cap = capsys.readouterr()
+    doc = json.loads(cap.out)  # exactly one JSON object on stdout
+    assert f"recording: {rrd}" in cap.err
     assert list(doc) == ["results", "sweep"]
     assert doc["sweep"]["count"] == 4 and doc["sweep"]["tasks"] == 2
     first4 = {c: {k: v[:4] for k, v in per.items()} for c, per in serial.samples.items()}
@@ -287,10 +290,21 @@ def test_cli_sweep_json_and_files(problem_file, serial, capsys, tmp_path):
                 assert got[key] == pytest.approx(value, rel=1e-12), (c, key)
             elif key != "fallbacks":
                 assert got[key] == value, (c, key)
-    (run_dir,) = tmp_path.iterdir()
+    (run_dir,) = (tmp_path / "res").iterdir()
     assert {p.name for p in run_dir.iterdir()} == {"sweep.json", "samples.csv",
                                                     "distributions.png"}
     assert json.loads((run_dir / "sweep.json").read_text()) == doc
+    # the recording holds samples.csv's values: every metric, controller and scenario
+    rows = np.genfromtxt(run_dir / "samples.csv", delimiter=",", names=True, dtype=None,
+                         encoding="utf-8")  # fmt: skip
+    recorded = pytest.importorskip("test_recording_sweep").recorded_samples(rrd, "small_sweep")
+    assert set(recorded) == {*SWEEP_METRICS, "jerk_1s_over_limit_s", "collisions",
+                             "aeb_activations"}  # fmt: skip
+    for metric, (index, values, names) in recorded.items():
+        np.testing.assert_array_equal(index, np.arange(4))
+        for k, c in enumerate(names):
+            want = rows[rows["controller"] == c][metric].astype(float)
+            np.testing.assert_array_equal(values[:, k], want, err_msg=f"{metric} {c}")
 
 
 def _gains_doc(n: int) -> dict:

@@ -4,7 +4,9 @@ Runs ``[sweep] count`` random scenarios for every controller (see
 :mod:`lcc_synth.experiments.sweep`), prints mean and 5th / 95th percentiles of the metrics and
 the counts of collisions, emergency brakings and MPC fallbacks, and writes under
 ``results/<problem>-<UTC timestamp>/``: ``sweep.json`` (the ``--json`` document),
-``samples.csv`` (every scenario's metrics) and ``distributions.png``.
+``samples.csv`` (every scenario's metrics) and ``distributions.png``; and a Rerun recording
+(``logs/<problem>-<UTC timestamp>.rrd``, ``--rrd PATH`` / ``--no-record``) of every scenario's
+metrics per controller and the summary (:mod:`lcc_synth.recording.sweep`).
 
 By default the tasks run on a local Dask cluster (``--workers`` single-threaded processes, no
 dashboard, scratch space in a temporary directory); ``--scheduler ADDRESS`` uses an existing
@@ -17,7 +19,7 @@ import argparse
 import json
 import sys
 
-from lcc_synth.cli.arguments import add_output_arguments, add_problem_arguments
+from lcc_synth.cli.arguments import add_output_arguments, add_problem_arguments, add_recording
 
 HELP = "Monte Carlo robustness sweep of every controller on a Dask cluster"
 
@@ -39,6 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="worker processes of the local cluster (default 2; not with --scheduler)",
     )
     add_output_arguments(parser, "the sweep", "the PNG")
+    add_recording(parser, steps=False)
 
 
 def _client(args):
@@ -66,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
     from lcc_synth.errors import ConfigError
     from lcc_synth.experiments.sweep import SWEEP_METRICS, format_summary, load_sweep, run_sweep
     from lcc_synth.experiments.tables import json_safe, run_directory
+    from lcc_synth.recording import record_sweep_file, recording_path
     from lcc_synth.synthesis.h2 import SynthesisError
 
     if args.scheduler is not None and args.workers is not None:
@@ -74,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--workers", f"must be an integer in [1, 256], got {args.workers}")
     names = None if args.controllers is None else args.controllers.split(",")
     spec = load_sweep(args.problem, args.count, args.batch_size, args.seed, names)
+    rrd = recording_path(args, spec.name)  # a bad --rrd fails before the sweep runs
     stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
     log = sys.stderr if args.json else sys.stdout
     progress = not args.no_progress
@@ -90,12 +95,15 @@ def run(args: argparse.Namespace) -> int:
         if cluster is not None:
             cluster.close()
 
+    # every per-scenario sample (samples.csv's columns and the recording's plots)
+    labels = {**SWEEP_METRICS, "jerk_1s_over_limit_s": "time over ISO jerk limit (s)",
+              "collisions": "collisions", "aeb_activations": "AEB steps"}  # fmt: skip
     doc = json_safe({"results": result.summary, "sweep": result.info})
     out_dir = run_directory(args.out, spec.name, stamp)
     (out_dir / "sweep.json").write_text(json.dumps(doc, indent=2) + "\n")
     with (out_dir / "samples.csv").open("w", newline="") as fh:
         w = csv.writer(fh)
-        keys = [*SWEEP_METRICS, "jerk_1s_over_limit_s", "collisions", "aeb_activations"]
+        keys = list(labels)
         w.writerow(["scenario", "controller", *keys])
         for c, per in result.samples.items():
             for i in range(spec.count):
@@ -112,6 +120,10 @@ def run(args: argparse.Namespace) -> int:
             )
         )
     info = result.info
+    table = format_summary(result.summary)
+    if rrd is not None:
+        record_sweep_file(rrd, spec.name, result.samples, labels, result.summary, info)
+        print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
     if args.json:
         print(json.dumps(doc))
     else:
@@ -119,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
             f"{spec.name}: {spec.count} scenarios x {len(result.summary)} controllers, "
             f"seed {spec.seed}, {info['tasks']} tasks of <= {spec.batch_size}; mean [p5, p95]"
         )
-        print(format_summary(result.summary))
+        print(table)
     print(
         f"time: {info['wall_time_s']:.1f} s on {info['scheduler']} "
         f"({info['scenarios_per_s']:.1f} scenarios/s, {info['runs_per_s']:.1f} "

@@ -60,6 +60,9 @@ ring design (:func:`record_platoon_synthesis`) records each CAV's gain under
 ``/synthesis/<name>/<u_col>/`` (``gains``, ``report``), the whole report at
 ``/synthesis/<name>/report`` and its range front's H2 losses at ``pareto/loss_percent``.
 
+Sweeps (:func:`record_sweep`, ``lcc-synth sweep``) under ``/sweep/<name>/``: one scatter
+series per controller and metric over the ``scenario`` timeline, and the summary ``report``.
+
 Interrupted runs: :func:`open_recording` is a context manager that flushes and finalises the
 file on every exit (exception, ``KeyboardInterrupt``) and records the interruption in
 ``/<scenario>/status``; the commands record each controller as soon as its result exists
@@ -107,6 +110,7 @@ from lcc_synth.recording.layout import (
     analysis_blueprint,
     platoon_synthesis_blueprint,
     simulation_blueprint,
+    sweep_blueprint,
     synthesis_blueprint,
 )
 from lcc_synth.recording.reader import (
@@ -121,6 +125,7 @@ from lcc_synth.recording.simulation import (
     record_mpc_history,
     record_simulation,
 )
+from lcc_synth.recording.sweep import record_sweep, record_sweep_file
 
 __all__ = [
     "APP_ID",
@@ -137,6 +142,9 @@ __all__ = [
     "simulation_blueprint",
     "analysis_blueprint",
     "synthesis_blueprint",
+    "sweep_blueprint",
+    "record_sweep",
+    "record_sweep_file",
     "platoon_synthesis_blueprint",
     "open_recording",
     "record_simulation",

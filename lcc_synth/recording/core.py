@@ -177,24 +177,29 @@ def _rows(rr: Any, descriptor: Any, flat: Any, rows: int, per_row: int):
 
 
 def _send_series(
-    rec: Any, entity: str, t: Any, values: np.ndarray, names, colors, widths=None
-) -> None:
+    rec: Any, entity: str, t: Any, values: np.ndarray, names, colors, widths=None,
+    points: bool = False,
+) -> None:  # fmt: skip
     """One entity with ``values.shape[1]`` scalar series (one ``send_columns`` call); ``t`` is
-    the times (s) or a ready ``TimeColumn``; ``widths`` the line widths (default 1.5)."""
+    the times (s) or a ready ``TimeColumn``; ``widths`` the line widths (default 1.5), or with
+    ``points`` the marker sizes (default 2: a scatter plot, for values that are not a signal)."""
     import pyarrow as pa
 
     rr = _rr()
     values = np.ascontiguousarray(values, dtype=np.float64)
     rows, k = values.shape
-    rec.log(
-        entity,
-        rr.SeriesLines(
-            names=list(names),
-            colors=np.asarray(colors, dtype=np.uint8),
+    colors = np.asarray(colors, dtype=np.uint8)
+    if points:
+        style = rr.SeriesPoints(
+            names=list(names), colors=colors, markers=["circle"] * k,
+            marker_sizes=[2.0] * k if widths is None else [float(w) for w in widths],
+        )  # fmt: skip
+    else:
+        style = rr.SeriesLines(
+            names=list(names), colors=colors,
             widths=[1.5] * k if widths is None else [float(w) for w in widths],
-        ),
-        static=True,
-    )
+        )  # fmt: skip
+    rec.log(entity, style, static=True)
     flat = pa.array(values.reshape(-1), type=pa.float64())  # NaN stays NaN (a gap)
     column = _rows(rr, rr.Scalars.descriptor_scalars(), flat, rows, k)
     tcol = _time_column(t) if isinstance(t, np.ndarray) else t

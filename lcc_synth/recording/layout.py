@@ -312,3 +312,22 @@ def platoon_synthesis_blueprint(problem: str, cavs: Sequence[str], pareto: bool 
     return rrb.Blueprint(
         rrb.Horizontal(rrb.Vertical(*plots), rrb.Tabs(*reports), column_shares=[3, 2])
     )
+
+
+def sweep_blueprint(name: str, metrics: Sequence[tuple[str, str]]):
+    """Default layout of a sweep recording (:mod:`lcc_synth.recording.sweep`): a grid of one
+    scatter plot per ``(metric, label)`` (x = scenario index, one colour per controller, legend
+    in the corner) and the summary report."""
+    rrb = _rrb()
+    s = entity_name(name)
+    plots = [
+        rrb.TimeSeriesView(origin=f"/sweep/{s}/{entity_name(m)}", name=f"{label} vs scenario",
+                           plot_legend=rrb.PlotLegend(rrb.Corner2D.RightTop))
+        for m, label in metrics
+    ]  # fmt: skip
+    report = rrb.TextDocumentView(origin=f"/sweep/{s}/report", name=f"{name}: report")
+    return rrb.Blueprint(
+        rrb.Horizontal(rrb.Grid(*plots, grid_columns=3), report, column_shares=[5, 2]),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+    )
