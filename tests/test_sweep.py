@@ -305,6 +305,19 @@ def test_cli_sweep_json_and_files(problem_file, serial, capsys, tmp_path):
         for k, c in enumerate(names):
             want = rows[rows["controller"] == c][metric].astype(float)
             np.testing.assert_array_equal(values[:, k], want, err_msg=f"{metric} {c}")
+    # next to it: the hardest scenario (smallest spacing in samples.csv), every controller on it
+    from lcc_synth.experiments.sweep_review import hardest_scenario
+    from lcc_synth.recording import summarize_recording
+
+    per = {c: {k: rows[rows["controller"] == c][k].astype(float)
+               for k in ("min_spacing", "collisions")} for c in doc["results"]}  # fmt: skip
+    hard = hardest_scenario(per)
+    second = rrd.with_name(f"sweep-scenario{hard.index}.rrd")
+    assert sorted(p.name for p in rrd.parent.iterdir()) == sorted(["sweep.rrd", second.name])
+    assert f"hardest scenario {hard.index}: {hard.controller}" in cap.err
+    entities = summarize_recording(second).entities
+    for c in doc["results"]:
+        assert f"/small_sweep_scenario{hard.index}/{c}/velocity" in entities
 
 
 def _gains_doc(n: int) -> dict:

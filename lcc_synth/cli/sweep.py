@@ -6,7 +6,9 @@ the counts of collisions, emergency brakings and MPC fallbacks, and writes under
 ``results/<problem>-<UTC timestamp>/``: ``sweep.json`` (the ``--json`` document),
 ``samples.csv`` (every scenario's metrics) and ``distributions.png``; and a Rerun recording
 (``logs/<problem>-<UTC timestamp>.rrd``, ``--rrd PATH`` / ``--no-record``) of every scenario's
-metrics per controller and the summary (:mod:`lcc_synth.recording.sweep`).
+metrics per controller and the summary (:mod:`lcc_synth.recording.sweep`), with beside it
+``<stem>-scenario<i>.rrd``: the hardest scenario simulated again with every controller
+(:mod:`lcc_synth.experiments.sweep_review`).
 
 By default the tasks run on a local Dask cluster (``--workers`` single-threaded processes, no
 dashboard, scratch space in a temporary directory); ``--scheduler ADDRESS`` uses an existing
@@ -69,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     from lcc_synth.errors import ConfigError
     from lcc_synth.experiments.sweep import SWEEP_METRICS, format_summary, load_sweep, run_sweep
     from lcc_synth.experiments.tables import json_safe, run_directory
-    from lcc_synth.recording import record_sweep_file, recording_path
+    from lcc_synth.recording import recording_path
     from lcc_synth.synthesis.h2 import SynthesisError
 
     if args.scheduler is not None and args.workers is not None:
@@ -122,8 +124,7 @@ def run(args: argparse.Namespace) -> int:
     info = result.info
     table = format_summary(result.summary)
     if rrd is not None:
-        record_sweep_file(rrd, spec.name, result.samples, labels, result.summary, info)
-        print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
+        _record(rrd, spec, result, labels)
     if args.json:
         print(json.dumps(doc))
     else:
@@ -140,3 +141,33 @@ def run(args: argparse.Namespace) -> int:
     )
     print(f"results: {out_dir}", file=log)
     return 0
+
+
+def _record(rrd, spec, result, labels: dict[str, str]) -> None:
+    """The sweep's recording at ``rrd`` and, next to it (``<stem>-scenario<i>.rrd``), a
+    simulation recording of its hardest scenario with every controller
+    (:mod:`lcc_synth.experiments.sweep_review`)."""
+    from contextlib import ExitStack
+
+    from lcc_synth.experiments.sweep_review import hardest_scenario, simulate_scenario
+    from lcc_synth.metrics import summary
+    from lcc_synth.recording import SimulationRecorder, record_sweep_file
+
+    hard = hardest_scenario(result.samples)
+    second = rrd.with_name(f"{rrd.stem}-scenario{hard.index}.rrd")
+    what = (f"scenario {hard.index}: {hard.controller} "
+            f"{'collided' if hard.collided else f'min spacing {hard.min_spacing:.3g} m'}")
+    info = {**result.info, "hardest scenario": what, "its recording": str(second)}
+    record_sweep_file(rrd, spec.name, result.samples, labels, result.summary, info)
+    print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
+    scenario, runs, ctrls = simulate_scenario(spec, result.tables, hard.index)
+    view = argparse.Namespace(rrd=str(second), no_record=False, record_every="minmax")
+    one = argparse.Namespace(name=f"{spec.name}_scenario{hard.index}", controllers=ctrls,
+                             scenario=scenario)  # fmt: skip
+    with ExitStack() as stack:
+        recorder = SimulationRecorder(view, stack)
+        for name, res in runs.items():
+            recorder(one, name, res)
+        recorder.metrics({name: summary(res, spec.metrics) for name, res in runs.items()})
+    print(f"hardest {what}; every controller on it: {second} (lcc-synth review {second})",
+          file=sys.stderr)
