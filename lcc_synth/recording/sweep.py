@@ -15,7 +15,7 @@ Under ``/sweep/<name>/``:
   the command prints it) and the sweep's settings and timings.
 
 Size, measured: 1000 scenarios x 6 controllers x 13 metrics is 0.98 MB, written in 13 ms (one
-``send_columns`` call per metric, :func:`lcc_synth.recording.core._send_series`); 60 scenarios
+``send_columns`` call per metric); 60 scenarios
 0.25 MB, mostly the layout and the per-entity overhead.
 """
 
