@@ -5,9 +5,10 @@ The hardest scenario is the one with the smallest minimum spacing over every con
 vehicle (a collision first: its spacing reached 0); ties go to the lower scenario index, then
 to the controller listed first. Scenario ``i`` draws everything from ``(seed, i)`` only
 (:mod:`lcc_synth.experiments.sweep`), so simulating it alone, with the controller tables the
-workers ran (``h2`` gains already synthesised, :attr:`SweepResult.tables`), gives the run that
-the sweep measured, bit for bit (``tests/test_sweep_review.py`` checks every metric), now with
-its whole trajectory and each MPC's solve history.
+workers ran (``h2`` gains already synthesised,
+:attr:`~lcc_synth.experiments.sweep.SweepResult.tables`), gives the run that the sweep
+measured, bit for bit (``tests/test_sweep_review.py`` checks every metric), now with its whole
+trajectory and each MPC's solve history.
 
 Cost, measured: one scenario per controller on the client, 0.31 s for all_hdv, paper, h2 and
 mpc of ``problems/sweep_robustness.toml`` (after a first call that builds the MPC), and 0.68 s
@@ -56,7 +57,7 @@ def hardest_scenario(samples: Mapping[str, Mapping[str, np.ndarray]]) -> Hardest
     ----------
     samples : mapping
         ``{controller: {"min_spacing": (count,), "collisions": (count,), ...}}``
-        (:attr:`SweepResult.samples`).
+        (:attr:`~lcc_synth.experiments.sweep.SweepResult.samples`).
 
     Raises
     ------
@@ -89,7 +90,8 @@ def simulate_scenario(spec: Any, tables: Mapping[str, Mapping[str, Any]], index:
     spec : lcc_synth.experiments.sweep.SweepSpec
         The sweep (scenario, system, ranges, source).
     tables : mapping
-        Controller tables as the workers got them (:attr:`SweepResult.tables`).
+        Controller tables as the workers got them
+        (:attr:`~lcc_synth.experiments.sweep.SweepResult.tables`).
     index : int
         Scenario index, ``0 <= index < spec.count``.
 

@@ -68,8 +68,8 @@ def record_sweep(
         ``{metric: label with unit}``: the metrics to record, in order.
     summary : mapping, optional
         ``{controller: {metric: {"mean", "p5", "p95", ...}, "collisions", ...}}``
-        (:attr:`SweepResult.summary`): a table with one row per metric and one column per
-        controller, ``mean [p5, p95]``, then the counts.
+        (:attr:`~lcc_synth.experiments.sweep.SweepResult.summary`): a table with one row per
+        metric and one column per controller, ``mean [p5, p95]``, then the counts.
     info : mapping, optional
         Settings and timings of the run (``SweepResult.info``).
 
