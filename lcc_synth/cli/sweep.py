@@ -69,7 +69,13 @@ def run(args: argparse.Namespace) -> int:
     from datetime import UTC, datetime
 
     from lcc_synth.errors import ConfigError
-    from lcc_synth.experiments.sweep import SWEEP_METRICS, format_summary, load_sweep, run_sweep
+    from lcc_synth.experiments.sweep import (
+        SWEEP_METRICS,
+        SWEEP_SAMPLES,
+        format_summary,
+        load_sweep,
+        run_sweep,
+    )
     from lcc_synth.experiments.tables import json_safe, run_directory
     from lcc_synth.recording import recording_path
     from lcc_synth.synthesis.h2 import SynthesisError
@@ -97,15 +103,12 @@ def run(args: argparse.Namespace) -> int:
         if cluster is not None:
             cluster.close()
 
-    # every per-scenario sample (samples.csv's columns and the recording's plots)
-    labels = {**SWEEP_METRICS, "jerk_1s_over_limit_s": "time over ISO jerk limit (s)",
-              "collisions": "collisions", "aeb_activations": "AEB steps"}  # fmt: skip
     doc = json_safe({"results": result.summary, "sweep": result.info})
     out_dir = run_directory(args.out, spec.name, stamp)
     (out_dir / "sweep.json").write_text(json.dumps(doc, indent=2) + "\n")
     with (out_dir / "samples.csv").open("w", newline="") as fh:
         w = csv.writer(fh)
-        keys = list(labels)
+        keys = list(SWEEP_SAMPLES)
         w.writerow(["scenario", "controller", *keys])
         for c, per in result.samples.items():
             for i in range(spec.count):
@@ -122,9 +125,8 @@ def run(args: argparse.Namespace) -> int:
             )
         )
     info = result.info
-    table = format_summary(result.summary)
     if rrd is not None:
-        _record(rrd, spec, result, labels)
+        _record(rrd, spec, result)
     if args.json:
         print(json.dumps(doc))
     else:
@@ -132,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
             f"{spec.name}: {spec.count} scenarios x {len(result.summary)} controllers, "
             f"seed {spec.seed}, {info['tasks']} tasks of <= {spec.batch_size}; mean [p5, p95]"
         )
-        print(table)
+        print(format_summary(result.summary))
     print(
         f"time: {info['wall_time_s']:.1f} s on {info['scheduler']} "
         f"({info['scenarios_per_s']:.1f} scenarios/s, {info['runs_per_s']:.1f} "
@@ -143,12 +145,13 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _record(rrd, spec, result, labels: dict[str, str]) -> None:
+def _record(rrd, spec, result) -> None:
     """The sweep's recording at ``rrd`` and, next to it (``<stem>-scenario<i>.rrd``), a
     simulation recording of its hardest scenario with every controller
     (:mod:`lcc_synth.experiments.sweep_review`)."""
     from contextlib import ExitStack
 
+    from lcc_synth.experiments.sweep import SWEEP_SAMPLES
     from lcc_synth.experiments.sweep_review import hardest_scenario, simulate_scenario
     from lcc_synth.metrics import summary
     from lcc_synth.recording import SimulationRecorder, record_sweep_file
@@ -158,7 +161,7 @@ def _record(rrd, spec, result, labels: dict[str, str]) -> None:
     what = (f"scenario {hard.index}: {hard.controller} "
             f"{'collided' if hard.collided else f'min spacing {hard.min_spacing:.3g} m'}")
     info = {**result.info, "hardest scenario": what, "its recording": str(second)}
-    record_sweep_file(rrd, spec.name, result.samples, labels, result.summary, info)
+    record_sweep_file(rrd, spec.name, result.samples, SWEEP_SAMPLES, result.summary, info)
     print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
     scenario, runs, ctrls = simulate_scenario(spec, result.tables, hard.index)
     view = argparse.Namespace(rrd=str(second), no_record=False, record_every="minmax")

@@ -55,9 +55,9 @@ from lcc_synth.simulation.scenario import Scenario, split_ranges
 from lcc_synth.simulation.scenario_file import scenario_from
 
 __all__ = [
-    "SWEEP_METRICS", "SWEEP_COUNTS", "MAX_COUNT", "SweepSpec", "SweepResult", "load_sweep",
-    "chunks", "scenario_metrics", "run_chunk", "aggregate", "run_sweep", "local_cluster",
-    "format_summary",
+    "SWEEP_METRICS", "SWEEP_SAMPLES", "SWEEP_COUNTS", "MAX_COUNT", "SweepSpec", "SweepResult",
+    "load_sweep", "chunks", "scenario_metrics", "run_chunk", "aggregate", "run_sweep",
+    "local_cluster", "format_summary",
 ]  # fmt: skip
 
 #: Per-scenario metrics of a sweep -> label (distributions: mean, p5, p95).
@@ -69,6 +69,11 @@ SWEEP_METRICS: dict[str, str] = {
     "max_abs_command": "max |u| (m/s²)",
     "rms_jerk_cav": "CAV RMS jerk (m/s³)",
     "max_jerk_1s_cav": "CAV max 1 s jerk (m/s³)", **WAVE_METRICS,
+}
+#: Every per-scenario sample of a sweep -> label (``samples.csv``'s columns, the recording).
+SWEEP_SAMPLES: dict[str, str] = {
+    **SWEEP_METRICS, "jerk_1s_over_limit_s": "time over ISO jerk limit (s)",
+    "collisions": "collisions", "aeb_activations": "AEB steps",
 }
 #: Per-scenario counts of a sweep (summed over the scenarios).
 SWEEP_COUNTS = ("collisions", "aeb_activations", "fallbacks")
@@ -503,9 +508,7 @@ def run_sweep(
     args = (spec.scenario, spec.system, tables, spec.metrics, spec.source)
     names = list(tables)
     samples = {
-        c: {k: np.full(spec.count, np.nan) for k in (*SWEEP_METRICS, "jerk_1s_over_limit_s",
-                                                    "collisions", "aeb_activations")}
-        for c in names
+        c: {k: np.full(spec.count, np.nan) for k in SWEEP_SAMPLES} for c in names
     }
     fallbacks = dict.fromkeys(names, 0)
     sim_time = dict.fromkeys(names, 0.0)

@@ -73,7 +73,7 @@ def hardest_scenario(samples: Mapping[str, Mapping[str, np.ndarray]]) -> Hardest
         # a collision ranks first whatever spacing was recorded before it
         key = np.where(coll, -np.inf, np.where(np.isfinite(s), s, np.inf))
         i = int(np.argmin(key))
-        if np.isfinite(key[i]) or coll[i]:
+        if key[i] < np.inf:  # some finite spacing or a collision
             cand = (key[i], i, c, float(s[i]), bool(coll[i]))
             if best is None or cand[:2] < best[:2]:
                 best = cand

@@ -11,12 +11,13 @@ Under ``/sweep/<name>/``:
   same scenario in every run of the file with that seed, whatever the count, batch size or
   worker. A run with a collision has no AAVE or fuel (NaN: a gap in the series, as in
   ``samples.csv``).
-- ``report``: the summary table (mean [p5, p95] per metric and the counts per controller, as
-  the command prints it) and the sweep's settings and timings.
+- ``report``: the summary, one row per metric and one column per controller (mean [p5, p95],
+  then the counts; the simulation recordings' comparison table), and the sweep's settings and
+  timings.
 
 Size, measured: 1000 scenarios x 6 controllers x 13 metrics is 0.98 MB, written in 13 ms (one
-``send_columns`` call per metric); 60 scenarios
-0.25 MB, mostly the layout and the per-entity overhead.
+``send_columns`` call per metric); 60 scenarios 0.25 MB, mostly the layout and the per-entity
+overhead.
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ import numpy as np
 from lcc_synth.errors import ConfigError
 from lcc_synth.recording.core import (
     _PALETTE,
+    _cell,
+    _comparison_markdown,
     _flush_started,
     _fmt,
     _jsonable,
@@ -90,11 +93,13 @@ def record_sweep(
         values = np.column_stack([np.asarray(samples[c][metric], dtype=np.float64)
                                   for c in ctrls])  # fmt: skip
         _send_series(rec, entity, index, values, ctrls, colors, points=True)
-    text = f"# sweep {name}: {count} scenarios x {len(ctrls)} controllers\n\n"
+    title = f"sweep {name}: {count} scenarios x {len(ctrls)} controllers"
     if summary:
-        text += _summary_markdown(summary, labels) + "\n\n"
+        text = _comparison_markdown(f"{title}, mean [p5, p95]", _summary_rows(summary, labels))
+    else:
+        text = f"# {title}\n"
     if info:
-        text += _mapping_markdown("run", _jsonable(dict(info)))
+        text += "\n" + _mapping_markdown("run", _jsonable(dict(info)))
     record_text(rec, f"/sweep/{s}/report", text)
     _flush_started(rec)
 
@@ -141,25 +146,18 @@ _COUNTS = (("collisions (scenarios)", "collisions", "collision_scenarios"),
            ("MPC fallbacks", "fallbacks", None))  # fmt: skip
 
 
-def _summary_markdown(summary: Mapping[str, Mapping[str, Any]], labels: Mapping[str, str]) -> str:
-    """Metrics as rows, controllers as columns: ``mean [p5, p95]``, then the counts."""
-    ctrls = list(summary)
-    lines = ["| metric: mean [p5, p95] | " + " | ".join(ctrls) + " |",
-             "|---" * (len(ctrls) + 1) + "|"]  # fmt: skip
-    for metric, label in labels.items():
-        cells = []
-        for c in ctrls:
-            d = summary[c].get(metric)
-            if not isinstance(d, Mapping) or "mean" not in d:
-                break
-            cells.append("n/a" if d["mean"] is None else
-                         f"{_fmt(d['mean'])} [{_fmt(d['p5'])}, {_fmt(d['p95'])}]")  # fmt: skip
-        else:
-            cell = label.replace("|", "\\|")  # "max |u|": a bar would end the cell
-            lines.append(f"| {cell} | " + " | ".join(cells) + " |")
-    for label, total, scen in _COUNTS:
-        if all(total in summary[c] for c in ctrls):
-            cells = [str(summary[c][total]) + (f" ({summary[c][scen]})" if scen else "")
-                     for c in ctrls]  # fmt: skip
-            lines.append(f"| {label} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+def _summary_rows(summary: Mapping[str, Mapping[str, Any]], labels: Mapping[str, str]):
+    """``{controller: {label: cell}}`` for the comparison table: ``mean [p5, p95]`` of every
+    metric with a distribution, then the counts."""
+    rows: dict[str, dict[str, str]] = {}
+    for c, e in summary.items():
+        row = rows[c] = {}
+        for metric, label in labels.items():
+            d = e.get(metric)
+            if isinstance(d, Mapping) and "mean" in d:
+                row[_cell(label)] = ("n/a" if d["mean"] is None else
+                                     f"{_fmt(d['mean'])} [{_fmt(d['p5'])}, {_fmt(d['p95'])}]")
+        for label, total, scen in _COUNTS:
+            if total in e:
+                row[label] = str(e[total]) + (f" ({e[scen]})" if scen else "")
+    return rows
