@@ -247,7 +247,8 @@ def test_interrupted_run_leaves_a_readable_file(tmp_path, exc):
     assert summary.entities["/rec_test/all_hdv/velocity"].samples == len(first.t)
     assert not any("raiser" in p for p in summary.entities)
     status = summary.texts["/rec_test/status"]
-    assert "interrupted" in status and type(exc).__name__ in status
+    word = "**interrupted**" if isinstance(exc, KeyboardInterrupt) else "**failed**"
+    assert word in status and type(exc).__name__ in status and "complete" not in status
     _, vel = _temporal(_chunks(path), "/rec_test/all_hdv/velocity", "Scalars:scalars")
     np.testing.assert_array_equal(np.array(vel), first.velocity[0])
     RrdReader(path).store()  # the footer/manifest was written
@@ -637,8 +638,9 @@ def test_collisions_and_emergency_braking_are_events_on_the_timeline(tmp_path):
 
 
 def test_killed_process_leaves_the_flushed_controllers_readable(tmp_path):
-    """A process killed after recording a controller (no finalisation, no footer): the file
-    still reads back, marked not finalised, with that controller's data."""
+    """A process killed after recording a controller (no finalisation, no footer): nothing
+    appears under the final name (a reader never sees a half file), and the private temporary
+    file still reads back, marked not finalised, with that controller's data."""
     import subprocess
     import sys
 
@@ -657,6 +659,8 @@ def test_killed_process_leaves_the_flushed_controllers_readable(tmp_path):
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=120)
     assert proc.returncode == 9, proc.stderr.decode()
-    s = R.summarize_recording(path)
+    assert not path.exists()
+    (tmp,) = tmp_path.glob(".killed.part-*.rrd")
+    s = R.summarize_recording(tmp)
     assert not s.finalized
     assert s.entities["/k/h/velocity"].samples == 300

@@ -4,19 +4,24 @@ Each command lives in its own module ``lcc_synth.cli.<command>`` exposing
 ``HELP: str``, ``add_arguments(parser)`` and ``run(args) -> int``. Modules import their heavy
 dependencies inside ``run`` so that ``lcc-synth --help`` stays fast.
 
-Exit codes: 0 success, 1 a run that found a failure (e.g. a solver failure), 2 bad input
-(problem file, option) with a one-line message naming the file and the field. A bad option of a
-command prints that command's usage, not the top-level one.
+Exit codes: 0 success; 1 a run that found a failure (a solver failure, a controller that
+could not be designed, a file that could not be written after the work: every result that
+succeeded is still written and printed); 2 bad input (problem file, option, an output path
+that cannot be written, a run too large for the disk, memory or the recording limit) with a
+one-line message naming the file and the field, before any work; 130 / 143 stopped by SIGINT /
+SIGTERM (:mod:`lcc_synth.interrupts`: the recording is finalised as "interrupted", finished
+work is kept). A bad option of a command prints that command's usage, not the top-level one.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from lcc_synth.cli.arguments import check_options
-from lcc_synth.errors import ConfigError
+from lcc_synth.errors import ConfigError, FileError, Interrupted
 
 COMMANDS = ("run", "analyze", "regions", "simulate", "synthesize", "sweep", "review")
 
@@ -75,10 +80,41 @@ def main(argv: list[str] | None = None) -> int:
             err = err.with_source(problem)  # a field of the problem file: name the file
         print(f"lcc-synth {args.command}: error: {err}", file=sys.stderr)
         return 2
+    except FileError as err:
+        print(f"lcc-synth {args.command}: error: {err}", file=sys.stderr)
+        return 1
+    except Interrupted as err:
+        print(f"lcc-synth {args.command}: interrupted by {err.signame}", file=sys.stderr)
+        return 128 + err.signum
     except KeyboardInterrupt:
         print(f"lcc-synth {args.command}: interrupted", file=sys.stderr)
         return 130
 
 
+def entry() -> None:
+    """The ``lcc-synth`` console script: :func:`main` with SIGINT and SIGTERM handled
+    (:func:`lcc_synth.interrupts.handling`) and Rerun's own log lines off (every recording
+    error is reported by the package as one line; a ``RUST_LOG`` you set is kept).
+
+    After a signal the process exits at once when :func:`main` returns (``os._exit``):
+    threads still inside native code (a simulation kernel on the thread pool) would otherwise
+    hold the interpreter's exit until they finish.
+    """
+    from lcc_synth.interrupts import handling, interrupted
+
+    os.environ.setdefault("RUST_LOG", "off")
+    try:
+        with handling():
+            code = main()
+    except Interrupted as err:  # a signal between main's return and the end of the block
+        code = 128 + err.signum
+    signum = interrupted()
+    if signum is not None:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code if code >= 128 else 128 + signum)
+    sys.exit(code)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    entry()

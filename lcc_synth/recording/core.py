@@ -84,15 +84,35 @@ def vehicle_widths(m: int, n: int) -> list[float]:
     return widths
 
 
+#: Seconds of one flush slice while a recording is finalised (a signal is handled between two).
+_FLUSH_SLICE = 0.25
+#: Seconds a recording's temporary file may stop growing, on a full file system, before the
+#: flush is declared failed (Rerun's file writer waits forever on a full disk).
+_STALL_S = 3.0
+
+
 @contextmanager
 def open_recording(
-    path: str | Path, name: str, blueprint: Any = None, scenario: str | None = None
-) -> Iterator[Any]:
+    path: str | Path, name: str, blueprint: Any = None, scenario: str | None = None,
+    overwrite: bool = False,
+) -> Iterator[Any]:  # fmt: skip
     """Open a Rerun recording that writes to ``path``; yields the ``rerun.RecordingStream``.
 
-    The file is flushed and finalised on every exit. On an exception (a controller raising,
-    ``KeyboardInterrupt``...) ``/<scenario>/status`` records the interruption and the exception
-    propagates; everything recorded before stays in a readable file.
+    The recording streams to a private temporary file next to ``path``
+    (:func:`lcc_synth.outputs.temporary_path`), which is flushed, finalised and published
+    under ``path`` when the block ends, however it ends (:func:`lcc_synth.outputs.publish`:
+    exclusively, ``NAME-2.rrd``... if the name was taken meanwhile, or over it with
+    ``overwrite``); :func:`written_path` gives the name used. A reader never sees a half file.
+
+    ``/<scenario>/status`` records how the run ended: **complete**; **interrupted** by a signal
+    or Ctrl-C; **failed** with the error that ended it; or what :func:`set_status` set
+    (**partial**: some controllers failed, **failed**: none produced a result). Everything
+    recorded before an interruption or error stays in a valid file, and the exception
+    propagates.
+
+    The file is finalised in flush slices of 0.25 s, so a signal is handled during a long
+    flush; a file writer that stops (a full disk: Rerun's writer would wait forever) is a
+    :class:`~lcc_synth.errors.FileError` naming ``path``, and the temporary file is removed.
 
     Parameters
     ----------
@@ -104,7 +124,13 @@ def open_recording(
         The default layout saved in the file.
     scenario : str, optional
         Entity prefix of the status document (default: ``name``).
+    overwrite : bool
+        Replace an existing file at ``path`` (``--overwrite``) instead of taking the next free
+        name.
     """
+    from lcc_synth.errors import FileError
+    from lcc_synth.outputs import publish, temporary_path
+
     rr = _rr()
     path = Path(path)
     try:
@@ -114,28 +140,123 @@ def open_recording(
     if not os.access(path.parent, os.W_OK):
         raise ConfigError("--rrd", f"directory {str(path.parent)!r} is not writable")
     status = f"/{entity_name(scenario or name)}/status"
+    tmp = temporary_path(path)
     rec = rr.RecordingStream(APP_ID, recording_id=uuid.uuid4())
-    rec.save(path, default_blueprint=blueprint)
+    state = _state(rec)
+    state.target = path
+    try:
+        rec.save(tmp, default_blueprint=blueprint)
+    except Exception as err:  # noqa: BLE001 - Rerun raises its own error types
+        raise FileError(path, str(err)) from None
     rec.send_recording_name(name)
     started = datetime.now(UTC).isoformat(timespec="seconds")
     record_text(rec, status, f"# Status\n\nstarted {started}: **running**\n")
-    with rec:  # flush + finalise the file sink on every exit (Rerun 0.41 context manager)
-        try:
-            yield rec
-        except GeneratorExit:  # the with-block was abandoned (interpreter exit): just finalise
-            raise
-        except BaseException as err:
+    outcome: BaseException | None = None
+    try:
+        yield rec
+    except BaseException as err:  # recorded, then raised again once the file is finalised
+        outcome = err
+        if not isinstance(err, GeneratorExit):  # GeneratorExit: the block was abandoned
             what = type(err).__name__ + (f": {err}" if str(err) else "")
+            stop = isinstance(err, KeyboardInterrupt)
+            how = f"**interrupted** by `{what}`" if stop else f"**failed**: `{what}`"
             record_text(
                 rec,
                 status,
-                f"# Status\n\nstarted {started}: **interrupted** by `{what}`; the recording holds "
-                "everything recorded before the interruption.\n",
+                f"# Status\n\nstarted {started}: {how}; the recording holds everything "
+                f"recorded before the {'interruption' if stop else 'error'}.\n",
             )
+    else:
+        done = datetime.now(UTC).isoformat(timespec="seconds")
+        word, detail = state.status
+        more = f"\n\n{detail}\n" if detail else "\n"
+        record_text(rec, status, f"# Status\n\nstarted {started}, **{word}** {done}{more}")
+    try:
+        _finalise(rec, tmp, path)
+        state.written = publish(tmp, path, overwrite)
+    except BaseException as err:
+        _abandon(rec, tmp)
+        if outcome is None:
             raise
-        else:
-            done = datetime.now(UTC).isoformat(timespec="seconds")
-            record_text(rec, status, f"# Status\n\nstarted {started}, **complete** {done}\n")
+        import sys
+
+        print(f"lcc-synth: the recording was not written: {err}", file=sys.stderr)
+    if outcome is not None:
+        raise outcome
+
+
+def _finalise(rec: Any, tmp: Path, path: Path) -> None:
+    """Flush ``rec`` to ``tmp`` in slices and finalise the file (footer), never hanging: a
+    writer thread that died, or a file that stopped growing on a full file system, is a
+    :class:`~lcc_synth.errors.FileError` naming ``path``."""
+    import time
+
+    from lcc_synth.errors import FileError
+    from lcc_synth.outputs import free_bytes
+
+    state = _state(rec)
+    size, since = -1, time.monotonic()
+    while True:
+        if state.failure:
+            raise FileError(path, _reason(state.failure, tmp))
+        try:
+            rec.flush(timeout_sec=_FLUSH_SLICE)
+            break
+        except RuntimeError as err:
+            if "timed out" not in str(err).lower():
+                raise FileError(path, _reason(str(err), tmp)) from None
+        now_size = tmp.stat().st_size if tmp.exists() else 0
+        if now_size != size:
+            size, since = now_size, time.monotonic()
+        elif time.monotonic() - since > _STALL_S and free_bytes(tmp) < (1 << 20):
+            raise FileError(path, "No space left on device")
+    rec.disconnect()  # writes the footer: the file is complete
+
+
+def _abandon(rec: Any, tmp: Path) -> None:
+    """Drop a recording that cannot be written: detach its file sink (so that Rerun's own
+    flush at interpreter exit does not wait forever on a dead writer) and remove the
+    temporary file."""
+    import threading
+
+    import rerun as rr
+
+    t = threading.Thread(target=rec.disconnect, daemon=True, name="lcc-rrd-drop")
+    t.start()
+    t.join(2.0)
+    if t.is_alive():  # the writer is stuck: Rerun's at-exit flush would be too
+        rr.unregister_shutdown()
+    try:
+        tmp.unlink()
+    except OSError:
+        pass
+
+
+def _reason(message: str, tmp: Path) -> str:
+    """A file writer's error as the reason of a one-line error (a full disk said plainly)."""
+    from lcc_synth.outputs import free_bytes
+
+    try:
+        if free_bytes(tmp) < (1 << 20):
+            return "No space left on device"
+    except OSError:
+        pass
+    return f"the recording's file writer stopped ({message})"
+
+
+def written_path(rec: Any) -> Path | None:
+    """The file a recording of :func:`open_recording` was published as (after its block;
+    ``None`` before, or for a recording that could not be written)."""
+    return _state(rec).written
+
+
+def set_status(rec: Any, status: str, detail: str = "") -> None:
+    """The status :func:`open_recording` records when its block ends normally: ``"complete"``
+    (the default), ``"partial"`` (some controllers failed: ``detail`` says which) or
+    ``"failed"`` (no result)."""
+    if status not in ("complete", "partial", "failed"):
+        raise ValueError(f"status must be complete, partial or failed, got {status!r}")
+    _state(rec).status = (status, detail)
 
 
 def record_text(rec: Any, entity: str, markdown: str) -> None:
@@ -207,8 +328,14 @@ def _send_series(
 
 
 def _flush_started(rec: Any) -> None:
-    """Start writing what was logged without waiting (the context manager's exit waits)."""
-    rec.flush(timeout_sec=0.0)
+    """Start writing what was logged without waiting (the context manager's exit waits); a
+    file writer that has stopped (a full disk) is remembered and reported when the recording
+    is finalised, not raised in the middle of the work."""
+    try:
+        rec.flush(timeout_sec=0.0)
+    except RuntimeError as err:
+        if "timed out" not in str(err).lower():
+            _state(rec).failure = str(err)
 
 
 def _fmt(value: Any) -> str:
@@ -307,6 +434,12 @@ class _RecState:
     rows: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
     runs: dict[tuple[str, str], _RunFacts] = field(default_factory=dict)
     colors: dict[str, tuple[int, int, int]] = field(default_factory=dict)
+    #: the file asked for, the file published (:func:`written_path`), how the run ended
+    #: (:func:`set_status`) and a file-writer failure seen while recording
+    target: Path | None = None
+    written: Path | None = None
+    status: tuple[str, str] = ("complete", "")
+    failure: str = ""
 
     def color(self, key: str) -> tuple[int, int, int]:
         if key not in self.colors:

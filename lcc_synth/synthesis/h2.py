@@ -452,34 +452,60 @@ class LMIResult:
     info: dict = field(default_factory=dict)
 
 
-def solve_checked(prob, what: str, hint: str = "") -> tuple[str, float]:
-    """Solve a cvxpy problem with Clarabel (named explicitly); raise on failure.
-
-    Accepts ``optimal`` and ``optimal_inaccurate`` (the caller checks the *result*: eigenvalues
-    and the true H2 norm); anything else is a :class:`SynthesisError`.
-    """
-    import time
+def _clarabel(prob) -> tuple[str, float | None, list]:
+    """Solve ``prob`` with Clarabel (named explicitly; see STACK_NOTES: left to choose, cvxpy
+    picks SCS); returns its status, value and every variable's value, which is what comes back
+    from :func:`~lcc_synth.interrupts.call_in_child`."""
     import warnings
 
     import cvxpy as cp
 
-    t0 = time.perf_counter()
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # "solution may be inaccurate"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # "solution may be inaccurate"
+        try:
             prob.solve(solver=cp.CLARABEL)
-    except cp.error.SolverError as err:
+        except cp.error.SolverError as err:
+            return "solver_error", str(err), []
+    return prob.status, prob.value, [v.value for v in prob.variables()]
+
+
+def solve_checked(prob, what: str, hint: str = "") -> tuple[str, float, float]:
+    """Solve a cvxpy problem with Clarabel (named explicitly); raise on failure.
+
+    The solve runs in a forked child process (:func:`lcc_synth.interrupts.call_in_child`), so
+    that Ctrl-C or SIGTERM stops it at once: cvxpy's compilation and Clarabel hold the
+    interpreter lock for seconds at a time on large designs. The variables of ``prob`` get the
+    solution's values (bit for bit those of an in-process solve).
+
+    Accepts ``optimal`` and ``optimal_inaccurate`` (the caller checks the *result*: eigenvalues
+    and the true H2 norm); anything else is a :class:`SynthesisError`.
+
+    Returns
+    -------
+    status : str
+    seconds : float
+        Wall time of the solve.
+    value : float
+        The optimal value.
+    """
+    import time
+
+    from lcc_synth.interrupts import call_in_child
+
+    t0 = time.perf_counter()
+    status, value, values = call_in_child(_clarabel, prob)
+    if status == "solver_error":
         raise SynthesisError(
-            f"{what}: Clarabel failed ({err}); the problem is probably infeasible or "
+            f"{what}: Clarabel failed ({value}); the problem is probably infeasible or "
             f"badly conditioned{hint}",
             {"status": "solver_error"},
-        ) from None
-    dt = time.perf_counter() - t0
-    if prob.status not in ("optimal", "optimal_inaccurate"):
-        raise SynthesisError(
-            f"{what}: solver status {prob.status!r}{hint}", {"status": prob.status}
         )
-    return prob.status, dt
+    dt = time.perf_counter() - t0
+    if status not in ("optimal", "optimal_inaccurate"):
+        raise SynthesisError(f"{what}: solver status {status!r}{hint}", {"status": status})
+    for var, val in zip(prob.variables(), values, strict=True):
+        var.save_value(val)
+    return status, dt, float(value)
 
 
 def lmi_full_state(plant: H2Plant, eps: float = 1e-7) -> LMIResult:
@@ -499,9 +525,9 @@ def lmi_full_state(plant: H2Plant, eps: float = 1e-7) -> LMIResult:
     cons = [X >> eps * np.eye(nx), -(M + M.T) / 2 >> 0, cp.bmat([[W, Z], [Z.T, X]]) >> 0]
     obj = cp.Minimize(cp.trace(plant.Q @ X) + plant.r * W[0, 0])
     prob = cp.Problem(obj, cons)
-    status, dt = solve_checked(prob, "full-state H2 LMI")
+    status, dt, value = solve_checked(prob, "full-state H2 LMI")
     Xv, Zv = X.value, Z.value
     g = np.linalg.solve(Xv.T, Zv.T).T.ravel()
     Mv = plant.A @ Xv + Xv @ plant.A.T + plant.B @ Zv + Zv.T @ plant.B.T + plant.Bw @ plant.Bw.T
     residual = float(max(np.max(np.linalg.eigvalsh((Mv + Mv.T) / 2)), 0.0))
-    return LMIResult(g, math.sqrt(max(prob.value, 0.0)), status, dt, residual)
+    return LMIResult(g, math.sqrt(max(value, 0.0)), status, dt, residual)

@@ -130,7 +130,7 @@ def string_lmi(
     cons = [k for k in cons if k is not None]
     prob = cp.Problem(cp.Minimize(cp.trace(plant.Q @ X) + plant.r * W[0, 0]), cons)
     progress(f"synthesis: string-stability LMI solve ({plant.nx} states, Clarabel)")
-    status, dt = solve_checked(
+    status, dt, value = solve_checked(
         prob,
         f"string-stability LMI (gamma = {gamma:g})",
         "; no gain of this pattern is certified string stable by the LMI (one common, "
@@ -145,7 +145,7 @@ def string_lmi(
     Hv = Mv + plant.Bw @ plant.Bw.T
     top = [np.max(np.linalg.eigvalsh((S + S.T) / 2)) for S in (Hv, Bv)]
     residual = float(max(*top, 0.0))
-    return LMIResult(g, math.sqrt(max(prob.value, 0.0)), status, dt, residual, {"gamma": gamma})
+    return LMIResult(g, math.sqrt(max(value, 0.0)), status, dt, residual, {"gamma": gamma})
 
 
 @dataclass

@@ -221,7 +221,7 @@ def convex_restriction(
         + plant.r * W[0, 0]
     )
     prob = cp.Problem(obj, cons)
-    status, dt = solve_checked(
+    status, dt, value = solve_checked(
         prob,
         "structured H2 convex restriction",
         "; the restriction certifies no gain of this pattern (use method = 'direct' to "
@@ -240,7 +240,7 @@ def convex_restriction(
     cones += [len(P_idx), *(len(w) for w in windows), len(P_idx) + 1]
     return LMIResult(
         g,
-        math.sqrt(max(prob.value, 0.0)),
+        math.sqrt(max(value, 0.0)),
         status,
         dt,
         residual,

@@ -1,0 +1,92 @@
+"""The real ``lcc-synth`` command in a subprocess, for the tests of failure paths.
+
+``run_cli`` runs it to the end; ``start_cli`` starts it and returns the ``Popen`` (to send a
+signal at a chosen moment). Both run the installed console script (``lcc-synth``), the way a
+user does, from a working directory of the test's choosing, with Rerun's analytics off and a
+non-interactive matplotlib; ``PYTHONPATH`` (a worktree's package) is passed on.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+PROBLEMS = REPO / "problems"
+
+
+def cli_command() -> list[str]:
+    """The console script next to this interpreter (the venv's), else ``python -m``."""
+    script = Path(sys.executable).with_name("lcc-synth")
+    if script.is_file():
+        return [str(script)]
+    found = shutil.which("lcc-synth")
+    if found:
+        return [found]
+    return [sys.executable, "-m", "lcc_synth.cli.main"]
+
+
+def cli_env(**extra: str) -> dict[str, str]:
+    env = dict(os.environ)
+    env.update(RERUN_ANALYTICS="0", MPLBACKEND="Agg", PYTHONUNBUFFERED="1")
+    env.update(extra)
+    return env
+
+
+def run_cli(
+    args: Sequence[str], cwd: str | Path, timeout: float = 300, env: dict | None = None,
+    preexec_fn: Callable[[], None] | None = None,
+) -> subprocess.CompletedProcess:  # fmt: skip
+    """``lcc-synth ARGS`` to the end; text output captured."""
+    return subprocess.run(
+        [*cli_command(), *map(str, args)], cwd=cwd, env=env or cli_env(), capture_output=True,
+        text=True, timeout=timeout, preexec_fn=preexec_fn,
+    )  # fmt: skip
+
+
+def start_cli(
+    args: Sequence[str], cwd: str | Path, env: dict | None = None
+) -> subprocess.Popen:
+    """``lcc-synth ARGS`` started (stdout and stderr piped, text)."""
+    return subprocess.Popen(
+        [*cli_command(), *map(str, args)], cwd=cwd, env=env or cli_env(),
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+
+
+def wait_for(predicate: Callable[[], bool], timeout: float, poll: float = 0.01) -> bool:
+    """Poll ``predicate`` until it holds (True) or ``timeout`` seconds pass (False)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(poll)
+    return predicate()
+
+
+def one_line_error(stderr: str) -> bool:
+    """Does ``stderr`` end with exactly one ``lcc-synth ...: error: ...`` line and hold no
+    traceback?"""
+    lines = [ln for ln in stderr.splitlines() if ln.strip()]
+    errors = [ln for ln in lines if ": error: " in ln]
+    return "Traceback" not in stderr and len(errors) == 1 and lines[-1] == errors[0]
+
+
+def rerun_binary() -> str:
+    """The ``rerun`` command of this environment (for ``rerun rrd verify``)."""
+    script = Path(sys.executable).with_name("rerun")
+    return str(script) if script.is_file() else "rerun"
+
+
+def rrd_verifies(path: str | Path) -> bool:
+    """Does ``rerun rrd verify PATH`` accept the file (complete, footer included)?"""
+    proc = subprocess.run(
+        [rerun_binary(), "rrd", "verify", str(path)], capture_output=True, text=True,
+        timeout=120, env=cli_env(CI="1"),
+    )  # fmt: skip
+    return proc.returncode == 0
