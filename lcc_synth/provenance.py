@@ -61,7 +61,7 @@ def solver_of(table: Mapping[str, Any]) -> str | None:
 def provenance(
     problem: str | Path | None,
     *,
-    backend: str | Mapping[str, str] = "builtin",
+    backend: str | Mapping[str, str] | None = "builtin",
     seeds: Any = None,
     controllers: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> dict[str, Any]:
@@ -71,8 +71,9 @@ def provenance(
     ----------
     problem : path-like or None
         The problem file (its name, path and SHA-256); ``None`` for the built-in default.
-    backend : str or mapping
-        The simulator (``"builtin"`` or ``"sumo"``), or ``{scenario: backend}``.
+    backend : str, mapping or None
+        The simulator (``"builtin"`` or ``"sumo"``), or ``{scenario: backend}``; ``None`` for a
+        command that simulates nothing (``synthesize``, ``analyze``, ``regions``).
     seeds : any
         The random seeds (e.g. ``{"seed": 7, "draws": 100}`` or ``{scenario: seed}``).
     controllers : mapping, optional

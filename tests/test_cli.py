@@ -78,7 +78,7 @@ def test_unknown_command_prints_the_top_level_usage(capsys):
 
 # ------------------------------------------------------------- options that apply, and no more
 
-_RECORD = {"--rrd", "--no-record"}
+_RECORD = {"--rrd", "--no-record", "--overwrite"}
 #: Every command's options (the audit): a simulation records steps (--record-every); analyze,
 #: regions, synthesize and sweep record no steps; review reads a recording.
 EXPECTED_OPTIONS = {

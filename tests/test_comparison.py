@@ -203,7 +203,9 @@ def test_suite_table_equals_direct_simulation(suite_run, problem_file):
                 "aeb_activations": int(aeb_activations(res)[0]),
                 "collisions": int(collisions(res)[0]),
             }
-            assert set(row) == {*SUITE_METRICS, "collided"}
+            assert set(row) == {*SUITE_METRICS, "collided", "failed_steps"}
+            stats = res.controller_stats or {}  # the MPC's fallbacks and errors, 0 for the rest
+            assert row["failed_steps"] == stats.get("fallbacks", 0) + stats.get("errors", 0)
             for key, value in expect.items():
                 assert row[key] == pytest.approx(value, rel=1e-12, abs=0), (sname, cname, key)
 
@@ -318,10 +320,19 @@ def test_cli_run_json_files_and_recording(problem_file, capsys, tmp_path):
     assert code == 0
     out = capsys.readouterr().out
     doc = json.loads(out)  # exactly one JSON object on stdout
-    assert list(doc) == ["results"]
+    assert list(doc) == ["results", "provenance"]
     assert set(doc["results"]) == {"brake", "sine"}
     assert set(doc["results"]["sine"]) == {"all_hdv", "paper"}
-    assert set(doc["results"]["sine"]["paper"]) == {*SUITE_METRICS, "collided"}
+    assert set(doc["results"]["sine"]["paper"]) == {*SUITE_METRICS, "collided", "failed_steps"}
+    prov = doc["provenance"]  # the file's own bytes, hashed independently
+    import hashlib
+
+    assert prov["problem"]["sha256"] == hashlib.sha256(problem_file.read_bytes()).hexdigest()
+    assert prov["backend"] == {"brake": "builtin", "sine": "builtin"}
+    assert set(prov["solvers"]) >= {"all_hdv", "paper"} and prov["solvers"]["paper"] is None
+    from lcc_synth import __version__
+
+    assert prov["version"] == __version__
     (run_dir,) = (tmp_path / "res").iterdir()
     assert run_dir.name.startswith("short_suite-")
     names = {p.name for p in run_dir.iterdir()}

@@ -188,42 +188,51 @@ def _print_human(doc: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lcc_synth.errors import ConfigError
+    from lcc_synth.errors import ConfigError, FileError
+    from lcc_synth.outputs import check_file
+    from lcc_synth.provenance import provenance
     from lcc_synth.recording import record_analysis_file, recording_path
 
     recording_path(args, "check")  # a bad --rrd fails before the analysis runs
+    if args.png:  # an existing --png needs --overwrite: refused before the analysis runs
+        check_file(args.png, "--png", overwrite=args.overwrite)
     doc, extra = analyze(args.problem)
     rrd = recording_path(args, doc["problem"])
-    if rrd is not None:
-        import numpy as np
+    prov = provenance(args.problem, backend=None)
+    if args.png and not extra["reports"]:
+        raise ConfigError(
+            "--png", "needs [cases.NAME] tables on a system with a head vehicle", doc["file"]
+        )
+    written, error = [], None
+    try:  # a file that cannot be written (a full disk) does not hide the report printed below
+        if rrd is not None:
+            import numpy as np
 
-        omega = extra["options"].omega()
-        curves = {
-            name: (omega, np.abs(gamma(omega)), rep.as_dict())
-            for name, (gamma, rep, _label) in extra["reports"].items()
-        }
-        record_analysis_file(rrd, doc["problem"], gamma=curves, summary=doc)
-        print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
-    written = []
-    if args.png:
-        if not extra["reports"]:
-            raise ConfigError(
-                "--png", "needs [cases.NAME] tables on a system with a head vehicle", doc["file"]
-            )
-        import numpy as np
+            omega = extra["options"].omega()
+            curves = {
+                name: (omega, np.abs(gamma(omega)), rep.as_dict())
+                for name, (gamma, rep, _label) in extra["reports"].items()
+            }
+            rrd = record_analysis_file(rrd, doc["problem"], gamma=curves, summary=doc,
+                                       overwrite=args.overwrite, provenance=prov)  # fmt: skip
+            print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
+        if args.png:
+            import numpy as np
 
-        from lcc_synth.figures import plot_gamma_curves
+            from lcc_synth.figures import plot_gamma_curves
 
-        omega = extra["options"].omega()
-        curves = {}
-        for gamma, rep, label in extra["reports"].values():
-            mag = np.abs(gamma(omega))
-            curves[label] = (mag, rep)
-        title = f"{doc['problem']}: head-to-tail |Gamma(jw)| (Fig. 9)"
-        written.append(str(plot_gamma_curves(curves, omega, args.png, title=title)))
+            omega = extra["options"].omega()
+            curves = {}
+            for gamma, rep, label in extra["reports"].values():
+                mag = np.abs(gamma(omega))
+                curves[label] = (mag, rep)
+            title = f"{doc['problem']}: head-to-tail |Gamma(jw)| (Fig. 9)"
+            written.append(str(plot_gamma_curves(curves, omega, args.png, title=title)))
+    except FileError as err:
+        error = err
     doc["written"] = written
     if args.json:
-        print(json.dumps(doc))
+        print(json.dumps({**doc, "provenance": prov}))
     elif "controllability" in doc and "reachable_verdict" in doc["controllability"]:
         from lcc_synth.cli.analyze_platoon import print_platoon
 
@@ -232,4 +241,7 @@ def run(args: argparse.Namespace) -> int:
         _print_human(doc)
         for w in written:
             print(f"wrote {w}")
+    if error is not None:
+        print(f"lcc-synth analyze: error: {error}", file=sys.stderr)
+        return 1
     return 0

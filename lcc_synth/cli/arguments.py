@@ -21,12 +21,17 @@ def add_problem_arguments(
 
 
 def add_recording(parser: argparse.ArgumentParser, steps: bool = True) -> None:
-    """``--rrd``, ``--no-record`` and, for the commands that record simulation ``steps``,
-    ``--record-every`` (imported only when a command is set up, so that ``lcc-synth --help``
-    stays fast)."""
+    """``--rrd``, ``--no-record``, ``--overwrite`` and, for the commands that record simulation
+    ``steps``, ``--record-every`` (imported only when a command is set up, so that
+    ``lcc-synth --help`` stays fast)."""
     from lcc_synth.recording import add_recording_arguments
 
     add_recording_arguments(parser, steps=steps)
+    parser.add_argument(
+        "--overwrite", action="store_true",
+        help="replace files named by --rrd, --out FILE, --png or --figure if they exist "
+        "(default: such a file is refused before any work; default names never collide)",
+    )  # fmt: skip
 
 
 def check_options(args: argparse.Namespace) -> None:

@@ -29,12 +29,17 @@ def run(args: argparse.Namespace) -> int:
     import time
 
     from lcc_synth.analysis.region_specs import expansion, region_specs_from, run_region_specs
-    from lcc_synth.errors import ConfigError
+    from lcc_synth.errors import ConfigError, FileError
+    from lcc_synth.outputs import check_file
     from lcc_synth.problem import load_problem, system_from
+    from lcc_synth.provenance import provenance
     from lcc_synth.recording import record_analysis_file, recording_path
 
     prob = load_problem(args.problem)
     rrd = recording_path(args, prob.name)  # a bad --rrd fails before the maps are computed
+    if args.png:  # an existing --png needs --overwrite: refused before the maps are computed
+        check_file(args.png, "--png", overwrite=args.overwrite)
+    prov = provenance(prob.path, backend=None)
     src = str(prob.path)
     if args.step is not None and not args.step > 0:
         raise ConfigError("--step", f"must be > 0, got {args.step}")
@@ -61,21 +66,26 @@ def run(args: argparse.Namespace) -> int:
             entry["baseline"] = specs[name].baseline
             entry["expansion"] = expansion(rm, maps[specs[name].baseline])
         doc["maps"][name] = entry
-    if rrd is not None:
-        reports = {n: {k: v for k, v in e.items() if k != "labels"} for n, e in doc["maps"].items()}
-        record_analysis_file(rrd, prob.name, regions=maps, region_reports=reports, summary=doc)
-        print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
-    written = []
-    if args.png:
-        from lcc_synth.figures import plot_region_maps
+    written, error = [], None
+    try:  # a file that cannot be written (a full disk) does not hide the report printed below
+        if rrd is not None:
+            reports = {n: {k: v for k, v in e.items() if k != "labels"}
+                       for n, e in doc["maps"].items()}  # fmt: skip
+            rrd = record_analysis_file(rrd, prob.name, regions=maps, region_reports=reports,
+                                       summary=doc, overwrite=args.overwrite, provenance=prov)
+            print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
+        if args.png:
+            from lcc_synth.figures import plot_region_maps
 
-        baselines = {n: maps[s.baseline] for n, s in specs.items() if s.baseline}
-        titles = {n: s.title for n, s in specs.items()}
-        written.append(str(plot_region_maps(maps, args.png, baselines, titles)))
+            baselines = {n: maps[s.baseline] for n, s in specs.items() if s.baseline}
+            titles = {n: s.title for n, s in specs.items()}
+            written.append(str(plot_region_maps(maps, args.png, baselines, titles)))
+    except FileError as err:
+        error = err
     doc["written"] = written
     if args.json:
-        print(json.dumps(doc))
-        return 0
+        print(json.dumps({**doc, "provenance": prov}))
+        return _failed(error)
     print(f"{doc['problem']} ({src}): {system.kind}, m = {system.m}, n = {system.n}, "
           f"v* = {system.v_star:g} m/s; {omega.size} frequencies in "
           f"[{omega[0]:g}, {omega[-1]:g}] rad/s")
@@ -107,4 +117,12 @@ def run(args: argparse.Namespace) -> int:
     print(f"total {total:.2f} s for {sum(m.points for m in maps.values())} points")
     for w in written:
         print(f"wrote {w}")
-    return 0
+    return _failed(error)
+
+
+def _failed(error) -> int:
+    """1 after a file that could not be written (its one line on stderr), else 0."""
+    if error is None:
+        return 0
+    print(f"lcc-synth regions: error: {error}", file=sys.stderr)
+    return 1

@@ -80,121 +80,219 @@ def _blueprint(suite, controllers, gamma_cases, design_names):
 
 
 def run(args: argparse.Namespace) -> int:
-    from contextlib import nullcontext
     from datetime import UTC, datetime
 
-    import numpy as np
-
-    from lcc_synth.analysis.string_stability import verdict_text
-    from lcc_synth.experiments.comparison import (
-        applies,
-        gamma_curves,
-        gamma_settings,
-        load_suite,
-        run_suite,
-    )
-    from lcc_synth.experiments.tables import (
-        format_table,
-        json_safe,
-        run_directory,
-        write_csv,
-        write_json,
-        write_markdown,
-    )
-    from lcc_synth.recording import (
-        open_recording,
-        record_gains,
-        record_gamma,
-        record_simulation,
-        recording_decimation,
-        recording_path,
-    )
-    from lcc_synth.synthesis.h2 import SynthesisError
+    from lcc_synth.errors import FileError
+    from lcc_synth.experiments.comparison import gamma_settings, load_suite
+    from lcc_synth.outputs import check_directory, new_directory, remove_if_empty
+    from lcc_synth.recording import recording_decimation, recording_path
 
     problem = Path(args.problem) if args.problem else default_problem()
     suite = load_suite(problem, _names(args.scenarios), _names(args.controllers))
     now = datetime.now(UTC)
     stamp = now.strftime("%Y%m%dT%H%M%SZ")
-    rrd = recording_path(args, suite.name, now=now)
+    rrd = recording_path(args, suite.name, now=now)  # a bad or existing --rrd: before the work
     every = recording_decimation(args)
-    ctrl_names = list(suite.controllers)
-    layouts = suite.layouts_used()
     settings = gamma_settings(suite)  # {layout: [(suffix, dt, latency, scenarios)]}
+    prov = _provenance(problem, suite)
+    log = sys.stderr if args.json else sys.stdout
+    # after every input check, before the long work: an unwritable or full --out fails now;
+    # the directory is new (exclusive create) and removed again if the run leaves it empty
+    check_directory(args.out, "--out", RESULTS_BYTES, "tables, details, gains and figures")
+    out_dir = new_directory(args.out, suite.name, stamp)
+    try:
+        result, curves, omega, rrd_written, rec_error = _simulate_and_record(
+            args, suite, rrd, every, settings, prov
+        )
+        if result is None:  # nothing could be designed or run
+            remove_if_empty(out_dir)
+            return 1
+        # what was computed is printed first: a file that cannot be written cannot hide it
+        _print_results(args, suite, result, curves, settings, log, prov)
+        failures = _failure_lines(result)
+        for line in failures:
+            print(f"lcc-synth run: {line}", file=sys.stderr)
+        try:
+            _write_files(args, problem, suite, result, curves, omega, out_dir, rrd_written, prov)
+        except FileError as err:
+            print(f"lcc-synth run: error: {err}", file=sys.stderr)
+            remove_if_empty(out_dir)
+            return 1
+    except BaseException:
+        remove_if_empty(out_dir)  # interrupted or failed before writing anything into it
+        raise
+    print(f"results: {out_dir}", file=log)
+    if rrd_written is not None:
+        print(f"recording: {rrd_written}  (open with: lcc-synth review {rrd_written})", file=log)
+    t = result.timings
+    print(
+        f"time: controllers {t['controllers']:.1f} s, simulations {t['simulations']:.1f} s, "
+        f"string stability as run {t.get('string_stability', 0.0):.1f} s",
+        file=log,
+    )
+    if rec_error is not None:
+        print(f"lcc-synth run: error: {rec_error}", file=sys.stderr)
+        return 1
+    return 1 if failures else 0
+
+
+#: Bytes the results directory of a run needs at most (tables, details.json, gains files and
+#: PNG figures: 1.2 MB measured for problems/showcase.toml, six scenarios; 4x for margin).
+RESULTS_BYTES = 5e6
+
+
+def _provenance(problem: Path, suite) -> dict:
+    """The run's provenance (:func:`lcc_synth.provenance.provenance`): backends and seeds per
+    scenario, the solver of every controller."""
+    from lcc_synth.provenance import provenance
+
+    return provenance(
+        problem,
+        backend={s: ss.scenario.backend for s, ss in suite.scenarios.items()},
+        seeds={s: ss.scenario.seed for s, ss in suite.scenarios.items()},
+        controllers=suite.controllers,
+    )
+
+
+def _simulate_and_record(args, suite, rrd, every, settings, prov):
+    """Design, simulate and analyse the suite, recording as it goes. Returns ``(result,
+    curves, omega, recording written, recording error)``; ``result`` is ``None`` when no
+    controller could run (the reasons are printed)."""
+    import time
+    from contextlib import nullcontext
+
+    import numpy as np
+
+    from lcc_synth.errors import FileError
+    from lcc_synth.experiments.comparison import applies, gamma_curves, run_suite
+    from lcc_synth.recording import (
+        open_recording,
+        record_gains,
+        record_gamma,
+        record_provenance,
+        record_simulation,
+        set_status,
+        written_path,
+    )
+    from lcc_synth.synthesis.gains_file import gains_document
+
+    ctrl_names = list(suite.controllers)
     gamma_cases = [
         f"{lname}.{c}{suffix}" for lname, rows in settings.items() for suffix, *_ in rows
         for c in ctrl_names
     ]  # fmt: skip
     design_names = [
-        f"{lname}.{c}" for lname in layouts for c, t in suite.controllers.items()
+        f"{lname}.{c}" for lname in suite.layouts_used() for c, t in suite.controllers.items()
         if t.get("type") == "h2"
     ]
-    log = sys.stderr if args.json else sys.stdout
-    progress = not args.no_progress
-    # after every input check, before the long work: fail early on an unwritable --out
-    out_dir = run_directory(args.out, suite.name, stamp)
-
     if rrd is not None:
         bp = _blueprint(suite, ctrl_names, gamma_cases, design_names)
-        recording = open_recording(rrd, suite.name, blueprint=bp, scenario=suite.name)
+        recording = open_recording(rrd, suite.name, blueprint=bp, scenario=suite.name,
+                                   overwrite=bool(getattr(args, "overwrite", False)))
     else:
         recording = nullcontext(None)
+    result, curves, omega, rec = None, {}, np.logspace(*_OMEGA), None
+    try:
+        with recording as rec:
+            if rec is not None:
+                record_provenance(rec, prov)
 
-    with recording as rec:
+            def on_result(sname, cname, res, row, ctrl):
+                if rec is None:
+                    return
+                history = ctrl.history() if hasattr(ctrl, "history") else None
+                record_simulation(
+                    rec, res, sname, controller=cname, metrics=row, decimate=every,
+                    mpc_history=history or None,
+                )
 
-        def on_result(sname, cname, res, row, ctrl):
-            if rec is None:
-                return
-            history = ctrl.history() if hasattr(ctrl, "history") else None
-            record_simulation(
-                rec, res, sname, controller=cname, metrics=row, decimate=every,
-                mpc_history=history or None,
-            )
+            result = run_suite(suite, progress=not args.no_progress, on_result=on_result)
+            if not result.results or not any(result.results.values()):
+                for line in _failure_lines(result):
+                    print(f"lcc-synth run: {line}", file=sys.stderr)
+                if rec is not None:
+                    set_status(rec, "failed", "\n".join(_failure_lines(result)))
+                return None, {}, omega, None, None
+            t0 = time.perf_counter()
+            for lname, rows in settings.items():
+                curves[lname] = {}
+                for suffix, dt, lat, snames in rows:  # the controllers of those scenarios
+                    ctrls = {c: k for c, k in result.controllers[lname].items()
+                             if any(applies(suite.controllers[c], lname, s) for s in snames)}
+                    per = gamma_curves(ctrls, suite.layouts[lname], omega, dt, lat)
+                    curves[lname].update({f"{c}{suffix}": v for c, v in per.items()})
+            result.timings["string_stability"] = time.perf_counter() - t0
+            if rec is not None:
+                for lname, per in curves.items():
+                    for cname, (mag, rep) in per.items():
+                        w, m = (rep.omega, rep.ratio) if hasattr(rep, "ratio") else (omega, mag)
+                        record_gamma(rec, f"{lname}.{cname}", w, m, rep.as_dict())
+                for lname, per in result.designs.items():
+                    for cname, rep in per.items():
+                        record_gains(rec, f"{lname}.{cname}", gains_document(rep))
+                failures = _failure_lines(result)
+                if failures:
+                    set_status(rec, "partial", "\n".join(failures))
+    except FileError as err:  # the recording could not be written: the results still count
+        if result is None:
+            raise
+        return result, curves, omega, None, err
+    return result, curves, omega, (written_path(rec) if rec is not None else None), None
 
-        try:
-            result = run_suite(suite, progress=progress, on_result=on_result)
-        except SynthesisError as err:
-            print(f"lcc-synth run: synthesis failed: {err}", file=sys.stderr)
-            if not any(out_dir.iterdir()):
-                out_dir.rmdir()  # nothing was written: leave no empty results directory
-            return 1
 
-        import time
+def _print_results(args, suite, result, curves, settings, log, prov) -> None:
+    """The table (``--json``: the JSON document on stdout), collisions, controller statistics
+    and the as-run |Γ| lines."""
+    from lcc_synth.analysis.string_stability import verdict_text
+    from lcc_synth.experiments.tables import format_table, json_safe
 
-        t0 = time.perf_counter()
-        omega = np.logspace(*_OMEGA)
-        curves: dict[str, dict] = {}  # {layout: {controller + suffix: (|Gamma|, report)}}
-        for lname, rows in settings.items():
-            curves[lname] = {}
-            for suffix, dt, lat, snames in rows:  # the controllers that run in those scenarios
-                ctrls = {c: k for c, k in result.controllers[lname].items()
-                         if any(applies(suite.controllers[c], lname, s) for s in snames)}
-                per = gamma_curves(ctrls, suite.layouts[lname], omega, dt, lat)
-                curves[lname].update({f"{c}{suffix}": v for c, v in per.items()})
-        result.timings["string_stability"] = time.perf_counter() - t0
-        if rec is not None:
-            for lname, per in curves.items():
-                for cname, (mag, rep) in per.items():
-                    w, m = (rep.omega, rep.ratio) if hasattr(rep, "ratio") else (omega, mag)
-                    record_gamma(rec, f"{lname}.{cname}", w, m, rep.as_dict())
-            for lname, per in result.designs.items():
-                from lcc_synth.synthesis.gains_file import gains_document
+    if args.json:
+        print(json.dumps(json_safe({"results": result.table, "provenance": prov})))
+        for line in _collision_lines(result):
+            print(line, file=log)
+        return
+    print(_title(suite))
+    print(format_table(result.table))
+    for line in _collision_lines(result):
+        print(line)
+    from lcc_synth.cli.output import controller_stats_lines
 
-                for cname, rep in per.items():
-                    record_gains(rec, f"{lname}.{cname}", gains_document(rep))
+    stats = {f"{s}/{c}": r.controller_stats for s, per in result.results.items()
+             for c, r in per.items()}  # fmt: skip
+    for line in controller_stats_lines(stats):
+        print(line)
+    for lname, rows in settings.items():
+        for suffix, _, lat, snames in rows:
+            if suffix:
+                print(f"|Γ| on {lname} with the V2V latency {lat:g} s of {', '.join(snames)}:")
+            for cname in suite.controllers:
+                if f"{cname}{suffix}" in curves.get(lname, {}):
+                    rep = curves[lname][f"{cname}{suffix}"][1]
+                    print(f"|Γ| {lname}/{cname}{suffix}: {_gamma_line(rep, verdict_text)}")
 
-    # ---- files
+
+def _write_files(args, problem, suite, result, curves, omega, out_dir, rrd, prov) -> list[Path]:
+    """Every file of the results directory, each written atomically under a name built from
+    safe parts (:func:`lcc_synth.outputs.path_part`) inside ``out_dir``."""
+    from lcc_synth.experiments.tables import json_safe, write_csv, write_json, write_markdown
+    from lcc_synth.outputs import child, path_part, write_text
     from lcc_synth.synthesis.gains_file import write_gains
 
-    written = []
-    written.append(write_markdown(result.table, out_dir / "table.md", title=_title(suite)))
-    written.append(write_csv(result.table, out_dir / "table.csv"))
-    written.append(write_json(result.table, out_dir / "table.json"))
+    def name(*parts: str, ext: str) -> Path:
+        return child(out_dir, "_".join(path_part(p) for p in parts) + ext)
+
+    written = [
+        write_markdown(result.table, out_dir / "table.md", title=_title(suite), overwrite=False),
+        write_csv(result.table, out_dir / "table.csv", overwrite=False),
+        write_json(result.table, out_dir / "table.json", overwrite=False, provenance=prov),
+    ]
     for lname, per in result.designs.items():
         for cname, rep in per.items():
-            written.append(write_gains(out_dir / f"gains_{lname}_{cname}.json", rep))
+            written.append(write_gains(name("gains", lname, cname, ext=".json"), rep, False))
     details = {
         "problem": str(problem),
         "suite": suite.name,
+        "provenance": prov,
         "scenarios": {
             s: {"layout": ss.layout, "title": ss.title, "metrics_window": list(ss.metrics.window),
                 "metrics_vehicles": ss.metrics.vehicles, "backend": ss.scenario.backend}
@@ -202,9 +300,10 @@ def run(args: argparse.Namespace) -> int:
         },
         "layouts": {
             lname: {"kind": sy.kind, "m": sy.m, "n": sy.n, "v_star": sy.v_star}
-            for lname, sy in suite.layouts.items() if lname in layouts
+            for lname, sy in suite.layouts.items() if lname in suite.layouts_used()
         },
         "controller_tables": result.tables,
+        "failures": result.failures,
         "synthesis": {
             lname: {c: rep.as_dict() for c, rep in per.items()}
             for lname, per in result.designs.items()
@@ -219,61 +318,38 @@ def run(args: argparse.Namespace) -> int:
         "timings_s": result.timings,
         "recording": str(rrd) if rrd else None,
     }
-    path = out_dir / "details.json"
-    path.write_text(json.dumps(json_safe(details), indent=2, default=str) + "\n")
-    written.append(path)
-
+    text = json.dumps(json_safe(details), indent=2, default=str) + "\n"
+    written.append(write_text(out_dir / "details.json", text))
     if not args.no_figures:
         from lcc_synth.figures import plot_gamma_curves, plot_profiles
 
         for sname, per in result.results.items():
-            ss = suite.scenarios[sname]
-            written.append(
-                plot_profiles(per, out_dir / f"profiles_{sname}.png", title=ss.title or sname)
-            )
+            if per:
+                ss = suite.scenarios[sname]
+                written.append(plot_profiles(per, name("profiles", sname, ext=".png"),
+                                             title=ss.title or sname))  # fmt: skip
         for lname, per in curves.items():
             if per:
                 sy = suite.layouts[lname]
-                written.append(
-                    plot_gamma_curves(
-                        per, omega, out_dir / f"gamma_{lname}.png",
-                        title=f"|Γ(jω)| on layout {lname} ({sy.kind}, m={sy.m}, n={sy.n})",
-                    )
-                )
+                written.append(plot_gamma_curves(
+                    per, omega, name("gamma", lname, ext=".png"),
+                    title=f"|Γ(jω)| on layout {lname} ({sy.kind}, m={sy.m}, n={sy.n})",
+                ))  # fmt: skip
+    return written
 
-    if args.json:
-        print(json.dumps(json_safe({"results": result.table})))
-        for line in _collision_lines(result):
-            print(line, file=log)
-    else:
-        print(_title(suite))
-        print(format_table(result.table))
-        for line in _collision_lines(result):
-            print(line)
-        from lcc_synth.cli.output import controller_stats_lines
 
-        stats = {f"{s}/{c}": r.controller_stats for s, per in result.results.items()
-                 for c, r in per.items()}  # fmt: skip
-        for line in controller_stats_lines(stats):
-            print(line)
-        for lname, rows in settings.items():
-            for suffix, _, lat, snames in rows:
-                if suffix:
-                    print(f"|Γ| on {lname} with the V2V latency {lat:g} s of {', '.join(snames)}:")
-                for cname in ctrl_names:
-                    if f"{cname}{suffix}" in curves[lname]:
-                        rep = curves[lname][f"{cname}{suffix}"][1]
-                        print(f"|Γ| {lname}/{cname}{suffix}: {_gamma_line(rep, verdict_text)}")
-    print(f"results: {out_dir}", file=log)
-    if rrd is not None:
-        print(f"recording: {rrd}  (open with: lcc-synth review {rrd})", file=log)
-    t = result.timings
-    print(
-        f"time: controllers {t['controllers']:.1f} s, simulations {t['simulations']:.1f} s, "
-        f"string stability as run {t.get('string_stability', 0.0):.1f} s",
-        file=log,
-    )
-    return 0
+def _failure_lines(result) -> list[str]:
+    """``failed: LAYOUT/CONTROLLER: not run: why`` and ``failed: SCENARIO/CONTROLLER: its
+    solver failed on k steps`` lines (what makes ``run`` exit 1)."""
+    lines = [f"failed: {lname}/{cname}: not run: {why}"
+             for lname, per in result.failures.items() for cname, why in per.items()]
+    for sname, per in result.table.items():
+        for cname, row in per.items():
+            if row.get("failed_steps"):
+                st = result.results[sname][cname].controller_stats or {}
+                lines.append(f"failed: {sname}/{cname}: its solver failed on "
+                             f"{row['failed_steps']} of {st.get('steps', '?')} steps")
+    return lines
 
 
 def _collision_lines(result) -> list[str]:

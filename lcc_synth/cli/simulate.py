@@ -52,9 +52,22 @@ def load(args):
 
     if args.seeds is not None and args.seeds < 1:
         raise ConfigError("--seeds", f"must be >= 1, got {args.seeds}")
-    spec = load_spec(args.problem, seeds=args.seeds)
+    spec = load_spec(args.problem, seeds=args.seeds, keep_going=True)
     check_backend(spec.scenario)  # SUMO missing: before any run
     return spec
+
+
+def run_provenance(spec) -> dict[str, Any]:
+    """The provenance of a ``simulate`` run (:func:`lcc_synth.provenance.provenance`)."""
+    from lcc_synth.provenance import provenance
+
+    sc = spec.scenario
+    tables = {n: getattr(c, "source_table", None) or c.toml_table()
+              for n, c in spec.controllers.items()}  # fmt: skip
+    return provenance(
+        spec.source, backend=sc.backend, controllers=tables,
+        seeds={"seed": sc.seed, "draws": sc.batch, "first_index": sc.first_index},
+    )  # fmt: skip
 
 
 def chunks(scenario, budget: float = MEMORY_BUDGET) -> list:
@@ -132,7 +145,7 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
     NaN: the means are over the other draws); those controllers come last."""
     import numpy as np
 
-    from lcc_synth.experiments.tables import collided
+    from lcc_synth.experiments.tables import failed_steps, failure_rank
     from lcc_synth.metrics import PHASE_PREFIX, aggregate
 
     cfg = spec.metrics
@@ -141,8 +154,11 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
         entry = aggregate(arrays)
         entry["controller"], entry["controller_stats"], entry["wall_time_s"] = info[name]
         entry["collided"] = entry["scenarios_with_collision"] > 0
+        entry["failed_steps"] = failed_steps(entry["controller_stats"])
         out[name] = entry
-    if cfg.baseline is not None:
+    for name, why in getattr(spec, "failed", {}).items():  # could not be built: no metrics
+        out[name] = {"failed": why, "collided": False, "failed_steps": 0}
+    if cfg.baseline is not None and cfg.baseline in per:
         a0, f0 = per[cfg.baseline]["aave"], per[cfg.baseline]["fuel_ml"]
         for name, arrays in per.items():
             if name == cfg.baseline:
@@ -164,7 +180,7 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
                     p: _mean_finite(_pct(per[cfg.baseline][k], arrays[k]))
                     for p, k in ((p, PHASE_PREFIX + p) for p, _ in cfg.phases)
                 }
-    return dict(sorted(out.items(), key=lambda item: collided(item[1])))
+    return dict(sorted(out.items(), key=lambda item: failure_rank(item[1])))
 
 
 def report(spec, results) -> dict[str, Any]:
@@ -219,11 +235,18 @@ def print_table(spec, rep: dict[str, Any], file=None, collisions=None) -> None:
         cols += ["AAVE red. %", "fuel red. %"]
     cols += ["min s (m)", "min TTC (s)", "max|u|", "jerk rms", "jerk 1 s", "ISO 15622 jerk", "AEB",
              "collisions"]  # fmt: skip
+    from lcc_synth.experiments.tables import row_label
+
     rows = []
     for name, e in rep.items():
+        if e.get("failed"):  # not run: no metrics
+            rows.append([row_label(name, e)] + ["n/a"] * (len(cols) - 1))
+            continue
         b = e["batch"]
         k = e["scenarios_with_collision"]
         mark = "" if not k else " (collided)" if b == 1 else f" (collided {k}/{b})"
+        steps = e.get("failed_steps") or 0
+        mark += f" (QP failed on {steps} step{'s' if steps != 1 else ''})" if steps else ""
         row = [
             name + mark,
             _fmt(e["aave"], e["aave_std"], b, 4),
@@ -259,7 +282,8 @@ def print_table(spec, rep: dict[str, Any], file=None, collisions=None) -> None:
         print(line, file=file)
     from lcc_synth.cli.output import controller_stats_lines
 
-    for line in controller_stats_lines({n: e["controller_stats"] for n, e in rep.items()}):
+    stats = {n: e["controller_stats"] for n, e in rep.items() if "controller_stats" in e}
+    for line in controller_stats_lines(stats):
         print(line, file=file)
 
 
@@ -271,6 +295,8 @@ def phase_lines(rep: dict[str, Any], cfg) -> list[str]:
     heads = ", ".join(f"{p} [{w[0]:g}, {w[1]:g}] s" for p, w in cfg.phases)
     out = [f"fuel per phase (mL): {heads}"]
     for name, e in rep.items():
+        if e.get("failed"):
+            continue
         red = (e.get("reduction_vs_baseline") or {}).get("fuel_phases_pct", {})
         cells = [f"{e['fuel_ml_phases'][p]:.2f}" + (f" ({red[p]:+.2f} %)" if p in red else "")
                  for p, _ in cfg.phases]  # fmt: skip
@@ -283,6 +309,8 @@ def collision_lines(rep: dict[str, Any], collisions=None) -> list[str]:
     (``collisions``: ``{name: [line, ...]}`` of the draws that did, as in :func:`print_table`)."""
     out = []
     for name, e in rep.items():
+        if e.get("failed"):
+            continue
         b, k = e["batch"], e["scenarios_with_collision"]
         if not k:
             continue
@@ -295,46 +323,81 @@ def collision_lines(rep: dict[str, Any], collisions=None) -> list[str]:
     return out
 
 
+def failure_lines(rep: dict[str, Any]) -> list[str]:
+    """``failed: NAME: ...`` lines for the controllers of :func:`report` that did not run, or
+    whose solver failed on some steps (what makes ``simulate`` exit 1)."""
+    out = []
+    for name, e in rep.items():
+        if e.get("failed"):
+            out.append(f"failed: {name}: not run: {e['failed']}")
+        elif e.get("failed_steps"):
+            st = e.get("controller_stats") or {}
+            why = ", ".join(f"{k} {v}" for k, v in (st.get("qp_failures") or {}).items())
+            out.append(
+                f"failed: {name}: its solver failed on {e['failed_steps']} of "
+                f"{st.get('steps', '?')} steps (fallbacks {st.get('fallbacks', 0)}, errors "
+                f"{st.get('errors', 0)}{'; QP statuses: ' + why if why else ''})"
+            )
+    return out
+
+
 def run(args) -> int:
     from contextlib import ExitStack
 
+    from lcc_synth.errors import ConfigError, FileError
     from lcc_synth.metrics import concatenate, per_scenario
     from lcc_synth.recording import SimulationRecorder
 
-    with ExitStack() as stack:  # the recording is finalised however the run ends
-        recorder = SimulationRecorder(args, stack)
-        spec = load(args)
-        if args.record_seeds is not None and spec.scenario.batch == 1:
-            from lcc_synth.errors import ConfigError
+    rep: dict[str, Any] | None = None
+    rec_error: FileError | None = None
+    try:
+        with ExitStack() as stack:  # the recording is finalised however the run ends
+            recorder = SimulationRecorder(args, stack)
+            spec = load(args)
+            prov = run_provenance(spec)
+            recorder.provenance = prov
+            if args.record_seeds is not None and spec.scenario.batch == 1:
+                raise ConfigError(
+                    "--record-seeds", "applies to a study of several scenarios (--seeds N, or "
+                    "[scenario].batch > 1); this one has a single scenario",
+                )  # fmt: skip
+            if recorder.enabled:  # a bad --record-seeds fails before the simulation runs
+                from lcc_synth.recording.cli import parse_record_seeds
 
-            raise ConfigError(
-                "--record-seeds", "applies to a study of several scenarios (--seeds N, or "
-                "[scenario].batch > 1); this one has a single scenario",
-            )  # fmt: skip
-        if recorder.enabled:  # a bad --record-seeds fails before the simulation runs
-            from lcc_synth.recording.cli import parse_record_seeds
-
-            parse_record_seeds(getattr(args, "record_seeds", None), spec.scenario.batch)
-        offsets = [c.first_index - spec.scenario.first_index for c in chunks(spec.scenario)]
-        parts: dict[str, list] = {name: [] for name in spec.controllers}
-        crashes: dict[str, list[str]] = {name: [] for name in spec.controllers}
-        info: dict[str, tuple] = {}
-        for chunk, name, result in iter_results(spec):
-            recorder(spec, name, result, offset=offsets[chunk])  # the selected seeds
-            parts[name].append(per_scenario(result, spec.metrics))
-            crashes[name] += result.collision_report()[: _MAX_LISTED - len(crashes[name])]
-            wall = info[name][2] + result.wall_time if name in info else result.wall_time
-            info[name] = (result.controller_info, result.controller_stats, wall)
-            del result
-        per = {n: concatenate(p) for n, p in parts.items()}
-        rep = report_from(spec, per, info)
-        recorder.metrics(rep, per)
-    if recorder.path is not None:
-        print(f"recording: {recorder.path} (lcc-synth review {recorder.path})", file=sys.stderr)
+                parse_record_seeds(getattr(args, "record_seeds", None), spec.scenario.batch)
+            offsets = [c.first_index - spec.scenario.first_index for c in chunks(spec.scenario)]
+            parts: dict[str, list] = {name: [] for name in spec.controllers}
+            crashes: dict[str, list[str]] = {name: [] for name in spec.controllers}
+            info: dict[str, tuple] = {}
+            for chunk, name, result in iter_results(spec):
+                recorder(spec, name, result, offset=offsets[chunk])  # the selected seeds
+                parts[name].append(per_scenario(result, spec.metrics))
+                crashes[name] += result.collision_report()[: _MAX_LISTED - len(crashes[name])]
+                wall = info[name][2] + result.wall_time if name in info else result.wall_time
+                info[name] = (result.controller_info, result.controller_stats, wall)
+                del result
+            per = {n: concatenate(p) for n, p in parts.items()}
+            rep = report_from(spec, per, info)
+            recorder.metrics(rep, per)
+            failures = failure_lines(rep)
+            if failures:
+                recorder.status("failed" if not per else "partial", "\n".join(failures))
+    except FileError as err:  # the recording could not be written: the results still print
+        if rep is None:
+            raise
+        rec_error = err
+    if recorder.written is not None:
+        path = recorder.written
+        print(f"recording: {path} (lcc-synth review {path})", file=sys.stderr)
     if args.json:
-        print(json.dumps({"results": _clean(rep)}))
+        print(json.dumps({"results": _clean(rep), "provenance": prov}))
         for line in collision_lines(rep, crashes):
             print(line, file=sys.stderr)
     else:
         print_table(spec, rep, collisions=crashes)
-    return 0
+    for line in failures:
+        print(f"lcc-synth simulate: {line}", file=sys.stderr)
+    if rec_error is not None:
+        print(f"lcc-synth simulate: error: {rec_error}", file=sys.stderr)
+        return 1
+    return 1 if failures else 0

@@ -29,8 +29,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lcc_synth.errors import ConfigError
+    from lcc_synth.errors import ConfigError, FileError
+    from lcc_synth.outputs import check_file
     from lcc_synth.problem import check_top_level, load_problem
+    from lcc_synth.provenance import provenance
     from lcc_synth.recording import (
         record_platoon_synthesis_file,
         record_synthesis_file,
@@ -61,30 +63,42 @@ def run(args: argparse.Namespace) -> int:
         why = (f"not available for kind = {spec.system.kind!r} yet" if platoon else
                f"only design = 'sparsity' draws a Pareto front; this one is {spec.design!r}")
         raise ConfigError("--figure", why, src)
-    rrd = recording_path(args, spec.name)  # bad --rrd fails before the synthesis runs
+    # every output checked before the synthesis runs: an existing file needs --overwrite
+    for flag, value in (("--out", args.out), ("--figure", args.figure)):
+        if value:
+            check_file(value, flag, overwrite=args.overwrite)
+    rrd = recording_path(args, spec.name)
+    prov = provenance(problem.path, backend=None, controllers={spec.name: {"type": "h2"}})
     rep = _design(args, synthesize_platoon if platoon else synthesize, spec)
     if rep is None:
         return 1
-    if rrd is not None:
-        if platoon:
-            record_platoon_synthesis_file(rrd, rep)
-        else:
-            record_synthesis_file(rrd, rep, spec.system)
-        print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
-    written = []
-    if args.out:
-        written.append(str(write_gains(args.out, rep)))
-    if args.figure:
-        from lcc_synth.figures import plot_pareto_front
+    written, error = [], None
+    try:  # a file that cannot be written (a full disk) does not hide the report printed below
+        if rrd is not None:
+            if platoon:
+                rrd = record_platoon_synthesis_file(rrd, rep, args.overwrite, prov)
+            else:
+                rrd = record_synthesis_file(rrd, rep, spec.system, args.overwrite, prov)
+            print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
+        if args.out:
+            written.append(str(write_gains(args.out, rep, args.overwrite)))
+        if args.figure:
+            from lcc_synth.figures import plot_pareto_front
 
-        written.append(str(plot_pareto_front(rep.pareto, rep.h2_unstructured, args.figure,
-                                            title=rep.problem)))
+            written.append(str(plot_pareto_front(rep.pareto, rep.h2_unstructured, args.figure,
+                                                title=rep.problem)))  # fmt: skip
+    except FileError as err:
+        error = err
     if args.json:
-        print(json.dumps({"ok": True, **rep.as_dict(), "written": written}))
+        print(json.dumps({"ok": error is None, **rep.as_dict(), "written": written,
+                          "provenance": prov}))  # fmt: skip
     else:
         print(format_platoon_report(rep) if platoon else format_report(rep))
         for w in written:
             print(f"wrote {w}")
+    if error is not None:
+        print(f"lcc-synth synthesize: error: {error}", file=sys.stderr)
+        return 1
     return 0
 
 

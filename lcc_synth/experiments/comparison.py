@@ -54,6 +54,7 @@ from lcc_synth.schema import declared
 from lcc_synth.simulation.results import SimResult
 from lcc_synth.simulation.scenario import Scenario
 from lcc_synth.simulation.scenario_file import scenario_from
+from lcc_synth.synthesis.h2 import SynthesisError
 
 __all__ = [
     "SUITE_TYPES", "SuiteScenario", "Suite", "SuiteRun", "load_suite", "select_names",
@@ -348,9 +349,14 @@ def prepare_controllers(
     label: str = "suite",
     on_step: Callable[[str], None] | None = None,
     fallbacks: Mapping[str, Mapping[str, Any]] | None = None,
+    failures: dict[str, str] | None = None,
 ):
     """Controller tables of one layout, ``h2`` entries replaced by their synthesised gains and
     the MPCs' ``fallback = "NAME"`` by NAME's gain.
+
+    With ``failures`` (a dict), a controller whose synthesis fails, and an MPC falling back to
+    it, are left out and recorded there (``{name: why}``), so that the others still run;
+    without it the :class:`~lcc_synth.synthesis.h2.SynthesisError` propagates.
 
     Returns ``(tables, designs)``: ``{name: table}`` with only the types of
     :data:`lcc_synth.controllers.registry.CONTROLLER_TYPES`, and ``{name: SynthesisReport}``,
@@ -368,16 +374,24 @@ def prepare_controllers(
             on_step(name)
         table = controller_table(raw, layout)
         if table.get("type") == "h2":
-            table, rep = synthesize_table(
-                name, table, system, hdv_table, f"{label}_{layout}_{name}", source
-            )
+            try:
+                table, rep = synthesize_table(
+                    name, table, system, hdv_table, f"{label}_{layout}_{name}", source
+                )
+            except SynthesisError as err:
+                if failures is None:
+                    raise
+                failures[name] = f"synthesis failed: {err}"
+                continue
             designs[name] = rep
         tables[name] = table
-    from lcc_synth.experiments.spec import resolve_fallbacks
+    from lcc_synth.experiments.spec import drop_failed_fallbacks, resolve_fallbacks
 
+    if failures:
+        tables = drop_failed_fallbacks(tables, failures, source)
     resolved = resolve_fallbacks(tables, system, source)
-    return {k: resolved[k] for k in controllers}, {k: designs[k] for k in designs
-                                                    if k in controllers}
+    return {k: resolved[k] for k in controllers if k in resolved}, {
+        k: designs[k] for k in designs if k in controllers}
 
 
 def build_controllers(
@@ -396,11 +410,13 @@ def metrics_row(result: SimResult, config: MetricsConfig) -> dict[str, Any]:
     """The :data:`SUITE_METRICS` of one result (batch means / worst cases, as ``summary``)
     and ``collided``: a scenario of the run had a collision (its AAVE and fuel are NaN, the
     tables rank it last)."""
+    from lcc_synth.experiments.tables import failed_steps
     from lcc_synth.metrics import summary
 
     s = summary(result, config)
     row: dict[str, Any] = {key: s[key] for key in SUITE_METRICS}
     row["collided"] = s["scenarios_with_collision"] > 0
+    row["failed_steps"] = failed_steps(result.controller_stats)
     return row
 
 
@@ -438,6 +454,9 @@ class SuiteRun:
         ``{layout: {controller: Controller}}``.
     timings : dict
         Wall times (s) of the stages.
+    failures : dict
+        ``{layout: {controller: why}}``: the controllers that could not be built (a failed
+        synthesis, an MPC falling back to it); their rows in :attr:`table` say so.
     """
 
     suite: Suite
@@ -447,6 +466,7 @@ class SuiteRun:
     designs: dict[str, dict[str, Any]]
     controllers: dict[str, dict[str, Controller]]
     timings: dict[str, float]
+    failures: dict[str, dict[str, str]] = field(default_factory=dict)
 
 
 def run_suite(
@@ -479,6 +499,7 @@ def run_suite(
             raise err from None
     timings: dict[str, float] = {}
     layouts = suite.layouts_used()
+    failures: dict[str, dict[str, str]] = {lname: {} for lname in layouts}
     tables: dict[str, dict[str, dict[str, Any]]] = {}
     designs: dict[str, dict[str, Any]] = {}
     built: dict[str, dict[str, Controller]] = {}
@@ -495,8 +516,9 @@ def run_suite(
 
             tables[lname], designs[lname] = prepare_controllers(
                 per_layout[lname][0], system, lname, suite.hdv_table, suite.source, suite.name,
-                on_step=starting, fallbacks=per_layout[lname][1],
+                on_step=starting, fallbacks=per_layout[lname][1], failures=failures[lname],
             )
+            bar.update(len([c for c in failures[lname] if c in per_layout[lname][0]]))
             built[lname] = {}
             for cname, table in tables[lname].items():
                 starting(cname)
@@ -528,6 +550,11 @@ def run_suite(
             draws = ss.scenario.draw()
             table[sname] = {}
             results[sname] = {}
+            for cname, why in failures[ss.layout].items():  # a row saying why it did not run
+                if cname in suite.controllers and applies(suite.controllers[cname], ss.layout,
+                                                          sname):  # fmt: skip
+                    table[sname][cname] = {**dict.fromkeys(SUITE_METRICS), "collided": False,
+                                           "failed_steps": 0, "failed": why}  # fmt: skip
             for cname, ctrl in runs[sname].items():
                 bar.set_postfix_str(f"{sname}/{cname}")
                 res = run_scenario(ss.scenario, ctrl, draws)
@@ -539,7 +566,8 @@ def run_suite(
                 bar.update(1)
     timings["simulations"] = time.perf_counter() - t0
     table = rank_failed_last(table)  # failed runs rank last in every form of the table
-    return SuiteRun(suite, table, results, tables, designs, built, timings)
+    return SuiteRun(suite, table, results, tables, designs, built, timings,
+                    {k: v for k, v in failures.items() if v})  # fmt: skip
 
 
 def gamma_curves(

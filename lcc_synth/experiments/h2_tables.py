@@ -125,9 +125,15 @@ def synthesize_h2_tables(
     hdv_table: Mapping[str, Any],
     source: str | None = None,
     label: str = "problem",
+    failures: dict[str, str] | None = None,
 ) -> tuple[dict[str, dict[str, Any]], dict[str, Any]]:
     """Every ``type = "h2"`` table of ``tables`` replaced by its synthesised static table
     (:func:`synthesize_table`, problem name ``LABEL_NAME``); the other tables unchanged.
+
+    With ``failures`` (a dict), a synthesis that fails
+    (:class:`~lcc_synth.synthesis.h2.SynthesisError`) is recorded there as
+    ``{name: "synthesis failed: ..."}`` and its controller left out, so that the others still
+    run; without it the error propagates.
 
     Returns
     -------
@@ -135,13 +141,20 @@ def synthesize_h2_tables(
         ``(tables, designs)``: ``{name: table}`` in the order of ``tables`` and
         ``{name: report}`` of the synthesised ones.
     """
+    from lcc_synth.synthesis.h2 import SynthesisError
+
     out: dict[str, dict[str, Any]] = {}
     designs: dict[str, Any] = {}
     for name, table in tables.items():
         if isinstance(table, Mapping) and table.get("type") == "h2":
-            out[name], designs[name] = synthesize_table(
-                name, table, system, hdv_table, f"{label}_{name}", source
-            )
+            try:
+                out[name], designs[name] = synthesize_table(
+                    name, table, system, hdv_table, f"{label}_{name}", source
+                )
+            except SynthesisError as err:
+                if failures is None:
+                    raise
+                failures[name] = f"synthesis failed: {err}"
         else:
             out[name] = table
     return out, designs

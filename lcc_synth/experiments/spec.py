@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -20,8 +20,8 @@ from lcc_synth.simulation.scenario import Scenario
 from lcc_synth.simulation.scenario_file import scenario_from
 from lcc_synth.simulation.timestep import check_time_step
 
-__all__ = ["SimulationSpec", "controllers_from", "fallback_target", "load_spec",
-           "resolve_fallbacks"]
+__all__ = ["SimulationSpec", "controllers_from", "drop_failed_fallbacks", "fallback_target",
+           "load_spec", "resolve_fallbacks"]
 
 
 @dataclass(frozen=True, repr=False)
@@ -34,6 +34,9 @@ class SimulationSpec(Record):
     controllers: dict[str, Controller]
     metrics: MetricsConfig
     source: str
+    #: controllers that could not be built (``{name: why}``, e.g. a failed synthesis): the
+    #: others run, and ``simulate`` reports these and exits 1
+    failed: dict[str, str] = field(default_factory=dict)
 
     def toml_tables(self) -> dict[str, Any]:
         """``name``, ``[hdv]``, ``[system]``, ``[scenario]``, ``[controllers.*]`` and
@@ -129,34 +132,63 @@ def resolve_fallbacks(
     return out
 
 
+def drop_failed_fallbacks(
+    tables: Mapping[str, Mapping[str, Any]], failures: dict[str, str],
+    source: str | None = None,
+) -> dict[str, dict[str, Any]]:  # fmt: skip
+    """``tables`` without the MPCs whose ``fallback = "NAME"`` is a controller of
+    ``failures`` (it could not be designed): each is added to ``failures`` in turn."""
+    out = {k: dict(t) for k, t in tables.items()}
+    for name in list(out):
+        target = fallback_target({**out, **dict.fromkeys(failures, {})}, name, source)
+        if target is not None and target in failures:
+            failures[name] = f"its fallback {target!r} could not be designed"
+            del out[name]
+    return out
+
+
 def controllers_from(
-    data: Mapping[str, Any], system: System, source: str | None = None, label: str = "problem"
-):
+    data: Mapping[str, Any], system: System, source: str | None = None, label: str = "problem",
+    failures: dict[str, str] | None = None,
+):  # fmt: skip
     """Every ``[controllers.NAME]`` table, built in file order: ``type = "h2"`` synthesised
     for ``system`` first (:func:`lcc_synth.experiments.h2_tables.synthesize_h2_tables`, the
     code path of ``run``; problem names ``LABEL_NAME``), then the MPC fallbacks resolved. A
     synthesised controller, and an MPC with ``fallback = "NAME"``, keep the table the file
-    states as ``source_table`` (what :meth:`SimulationSpec.toml_tables` writes back)."""
+    states as ``source_table`` (what :meth:`SimulationSpec.toml_tables` writes back).
+
+    With ``failures`` (a dict), a controller whose synthesis fails, and an MPC that falls back
+    to it, are left out and recorded there (``{name: why}``); without it the error propagates.
+    """
     tables = declared("").get(data, "controllers", "")
     if not tables:
         raise ConfigError("controllers", "needs at least one [controllers.NAME] table")
     if all(isinstance(t, Mapping) for t in tables.values()):
         hdv_table = declared("").get(data, "hdv", "")
         given = tables
-        tables, designs = synthesize_h2_tables(tables, system, hdv_table, source, label)
+        tables, designs = synthesize_h2_tables(tables, system, hdv_table, source, label,
+                                               failures)  # fmt: skip
+        if failures:
+            tables = drop_failed_fallbacks(tables, failures, source)
         tables = resolve_fallbacks(tables, system, source)
         built = {name: build_controller(name, t, system, source) for name, t in tables.items()}
         for name in designs:  # written back as stated (a reload synthesises the same gain)
             built[name].source_table = dict(given[name])
         for name, t in given.items():  # an MPC's fallback = "NAME" is written back as stated
-            if t.get("type") == "mpc" and isinstance(t.get("fallback"), str):
+            if name in built and t.get("type") == "mpc" and isinstance(t.get("fallback"), str):
                 built[name].source_table = {**built[name].toml_table(), "fallback": t["fallback"]}
         return built
     return {name: build_controller(name, t, system, source) for name, t in tables.items()}
 
 
-def load_spec(path: str | Path | Problem, seeds: int | None = None) -> SimulationSpec:
-    """Read a problem file for simulation; ``seeds`` overrides ``[scenario].batch``."""
+def load_spec(
+    path: str | Path | Problem, seeds: int | None = None, keep_going: bool = False
+) -> SimulationSpec:
+    """Read a problem file for simulation; ``seeds`` overrides ``[scenario].batch``.
+
+    With ``keep_going``, a controller that cannot be designed (a failed synthesis) is left out
+    and named in :attr:`SimulationSpec.failed`, so that the others still run (``simulate``);
+    without it the :class:`~lcc_synth.synthesis.h2.SynthesisError` propagates."""
     problem = path if isinstance(path, Problem) else load_problem(path)
     source = str(problem.path)
     try:
@@ -166,9 +198,11 @@ def load_spec(path: str | Path | Problem, seeds: int | None = None) -> Simulatio
             if seeds < 1:
                 raise ConfigError("--seeds", f"must be >= 1, got {seeds}")
             scenario = replace(scenario, batch=int(seeds))
-        controllers = controllers_from(problem.data, system, source, problem.name)
+        failed: dict[str, str] | None = {} if keep_going else None
+        controllers = controllers_from(problem.data, system, source, problem.name, failed)
         check_time_step(scenario, controllers)
         metrics = metrics_from(problem.data, system, controllers, scenario)
-        return SimulationSpec(problem.name, system, scenario, controllers, metrics, source)
+        return SimulationSpec(problem.name, system, scenario, controllers, metrics, source,
+                              dict(failed or {}))  # fmt: skip
     except ConfigError as err:
         raise err.with_source(source) if not err.source else err from None

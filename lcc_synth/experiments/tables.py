@@ -1,10 +1,18 @@
 """The tables of an experiment: the comparison table's columns (:data:`SUITE_METRICS`) and its
 terminal, Markdown, CSV and JSON forms, JSON-safe copies and the run's results directory.
 
-Failed runs rank last: a row whose run collided (``"collided": true``, else ``collisions > 0``)
-has NaN AAVE and fuel (:mod:`lcc_synth.metrics`), is marked (``NAME (collided)`` in the
-terminal and Markdown, a ``collided`` column in CSV, the ``collided`` key in JSON) and comes
-after the scenario's other rows in every form (:func:`rank_failed_last`; file order otherwise).
+Failed runs rank last, in every form (:func:`rank_failed_last`; file order otherwise):
+
+* a run whose controller's solver failed on some steps (``"failed_steps": k > 0``: QP steps
+  that fell back to a shifted plan, the static gain or a held command, and controller errors;
+  :func:`failed_steps`) is marked ``NAME (QP failed on k steps)`` and comes after the clean
+  runs;
+* a run that collided (``"collided": true``, else ``collisions > 0``) has NaN AAVE and fuel
+  (:mod:`lcc_synth.metrics`), is marked ``NAME (collided)`` and comes after those;
+* a controller that could not run at all (``"failed": "why"``, e.g. its synthesis failed) has
+  no metrics (``n/a``), is marked ``NAME (not run)`` (the commands print why) and comes last.
+
+CSV has the columns ``collided``, ``failed_steps`` and ``not_run`` for them, JSON the keys.
 """
 
 from __future__ import annotations
@@ -16,12 +24,13 @@ from typing import Any
 
 import numpy as np
 
-from lcc_synth.errors import ConfigError
-
 __all__ = [
     "SUITE_METRICS",
     "json_safe",
     "collided",
+    "failed_steps",
+    "failure_rank",
+    "row_label",
     "rank_failed_last",
     "format_table",
     "markdown_table",
@@ -48,20 +57,10 @@ SUITE_METRICS: dict[str, tuple[str, str]] = {
 
 
 def run_directory(root: str | Path, name: str, stamp: str) -> Path:
-    """A new directory ``root/<name>-<stamp>`` (``-2``, ``-3``... appended if it exists)."""
-    from lcc_synth.recording import entity_name
+    """A new directory ``root/<name>-<stamp>`` (:func:`lcc_synth.outputs.new_directory`)."""
+    from lcc_synth.outputs import new_directory
 
-    base = Path(root) / f"{entity_name(name)}-{stamp}"
-    path, k = base, 1
-    while True:
-        try:
-            path.mkdir(parents=True, exist_ok=False)
-            return path
-        except FileExistsError:
-            k += 1
-            path = base.with_name(f"{base.name}-{k}")
-        except OSError as err:
-            raise ConfigError("--out", f"cannot create {str(path)!r}: {err}") from None
+    return new_directory(root, name, stamp)
 
 
 def json_safe(x: Any) -> Any:
@@ -86,11 +85,43 @@ def collided(metrics: Mapping[str, Any]) -> bool:
     return bool(metrics.get("collisions") or 0)
 
 
+def failed_steps(stats: Mapping[str, Any] | None) -> int:
+    """Steps on which a controller's solver failed, from its run statistics (an MPC's or
+    DeeP-LCC's ``stats()``): the steps that used a fallback (shifted plan, static gain, held
+    command) plus the steps that raised an error. A QP that OSQP left unfinished but DeeP-LCC's
+    exact re-solve finished is not a failure. 0 for a controller without statistics."""
+    if not stats:
+        return 0
+    return int(stats.get("fallbacks", 0) or 0) + int(stats.get("errors", 0) or 0)
+
+
+def failure_rank(metrics: Mapping[str, Any]) -> tuple[bool, bool, bool]:
+    """Sort key of a row: clean runs, then solver failures, then collisions, then controllers
+    that did not run."""
+    return (bool(metrics.get("failed")), collided(metrics),
+            bool(metrics.get("failed_steps") or 0))  # fmt: skip
+
+
+def row_label(name: str, metrics: Mapping[str, Any]) -> str:
+    """``NAME`` with its failure marks: ``(not run)`` (the reason is printed under the table),
+    ``(collided)``, ``(QP failed on k steps)``."""
+    if metrics.get("failed"):
+        return f"{name} (not run)"
+    marks = []
+    if collided(metrics):
+        marks.append("collided")
+    k = int(metrics.get("failed_steps") or 0)
+    if k:
+        marks.append(f"QP failed on {k} step{'s' if k != 1 else ''}")
+    return f"{name} ({', '.join(marks)})" if marks else name
+
+
 def rank_failed_last(table: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> dict[str, dict]:
-    """The table with, within every scenario, the rows whose run collided moved after the
-    others (a stable sort: file order otherwise)."""
+    """The table with, within every scenario, the runs whose solver failed, then those that
+    collided, then the controllers that did not run, moved after the clean runs (a stable
+    sort: file order otherwise)."""
     return {
-        sname: dict(sorted(per.items(), key=lambda item: collided(item[1])))
+        sname: dict(sorted(per.items(), key=lambda item: failure_rank(item[1])))
         for sname, per in table.items()
     }
 
@@ -114,7 +145,7 @@ def _rows(table: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> list[list[str
     for sname, per in rank_failed_last(table).items():
         for cname, metrics in per.items():
             rows.append(
-                [sname, f"{cname} (collided)" if collided(metrics) else cname]
+                [sname, row_label(cname, metrics)]
                 + [_cell(metrics.get(k), fmt) for k, (_, fmt) in SUITE_METRICS.items()]
             )
     return rows
@@ -157,47 +188,58 @@ def _md_escape(cell: str) -> str:
 
 
 def write_markdown(
-    table: Mapping[str, Mapping[str, Mapping[str, Any]]], path: str | Path, title: str = ""
-) -> Path:
-    """Write :func:`markdown_table` (with an optional heading) to ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    table: Mapping[str, Mapping[str, Mapping[str, Any]]], path: str | Path, title: str = "",
+    overwrite: bool = True,
+) -> Path:  # fmt: skip
+    """Write :func:`markdown_table` (with an optional heading) to ``path`` atomically
+    (:func:`lcc_synth.outputs.write_text`; ``overwrite`` false: the next free name if the
+    file exists); returns the name written."""
+    from lcc_synth.outputs import write_text
+
     text = (f"# {title}\n\n" if title else "") + markdown_table(table)
-    path.write_text(text)
-    return path
+    return write_text(path, text, overwrite)
 
 
-def write_csv(table: Mapping[str, Mapping[str, Mapping[str, Any]]], path: str | Path) -> Path:
+def write_csv(
+    table: Mapping[str, Mapping[str, Mapping[str, Any]]], path: str | Path,
+    overwrite: bool = True,
+) -> Path:  # fmt: skip
     """CSV with columns ``scenario, controller``, the :data:`SUITE_METRICS` keys (full
     precision; ``inf`` for a time to collision that never occurs, empty for NaN) and
-    ``collided`` (``true`` / ``false``; those rows last in their scenario)."""
+    ``collided`` (``true`` / ``false``), ``failed_steps`` and ``not_run`` (the reason, empty
+    when it ran): failed rows last in their scenario. Written atomically (as
+    :func:`write_markdown`)."""
     import csv
+    import io
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["scenario", "controller", *SUITE_METRICS, "collided"])
-        for sname, per in rank_failed_last(table).items():
-            for cname, metrics in per.items():
-                vals = []
-                for k in SUITE_METRICS:
-                    v = metrics.get(k)
-                    if v is None or (isinstance(v, float) and math.isnan(v)):
-                        vals.append("")
-                    else:
-                        vals.append(repr(float(v)) if isinstance(v, float) else str(v))
-                w.writerow([sname, cname, *vals, str(collided(metrics)).lower()])
-    return path
+    from lcc_synth.outputs import write_text
+
+    fh = io.StringIO()
+    w = csv.writer(fh)
+    w.writerow(["scenario", "controller", *SUITE_METRICS, "collided", "failed_steps",
+                "not_run"])  # fmt: skip
+    for sname, per in rank_failed_last(table).items():
+        for cname, metrics in per.items():
+            vals = []
+            for k in SUITE_METRICS:
+                v = metrics.get(k)
+                if v is None or (isinstance(v, float) and math.isnan(v)):
+                    vals.append("")
+                else:
+                    vals.append(repr(float(v)) if isinstance(v, float) else str(v))
+            w.writerow([sname, cname, *vals, str(collided(metrics)).lower(),
+                        int(metrics.get("failed_steps") or 0), metrics.get("failed") or ""])
+    return write_text(path, fh.getvalue(), overwrite)
 
 
-def write_json(table: Mapping[str, Any], path: str | Path, **extra: Any) -> Path:
-    """``{"results": table, **extra}`` as JSON (non-finite numbers as ``null``; collided rows
-    last in their scenario)."""
+def write_json(
+    table: Mapping[str, Any], path: str | Path, overwrite: bool = True, **extra: Any
+) -> Path:
+    """``{"results": table, **extra}`` as JSON (non-finite numbers as ``null``; failed rows
+    last in their scenario), written atomically (as :func:`write_markdown`)."""
     import json
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    from lcc_synth.outputs import write_text
+
     doc = {"results": rank_failed_last(table), **extra}
-    path.write_text(json.dumps(json_safe(doc), indent=2) + "\n")
-    return path
+    return write_text(path, json.dumps(json_safe(doc), indent=2) + "\n", overwrite)

@@ -140,13 +140,29 @@ def _legend_below(fig, axes_or_handles, labels=None, ncols: int = 4):
         fig.legend(handles, labels, loc="outside lower center", ncols=min(ncols, len(handles)))
 
 
-def _save(fig, path: Path, title: str | None = None, dpi: int = 110) -> Path:
-    """Add the optional suptitle, write ``fig`` to ``path`` (creating folders), close it."""
+def _save(
+    fig, path: Path, title: str | None = None, dpi: int = 110, overwrite: bool = True
+) -> Path:
+    """Add the optional suptitle, write ``fig`` to ``path`` atomically (creating folders;
+    :func:`lcc_synth.outputs.writing`: a reader never sees half a file; the caller named the
+    file, so an existing one is replaced, as ``savefig`` would, unless ``overwrite`` is false:
+    then the next free name ``NAME-2.png``), close it; returns the name written. A write error
+    (a full disk) is a :class:`~lcc_synth.errors.FileError` naming ``path``."""
     import matplotlib.pyplot as plt
 
-    if title:
-        fig.suptitle(title)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
-    return path
+    from lcc_synth.errors import FileError
+    from lcc_synth.outputs import writing
+
+    path = Path(path)
+    try:
+        if title:
+            fig.suptitle(title)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise FileError.from_os(path.parent, err, "create") from None
+        with writing(path, overwrite) as out:
+            fig.savefig(out.tmp, dpi=dpi)
+    finally:
+        plt.close(fig)
+    return out.path

@@ -40,8 +40,11 @@ Simulation (:func:`record_simulation`), under ``/<scenario>/<controller>/``:
                        each recorded controller step (x = seconds ahead, y = value)
 =====================  =========================================================================
 
-``/<scenario>/metrics`` (markdown) compares every controller recorded so far and
-``/<scenario>/status`` says whether the run completed or was interrupted (and by what).
+``/<scenario>/metrics`` (markdown) compares every controller recorded so far,
+``/<scenario>/status`` says whether the run completed, was interrupted (and by what), failed,
+or is partial (some controllers failed), and ``/provenance`` (markdown) holds the run's
+provenance (:mod:`lcc_synth.provenance`: package version, problem file and SHA-256, backend,
+seeds, solvers).
 
 Vehicle names in series and labels: ``head``, ``hdv-2``, ``hdv-1`` (ahead of the CAV), ``cav``,
 ``hdv1``, ``hdv2``... (behind), i.e. the paper's vehicle index; series colors as above.
@@ -63,10 +66,13 @@ ring design (:func:`record_platoon_synthesis`) records each CAV's gain under
 Sweeps (:func:`record_sweep`, ``lcc-synth sweep``) under ``/sweep/<name>/``: one scatter
 series per controller and metric over the ``scenario`` timeline, and the summary ``report``.
 
-Interrupted runs: :func:`open_recording` is a context manager that flushes and finalises the
-file on every exit (exception, ``KeyboardInterrupt``) and records the interruption in
-``/<scenario>/status``; the commands record each controller as soon as its result exists
-(:class:`SimulationRecorder`), so the file holds everything finished before the interruption.
+Interrupted runs: :func:`open_recording` is a context manager that writes a private temporary
+file, flushes and finalises it on every exit (exception, ``KeyboardInterrupt``, SIGTERM) and
+publishes it under its name atomically (a reader never sees a half file; :func:`written_path`
+is the name used), recording the interruption in ``/<scenario>/status``; the commands record
+each controller as soon as its result exists (:class:`SimulationRecorder`), so the file holds
+everything finished before the interruption. A disk that fills is one error line naming the
+file, never a hang.
 
 Rerun's usage analytics live in its viewer/CLI binary, not in the logging SDK (writing a file
 sends nothing). Rerun 0.41 documents only ``rerun analytics disable`` (a per-user setting); its
@@ -102,9 +108,12 @@ from lcc_synth.recording.core import (
     ROAD_Y_SCALE,
     entity_name,
     open_recording,
+    record_provenance,
     record_text,
+    set_status,
     vehicle_colors,
     vehicle_names,
+    written_path,
 )
 from lcc_synth.recording.layout import (
     analysis_blueprint,
@@ -147,6 +156,9 @@ __all__ = [
     "record_sweep_file",
     "platoon_synthesis_blueprint",
     "open_recording",
+    "record_provenance",
+    "set_status",
+    "written_path",
     "record_simulation",
     "record_metrics",
     "SimulationRecorder",

@@ -23,7 +23,9 @@ from lcc_synth.recording.core import (
     _state,
     entity_name,
     open_recording,
+    record_provenance,
     record_text,
+    written_path,
 )
 from lcc_synth.recording.layout import (
     analysis_blueprint,
@@ -195,15 +197,21 @@ def record_synthesis(rec: Any, rep: Any, system: Any = None) -> None:
     _flush_started(rec)
 
 
-def record_synthesis_file(path: str | Path, rep: Any, system: Any = None) -> Path:
-    """Write a synthesis recording to ``path`` (see :func:`record_synthesis`)."""
+def record_synthesis_file(
+    path: str | Path, rep: Any, system: Any = None, overwrite: bool = False,
+    provenance: Mapping[str, Any] | None = None,
+) -> Path:  # fmt: skip
+    """Write a synthesis recording to ``path`` (see :func:`record_synthesis`; ``provenance``
+    at ``/provenance``); returns the file written (:func:`~.core.open_recording`)."""
     path = Path(path)
     blueprint = synthesis_blueprint(
         [rep.problem], gamma=system is not None and rep.kind != "fd_lcc", pareto=bool(rep.pareto)
     )
-    with open_recording(path, rep.problem, blueprint) as rec:
+    with open_recording(path, rep.problem, blueprint, overwrite=overwrite) as rec:
+        if provenance is not None:
+            record_provenance(rec, provenance)
         record_synthesis(rec, rep, system)
-    return path
+    return written_path(rec) or path
 
 
 #: Fields of a platoon report left out of its markdown report (the gains are recorded per CAV).
@@ -244,14 +252,19 @@ def record_platoon_synthesis(rec: Any, rep: Any) -> None:
     _flush_started(rec)
 
 
-def record_platoon_synthesis_file(path: str | Path, rep: Any) -> Path:
+def record_platoon_synthesis_file(
+    path: str | Path, rep: Any, overwrite: bool = False,
+    provenance: Mapping[str, Any] | None = None,
+) -> Path:  # fmt: skip
     """Write a platoon / ring synthesis recording to ``path`` (see
-    :func:`record_platoon_synthesis`)."""
+    :func:`record_platoon_synthesis`); returns the file written."""
     path = Path(path)
     blueprint = platoon_synthesis_blueprint(rep.problem, list(rep.gains), bool(rep.pareto))
-    with open_recording(path, rep.problem, blueprint) as rec:
+    with open_recording(path, rep.problem, blueprint, overwrite=overwrite) as rec:
+        if provenance is not None:
+            record_provenance(rec, provenance)
         record_platoon_synthesis(rec, rep)
-    return path
+    return written_path(rec) or path
 
 
 def record_analysis_file(
@@ -262,8 +275,12 @@ def record_analysis_file(
     regions: Mapping[str, Any] | None = None,
     region_reports: Mapping[str, Mapping[str, Any]] | None = None,
     summary: Mapping[str, Any] | None = None,
+    overwrite: bool = False,
+    provenance: Mapping[str, Any] | None = None,
 ) -> Path:
-    """Write an analysis recording (``lcc-synth analyze`` / ``regions``) to ``path``.
+    """Write an analysis recording (``lcc-synth analyze`` / ``regions``) to ``path``; returns
+    the file written (:func:`~.core.open_recording`: ``overwrite`` an existing one, else the
+    next free name).
 
     Parameters
     ----------
@@ -281,7 +298,9 @@ def record_analysis_file(
     regions = dict(regions or {})
     path = Path(path)
     blueprint = analysis_blueprint(list(gamma), list(regions), report=summary is not None)
-    with open_recording(path, name, blueprint) as rec:
+    with open_recording(path, name, blueprint, overwrite=overwrite) as rec:
+        if provenance is not None:
+            record_provenance(rec, provenance)
         for case, (omega, mag, report) in gamma.items():
             record_gamma(rec, case, omega, mag, report)
         for rname, rm in regions.items():
@@ -291,7 +310,7 @@ def record_analysis_file(
             record_text(
                 rec, "/analysis/report", f"# {name}\n\n" + _mapping_markdown("report", summary)
             )
-    return path
+    return written_path(rec) or path
 
 
 def record_gains(rec: Any, name: str, gains: Mapping[str, Any], under: str | None = None) -> None:

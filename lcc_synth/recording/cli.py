@@ -13,8 +13,10 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.recording.core import (
-    entity_name,
     open_recording,
+    record_provenance,
+    set_status,
+    written_path,
 )
 from lcc_synth.recording.layout import (
     merge_ranges,
@@ -66,7 +68,14 @@ def recording_path(
     args: argparse.Namespace, problem_name: str, now: datetime | None = None
 ) -> Path | None:
     """Where the command records: ``None`` with ``--no-record``, ``--rrd`` when given, else
-    ``logs/<problem>-<UTC timestamp>.rrd`` (relative to the working directory)."""
+    ``logs/<problem>-<UTC timestamp>.rrd`` (relative to the working directory).
+
+    Checked here, before any work (:func:`lcc_synth.outputs.check_file` /
+    :func:`~lcc_synth.outputs.check_directory`): the suffix, an existing ``--rrd`` (refused
+    unless ``--overwrite``), a directory that cannot be written. The default name is made
+    unique when the file is published (``-2``, ``-3``... if another run took it)."""
+    from lcc_synth.outputs import check_directory, check_file, path_part
+
     if getattr(args, "no_record", False):
         return None
     recording_decimation(args)  # validate early, before any work is done
@@ -75,11 +84,10 @@ def recording_path(
         path = Path(given)
         if path.suffix != ".rrd":
             raise ConfigError("--rrd", f"must be a path ending in .rrd, got {given!r}")
-        if path.exists() and path.is_dir():
-            raise ConfigError("--rrd", f"is a directory, expected a file path: {given!r}")
-        return path
+        return check_file(path, "--rrd", overwrite=bool(getattr(args, "overwrite", False)))
     stamp = (now or datetime.now(UTC)).strftime("%Y%m%dT%H%M%SZ")
-    return Path("logs") / f"{entity_name(problem_name)}-{stamp}.rrd"
+    check_directory("logs", "--rrd (default logs/)")
+    return Path("logs") / f"{path_part(problem_name)}-{stamp}.rrd"
 
 
 def recording_decimation(args: argparse.Namespace) -> int | str:
@@ -132,6 +140,20 @@ class SimulationRecorder:
         self.seeds: list[int] = []  # study scenarios recorded (several-seed recordings)
         self.ranges: dict[str, Any] = {}
         self._layout: tuple = ()
+        #: the run's provenance document, recorded at ``/provenance`` when the file opens
+        self.provenance: dict[str, Any] | None = None
+
+    @property
+    def written(self) -> Path | None:
+        """The file the recording was published as (after the stack closed it; ``None``
+        before, without a recording, or when it could not be written)."""
+        return None if self.rec is None else written_path(self.rec)
+
+    def status(self, status: str, detail: str = "") -> None:
+        """How the run ended, recorded when the file closes normally
+        (:func:`~lcc_synth.recording.core.set_status`: ``partial``, ``failed``)."""
+        if self.rec is not None:
+            set_status(self.rec, status, detail)
 
     def __call__(self, spec: Any, name: str, result: Any, offset: int = 0) -> None:
         """Record controller ``name``'s ``result`` of ``spec`` (``spec.name``,
@@ -156,8 +178,11 @@ class SimulationRecorder:
             self.ranges = plot_ranges(result)
             self._layout = (spec.name, list(spec.controllers), mpc, batch > 1)
             self.rec = self.stack.enter_context(
-                open_recording(self.path, spec.name, self._blueprint())
+                open_recording(self.path, spec.name, self._blueprint(),
+                               overwrite=bool(getattr(self.args, "overwrite", False)))
             )
+            if self.provenance is not None:
+                record_provenance(self.rec, self.provenance)
         else:
             self.ranges = merge_ranges(self.ranges, plot_ranges(result))
         controller = dict(spec.controllers).get(name)

@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import re
 import uuid
 import weakref
 from collections.abc import Iterator, Mapping, Sequence
@@ -48,15 +47,12 @@ def _rrb():
     return rrb
 
 
-_BAD = re.compile(r"[^A-Za-z0-9_.\-]")
-
-
 def entity_name(name: str) -> str:
-    """``name`` reduced to one safe entity-path part (``[A-Za-z0-9_.-]``, others -> ``_``)."""
-    cleaned = _BAD.sub("_", str(name).strip())
-    if not cleaned or set(cleaned) <= {"."}:
-        raise ConfigError("name", f"cannot be used as a recording entity name: {name!r}")
-    return cleaned
+    """``name`` reduced to one safe entity-path part (``[A-Za-z0-9_.-]``, others -> ``_``): the
+    same rule as a file name's part (:func:`lcc_synth.outputs.path_part`)."""
+    from lcc_synth.outputs import path_part
+
+    return path_part(name, "name")
 
 
 def vehicle_names(m: int, n: int) -> list[str]:
@@ -257,6 +253,12 @@ def set_status(rec: Any, status: str, detail: str = "") -> None:
     if status not in ("complete", "partial", "failed"):
         raise ValueError(f"status must be complete, partial or failed, got {status!r}")
     _state(rec).status = (status, detail)
+
+
+def record_provenance(rec: Any, doc: Mapping[str, Any]) -> None:
+    """Record the run's provenance (:func:`lcc_synth.provenance.provenance`: package version,
+    problem file and its SHA-256, backend, seeds, solvers) as the document ``/provenance``."""
+    record_text(rec, "/provenance", "# Provenance\n\n" + _mapping_markdown("run", doc))
 
 
 def record_text(rec: Any, entity: str, markdown: str) -> None:

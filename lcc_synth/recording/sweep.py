@@ -41,7 +41,9 @@ from lcc_synth.recording.core import (
     _send_series,
     entity_name,
     open_recording,
+    record_provenance,
     record_text,
+    written_path,
 )
 from lcc_synth.recording.layout import sweep_blueprint
 
@@ -111,15 +113,21 @@ def record_sweep_file(
     labels: Mapping[str, str],
     summary: Mapping[str, Mapping[str, Any]] | None = None,
     info: Mapping[str, Any] | None = None,
+    overwrite: bool = False,
+    provenance: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write a sweep recording to ``path`` (see :func:`record_sweep`) with its default layout
-    (:func:`~lcc_synth.recording.layout.sweep_blueprint`); returns ``path``."""
+    (:func:`~lcc_synth.recording.layout.sweep_blueprint`) and ``provenance`` at
+    ``/provenance``; returns the file written (:func:`~.core.open_recording`: ``overwrite`` an
+    existing one, else the next free name)."""
     path = Path(path)
     _scenario_count(samples, labels)  # bad samples: an error before the file is created
     blueprint = sweep_blueprint(name, list(labels.items()))
-    with open_recording(path, name, blueprint) as rec:
+    with open_recording(path, name, blueprint, overwrite=overwrite) as rec:
+        if provenance is not None:
+            record_provenance(rec, provenance)
         record_sweep(rec, name, samples, labels, summary, info)
-    return path
+    return written_path(rec) or path
 
 
 

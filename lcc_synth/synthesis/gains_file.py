@@ -154,12 +154,15 @@ def gains_document(rep: SynthesisReport | PlatoonReport) -> dict[str, Any]:
     return _jsonable(doc)
 
 
-def write_gains(path: str | Path, rep: SynthesisReport | PlatoonReport) -> Path:
-    """Write the gains file of ``rep`` to ``path`` (parent directories created)."""
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(gains_document(rep), indent=2) + "\n")
-    return p
+def write_gains(
+    path: str | Path, rep: SynthesisReport | PlatoonReport, overwrite: bool = True
+) -> Path:
+    """Write the gains file of ``rep`` to ``path`` atomically (parent directories created;
+    :func:`lcc_synth.outputs.write_text`; an existing file is replaced only with
+    ``overwrite``, else the next free name ``NAME-2.json`` is used); returns the name written."""
+    from lcc_synth.outputs import write_text
+
+    return write_text(path, json.dumps(gains_document(rep), indent=2) + "\n", overwrite)
 
 
 def read_gains(path: str | Path) -> tuple[StaticGains, dict[str, Any]]:
