@@ -27,6 +27,9 @@ class ConfigError(ValueError):
         where = f"{source}: " if source else ""
         super().__init__(f"{where}{field}: {message}")
 
+    def __reduce__(self):  # picklable (from a child process or a Dask worker)
+        return (type(self), (self.field, self.message, self.source))
+
     def with_source(self, source: str) -> ConfigError:
         """Return the same error attributed to ``source`` (a file path)."""
         return ConfigError(self.field, self.message, source)
@@ -59,6 +62,9 @@ class FileError(OSError):
     def __str__(self) -> str:
         return f"cannot {self.action} {self.path}: {self.reason}"
 
+    def __reduce__(self):
+        return (type(self), (self.path, self.reason, self.action))
+
     @classmethod
     def from_os(cls, path, err: OSError, action: str = "write") -> FileError:
         """The :class:`FileError` of an ``OSError`` (its ``strerror``, else its text)."""
@@ -85,6 +91,9 @@ class Interrupted(KeyboardInterrupt):
         except ValueError:  # pragma: no cover - not a known signal
             self.signame = f"signal {self.signum}"
         super().__init__(self.signame)
+
+    def __reduce__(self):
+        return (type(self), (self.signum,))
 
 
 class ImplausibleValueWarning(UserWarning):

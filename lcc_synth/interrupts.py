@@ -31,14 +31,14 @@ from typing import Any
 
 from lcc_synth.errors import Interrupted
 
-__all__ = ["CLEANUP_DEADLINE", "POLL_S", "handling", "interrupted", "call_in_child"]
+__all__ = ["CLEANUP_DEADLINE", "POLL_S", "handling", "interrupted", "deliver", "call_in_child"]
 
 #: Seconds the clean-up after a signal may take before the process exits regardless.
 CLEANUP_DEADLINE = 20.0
 #: Seconds between two checks for a signal while waiting for a child process.
 POLL_S = 0.05
 
-_STATE: dict[str, Any] = {"signum": None}
+_STATE: dict[str, Any] = {"signum": None, "in_child": False, "active": False}
 
 
 def interrupted() -> int | None:
@@ -55,12 +55,22 @@ def _watchdog(signum: int) -> None:
         os._exit(128 + signum)
 
 
-def _handler(signum: int, frame: Any) -> None:
-    if _STATE["signum"] is not None:  # a second signal: the user insists
-        os._exit(128 + signum)
-    _STATE["signum"] = signum
-    threading.Thread(target=_watchdog, args=(signum,), daemon=True, name="lcc-deadline").start()
+def deliver(signum: int) -> None:
+    """Raise :class:`~lcc_synth.errors.Interrupted` for ``signum`` as the handler does: for a
+    signal that native code caught itself (OSQP's own SIGINT handler during a solve, read back
+    by :mod:`lcc_synth.mpc.solver`). Under :func:`handling` a second signal exits at once and
+    the clean-up gets :data:`CLEANUP_DEADLINE` seconds."""
+    if _STATE["active"]:
+        if _STATE["signum"] is not None:  # a second signal: the user insists
+            os._exit(128 + signum)
+        _STATE["signum"] = signum
+        threading.Thread(target=_watchdog, args=(signum,), daemon=True,
+                         name="lcc-deadline").start()  # fmt: skip
     raise Interrupted(signum)
+
+
+def _handler(signum: int, frame: Any) -> None:
+    deliver(signum)
 
 
 @contextmanager
@@ -73,11 +83,13 @@ def handling() -> Iterator[None]:
         return
     old = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     _STATE["signum"] = None
+    _STATE["active"] = True
     for s in old:
         signal.signal(s, _handler)
     try:
         yield
     finally:
+        _STATE["active"] = False
         for s, h in old.items():
             signal.signal(s, h)
 
@@ -85,6 +97,7 @@ def handling() -> Iterator[None]:
 def _child(fn: Callable[..., Any], args: tuple, kwargs: dict, fd: int) -> None:
     """In the forked child: run, send ``(ok, value)`` pickled, exit without clean-up."""
     code = 0
+    _STATE["in_child"] = True  # a nested call_in_child runs in this process
     try:
         for s in (signal.SIGINT, signal.SIGTERM):
             signal.signal(s, signal.SIG_DFL)
@@ -107,9 +120,10 @@ def _child(fn: Callable[..., Any], args: tuple, kwargs: dict, fd: int) -> None:
 def call_in_child(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
     """``fn(*args, **kwargs)`` computed in a forked child process, so that a signal stops it
     at once (see the module docstring). Its exceptions are raised here; its result must be
-    picklable. Runs in-process where ``os.fork`` does not exist or in a thread other than
-    the main one (only the main thread handles signals)."""
-    if not hasattr(os, "fork") or threading.current_thread() is not threading.main_thread():
+    picklable. Runs in-process where ``os.fork`` does not exist, in a thread other than the
+    main one (only the main thread handles signals), or inside such a child already."""
+    if (not hasattr(os, "fork") or _STATE["in_child"]
+            or threading.current_thread() is not threading.main_thread()):  # fmt: skip
         return fn(*args, **kwargs)
     r, w = os.pipe()
     pid = os.fork()

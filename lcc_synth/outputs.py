@@ -67,17 +67,19 @@ _BAD = re.compile(r"[^A-Za-z0-9_.\-]")
 
 def path_part(name: object, field: str = "name") -> str:
     """``name`` as one safe part of a file name: characters outside ``[A-Za-z0-9_.-]`` become
-    ``_``; a name of dots only (``.``, ``..``) or an empty one is refused.
+    ``_``, and so does a leading dot (no hidden files, no ``..``); an empty name or one of dots
+    only is refused.
 
     Examples
     --------
-    >>> path_part("x/../../../victim"), path_part("h2 (robust)")
-    ('x_.._.._.._victim', 'h2__robust_')
+    >>> path_part("x/../../../victim"), path_part("../names"), path_part("h2 (robust)")
+    ('x_.._.._.._victim', '_._names', 'h2__robust_')
     """
-    cleaned = _BAD.sub("_", str(name).strip())
-    if not cleaned or set(cleaned) <= {"."}:
+    text = str(name).strip()
+    if not text or set(text) <= {"."}:
         raise ConfigError(field, f"cannot be used in a file name: {name!r}")
-    return cleaned
+    cleaned = _BAD.sub("_", text)
+    return "_" + cleaned[1:] if cleaned.startswith(".") else cleaned
 
 
 def child(directory: str | Path, name: str) -> Path:

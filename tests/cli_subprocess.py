@@ -90,3 +90,35 @@ def rrd_verifies(path: str | Path) -> bool:
         timeout=120, env=cli_env(CI="1"),
     )  # fmt: skip
     return proc.returncode == 0
+
+
+def mount_tmpfs(path: str | Path, size: str) -> bool:
+    """Mount a fresh tmpfs of ``size`` (e.g. ``"8m"``) on the directory ``path`` (created);
+    ``False`` where this machine does not allow it (not root, no ``mount``), so that the
+    test can skip with a reason."""
+    Path(path).mkdir(parents=True, exist_ok=True)
+    if os.geteuid() != 0 or shutil.which("mount") is None:
+        return False
+    proc = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)],
+                          capture_output=True, text=True)  # fmt: skip
+    return proc.returncode == 0
+
+
+def unmount(path: str | Path) -> None:
+    subprocess.run(["umount", "-l", str(path)], capture_output=True)
+
+
+def fill(directory: str | Path) -> None:
+    """Fill the file system of ``directory`` to the last byte (one file, written until ENOSPC)."""
+    block = b"\0" * (1 << 16)
+    with open(Path(directory) / "filler", "wb", buffering=0) as fh:
+        try:
+            while True:
+                fh.write(block)
+        except OSError:
+            pass
+        try:  # the last partial block
+            while True:
+                fh.write(b"\0" * 512)
+        except OSError:
+            pass

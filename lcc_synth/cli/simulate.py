@@ -378,7 +378,7 @@ def run(args) -> int:
                 del result
             per = {n: concatenate(p) for n, p in parts.items()}
             rep = report_from(spec, per, info)
-            recorder.metrics(rep, per)
+            recorder.metrics({n: e for n, e in rep.items() if not e.get("failed")}, per)
             failures = failure_lines(rep)
             if failures:
                 recorder.status("failed" if not per else "partial", "\n".join(failures))

@@ -105,12 +105,14 @@ def run(args: argparse.Namespace) -> int:
 def _design(args: argparse.Namespace, design, spec):
     """``design(spec)`` with progress lines as asked; ``None`` (reported on stdout as JSON with
     ``--json``, and on stderr) when the synthesis fails."""
+    from lcc_synth.interrupts import call_in_child
     from lcc_synth.resources import set_progress
     from lcc_synth.synthesis.h2 import SynthesisError
 
     set_progress(not args.no_progress)
-    try:
-        return design(spec)
+    try:  # in a child process: Ctrl-C / SIGTERM stop it at once, even inside a long LAPACK or
+        # Clarabel call that holds the interpreter lock (a 402-state Riccati QZ takes seconds)
+        return call_in_child(design, spec)
     except SynthesisError as err:
         if args.json:
             print(json.dumps({"ok": False, "error": str(err), "details": err.details},

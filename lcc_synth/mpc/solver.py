@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import ctypes
 import os
+import signal
 import sys
 import time
 from dataclasses import dataclass
@@ -54,7 +55,8 @@ def _osqp_interrupt_flag():
     iterations: a Ctrl-C that lands in the last iterations of a converging solve is consumed
     and the solve reports ``solved`` (measured: 5 of 20 interrupted MPC runs went on to the
     end and exited 0). The flag stays set until the next solve starts, so reading it after
-    every solve turns each such Ctrl-C into a ``KeyboardInterrupt``.
+    every solve turns each such Ctrl-C into :class:`~lcc_synth.errors.Interrupted` (a
+    ``KeyboardInterrupt``; :func:`lcc_synth.interrupts.deliver`).
     """
     try:
         from osqp import ext_builtin
@@ -165,7 +167,9 @@ class OSQPSolver:
         # converged after the signal (the status then says "solved")
         if status_val == OSQP_SIGINT or (self._interrupted is not None
                                          and self._interrupted()):
-            raise KeyboardInterrupt
+            from lcc_synth.interrupts import deliver
+
+            deliver(signal.SIGINT)  # Interrupted (a KeyboardInterrupt), as the CLI's handler
         ok = status_val == OSQP_SOLVED and not self.force_failure
         sol = ext.solution
         x, y = sol.x, sol.y
