@@ -13,7 +13,13 @@
   held it for up to 1.6 s at once on a 60-state LMI, and for tens of seconds in total on the
   202- and 402-state designs. The parent waits for the child in :data:`POLL_S` slices, so a
   signal is handled within that time; the child is killed and reaped. The result comes back
-  pickled (numpy arrays bit for bit). Where ``fork`` is not available the call runs in-process.
+  pickled (numpy arrays bit for bit).
+
+  It forks only while :func:`handling` is active (the ``lcc-synth`` command), where no solver
+  ever runs in the parent. Elsewhere (the Python API, the tests) the call runs in-process, as a
+  fork is not safe there: Clarabel's linear algebra (faer) runs on a rayon thread pool, and a
+  child forked after a solve in the parent inherits the pool's state without its threads and
+  waits for them forever (seen here: the first in-process solve, then a forked one, hung).
 """
 
 from __future__ import annotations
@@ -120,9 +126,10 @@ def _child(fn: Callable[..., Any], args: tuple, kwargs: dict, fd: int) -> None:
 def call_in_child(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
     """``fn(*args, **kwargs)`` computed in a forked child process, so that a signal stops it
     at once (see the module docstring). Its exceptions are raised here; its result must be
-    picklable. Runs in-process where ``os.fork`` does not exist, in a thread other than the
-    main one (only the main thread handles signals), or inside such a child already."""
-    if (not hasattr(os, "fork") or _STATE["in_child"]
+    picklable. Runs in-process outside :func:`handling` (see the module docstring), where
+    ``os.fork`` does not exist, in a thread other than the main one (only the main thread
+    handles signals), or inside such a child already."""
+    if (not _STATE["active"] or not hasattr(os, "fork") or _STATE["in_child"]
             or threading.current_thread() is not threading.main_thread()):  # fmt: skip
         return fn(*args, **kwargs)
     r, w = os.pipe()
