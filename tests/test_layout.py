@@ -1,5 +1,7 @@
-"""The package layout: no import cycle inside ``lcc_synth``, no module over 600 lines, few plain
-modules at the top.
+"""The package layout: no import cycle inside ``lcc_synth``, no module over a soft ceiling of
+900 lines (modules hold one concept each, sized by the concept: issue 29 replaced the former
+600-line rule, which had started to shape files instead of concepts), few plain modules at the
+top.
 
 Imports are read with :mod:`ast`, function-level (lazy) imports included: a cycle closed by a
 lazy import is still a cycle. Importing ``a.b.c`` also runs the ``__init__`` of ``a.b``, so an
@@ -14,7 +16,7 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parent.parent / "lcc_synth"
-MAX_LINES = 600
+MAX_LINES = 900
 MAX_TOP_MODULES = 8
 
 

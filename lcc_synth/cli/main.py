@@ -109,10 +109,10 @@ def entry() -> None:
     except Interrupted as err:  # a signal between main's return and the end of the block
         code = 128 + err.signum
     signum = interrupted()
-    if signum is not None:
-        sys.stdout.flush()
+    if signum is not None:  # the command's own code: 128 + signum, or 0 when a signal is its
+        sys.stdout.flush()  # normal end (Ctrl-C closes the viewer of ``review``)
         sys.stderr.flush()
-        os._exit(code if code >= 128 else 128 + signum)
+        os._exit(code)
     sys.exit(code)
 
 
