@@ -93,6 +93,8 @@ def minmax_rows(
     tolerance : float
         A bucket's interior minimum / maximum is dropped when a grid row of the bucket is
         within ``tolerance`` x the span of ``values`` (max - min over every finite sample).
+        An extreme reached on several rows of a bucket (a command saturated at its limit)
+        keeps the first and the last of them.
     forced : numpy.ndarray, optional
         ``(T,)`` bool: rows always kept.
 
@@ -138,7 +140,12 @@ def minmax_rows(
             x = np.where(np.isfinite(x), x, -np.inf)
             e = np.where(np.isfinite(e), e, -np.inf)
             peak = np.maximum.reduceat(x, grid[:-1], axis=0)[seg]  # (T, k)
-            keep |= ((x == peak) & (x > e + tol)).any(axis=1)
+            hit = (x == peak) & (x > e + tol)
+            for j in np.flatnonzero(hit.any(axis=0)):  # a plateau (a saturated command):
+                rows = np.flatnonzero(hit[:, j])  # its first and last row in the bucket
+                new = np.diff(seg[rows]) != 0
+                keep[rows[np.r_[True, new]]] = True
+                keep[rows[np.r_[new, True]]] = True
     return np.flatnonzero(keep)
 
 
