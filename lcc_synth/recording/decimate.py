@@ -30,13 +30,14 @@ does not visibly change:
 
 Measured on the default ``lcc-synth run`` (``problems/showcase.toml``, 24 runs: six scenarios,
 four to six controllers; ``rerun rrd stats`` and the Arrow size of every chunk by entity,
-``benchmarks/bench_recording_size.py``): the file 19.1 MB -> 6.8 MB. Its simulations 16.5 ->
-4.7 MB: MPC predicted plans 6.36 -> 0.44 MB (about 200 full plans per run before), the
-accelerations 3.81 -> 1.53 MB (the noisy ``heterogeneous`` ones 2.68 -> 1.03 MB: before, two
-rows in three), the road 2.26 -> 0.87 MB (0.1 s frames with M4 peaks before), velocity and
-spacing 2.52 -> 0.93 MB, the CAV command 0.46 -> 0.23 MB, MPC solve times and status 0.39 ->
-0.11 MB; the rest is about 2 kB of Arrow schema per chunk. The layout (blueprint) 2.47 ->
-2.09 MB: time-series views no longer save the visible time range that is Rerun's default.
+``benchmarks/bench_recording_size.py``): the file 19.1 MB -> 6.6 MB. Its simulations 16.3 ->
+4.2 MB: the MPC plans 6.36 -> 0.44 MB (about 200 full plans per run before), the
+accelerations 3.81 -> 1.31 MB (the noisy ``heterogeneous`` ones 2.68 -> 0.81 MB: two rows in
+three before), the road 2.26 -> 0.87 MB (0.1 s frames with M4 peaks before), velocity and
+spacing 2.52 -> 0.93 MB, the CAV command 0.46 -> 0.21 MB, the AEB flags 0.27 -> 0.10 MB, the
+MPC solve times and status 0.39 -> 0.11 MB; what remains is mostly about 2 kB of Arrow schema
+per chunk. The layout (blueprint) 2.47 -> 2.09 MB: time-series views no longer save the
+visible time range that is Rerun's default.
 """
 
 from __future__ import annotations
@@ -404,8 +405,8 @@ def strip_points(
     """``(S, H)`` bool: the points of each line strip to keep so that the strip drawn through
     them stays within ``tolerance`` x the span of all strips of every point (the
     :func:`linear_rows` simplification of each strip on its own: a smooth 5 s prediction of
-    51 points needs a handful); each strip keeps its ends and its extremes, a strip with a
-    NaN keeps every point.
+    51 points needs a handful); each strip keeps its ends and its extremes, a strip with some
+    NaN points keeps every point (one without any value, e.g. FD-LCC's CAV spacing: its ends).
 
     Parameters
     ----------
@@ -422,9 +423,10 @@ def strip_points(
     if S == 0 or H == 0:
         return keep
     keep[:, 0] = keep[:, -1] = True
-    bad = ~np.isfinite(y).all(axis=1)
+    finite = np.isfinite(y)
+    bad = ~finite.all(axis=1) & finite.any(axis=1)  # partly NaN: every point
     keep[bad] = True
-    good = np.flatnonzero(~bad)
+    good = np.flatnonzero(finite.all(axis=1))  # (a strip without any value: its two ends)
     if good.size and H > 2:
         keep[good, np.argmin(y[good], axis=1)] = True
         keep[good, np.argmax(y[good], axis=1)] = True
