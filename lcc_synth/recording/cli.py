@@ -42,11 +42,12 @@ def add_recording_arguments(parser: argparse.ArgumentParser, steps: bool = True)
     group.add_argument(
         "--record-every",
         type=_record_every,
-        default=None,  # not given: the command's default (record_every_default, else 1)
+        default=None,  # not given: the command's default (record_every_default, else minmax)
         metavar="N|minmax",
-        help="record every N-th simulation step (1 = every step), or 'minmax': a 0.2 s grid "
-        "keeping every visible peak and dip, the exact extremes and full rate around events "
-        "(default 1; `lcc-synth run`: minmax)",
+        help="'minmax' (the default): what the viewer draws at about a pixel, every visible "
+        "peak and dip, the exact extremes and full rate around emergency braking and "
+        "collisions, a fraction of the size; or every N-th simulation step (1 = every step: "
+        "the exact recording, value for value)",
     )
 
 
@@ -84,10 +85,12 @@ def recording_path(
 
 def recording_decimation(args: argparse.Namespace) -> int | str:
     """The validated ``--record-every`` value (an integer >= 1 or ``"minmax"``); when it is
-    not given, the command's default (``record_every_default``: ``run`` records ``minmax``)."""
+    not given, the command's default (``record_every_default``, else ``"minmax"``: every
+    command records the min/max-preserving decimation unless ``--record-every N`` is given;
+    ``1`` is the exact recording)."""
     every = getattr(args, "record_every", None)
     if every is None:
-        every = getattr(args, "record_every_default", 1)
+        every = getattr(args, "record_every_default", "minmax")
     if every == "minmax":
         return every
     if isinstance(every, bool) or not isinstance(every, int) or every < 1:

@@ -127,7 +127,7 @@ def record_simulation(
     *,
     controller: str | None = None,
     metrics: Mapping[str, Any] | None = None,
-    decimate: int = 1,
+    decimate: int | str = "minmax",
     run: int = 0,
     mpc_history: Any = None,
 ) -> str:
@@ -148,11 +148,11 @@ def record_simulation(
         The run's metrics (e.g. the ``--json`` shape of ``lcc-synth simulate``): scalars go into
         the per-controller and comparison tables, per-vehicle lists into a vehicle table.
     decimate : int or "minmax"
-        Record every ``decimate``-th step (the last step is always recorded), or ``"minmax"``:
-        each entity keeps its own rows of :func:`~lcc_synth.recording.decimate.minmax_rows`
-        (a 0.1 s grid, every visible peak and dip, the exact extremes) and full rate around
-        emergency braking, collisions and the CAV's jerk peaks
-        (:func:`~lcc_synth.recording.decimate.event_rows`).
+        ``"minmax"`` (the default): each entity keeps its own rows
+        (:mod:`lcc_synth.recording.decimate`: what the viewer draws within about a pixel,
+        every visible peak and dip, the exact extremes, full rate around emergency braking,
+        collisions and the CAV's jerk peaks); or every ``decimate``-th step (the last step is
+        always recorded; ``1``: every value exactly as simulated).
     run : int
         Which batch member to record.
     mpc_history : optional
