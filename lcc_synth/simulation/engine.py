@@ -384,9 +384,18 @@ def simulate(
 def simulate_many(
     scenario: Scenario, controllers: Mapping[str, Controller] | Sequence[Controller]
 ) -> dict[str, SimResult]:
-    """Run several controllers on the same draws; returns ``{name: SimResult}`` in order."""
-    items = controllers.items() if isinstance(controllers, Mapping) else (
+    """Run several controllers on the same draws; returns ``{name: SimResult}`` in order.
+
+    Every result stays in memory: their total is checked (``scenario.batch``) before the
+    draws are made."""
+    items = list(controllers.items() if isinstance(controllers, Mapping) else (
         (c.name, c) for c in controllers
-    )
+    ))  # fmt: skip
+    sc, n = scenario, len(items)
+    require_memory(
+        "scenario.batch", n * simulation_bytes(sc),
+        f"{n} results of {sc.steps} steps x {sc.n_vehicles} vehicles x {sc.batch} scenario(s)",
+        "run fewer scenarios or controllers at once",
+    )  # fmt: skip
     draws = scenario.draw()
     return {name: simulate(scenario, ctrl, draws) for name, ctrl in items}
