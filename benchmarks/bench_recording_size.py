@@ -183,9 +183,9 @@ def estimates(tmp: Path, showcase: Path | None) -> None:
     if showcase is not None:
         from lcc_synth.cli.run import default_problem
         from lcc_synth.experiments.comparison import load_suite
-        from lcc_synth.recording.size import estimate_suite_recording
+        from lcc_synth.experiments.suite_size import suite_recording_estimate
 
-        est = estimate_suite_recording(load_suite(default_problem()))
+        est = suite_recording_estimate(load_suite(default_problem()))
         real = showcase.stat().st_size
         print(f"  lcc-synth run (showcase)          minmax: real {format_size(real)}, "
               f"estimate {format_size(est.bytes)} = {est.bytes / real:.2f} x")

@@ -24,7 +24,7 @@ alone, 97 ms per run of the 200-seed study above (600 runs, 155 MB: 58 s more th
 recording), :data:`RECORD_RUN_S`, plus 0.013-0.02 s per MB written (:data:`RECORD_BYTE_S`).
 
 Memory. A result of ``B x T x n`` samples as
-:func:`~lcc_synth.simulation.engine.simulation_bytes` counts it, 1.75 times for the metrics'
+:func:`simulation_bytes` counts it, 1.75 times for the metrics'
 temporaries (:data:`RESULT_PEAK`; the study above without recording peaked 1.26-1.32 GiB above
 the interpreter for a 786 MB result); a scenario's random draws 705 B with 12 vehicles and its
 random generator 390 B while drawing (:data:`DRAW_VEHICLE_BYTES`,
@@ -63,9 +63,11 @@ __all__ = [
     "estimate_simulation",
     "format_bytes",
     "format_duration",
+    "format_size",
     "require_memory",
     "progress",
     "set_progress",
+    "simulation_bytes",
 ]
 
 #: fraction of the available memory a single run may plan to use
@@ -155,6 +157,31 @@ def progress(message: str) -> None:
         print(f"lcc-synth: {message}", file=sys.stderr, flush=True)
 
 
+def simulation_bytes(sc: Any) -> int:
+    """Bytes :func:`~lcc_synth.simulation.engine.simulate` allocates for the scenario ``sc``:
+    the time grid and the perturbation overrides (``steps x (1 + 2 vehicles)``), the recorded
+    samples (``batch x kept samples x (4 vehicles + 1 per CAV)`` floats) and the delay ring
+    buffer."""
+    import numpy as np
+
+    T, nv, B = sc.steps, sc.n_vehicles, sc.batch
+    kept = (T - 1) // sc.record_every + 1
+    nc = len(sc.cav_columns)
+    delay = float(np.max(np.asarray(sc.delay, dtype=float), initial=0.0)) + sc.delay_spread
+    delay = max(delay if np.isfinite(delay) else 0.0, sc.v2v.latency, 0.0)
+    ring = (int(delay / sc.dt) + 2) * B * nv * 16
+    return 8 * T * (1 + 2 * nv) + B * kept * (8 * (4 * nv + nc) + nc) + ring
+
+
+def format_size(n: float) -> str:
+    """``n`` bytes in decimal units (those of ``--max-recording-size``): ``"1.9 GB"``,
+    ``"640 kB"``."""
+    for unit, scale in (("PB", 1e15), ("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if abs(n) >= scale:
+            return f"{n / scale:.3g} {unit}"
+    return f"{int(n)} B"
+
+
 def format_duration(seconds: float) -> str:
     """``"40 s"``, ``"12 min"``, ``"3.2 h"``, ``"4.1 days"``, ``"37 years"``."""
     s = float(seconds)
@@ -197,8 +224,6 @@ class WorkEstimate:
         if self.memory >= 1e9:
             parts.append(f"memory ~{format_bytes(self.memory)}")
         if self.recording is not None:
-            from lcc_synth.recording.size import format_size
-
             parts.append(f"recording ~{format_size(self.recording)}")
         return f"lcc-synth {command}: estimate: {', '.join(parts)}"
 
@@ -251,8 +276,6 @@ def estimate_simulation(
     WorkEstimate
     """
     from dataclasses import replace
-
-    from lcc_synth.simulation.engine import simulation_bytes
 
     B, T, nv = int(scenario.batch), int(scenario.steps), int(scenario.n_vehicles)
     b = max(1, min(B, int(chunk or B)))

@@ -245,8 +245,8 @@ def test_the_default_run_recording_is_at_most_8_mb(tmp_path):
     ``lcc-synth run``'s check bounds it."""
     from lcc_synth.cli.run import default_problem
     from lcc_synth.experiments.comparison import load_suite
+    from lcc_synth.experiments.suite_size import suite_recording_estimate
     from lcc_synth.recording import summarize_recording
-    from lcc_synth.recording.size import estimate_suite_recording
 
     rrd = tmp_path / "showcase.rrd"
     proc = run_cli(["run", "--rrd", rrd, "--out", tmp_path / "res", "--no-figures",
@@ -255,7 +255,7 @@ def test_the_default_run_recording_is_at_most_8_mb(tmp_path):
     size = rrd.stat().st_size
     assert size <= 8_000_000, size
     assert rrd_verifies(rrd)
-    est = estimate_suite_recording(load_suite(default_problem()))
+    est = suite_recording_estimate(load_suite(default_problem()))
     assert size * (1 - ESTIMATE_MARGIN) <= est.bytes <= ESTIMATE_FACTOR * size, (est.bytes, size)
     table = json.loads(proc.stdout)["results"]
     s = summarize_recording(rrd)
@@ -277,7 +277,7 @@ def test_the_check_of_lcc_synth_run_refuses_its_recording_over_the_limit(tmp_pat
     below its estimate, naming what to change; nothing is checked with --no-record."""
     from lcc_synth.cli.run import default_problem
     from lcc_synth.experiments.comparison import load_suite
-    from lcc_synth.recording import check_suite_recording
+    from lcc_synth.experiments.suite_size import check_suite_recording
 
     monkeypatch.chdir(tmp_path)
     suite = load_suite(default_problem())

@@ -1,7 +1,7 @@
 """What the commands use: ``--rrd`` / ``--no-record`` / ``--record-every`` /
 ``--max-recording-size``, the recorder that records each controller of a problem as its result
 arrives, and the check of a recording's estimated size before the work
-(:func:`check_recording`, :func:`check_suite_recording`)."""
+(:func:`check_recording`)."""
 
 from __future__ import annotations
 
@@ -33,7 +33,6 @@ __all__ = [
     "check_recording",
     "check_recording_limit",
     "check_recording_space",
-    "check_suite_recording",
     "parse_record_seeds",
     "record_seed_count",
     "recording_decimation",
@@ -387,21 +386,3 @@ def _suggest(size: float) -> str:
         if size >= scale or unit == "MB":
             return f"{int(size * 1.5 // scale) + 1}{unit}"
     return "1GB"  # pragma: no cover
-
-
-def check_suite_recording(args: argparse.Namespace, suite: Any) -> Any:
-    """What ``lcc-synth run`` calls before the work: the estimate of its recording
-    (:func:`~lcc_synth.recording.size.estimate_suite_recording`) checked by
-    :func:`check_recording`; returns the estimate (``None`` with ``--no-record``)."""
-    if getattr(args, "no_record", False):
-        return None
-    from lcc_synth.recording.size import estimate_suite_recording
-
-    every = recording_decimation(args)
-    estimate = estimate_suite_recording(suite, every)
-    check_recording(
-        args, estimate, "--scenarios", "run fewer scenarios (--scenarios a,b) or controllers "
-        "(--controllers a,b), " + ("--record-every minmax, " if every != "minmax" else "")
-        + "--no-record",
-    )  # fmt: skip
-    return estimate

@@ -64,6 +64,7 @@ from lcc_synth.recording.decimate import (
     NOISY_BUCKET_S,
     ROAD_BUCKET_S,
 )
+from lcc_synth.resources import format_size
 
 __all__ = [
     "DEFAULT_LIMIT",
@@ -142,14 +143,6 @@ def parse_size(text: str, field: str = "--max-recording-size") -> int:
     if not (math.isfinite(value) and value >= 1):
         raise ConfigError(field, f"must be at least 1 byte, got {text!r}")
     return int(value)
-
-
-def format_size(n: float) -> str:
-    """``n`` bytes in decimal units: ``"1.9 GB"``, ``"640 kB"``."""
-    for unit, scale in (("PB", 1e15), ("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
-        if abs(n) >= scale:
-            return f"{n / scale:.3g} {unit}"
-    return f"{int(n)} B"
 
 
 @dataclass(frozen=True)
@@ -398,33 +391,48 @@ def estimate_simulation_recording(
     return estimate_recording_bytes(runs, decimate, views, blueprints=2, what=what)
 
 
-def estimate_suite_recording(suite: Any, decimate: int | str = "minmax") -> RecordingEstimate:
-    """The recording of ``lcc-synth run`` for ``suite``
-    (:func:`~lcc_synth.experiments.comparison.load_suite`): every controller that applies to
-    each scenario, the predictive ones (``type = "mpc"`` or ``"deep_lcc"``) with their
-    history; the layout of every scenario tab, written once; the |Gamma| curves and gains
-    are counted as the documents of a run each."""
-    from lcc_synth.experiments.comparison import applies, controller_table
+def estimate_suite_recording(
+    scenarios: Sequence[tuple[Any, Sequence[Mapping[str, Any]]]],
+    controllers: int,
+    documents: int = 0,
+    decimate: int | str = "minmax",
+) -> RecordingEstimate:
+    """The recording of ``lcc-synth run``: each scenario with the controllers that run in it.
 
+    Parameters
+    ----------
+    scenarios : sequence of (Scenario, sequence of mapping)
+        Each scenario and the tables of the controllers that run in it, merged for its layout
+        (:func:`lcc_synth.experiments.suite_size.suite_recording_estimate` builds them); the
+        predictive ones (``type = "mpc"`` or ``"deep_lcc"``) with their history.
+    controllers : int
+        Controllers of the suite (every scenario tab has a view per controller).
+    documents : int
+        |Gamma| curves and gains recorded besides (counted as the documents of a run each,
+        with two views).
+    decimate : int or "minmax"
+        The recording's ``--record-every``.
+
+    Returns
+    -------
+    RecordingEstimate
+        The layout written once.
+    """
     runs, views, n = [], 0, 0
-    for sname, ss in suite.scenarios.items():
-        for table in suite.controllers.values():
-            if not applies(table, ss.layout, sname):
-                continue
-            t = controller_table(table, ss.layout)
-            kind = str(t.get("type", ""))
+    for scenario, tables in scenarios:
+        for table in tables:
+            kind = str(table.get("type", ""))
             shape = None
             if kind in ("mpc", "deep_lcc"):
-                horizon, ts = _table_horizon(kind, t)
-                shape = _shape(ss.scenario, horizon, ts, kind == "mpc")
-            runs.append(run_shape(ss.scenario, shape))
+                horizon, ts = _table_horizon(kind, table)
+                shape = _shape(scenario, horizon, ts, kind == "mpc")
+            runs.append(run_shape(scenario, shape))
             n += 1
-        views += simulation_views(len(suite.controllers))
-    extra = len(suite.layouts) * (len(suite.controllers) + 1)  # |Gamma| curves, gains
-    runs.append(RunShape(0.0, 1, 1, count=extra))
-    views += 2 * extra
+        views += simulation_views(int(controllers))
+    runs.append(RunShape(0.0, 1, 1, count=int(documents)))
+    views += 2 * int(documents)
     mode = "minmax" if decimate == "minmax" else f"every {decimate} step(s)"
-    what = f"{len(suite.scenarios)} scenarios, {n} runs, {mode}"
+    what = f"{len(scenarios)} scenarios, {n} runs, {mode}"
     return estimate_recording_bytes(runs, decimate, views, blueprints=1, what=what)
 
 
