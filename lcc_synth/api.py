@@ -364,11 +364,14 @@ def record(
     name: str = "python",
     window: tuple[float, float] | None = None,
     controllers: Mapping[str, Any] | None = None,
+    decimate: int | str = "minmax",
 ) -> Path:
     """Write the runs ``results`` (``{controller name: SimResult}``) side by side into one
     Rerun recording ``path`` (``lcc-synth review PATH`` opens it), with the CLI's layout; with
     ``window`` each run's :func:`metrics` too; with ``controllers`` (``{name: controller}``)
-    the MPCs' solve times and plans of their last run. Returns ``path``.
+    the MPCs' solve times and plans of their last run. ``decimate`` as the CLI's
+    ``--record-every``: ``"minmax"`` (min/max-preserving, the default) or every N-th step
+    (``1``: exact). Returns ``path``.
     :func:`lcc_synth.recording.open_recording`, :func:`~lcc_synth.recording.record_simulation`.
     """
     from lcc_synth.recording import (
@@ -388,7 +391,7 @@ def record(
     blueprint = simulation_blueprint(name, list(results), list(histories), ranges)
     with open_recording(path, name, blueprint) as rec:
         for cname, result in results.items():
-            record_simulation(rec, result, name, controller=cname,
+            record_simulation(rec, result, name, controller=cname, decimate=decimate,
                               mpc_history=histories.get(cname) or None)  # fmt: skip
             if window is not None:
                 record_metrics(rec, name, cname, metrics(result, window=window))

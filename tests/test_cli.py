@@ -79,14 +79,16 @@ def test_unknown_command_prints_the_top_level_usage(capsys):
 # ------------------------------------------------------------- options that apply, and no more
 
 _RECORD = {"--rrd", "--no-record", "--overwrite"}
-#: Every command's options (the audit): a simulation records steps (--record-every); analyze,
-#: regions, synthesize and sweep record no steps; review reads a recording.
+_STEPS = {"--record-every", "--max-recording-size"}
+#: Every command's options (the audit): a simulation records steps (--record-every, and its
+#: size is limited: --max-recording-size); analyze, regions, synthesize and sweep record no
+#: steps; review reads a recording.
 EXPECTED_OPTIONS = {
     "run": {"--json", "--scenarios", "--controllers", "--out", "--no-figures", "--no-progress",
-            *_RECORD, "--record-every"},
+            *_RECORD, *_STEPS},
     "analyze": {"--json", "--png", *_RECORD},
     "regions": {"--json", "--png", "--step", *_RECORD},
-    "simulate": {"--json", "--seeds", "--record-seeds", *_RECORD, "--record-every"},
+    "simulate": {"--json", "--seeds", "--record-seeds", *_RECORD, *_STEPS},
     "synthesize": {"--json", "--out", "--figure", "--no-progress", *_RECORD},
     "sweep": {"--json", "--count", "--batch-size", "--seed", "--scheduler", "--workers",
               "--controllers", "--out", "--no-figures", "--no-progress", *_RECORD},
@@ -138,6 +140,8 @@ def test_options_of_another_command_are_usage_errors(argv, capsys):
         (["simulate", "paper_table2.toml", "--no-record", "--record-every", "5"],
          "--record-every"),
         (["run", "showcase.toml", "--no-record", "--record-every", "5"], "--record-every"),
+        (["simulate", "paper_table2.toml", "--no-record", "--max-recording-size", "3GB"],
+         "--max-recording-size"),
         (["simulate", "paper_table2.toml", "--no-record", "--record-seeds", "0"],
          "--record-seeds"),
         (["simulate", "paper_table2.toml", "--record-seeds", "0"], "--record-seeds"),

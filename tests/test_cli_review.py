@@ -32,7 +32,8 @@ def rrd(tmp_path_factory):
     res = simulate(sc, HDVController("all_hdv"))
     path = tmp_path_factory.mktemp("review") / "run.rrd"
     with R.open_recording(path, "demo", R.simulation_blueprint("demo", ["all_hdv"])) as rec:
-        R.record_simulation(rec, res, "demo", metrics={"aave": 0.123456, "fuel_ml": 9.5})
+        R.record_simulation(rec, res, "demo", metrics={"aave": 0.123456, "fuel_ml": 9.5},
+                            decimate=1)  # fmt: skip
     return path
 
 

@@ -121,7 +121,7 @@ def table(tmp_path_factory):
     with R.open_recording(path, "rec test", bp) as rec:
         for res in results.values():
             metrics = metrics_summary(res, MetricsConfig(window=(0.5, 5.0)))
-            R.record_simulation(rec, res, "rec test", metrics=metrics)
+            R.record_simulation(rec, res, "rec test", metrics=metrics, decimate=1)
     return path, results
 
 
@@ -221,9 +221,9 @@ def test_batch_member_and_controller_label(tmp_path):
     path = tmp_path / "batch.rrd"
     with R.open_recording(path, "b") as rec:
         for run in range(3):
-            R.record_simulation(rec, res, "b", controller=f"hdv_seed{run}", run=run)
+            R.record_simulation(rec, res, "b", controller=f"hdv_seed{run}", run=run, decimate=1)
         with pytest.raises(ConfigError, match="run"):
-            R.record_simulation(rec, res, "b", run=3)
+            R.record_simulation(rec, res, "b", run=3, decimate=1)
     chunks = _chunks(path)
     for run in range(3):
         _, vel = _temporal(chunks, f"/b/hdv_seed{run}/velocity", "Scalars:scalars")
@@ -239,7 +239,7 @@ def test_interrupted_run_leaves_a_readable_file(tmp_path, exc):
         with R.open_recording(
             path, "rec test", R.simulation_blueprint("rec test", ["all_hdv", "raiser"])
         ) as rec:
-            R.record_simulation(rec, first, "rec test")
+            R.record_simulation(rec, first, "rec test", decimate=1)
             simulate(sc, RaisingController(exc))  # raises mid-run (t = 2 s of 4 s)
     summary = R.summarize_recording(path)  # full read of a finalised file (footer included)
     assert summary.has_blueprint and summary.finalized
@@ -416,7 +416,9 @@ def test_mpc_controller_history_reaches_the_recording(tmp_path):
     R.add_recording_arguments(parser)
     path = tmp_path / "mpc_run.rrd"
     with contextlib.ExitStack() as stack:
-        recorder = R.SimulationRecorder(parser.parse_args(["--rrd", str(path)]), stack)
+        recorder = R.SimulationRecorder(
+            parser.parse_args(["--rrd", str(path), "--record-every", "1"]), stack
+        )
         recorder(SimpleNamespace(name="mpc demo", controllers={"mpc": ctrl}), "mpc", res)
     chunks = _chunks(path)
     t_ns, st = _temporal(chunks, "/mpc_demo/mpc/mpc/solve_time_ms", "Scalars:scalars")
@@ -466,7 +468,8 @@ def test_simulate_command_records_every_controller(tmp_path, capsys, monkeypatch
     problem = tmp_path / "small.toml"
     problem.write_text(SMALL_PROBLEM)
     path = tmp_path / "sim.rrd"
-    assert main(["simulate", str(problem), "--json", "--rrd", str(path)]) == 0
+    exact = ["--record-every", "1"]  # every step, value for value (the default is minmax)
+    assert main(["simulate", str(problem), "--json", "--rrd", str(path), *exact]) == 0
     captured = capsys.readouterr()
     results = json.loads(captured.out)["results"]  # stdout: the JSON object only
     assert str(path) in captured.err
@@ -614,7 +617,7 @@ def test_collisions_and_emergency_braking_are_events_on_the_timeline(tmp_path):
     assert res.collided[0].any() and res.aeb_active[0].any()  # the scenario does what we need
     path = tmp_path / "crash.rrd"
     with R.open_recording(path, "crash", R.simulation_blueprint("crash", ["blind"])) as rec:
-        R.record_simulation(rec, res, "crash")
+        R.record_simulation(rec, res, "crash", decimate=1)
     chunks = _chunks(path)
     t_ns, texts = _temporal(chunks, "/crash/blind/events", "TextLog:text")
     _, levels = _temporal(chunks, "/crash/blind/events", "TextLog:level")
@@ -653,7 +656,7 @@ def test_killed_process_leaves_the_flushed_controllers_readable(tmp_path):
         "r = simulate(Scenario(m=0, n=2, duration=3.0), HDVController('h'))\n"
         f"cm = R.open_recording({str(path)!r}, 'k')\n"
         "rec = cm.__enter__()\n"
-        "R.record_simulation(rec, r, 'k')\n"
+        "R.record_simulation(rec, r, 'k', decimate=1)\n"
         "rec.flush()\n"
         "os._exit(9)  # killed: no context-manager exit\n"
     )

@@ -117,10 +117,15 @@ def test_emergency_braking_is_recorded_at_full_rate(recorded):
     res = results["paper"]
     aeb = np.asarray(res.aeb_active)[0].astype(bool)
     assert aeb.sum() > 10  # the fixed-v* paper gain needs AEB after the head's brake
-    for entity in ("cav/aeb_active", "acceleration", "cav/u_cmd", "spacing"):
+    for entity in ("acceleration", "cav/u_cmd", "spacing"):
         t, _ = _entity(paths["minmax"], f"/dec/paper/{entity}")
         kept = set(np.round(t / res.dt).astype(int).tolist())
         assert set(np.round(res.t[aeb] / res.dt).astype(int).tolist()) <= kept, entity
+    # the AEB flag is a step signal: its breakpoints alone redraw it exactly (every sample)
+    t, flag = _entity(paths["minmax"], "/dec/paper/cav/aeb_active")
+    assert len(t) < len(res.t) / 4  # the flag chatters here: 512 breakpoints of 3000 rows
+    k = np.round((t - res.t[0]) / res.dt)  # recorded step indices
+    np.testing.assert_array_equal(np.interp(np.arange(len(res.t)), k, flag[:, 0, 0]), aeb)
 
 
 def test_minmax_rows_keep_every_bucket_extreme_and_a_spike_striding_drops():
@@ -182,3 +187,91 @@ def test_summary_fits_one_screen_and_full_holds_everything(recorded, tmp_path, c
     assert main(["review", "--summary", "--full", str(path)]) == 0
     assert capsys.readouterr().out.splitlines() == full
     assert main(["review", "--full", str(path)]) == 2  # --full only with --summary
+
+
+def _redraw(idx: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """What a line chart draws from the rows ``idx`` of ``v`` (``(T, k)``), at every row."""
+    T = v.shape[0]
+    out = np.full(v.shape, np.nan)
+    for j in range(v.shape[1]):
+        ok = np.isfinite(v[idx, j])
+        out[:, j] = np.interp(np.arange(T), idx[ok], v[idx[ok], j])
+    return out
+
+
+def test_linear_rows_redraw_every_sample_within_the_tolerance():
+    """Brute force: the line through the kept rows vs every sample of every series."""
+    rng = np.random.default_rng(4)
+    T = 5000
+    t = 0.01 * np.arange(T)
+    v = np.column_stack([np.sin(0.7 * t), np.where(t < 20, 15.0, 15.0 - np.exp(-(t - 20))),
+                         np.cumsum(rng.normal(scale=0.01, size=T)), np.full(T, 3.0)])  # fmt: skip
+    v[2000:2100, 1] = np.nan  # a gap
+    idx = R.decimate.linear_rows(v, VIEWER_TOLERANCE)
+    tol = VIEWER_TOLERANCE * (np.nanmax(v) - np.nanmin(v))
+    err = np.abs(_redraw(idx, v) - v)[np.isfinite(v)]
+    assert err.max() <= tol * (1 + 1e-9)
+    assert len(idx) < T / 4  # smooth: far fewer than the 0.2 s grid's T / 20 rows per ...
+    assert {0, T - 1, 1999, 2000, 2099, 2100} <= set(idx.tolist())
+    for j in range(4):  # global extremes exactly
+        assert np.nanmax(v[idx, j]) == np.nanmax(v[:, j])
+        assert np.nanmin(v[idx, j]) == np.nanmin(v[:, j])
+    flat = np.full(T, 15.0)  # a cruise: its two ends
+    assert R.decimate.linear_rows(flat).tolist() == [0, T - 1]
+    steps = np.repeat([0.0, 1.0, 0.0, 3.0], [10, 5, 20, 7])  # a flag / status: exact
+    k = R.decimate.linear_rows(steps, 0.0)
+    assert k.tolist() == [0, 9, 10, 14, 15, 34, 35, 41]
+    np.testing.assert_array_equal(np.interp(np.arange(42), k, steps[k]), steps)
+
+
+def test_viewer_rows_keep_a_noise_band_per_second_and_smooth_signals_as_lines():
+    rng = np.random.default_rng(5)
+    T, b = 7000, 20
+    t = 0.01 * np.arange(T)
+    after = np.clip(t - 20.0, 0.0, None)  # a cruise, then a decaying wave from t = 20 s
+    smooth = np.column_stack([15 - np.exp(-0.1 * after) * np.sin(0.2 * (j + 1) * after)
+                              for j in range(12)])  # fmt: skip
+    idx = R.decimate.viewer_rows(smooth, b)
+    assert len(idx) == len(R.decimate.linear_rows(smooth)) < len(minmax_rows(smooth, b))
+    noisy = smooth + rng.normal(scale=0.05, size=smooth.shape)
+    forced = np.zeros(T, bool)
+    forced[3000:3100] = True  # e.g. emergency braking: full rate
+    idx = R.decimate.viewer_rows(noisy, b, forced=forced)
+    wide = 5 * b  # NOISY_BUCKET_S / VIEWER_BUCKET_S
+    assert R.decimate.NOISY_BUCKET_S == 5 * R.decimate.VIEWER_BUCKET_S
+    np.testing.assert_array_equal(idx, minmax_rows(noisy, wide, forced=forced))
+    assert set(range(3000, 3100)) <= set(idx.tolist())
+    assert len(idx) < len(minmax_rows(noisy, b, forced=forced)) / 2
+    kept = np.zeros(T, bool)
+    kept[idx] = True
+    tol = VIEWER_TOLERANCE * (noisy.max() - noisy.min())
+    for start in range(0, T - 1, wide):  # every series' band, exact per wide bucket
+        sl = slice(start, min(start + wide, T - 1) + 1)
+        for j in range(12):
+            x, k = noisy[sl, j], kept[sl]
+            assert x[k].max() >= x.max() - tol and x[k].min() <= x.min() + tol
+
+
+def test_frames_plans_and_strips():
+    """The road's frames skip what did not move; plans skip repeats; strips keep the points
+    that draw them within the tolerance."""
+    T = 1000
+    pts = np.zeros((T, 4))
+    pts[500:600, 0] = np.linspace(0.0, 10.0, 100)  # one vehicle moves, then stands again
+    pts[600:, 0] = 10.0
+    idx = R.decimate.frame_rows(pts, 20)
+    assert idx.tolist()[:2] == [0, 520] and idx[-1] == T - 1
+    assert set(idx.tolist()) <= set(range(0, T, 20)) | {T - 1}
+    assert len(idx) <= 8  # 500..600 moved (5 frames) + first + last
+    plans = np.zeros((40, 51, 3))
+    plans[10:20] += 1.0 + np.arange(10)[:, None, None]  # the plan changes during 10..19 only
+    k = R.decimate.plan_rows(plans, 5)
+    assert k.tolist() == [0, 10, 15, 20, 39]
+    x = 0.1 * np.arange(51)
+    strips = np.stack([15 - np.exp(-x), 15 - 0.1 * x, np.r_[np.full(25, 15.0), np.full(26, 14.0)]])
+    keep = R.decimate.strip_points(x, strips)
+    assert keep[1].sum() == 2 and keep[2].sum() == 4 and keep[0].sum() <= 25
+    tol = VIEWER_TOLERANCE * (strips.max() - strips.min())
+    for s in range(3):
+        drawn = np.interp(x, x[keep[s]], strips[s, keep[s]])
+        assert np.abs(drawn - strips[s]).max() <= tol * (1 + 1e-9)

@@ -54,7 +54,7 @@ def _record(tmp_path, problem: str, duration: float):
     path = tmp_path / f"{spec.name}.rrd"
     with R.open_recording(path, spec.name, R.simulation_blueprint(spec.name, list(results))) as rec:
         for res in results.values():
-            R.record_simulation(rec, res, spec.name)
+            R.record_simulation(rec, res, spec.name, decimate=1)
     return path, results, spec.name
 
 

@@ -67,7 +67,7 @@ def test_seeds_records_every_scenario(tmp_path, capsys):
 
     path = tmp_path / "all.rrd"
     assert main(["simulate", str(_problem(tmp_path)), "--seeds", "3", "--json",
-                 "--rrd", str(path)]) == 0  # fmt: skip
+                 "--rrd", str(path), "--record-every", "1"]) == 0  # fmt: skip
     s = R.summarize_recording(path)
     assert s.finalized
     for c in ("all_hdv", "fd_lcc"):

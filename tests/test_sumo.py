@@ -504,7 +504,7 @@ def test_sumo_run_is_recorded(tmp_path):
     short.write_text(PROBLEM.read_text().replace("duration = 70.0", "duration = 25.0")
                      .replace("window = [20.0, 60.0]", "window = [20.0, 25.0]"))  # fmt: skip
     rrd = tmp_path / "sumo.rrd"
-    assert main(["simulate", str(short), "--rrd", str(rrd)]) == 0
+    assert main(["simulate", str(short), "--rrd", str(rrd), "--record-every", "1"]) == 0
     summary = summarize_recording(rrd)
     assert summary.finalized
     for name in ("all_hdv", "h2", "mpc"):

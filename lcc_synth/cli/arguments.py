@@ -40,13 +40,16 @@ def check_options(args: argparse.Namespace) -> None:
     Raises
     ------
     ConfigError
-        ``--record-every`` or ``--record-seeds`` with ``--no-record`` (nothing is recorded).
+        ``--record-every``, ``--record-seeds`` or ``--max-recording-size`` with
+        ``--no-record`` (nothing is recorded).
     """
     from lcc_synth.errors import ConfigError
 
     if getattr(args, "no_record", False):
         if getattr(args, "record_every", None) is not None:
             raise ConfigError("--record-every", "does not apply with --no-record")
+        if getattr(args, "max_recording_size", None) is not None:
+            raise ConfigError("--max-recording-size", "does not apply with --no-record")
         if getattr(args, "record_seeds", None) is not None:
             raise ConfigError("--record-seeds", "does not apply with --no-record")
 

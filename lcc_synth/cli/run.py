@@ -35,7 +35,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     add_output_arguments(parser, "the run", "PNG figures")
     add_recording(parser)
-    parser.set_defaults(record_every_default="minmax")  # 16 runs: min/max-preserving, ~9 MB not 40
 
 
 def default_problem() -> Path:
@@ -84,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
 
     from lcc_synth.errors import FileError
     from lcc_synth.experiments.comparison import gamma_settings, load_suite
+    from lcc_synth.experiments.suite_size import check_suite_recording
     from lcc_synth.outputs import check_directory, new_directory, remove_if_empty
     from lcc_synth.recording import recording_decimation, recording_path
 
@@ -93,6 +93,7 @@ def run(args: argparse.Namespace) -> int:
     stamp = now.strftime("%Y%m%dT%H%M%SZ")
     rrd = recording_path(args, suite.name, now=now)  # a bad or existing --rrd: before the work
     every = recording_decimation(args)
+    check_suite_recording(args, suite)  # --max-recording-size and the free space, before it
     settings = gamma_settings(suite)  # {layout: [(suffix, dt, latency, scenarios)]}
     prov = _provenance(problem, suite)
     log = sys.stderr if args.json else sys.stdout

@@ -54,6 +54,7 @@ def load(args):
         raise ConfigError("--seeds", f"must be >= 1, got {args.seeds}")
     spec = load_spec(args.problem, seeds=args.seeds, keep_going=True)
     check_backend(spec.scenario)  # SUMO missing: before any run
+    check_simulation(args, spec)
     return spec
 
 
@@ -70,6 +71,55 @@ def run_provenance(spec) -> dict[str, Any]:
     )  # fmt: skip
 
 
+def check_simulation(args: Any, spec: Any, budget: float = MEMORY_BUDGET) -> Any:
+    """Before any simulation: refuse a recording estimated above ``--max-recording-size``, a
+    run whose memory estimate exceeds what is available (exit 2, one line naming ``--seeds``,
+    ``scenario.batch`` or ``scenario.duration``) and a recording larger than the free space
+    (``--rrd``), in that order; print the estimate on stderr when the run should take more
+    than about 10 s (:data:`lcc_synth.resources.LONG_RUN_S`).
+
+    Returns the :class:`~lcc_synth.resources.WorkEstimate`. Called by :func:`load`.
+    """
+    from lcc_synth.recording.cli import (
+        check_recording_limit,
+        check_recording_space,
+        record_seed_count,
+        recording_decimation,
+    )
+    from lcc_synth.recording.size import estimate_simulation_recording
+    from lcc_synth.resources import announce, estimate_simulation, require_memory
+
+    sc = spec.scenario
+    if args.seeds is not None:
+        field, fewer = "--seeds", "run fewer seeds (--seeds)"
+    elif sc.batch > 1:
+        field, fewer = "scenario.batch", "run fewer scenarios (scenario.batch, or --seeds N)"
+    else:
+        field, fewer = "scenario.duration", "shorten scenario.duration or raise scenario.dt"
+    recording = None
+    if not getattr(args, "no_record", False):
+        seeds = record_seed_count(getattr(args, "record_seeds", None), sc.batch)
+        every = recording_decimation(args)
+        recording = estimate_simulation_recording(sc, spec.controllers, seeds, every)
+        fixes = ("record fewer seeds (--record-seeds 0,3), " if seeds > 1 else "") + (
+            "--record-every minmax, " if every != "minmax" else "") + "--no-record"
+        check_recording_limit(args, recording, field, fixes)
+    estimate = estimate_simulation(sc, spec.controllers, chunk=chunk_size(sc, budget),
+                                   recording=recording)  # fmt: skip
+    require_memory(field, estimate.memory, estimate.what, fewer)
+    if recording is not None:
+        check_recording_space(args, recording)
+    announce("simulate", estimate)
+    return estimate
+
+
+def chunk_size(scenario: Any, budget: float = MEMORY_BUDGET) -> int:
+    """Scenarios per seed chunk of :func:`chunks` (at most ``scenario.batch``)."""
+    samples = (scenario.steps - 1) // scenario.record_every + 1
+    size = max(1, int(budget // (samples * (scenario.n_vehicles * 4 * 8 + 9))))
+    return min(size, scenario.batch)
+
+
 def chunks(scenario, budget: float = MEMORY_BUDGET) -> list:
     """The scenario split into seed chunks whose recorded results fit ``budget`` bytes.
 
@@ -78,8 +128,7 @@ def chunks(scenario, budget: float = MEMORY_BUDGET) -> list:
     """
     from dataclasses import replace
 
-    samples = (scenario.steps - 1) // scenario.record_every + 1
-    size = max(1, int(budget // (samples * (scenario.n_vehicles * 4 * 8 + 9))))
+    size = chunk_size(scenario, budget)
     if scenario.batch <= size:
         return [scenario]
     return [

@@ -5,8 +5,10 @@ Submodules: :mod:`~lcc_synth.recording.core` (opening a recording, names, colour
 :mod:`~lcc_synth.recording.analysis` (what gets recorded), :mod:`~lcc_synth.recording.cli`
 (command flags and the recorder), :mod:`~lcc_synth.recording.reader` (reading back, viewer),
 :mod:`~lcc_synth.recording.summary` (the text of ``review --summary``),
-:mod:`~lcc_synth.recording.decimate` (min/max-preserving decimation, ``decimate="minmax"``).
-Everything public is importable from ``lcc_synth.recording``.
+:mod:`~lcc_synth.recording.decimate` (min/max-preserving decimation, ``decimate="minmax"``,
+every command's default), :mod:`~lcc_synth.recording.size` (a recording's size estimated before
+the work, ``--max-recording-size``). Everything public is importable from
+``lcc_synth.recording``.
 
 Every recording command writes one file, by default ``logs/<problem>-<UTC timestamp>.rrd``
 (see :func:`recording_path`), with a default blueprint so that opening it in the Rerun viewer
@@ -37,7 +39,8 @@ Simulation (:func:`record_simulation`), under ``/<scenario>/<controller>/``:
 ``mpc/status``         ``Scalars`` (MPC only): status code (0 QP, 1 shifted plan, 2 static gain,
                        3 hold) and 1 when a fallback was used
 ``mpc/predicted/*``    ``LineStrips2D`` (MPC only): ``u``, ``velocity``, ``spacing`` plans at
-                       each recorded controller step (x = seconds ahead, y = value)
+                       recorded controller steps (x = seconds ahead, y = value; ``minmax``:
+                       one every 0.5 s when it changed)
 =====================  =========================================================================
 
 ``/<scenario>/metrics`` (markdown) compares every controller recorded so far,
@@ -97,7 +100,13 @@ from lcc_synth.recording.analysis import (
 from lcc_synth.recording.cli import (
     SimulationRecorder,
     add_recording_arguments,
+    check_recording,
+    check_recording_limit,
+    check_recording_space,
+    parse_record_seeds,
+    record_seed_count,
     recording_decimation,
+    recording_limit,
     recording_path,
 )
 from lcc_synth.recording.core import (
@@ -134,6 +143,14 @@ from lcc_synth.recording.simulation import (
     record_mpc_history,
     record_simulation,
 )
+from lcc_synth.recording.size import (
+    RecordingEstimate,
+    estimate_recording_bytes,
+    estimate_simulation_recording,
+    estimate_suite_recording,
+    format_size,
+    parse_size,
+)
 from lcc_synth.recording.sweep import record_sweep, record_sweep_file
 
 __all__ = [
@@ -145,6 +162,18 @@ __all__ = [
     "add_recording_arguments",
     "recording_path",
     "recording_decimation",
+    "recording_limit",
+    "record_seed_count",
+    "parse_record_seeds",
+    "check_recording",
+    "check_recording_limit",
+    "check_recording_space",
+    "RecordingEstimate",
+    "estimate_recording_bytes",
+    "estimate_simulation_recording",
+    "estimate_suite_recording",
+    "format_size",
+    "parse_size",
     "entity_name",
     "vehicle_names",
     "vehicle_colors",

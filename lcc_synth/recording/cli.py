@@ -1,5 +1,7 @@
-"""What the commands use: ``--rrd`` / ``--no-record`` / ``--record-every`` and the recorder
-that records each controller of a problem as its result arrives."""
+"""What the commands use: ``--rrd`` / ``--no-record`` / ``--record-every`` /
+``--max-recording-size``, the recorder that records each controller of a problem as its result
+arrives, and the check of a recording's estimated size before the work
+(:func:`check_recording`)."""
 
 from __future__ import annotations
 
@@ -27,10 +29,23 @@ from lcc_synth.recording.layout import (
 )
 from lcc_synth.recording.simulation import record_metrics, record_simulation
 
+__all__ = [
+    "SimulationRecorder",
+    "add_recording_arguments",
+    "check_recording",
+    "check_recording_limit",
+    "check_recording_space",
+    "parse_record_seeds",
+    "record_seed_count",
+    "recording_decimation",
+    "recording_limit",
+    "recording_path",
+]
+
 
 def add_recording_arguments(parser: argparse.ArgumentParser, steps: bool = True) -> None:
     """Add ``--rrd PATH``, ``--no-record`` and (``steps``: for commands that record simulation
-    steps) ``--record-every N`` to a command's parser."""
+    steps) ``--record-every N`` and ``--max-recording-size SIZE`` to a command's parser."""
     group = parser.add_argument_group("recording (Rerun .rrd, see `lcc-synth review`)")
     excl = group.add_mutually_exclusive_group()
     excl.add_argument(
@@ -44,12 +59,31 @@ def add_recording_arguments(parser: argparse.ArgumentParser, steps: bool = True)
     group.add_argument(
         "--record-every",
         type=_record_every,
-        default=None,  # not given: the command's default (record_every_default, else 1)
+        default=None,  # not given: the command's default (record_every_default, else minmax)
         metavar="N|minmax",
-        help="record every N-th simulation step (1 = every step), or 'minmax': a 0.2 s grid "
-        "keeping every visible peak and dip, the exact extremes and full rate around events "
-        "(default 1; `lcc-synth run`: minmax)",
+        help="'minmax' (the default): what the viewer draws at about a pixel, every visible "
+        "peak and dip, the exact extremes and full rate around emergency braking and "
+        "collisions, a fraction of the size; or every N-th simulation step (1 = every step: "
+        "the exact recording, value for value)",
     )
+    group.add_argument(
+        "--max-recording-size",
+        type=_size,
+        default=None,
+        metavar="SIZE",
+        help="refuse, before the work, a run whose recording is estimated above SIZE "
+        "(default 1GB; e.g. 500MB, 3GB)",
+    )
+
+
+def _size(text: str) -> int:
+    """``--max-recording-size``: a size such as ``2GB``."""
+    from lcc_synth.recording.size import parse_size
+
+    try:
+        return parse_size(text)
+    except ConfigError as err:
+        raise argparse.ArgumentTypeError(err.message) from None
 
 
 def _record_every(text: str) -> int | str:
@@ -92,10 +126,12 @@ def recording_path(
 
 def recording_decimation(args: argparse.Namespace) -> int | str:
     """The validated ``--record-every`` value (an integer >= 1 or ``"minmax"``); when it is
-    not given, the command's default (``record_every_default``: ``run`` records ``minmax``)."""
+    not given, the command's default (``record_every_default``, else ``"minmax"``: every
+    command records the min/max-preserving decimation unless ``--record-every N`` is given;
+    ``1`` is the exact recording)."""
     every = getattr(args, "record_every", None)
     if every is None:
-        every = getattr(args, "record_every_default", 1)
+        every = getattr(args, "record_every_default", "minmax")
     if every == "minmax":
         return every
     if isinstance(every, bool) or not isinstance(every, int) or every < 1:
@@ -266,3 +302,112 @@ def parse_record_seeds(value: str | None, batch: int) -> list[int]:
     if not out:
         raise ConfigError("--record-seeds", f"selects no seed: {value!r}")
     return sorted(out)
+
+
+def record_seed_count(value: str | None, batch: int) -> int:
+    """How many scenarios ``--record-seeds`` selects of a study of ``batch`` (the same checks
+    and errors as :func:`parse_record_seeds`, without listing them: a study of 10^8 seeds is
+    counted, not enumerated)."""
+    if value is None or str(value).strip().lower() == "all":
+        return int(batch)
+    spans: list[tuple[int, int]] = []
+    for part in str(value).split(","):
+        part = part.strip()
+        try:
+            a, b = (int(x) for x in part.split("-", 1)) if "-" in part else (int(part),) * 2
+        except ValueError:
+            raise ConfigError(
+                "--record-seeds", f"expected seed indices like 0,3 or 2-5, got {value!r}"
+            ) from None
+        if a > b:
+            continue  # an empty range, as parse_record_seeds
+        if a < 0 or b >= batch:  # the first seed of the range outside the study
+            k = a if a < 0 else max(a, batch)
+            raise ConfigError(
+                "--record-seeds", f"seed {k} is not in [0, {batch - 1}] (--seeds {batch})"
+            )
+        spans.append((a, b))
+    if not spans:
+        raise ConfigError("--record-seeds", f"selects no seed: {value!r}")
+    count, end = 0, -1
+    for a, b in sorted(spans):
+        if b > end:
+            count += b - max(a, end + 1) + 1
+            end = b
+    return count
+
+
+def recording_limit(args: argparse.Namespace) -> int:
+    """``--max-recording-size`` in bytes (default
+    :data:`~lcc_synth.recording.size.DEFAULT_LIMIT`, 1 GB)."""
+    from lcc_synth.recording.size import DEFAULT_LIMIT
+
+    limit = getattr(args, "max_recording_size", None)
+    return DEFAULT_LIMIT if limit is None else int(limit)
+
+
+def check_recording(args: argparse.Namespace, estimate: Any, field: str, fixes: str) -> None:
+    """Refuse, before the work, a recording estimated above ``--max-recording-size``
+    (:func:`check_recording_limit`) or above the free space where it will be written
+    (:func:`check_recording_space`).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The command's flags (nothing is checked with ``--no-record``).
+    estimate : lcc_synth.recording.size.RecordingEstimate
+        The recording's estimated size.
+    field : str
+        What makes it large (``--seeds``, ``scenario.batch``...): the error's field.
+    fixes : str
+        What to change, e.g. ``"record fewer seeds (--record-seeds 0,3), --no-record"``
+        (``--max-recording-size`` is always offered).
+
+    Raises
+    ------
+    ConfigError
+        For ``field``: over the limit; for ``--rrd``: not enough free space.
+    """
+    check_recording_limit(args, estimate, field, fixes)
+    check_recording_space(args, estimate)
+
+
+def check_recording_limit(
+    args: argparse.Namespace, estimate: Any, field: str, fixes: str
+) -> None:
+    """The limit part of :func:`check_recording` (same parameters)."""
+    if getattr(args, "no_record", False):
+        return
+    from lcc_synth.recording.size import format_size
+
+    limit = recording_limit(args)
+    if estimate.bytes > limit:
+        flag = "the limit of --max-recording-size" if getattr(
+            args, "max_recording_size", None) is not None else "the default limit"
+        raise ConfigError(
+            field,
+            f"the recording would be about {format_size(estimate.bytes)} ({estimate.what}), "
+            f"over {flag} ({format_size(limit)}): {fixes}, or raise --max-recording-size "
+            f"(e.g. --max-recording-size {_suggest(estimate.bytes)})",
+        )  # fmt: skip
+
+
+def check_recording_space(args: argparse.Namespace, estimate: Any) -> None:
+    """The free-space part of :func:`check_recording`: the directory of the recording
+    (``--rrd``, else ``logs/``) can take ``estimate``
+    (:func:`lcc_synth.outputs.check_directory`: a :class:`ConfigError` for ``--rrd``)."""
+    if getattr(args, "no_record", False):
+        return
+    from lcc_synth.outputs import check_directory
+
+    path = recording_path(args, "check")
+    if path is not None:
+        check_directory(path.parent, "--rrd", estimate.bytes, "the recording")
+
+
+def _suggest(size: float) -> str:
+    """A round ``--max-recording-size`` above ``size``: ``3GB``, ``200MB``."""
+    for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6)):
+        if size >= scale or unit == "MB":
+            return f"{int(size * 1.5 // scale) + 1}{unit}"
+    return "1GB"  # pragma: no cover

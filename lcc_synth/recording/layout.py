@@ -71,7 +71,9 @@ def merge_ranges(*ranges: Mapping[str, Any]) -> dict[str, Any]:
 
 def _time_views(rrb, ranges: Mapping[str, Any]) -> dict[str, Any]:
     """Keyword arguments of every time-series view: the whole run on the x axis (linked across
-    views, so zooming one zooms all) and the whole timeline queried."""
+    views, so zooming one zooms all). The whole timeline is queried by default (Rerun's
+    ``VisibleTimeRanges``: "for time series views, the default is to show the entire
+    timeline"), so no visible time range is saved (3.3 kB per view in the file)."""
     t = ranges.get("time")
     if t is not None:
         start = rrb.TimeRangeBoundary.absolute(seconds=float(t[0]))
@@ -82,11 +84,6 @@ def _time_views(rrb, ranges: Mapping[str, Any]) -> dict[str, Any]:
         "axis_x": rrb.TimeAxis(
             view_range=rrb.TimeRange(start=start, end=end),
             link=rrb.components.LinkAxis.LinkToGlobal,
-        ),
-        "time_ranges": rrb.VisibleTimeRange(
-            "time",
-            start=rrb.TimeRangeBoundary.infinite(),
-            end=rrb.TimeRangeBoundary.infinite(),
         ),
     }
 

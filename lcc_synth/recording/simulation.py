@@ -41,10 +41,16 @@ from lcc_synth.recording.core import (
     vehicle_widths,
 )
 from lcc_synth.recording.decimate import (
+    MPC_PLAN_S,
+    MPC_TIMING_BUCKET_S,
     ROAD_BUCKET_S,
     VIEWER_BUCKET_S,
     event_rows,
-    minmax_rows,
+    frame_rows,
+    linear_rows,
+    plan_rows,
+    strip_points,
+    viewer_rows,
 )
 
 #: Colours of the CAVs of a platoon or ring, in order (the first is the single CAV's blue).
@@ -121,7 +127,7 @@ def record_simulation(
     *,
     controller: str | None = None,
     metrics: Mapping[str, Any] | None = None,
-    decimate: int = 1,
+    decimate: int | str = "minmax",
     run: int = 0,
     mpc_history: Any = None,
 ) -> str:
@@ -142,11 +148,11 @@ def record_simulation(
         The run's metrics (e.g. the ``--json`` shape of ``lcc-synth simulate``): scalars go into
         the per-controller and comparison tables, per-vehicle lists into a vehicle table.
     decimate : int or "minmax"
-        Record every ``decimate``-th step (the last step is always recorded), or ``"minmax"``:
-        each entity keeps its own rows of :func:`~lcc_synth.recording.decimate.minmax_rows`
-        (a 0.1 s grid, every visible peak and dip, the exact extremes) and full rate around
-        emergency braking, collisions and the CAV's jerk peaks
-        (:func:`~lcc_synth.recording.decimate.event_rows`).
+        ``"minmax"`` (the default): each entity keeps its own rows
+        (:mod:`lcc_synth.recording.decimate`: what the viewer draws within about a pixel,
+        every visible peak and dip, the exact extremes, full rate around emergency braking,
+        collisions and the CAV's jerk peaks); or every ``decimate``-th step (the last step is
+        always recorded; ``1``: every value exactly as simulated).
     run : int
         Which batch member to record.
     mpc_history : optional
@@ -193,10 +199,19 @@ def record_simulation(
         forced = event_rows(t_all, aeb_on, np.where(collided, ctime, np.nan), acc_all[:, cav])
     kept: list[int] = []
 
-    def rows(values: np.ndarray, bucket_s: float = VIEWER_BUCKET_S):
-        """``(rows, TimeColumn)`` of one entity (its own min/max rows, or the stride)."""
-        bucket = max(1, int(round(bucket_s / dt_rec)))
-        idx = minmax_rows(values, bucket, forced=forced) if minmax else stride
+    def rows(values: np.ndarray, how: str = "signal"):
+        """``(rows, TimeColumn)`` of one entity: its own rows (``how``: a ``"signal"``
+        (:func:`viewer_rows`), a piecewise-constant ``"flag"`` (its breakpoints, exact) or the
+        road's ``"frames"``), or the stride."""
+        if not minmax:
+            idx = stride
+        elif how == "flag":
+            idx = linear_rows(values, 0.0)
+        elif how == "frames":
+            idx = frame_rows(values, max(1, int(round(ROAD_BUCKET_S / dt_rec))))
+        else:
+            bucket = max(1, int(round(VIEWER_BUCKET_S / dt_rec)))
+            idx = viewer_rows(values, bucket, forced=forced)
         kept.append(len(idx))
         return idx, _time_column(t_all[idx])
 
@@ -222,7 +237,7 @@ def record_simulation(
     _send_series(rec, f"{base}/cav/u_cmd", tcol, u_all[idx], u_names, u_colors,
                  [2.0] * len(cavs))  # fmt: skip
     aeb = aeb_cav.astype(np.float64)
-    idx, tcol = rows(aeb)
+    idx, tcol = rows(aeb, "flag")
     red = [(214, 39, 40)] * len(cavs)
     _send_series(rec, f"{base}/cav/aeb_active", tcol, aeb[idx], aeb_names, red)
 
@@ -235,7 +250,7 @@ def record_simulation(
     else:
         xy_all[..., 0] = pos - pos[:, cav : cav + 1]
         xy_all[..., 1] = ROAD_Y_SCALE * (vel_all - v_star)
-    idx, tcol = rows(xy_all.reshape(T, -1), ROAD_BUCKET_S)  # scrubbing / playback: 10 frames/s
+    idx, tcol = rows(xy_all.reshape(T, -1), "frames")  # scrubbing / playback: 5 frames/s
     xy = xy_all[idx]
     rec.log(
         f"{base}/road",
@@ -296,7 +311,7 @@ def record_simulation(
     )
     record_metrics(rec, scenario, c, metrics or {})
     if mpc_history is not None:
-        record_mpc_history(rec, base, mpc_history, run=run)
+        record_mpc_history(rec, base, mpc_history, run=run, decimate=decimate)
     _flush_started(rec)
     return base
 
@@ -343,7 +358,12 @@ _MPC_STATUS = {0: "qp", 1: "shifted_plan", 2: "static_gain", 3: "hold"}
 
 
 def record_mpc_history(
-    rec: Any, base: str, history: Mapping[str, Any], run: int = 0, plan_every: int | None = None
+    rec: Any,
+    base: str,
+    history: Mapping[str, Any],
+    run: int = 0,
+    plan_every: int | None = None,
+    decimate: int | str = 1,
 ) -> None:
     """Record an MPC controller's per-step history under ``<base>/mpc/``.
 
@@ -358,6 +378,15 @@ def record_mpc_history(
     at each recorded controller step, x = seconds ahead of that step, y = the predicted value
     (one strip per vehicle), so scrubbing the timeline shows the plan of the moment.
     ``plan_every`` records every k-th plan (default: at most about 200 plans).
+
+    ``decimate="minmax"`` (what the commands record by default): the solve times keep the
+    min/max rows of every :data:`~lcc_synth.recording.decimate.MPC_TIMING_BUCKET_S` (their
+    peaks, :func:`~lcc_synth.recording.decimate.viewer_rows`), the status its changes only
+    (exact), and the plans one per :data:`~lcc_synth.recording.decimate.MPC_PLAN_S` s
+    (``plan_every`` steps when given), a plan unchanged since the last recorded one skipped
+    (:func:`~lcc_synth.recording.decimate.plan_rows`), each strip through the points that
+    draw it within 0.2 % of the span (:func:`~lcc_synth.recording.decimate.strip_points`).
+    An integer ``decimate`` records every controller step and the plans as above.
     """
     import pyarrow as pa
 
@@ -379,14 +408,28 @@ def record_mpc_history(
             x = x[run]
         return x[:S]
 
-    tcol = _time_column(t)
+    minmax = decimate == "minmax"
+    Ts = float(np.median(np.diff(t))) if S > 1 else 0.1
+
+    def rows(values: np.ndarray, flag: bool = False):
+        """``(rows, TimeColumn)`` of one per-step entity (every step unless ``minmax``)."""
+        if not minmax:
+            idx = np.arange(S)
+        elif flag:
+            idx = linear_rows(values, 0.0)
+        else:
+            bucket = max(1, int(round(MPC_TIMING_BUCKET_S / Ts)))
+            idx = viewer_rows(values, bucket, noisy_bucket=bucket)
+        return idx, _time_column(t[idx])
+
     times = [member(k, 0) for k in ("step_time", "osqp_time", "solve_time")]
     times = [(k, x) for k, x in zip(("step", "OSQP", "solve"), times, strict=True) if x is not None]
     if times:
         vals = np.column_stack([x.astype(np.float64) * 1e3 for _, x in times])
+        idx, tcol = rows(vals)
         _send_series(
-            rec, f"{base}/mpc/solve_time_ms", tcol, vals, [f"{k} time (ms)" for k, _ in times],
-            _PALETTE[: len(times)],
+            rec, f"{base}/mpc/solve_time_ms", tcol, vals[idx],
+            [f"{k} time (ms)" for k, _ in times], _PALETTE[: len(times)],
         )  # fmt: skip
     # the joint MPC of a platoon or ring (lcc_synth.mpc.platoon): a status per CAV, plans
     # (B, S, N, n_cav), predicted error states (B, S, N+1, nx) on s_1, v_1, ..., s_N, v_N
@@ -400,7 +443,8 @@ def record_mpc_history(
                  if joint else [f"status ({legend})"]) + ["fallback used"]  # fmt: skip
         colors = [_PALETTE[j % len(_PALETTE)] for j in range(code.shape[1])] if joint else [
             (90, 90, 90)]
-        _send_series(rec, f"{base}/mpc/status", tcol, vals, names, [*colors, (214, 39, 40)])
+        idx, tcol = rows(vals, flag=True)
+        _send_series(rec, f"{base}/mpc/status", tcol, vals[idx], names, [*colors, (214, 39, 40)])
     if joint:
         X = member("predicted_states", 2)
         history = {k: v for k, v in history.items() if k not in ("predicted_velocity",
@@ -411,17 +455,25 @@ def record_mpc_history(
             Ts = float(np.median(np.diff(t))) if S > 1 else 0.1
             history["dt"] = Ts
 
-    every = plan_every or max(1, S // 200)
-    steps = np.arange(0, S, every)
+    if plan_every is not None:
+        every = max(1, int(plan_every))
+    elif minmax:
+        every = max(1, int(round(MPC_PLAN_S / Ts)))
+    else:
+        every = max(1, S // 200)
     offsets = history.get("pred_time")
+    item = pa.list_(pa.field("item", pa.float32(), nullable=False), 2)
+    strip_type = pa.list_(pa.field("item", item, nullable=False))  # what the viewer expects
     for key, label in (("plan", "u"), ("predicted_velocity", "velocity"),
                        ("predicted_spacing", "spacing")):  # fmt: skip
         pred = member(key, 2 if key == "plan" and joint else 1 if key == "plan" else 2)
         if pred is None:
             continue
-        pred = np.asarray(pred, dtype=np.float64)[steps]
+        pred = np.asarray(pred, dtype=np.float64)
         if pred.ndim == 2:
             pred = pred[:, :, None]
+        steps = plan_rows(pred, every) if minmax else np.arange(0, S, every)
+        pred = pred[steps]
         K, H, V = pred.shape
         if offsets is not None:
             x = np.asarray(offsets, dtype=np.float64)[:H]
@@ -429,13 +481,13 @@ def record_mpc_history(
             x = float(history["dt"]) * np.arange(H)
         else:
             raise ConfigError("mpc_history", f"{key} needs 'pred_time' or 'dt'")
-        xy = np.empty((K, V, H, 2), dtype=np.float32)
-        xy[..., 0] = x[None, None, :]
-        xy[..., 1] = np.transpose(pred, (0, 2, 1))
-        item = pa.list_(pa.field("item", pa.float32(), nullable=False), 2)
+        ys = np.transpose(pred, (0, 2, 1)).reshape(K * V, H)  # one strip per plan and vehicle
+        keep = strip_points(x, ys) if minmax else np.ones((K * V, H), dtype=bool)
+        xy = np.empty((int(keep.sum()), 2), dtype=np.float32)
+        xy[:, 0] = np.broadcast_to(x, ys.shape)[keep]
+        xy[:, 1] = ys[keep]
         pts = pa.FixedSizeListArray.from_arrays(pa.array(xy.reshape(-1)), type=item)
-        strip_off = np.arange(0, K * V * H + 1, H, dtype=np.int32)
-        strip_type = pa.list_(pa.field("item", item, nullable=False))  # what the viewer expects
+        strip_off = np.concatenate([[0], np.cumsum(keep.sum(axis=1))]).astype(np.int32)
         strips = pa.ListArray.from_arrays(pa.array(strip_off), pts, type=strip_type)
         rec.send_columns(
             f"{base}/mpc/predicted/{label}",

@@ -67,7 +67,7 @@ import numpy as np
 from lcc_synth.controllers.base import ControlContext, Controller, Observation
 from lcc_synth.controllers.switch import switch_step
 from lcc_synth.errors import ConfigError
-from lcc_synth.resources import require_memory
+from lcc_synth.resources import require_memory, simulation_bytes
 from lcc_synth.simulation.kernels import _advance, _observe_all
 from lcc_synth.simulation.perturbations import overrides
 from lcc_synth.simulation.results import SimResult
@@ -109,19 +109,6 @@ def _steps_of(value: float, dt: float, field: str, multiple: bool) -> int:
     if multiple and (r < 1 or abs(ratio - r) > 1e-6 * max(1.0, ratio)):
         raise ConfigError(field, f"must be a positive multiple of dt = {dt} s, got {value}")
     return r
-
-
-def simulation_bytes(sc: Scenario) -> int:
-    """Bytes :func:`simulate` allocates for ``sc``: the time grid and the perturbation
-    overrides (``steps x (1 + 2 vehicles)``), the recorded samples (``batch x kept samples x
-    (4 vehicles + 1 per CAV)`` floats) and the delay ring buffer."""
-    T, nv, B = sc.steps, sc.n_vehicles, sc.batch
-    kept = (T - 1) // sc.record_every + 1
-    nc = len(sc.cav_columns)
-    delay = float(np.max(np.asarray(sc.delay, dtype=float), initial=0.0)) + sc.delay_spread
-    delay = max(delay if np.isfinite(delay) else 0.0, sc.v2v.latency, 0.0)
-    ring = (int(delay / sc.dt) + 2) * B * nv * 16
-    return 8 * T * (1 + 2 * nv) + B * kept * (8 * (4 * nv + nc) + nc) + ring
 
 
 def _law_arrays(law, n_cav: int, nv: int, ring: bool, name: str):
@@ -384,9 +371,18 @@ def simulate(
 def simulate_many(
     scenario: Scenario, controllers: Mapping[str, Controller] | Sequence[Controller]
 ) -> dict[str, SimResult]:
-    """Run several controllers on the same draws; returns ``{name: SimResult}`` in order."""
-    items = controllers.items() if isinstance(controllers, Mapping) else (
+    """Run several controllers on the same draws; returns ``{name: SimResult}`` in order.
+
+    Every result stays in memory: their total is checked (``scenario.batch``) before the
+    draws are made."""
+    items = list(controllers.items() if isinstance(controllers, Mapping) else (
         (c.name, c) for c in controllers
-    )
+    ))  # fmt: skip
+    sc, n = scenario, len(items)
+    require_memory(
+        "scenario.batch", n * simulation_bytes(sc),
+        f"{n} results of {sc.steps} steps x {sc.n_vehicles} vehicles x {sc.batch} scenario(s)",
+        "run fewer scenarios or controllers at once",
+    )  # fmt: skip
     draws = scenario.draw()
     return {name: simulate(scenario, ctrl, draws) for name, ctrl in items}

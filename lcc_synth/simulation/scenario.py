@@ -371,8 +371,23 @@ class Scenario(Record):
         return mask
 
     def draw(self) -> Draws:
-        """Per-scenario HDV parameters, delays and initial state (deterministic in ``seed``)."""
+        """Per-scenario HDV parameters, delays and initial state (deterministic in ``seed``).
+
+        Raises
+        ------
+        ConfigError
+            ``scenario.batch``: the draws (a random generator per scenario) would not fit in
+            the memory available, checked before any is drawn.
+        """
         B, nv = self.batch, self.n_vehicles
+        from lcc_synth.resources import DRAW_SCENARIO_BYTES, DRAW_VEHICLE_BYTES, require_memory
+
+        need = B * (DRAW_VEHICLE_BYTES * nv + DRAW_SCENARIO_BYTES)
+        if need > 1 << 26:  # below 64 MB: not worth asking the system
+            require_memory(
+                "scenario.batch", need, f"random draws of {B} scenarios x {nv} vehicles",
+                "run fewer scenarios at once (scenario.batch, --seeds)",
+            )  # fmt: skip
         names = MODEL_PARAMS[self.hdv.name]
         hdv_mask = self.is_hdv()
         values = {}
