@@ -24,10 +24,24 @@ Scenarios are cut into tasks of ``batch_size`` consecutive indices; a task simul
 scenarios as ONE batch per controller (the simulator's batch axis; all controllers on the same
 draws) and returns the per-scenario metrics. Tasks run on a Dask cluster (a ``LocalCluster`` of
 processes by default, or any scheduler address) with retries; Dask recomputes the tasks of a
-worker that dies. ``h2`` controllers are synthesised once, in the client, and ``gains_file``
-controllers are read there; workers receive plain controller tables and build (and cache, per
-process and thread) the controllers themselves (an MPC's ``fallback_gains_file`` is read on
-the worker: give it a path the workers can read).
+worker that dies. A task whose input is bad (a :class:`~lcc_synth.errors.ConfigError` raised on
+the worker) is not retried: the error comes back to the client as it is. ``h2`` controllers are
+synthesised once, in the client, and ``gains_file`` controllers are read there; workers
+receive plain controller tables and build (and cache, per process and thread) the controllers
+themselves (an MPC's ``fallback_gains_file`` is read on the worker: give it a path the
+workers can read). At most a few tasks per worker thread are submitted at a time (the next one
+when one finishes): the client and the scheduler hold a bounded number of tasks whatever the
+count, and an interrupted sweep has little to cancel.
+
+Finished work is kept
+---------------------
+What a sweep has finished is a :class:`SweepProgress`: the samples of the finished tasks and
+their counts. :func:`run_sweep` fills the one it is given (``progress=``), calls ``on_task``
+after each task (``lcc-synth sweep`` writes the partial results files from it,
+:mod:`lcc_synth.experiments.sweep_files`) and, given one that already holds finished tasks
+(an interrupted sweep read back), runs only the others: the samples, the summary and every
+count equal those of an uninterrupted sweep bit for bit (a task's result depends on its
+scenario indices only).
 
 The problem file's tables (``[sweep]`` ``count`` and ``batch_size``, the ``[lo, hi]`` ranges)
 are in ``problems/REFERENCE.md``.
@@ -36,10 +50,11 @@ are in ``problems/REFERENCE.md``.
 from __future__ import annotations
 
 import hashlib
+import json
 import pickle
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -56,8 +71,8 @@ from lcc_synth.simulation.scenario_file import scenario_from
 
 __all__ = [
     "SWEEP_METRICS", "SWEEP_SAMPLES", "SWEEP_COUNTS", "MAX_COUNT", "SweepSpec", "SweepResult",
-    "load_sweep", "chunks", "scenario_metrics", "run_chunk", "aggregate", "run_sweep",
-    "local_cluster", "format_summary",
+    "SweepProgress", "load_sweep", "chunks", "scenario_metrics", "run_chunk", "aggregate",
+    "run_sweep", "local_cluster", "stop_cluster", "table_digest", "format_summary",
 ]  # fmt: skip
 
 #: Per-scenario metrics of a sweep -> label (distributions: mean, p5, p95).
@@ -318,6 +333,24 @@ def run_chunk(
     }
 
 
+def _task(*args: Any) -> dict[str, Any]:
+    """:func:`run_chunk` as a Dask task: a :class:`ConfigError` (bad input, the same on every
+    try) comes back as a value, ``{"config_error": (field, message, source)}``, so that Dask
+    does not retry it (its retries are for failures that may pass) and the client raises it
+    (a ``ConfigError`` does not survive pickling as an exception: its arguments differ from
+    its message)."""
+    try:
+        return run_chunk(*args)
+    except ConfigError as err:
+        return {"config_error": (err.field, err.message, err.source)}
+
+
+def _raise_config_error(out: Mapping[str, Any]) -> None:
+    if "config_error" in out:
+        field_name, message, source = out["config_error"]
+        raise ConfigError(field_name, message, source)
+
+
 # --------------------------------------------------------------------------------------------
 # Aggregation
 # --------------------------------------------------------------------------------------------
@@ -368,6 +401,140 @@ def aggregate(
     return out
 
 
+def table_digest(table: Mapping[str, Any]) -> str:
+    """SHA-256 of a controller table as the workers receive it (keys sorted, floats exact),
+    to check that a resumed sweep runs the same controllers (e.g. the same synthesised
+    ``h2`` gains) as the interrupted one."""
+    from lcc_synth.experiments.tables import json_safe
+
+    text = json.dumps(json_safe(dict(table)), sort_keys=True, default=repr)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+_INT_SAMPLES = ("collisions", "aeb_activations")
+
+
+@dataclass
+class SweepProgress:
+    """The finished part of a sweep: what an interrupted sweep keeps and a resumed one starts
+    from.
+
+    Attributes
+    ----------
+    count, batch_size : int
+        The sweep's scenarios and scenarios per task.
+    names : list of str
+        The controllers, in order.
+    samples : dict
+        ``{controller: {sample: (count,) float array}}``, NaN for the scenarios not finished.
+    tasks : dict
+        ``{(start, stop): {"fallbacks": {controller: int}, "sim_time": {controller: s},
+        "wall_time": s}}`` of the finished tasks, in the order they finished.
+    digests : dict
+        ``{controller: table_digest}`` of the tables the finished tasks ran (empty until
+        :func:`run_sweep` has prepared them).
+    tables : dict
+        The controller tables (set by :func:`run_sweep`; empty before).
+    wall_time_s : float
+        Wall time of the earlier runs of this sweep (an interrupted one), seconds.
+    """
+
+    count: int
+    batch_size: int
+    names: list[str]
+    samples: dict[str, dict[str, np.ndarray]]
+    tasks: dict[tuple[int, int], dict[str, Any]] = field(default_factory=dict)
+    digests: dict[str, str] = field(default_factory=dict)
+    tables: dict[str, dict[str, Any]] = field(default_factory=dict)
+    wall_time_s: float = 0.0
+
+    @classmethod
+    def new(cls, spec: SweepSpec) -> SweepProgress:
+        """Nothing finished yet."""
+        names = list(spec.controllers)
+        samples = {c: {k: np.full(spec.count, np.nan) for k in SWEEP_SAMPLES} for c in names}
+        return cls(spec.count, spec.batch_size, names, samples)
+
+    def check(self, spec: SweepSpec) -> None:
+        """Raise ``ValueError`` unless this is progress of a sweep of ``spec``'s shape."""
+        got = (self.count, self.batch_size, self.names)
+        want = (spec.count, spec.batch_size, list(spec.controllers))
+        if got != want:
+            raise ValueError(f"progress of a sweep {got}, not of this one {want}")
+
+    def set_tables(self, tables: Mapping[str, Mapping[str, Any]]) -> None:
+        """Record the digests of the controller tables; with finished tasks, check that
+        ``tables`` are those the finished tasks ran.
+
+        Raises
+        ------
+        ConfigError
+            For ``--resume``: the controllers (e.g. a synthesised ``h2`` gain) differ.
+        """
+        now = {c: table_digest(tables[c]) for c in self.names}
+        if self.tasks and self.digests:
+            differ = [c for c in self.names if self.digests.get(c) != now[c]]
+            if differ:
+                raise ConfigError(
+                    "--resume",
+                    f"the controller tables of {', '.join(differ)} differ from those of the "
+                    "interrupted sweep (e.g. a synthesised gain): its samples cannot be "
+                    "continued with these",
+                )
+        self.digests = now
+        self.tables = {c: dict(tables[c]) for c in self.names}
+
+    def store(self, out: Mapping[str, Any]) -> None:
+        """Keep a finished task's result (:func:`run_chunk`); the task counts as finished
+        only once everything of it is stored."""
+        s, e = int(out["start"]), int(out["stop"])
+        for c in self.names:
+            for k, v in out["metrics"][c].items():
+                self.samples[c][k][s:e] = v
+        self.tasks[(s, e)] = {
+            "fallbacks": {c: int(out["fallbacks"][c]) for c in self.names},
+            "sim_time": {c: float(out["sim_time"][c]) for c in self.names},
+            "wall_time": float(out["wall_time"]),
+        }
+
+    @property
+    def done(self) -> int:
+        """Scenarios finished."""
+        return sum(e - s for s, e in self.tasks)
+
+    @property
+    def finished(self) -> bool:
+        """Every scenario finished."""
+        return self.done == self.count
+
+    def indices(self) -> np.ndarray:
+        """The finished scenarios' indices, ascending."""
+        if not self.tasks:
+            return np.zeros(0, dtype=np.int64)
+        return np.concatenate([np.arange(s, e) for s, e in sorted(self.tasks)])
+
+    def fallbacks(self) -> dict[str, int]:
+        """MPC fallback steps per controller over the finished tasks."""
+        return {c: sum(t["fallbacks"][c] for t in self.tasks.values()) for c in self.names}
+
+    def sim_time(self) -> dict[str, float]:
+        """Simulation seconds per controller over the finished tasks."""
+        return {c: float(sum(t["sim_time"][c] for t in self.tasks.values()))
+                for c in self.names}  # fmt: skip
+
+    def finished_samples(self) -> dict[str, dict[str, np.ndarray]]:
+        """The samples of the finished scenarios only (in scenario order; the counts as
+        integers): every scenario's when :attr:`finished`."""
+        idx = None if self.finished else self.indices()
+        out = {}
+        for c, per in self.samples.items():
+            out[c] = {}
+            for k, v in per.items():
+                v = v if idx is None else v[idx]
+                out[c][k] = v.astype(np.int64) if k in _INT_SAMPLES else v
+        return out
+
+
 @dataclass
 class SweepResult:
     """A finished sweep.
@@ -398,7 +565,8 @@ class SweepResult:
 
 def local_cluster(n_workers: int = 2, local_directory: str | None = None):
     """A ``LocalCluster`` of ``n_workers`` single-threaded processes on 127.0.0.1, scratch
-    space in ``local_directory`` (a temporary directory by default).
+    space of the workers and of the scheduler in ``local_directory`` (by default a temporary
+    directory ``lcc-sweep-dask-*``, removed with the cluster: :func:`stop_cluster`).
 
     The scheduler's HTTP endpoint (health, metrics; the dashboard if bokeh is installed)
     listens on a free port of 127.0.0.1 only, never on the fixed port 8787."""
@@ -412,18 +580,83 @@ def local_cluster(n_workers: int = 2, local_directory: str | None = None):
     scratch = None
     if local_directory is None:
         scratch = local_directory = tempfile.mkdtemp(prefix="lcc-sweep-dask-")
-    cluster = LocalCluster(
-        n_workers=n_workers,
-        threads_per_worker=1,
-        processes=True,
-        host="127.0.0.1",
-        dashboard_address="127.0.0.1:0",
-        local_directory=local_directory,
-        silence_logs=40,
-    )
-    if scratch is not None:  # removed with the cluster object
-        weakref.finalize(cluster, shutil.rmtree, scratch, True)
+    try:
+        cluster = LocalCluster(
+            n_workers=n_workers,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address="127.0.0.1:0",
+            local_directory=local_directory,
+            scheduler_kwargs={"local_directory": local_directory},  # not $TMPDIR/dask-scratch-space
+            silence_logs=40,
+            preload=[__name__],  # dask_setup: the workers leave SIGINT / SIGTERM to the client
+        )
+    except BaseException:
+        if scratch is not None:
+            shutil.rmtree(scratch, True)
+        raise
+    # removed with the cluster object, or by stop_cluster (at once: an interrupted run leaves
+    # the interpreter with os._exit, which runs no finalizer)
+    cluster.lcc_scratch = (weakref.finalize(cluster, shutil.rmtree, scratch, True)
+                           if scratch is not None else None)  # fmt: skip
     return cluster
+
+
+def dask_setup(worker: Any) -> None:
+    """Run by each worker of :func:`local_cluster` when it starts (a Dask preload): the worker
+    ignores SIGINT and SIGTERM. A Ctrl-C in a terminal reaches the whole process group; the
+    client stops the sweep, keeps what finished and stops the workers itself
+    (:func:`stop_cluster`); a worker that died of the same Ctrl-C would print a
+    ``KeyboardInterrupt`` traceback (and its nanny an error). A worker whose client dies ends
+    too (Dask's parent monitor)."""
+    import signal
+
+    if threading.current_thread() is threading.main_thread():
+        for s in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(s, signal.SIG_IGN)
+
+
+def stop_cluster(cluster: Any, client: Any = None, now: bool = False) -> None:
+    """Close ``client`` and the :func:`local_cluster` ``cluster`` and remove its scratch space.
+
+    With ``now`` (an interrupted or failed sweep), first mark the nannies as closing (they do
+    not restart their workers) and kill the worker processes: a worker inside a simulation
+    would otherwise hold the close for seconds (measured: 4 s for a task that does not yield;
+    0.05-0.3 s this way). ``cluster`` may be ``None`` (an external scheduler: only the client
+    is closed). Never raises for a cluster that is already gone."""
+    import gc
+    import os
+    import signal
+
+    if now and cluster is not None:
+        for nanny in list(getattr(cluster, "workers", {}).values()):
+            try:
+                nanny.close_gracefully(reason="lcc-sweep-stopped")  # no restart of its worker
+                pid = nanny.pid
+            except Exception:  # noqa: BLE001 - not a nanny (a worker of a thread cluster)
+                continue
+            if pid:
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except OSError:
+                    pass
+    quick = {"timeout": 5} if now else {}
+    try:
+        if client is not None:
+            client.close(**quick)
+    except Exception:  # noqa: BLE001 - the scheduler is gone already
+        pass
+    try:
+        if cluster is not None:
+            cluster.close(**quick)
+    except Exception:  # noqa: BLE001 - the cluster is closed below regardless
+        pass
+    finally:
+        scratch = getattr(cluster, "lcc_scratch", None)
+        if scratch is not None:
+            scratch()
+        gc.collect()  # multiprocessing's semaphores of the worker queues: released now
 
 
 def _inline_gains_file(name: str, table: Mapping[str, Any], spec: SweepSpec) -> dict[str, Any]:
@@ -464,6 +697,8 @@ def run_sweep(
     client: Any = None,
     progress: bool = True,
     retries: int = 3,
+    done: SweepProgress | None = None,
+    on_task: Callable[[SweepProgress], None] | None = None,
 ) -> SweepResult:
     """Run the sweep: synthesise ``h2`` controllers here, then every task on ``client``.
 
@@ -476,7 +711,22 @@ def run_sweep(
     progress : bool
         Progress bars on stderr (synthesis, scenarios done).
     retries : int
-        Retries of a failing task (a task lost with its worker is recomputed by Dask).
+        Retries of a failing task (a task lost with its worker is recomputed by Dask; a
+        :class:`ConfigError` is not retried).
+    done : SweepProgress, optional
+        Filled as tasks finish (the caller keeps what finished when the sweep is interrupted
+        or fails); one that holds finished tasks (an interrupted sweep) runs only the others.
+    on_task : callable, optional
+        ``on_task(done)`` after each finished task (in this thread).
+
+    Raises
+    ------
+    ConfigError
+        A controller that cannot be built, a bad input met on a worker, ``done`` of other
+        controller tables.
+    KeyboardInterrupt
+        (:class:`~lcc_synth.errors.Interrupted`) the tasks not finished are cancelled; ``done``
+        holds the finished ones.
     """
     from lcc_synth.experiments.comparison import prepare_controllers, progress_bar
 
@@ -504,51 +754,33 @@ def run_sweep(
     except ConfigError as err:
         raise err.with_source(spec.source) if spec.source else err from None
 
+    done = SweepProgress.new(spec) if done is None else done
+    done.check(spec)
+    done.set_tables(tables)
     parts = chunks(spec.count, spec.batch_size)
+    todo = [p for p in parts if p not in done.tasks]
     args = (spec.scenario, spec.system, tables, spec.metrics, spec.source)
     names = list(tables)
-    samples = {
-        c: {k: np.full(spec.count, np.nan) for k in SWEEP_SAMPLES} for c in names
-    }
-    fallbacks = dict.fromkeys(names, 0)
-    sim_time = dict.fromkeys(names, 0.0)
-    task_times = []
     t0 = time.perf_counter()
-
-    def store(out: dict[str, Any]) -> None:
-        s, e = out["start"], out["stop"]
-        for c, per in out["metrics"].items():
-            for k, v in per.items():
-                samples[c][k][s:e] = v
-            fallbacks[c] += out["fallbacks"][c]
-            sim_time[c] += out["sim_time"][c]
-        task_times.append(out["wall_time"])
-
     with progress_bar(spec.count, "scenarios", progress) as bar:
         bar.unit = "scenario"
-        if client is None:
-            for s, e in parts:
-                store(run_chunk(*args, s, e, spec.ranges))
-                bar.update(e - s)
-        else:
-            from dask.distributed import as_completed
+        bar.update(done.done)
 
-            token = _token(args, spec.ranges)[:16]
-            futures = [
-                client.submit(
-                    run_chunk, *args, s, e, spec.ranges, retries=retries, pure=False,
-                    key=f"lcc-sweep-{token}-{s}-{e}",
-                )
-                for s, e in parts
-            ]
-            for fut in as_completed(futures):
-                out = fut.result()
-                store(out)
-                bar.update(out["stop"] - out["start"])
+        def store(out: dict[str, Any]) -> None:
+            done.store(out)
+            bar.update(out["stop"] - out["start"])
+            if on_task is not None:
+                on_task(done)
+
+        if client is None:
+            for s, e in todo:
+                store(run_chunk(*args, s, e, spec.ranges))
+        elif todo:
+            _run_on(client, todo, args, spec.ranges, retries, store)
     wall = time.perf_counter() - t0
-    for c in names:
-        for k in ("collisions", "aeb_activations"):
-            samples[c][k] = samples[c][k].astype(np.int64)
+    samples = done.finished_samples()
+    fallbacks = done.fallbacks()
+    ran = sum(e - s for s, e in todo)  # scenarios run by this call
     info = {
         "count": spec.count,
         "batch_size": spec.batch_size,
@@ -559,12 +791,64 @@ def run_sweep(
         "synthesis_time_s": t_design,
         "wall_time_s": wall,
         "total_time_s": time.perf_counter() - t_all,
-        "task_time_s_sum": float(sum(task_times)),
-        "simulation_time_s": sim_time,
-        "scenarios_per_s": spec.count / wall if wall > 0 else None,
-        "runs_per_s": spec.count * len(names) / wall if wall > 0 else None,
+        "task_time_s_sum": float(sum(t["wall_time"] for t in done.tasks.values())),
+        "simulation_time_s": done.sim_time(),
+        "scenarios_per_s": ran / wall if wall > 0 and ran else None,
+        "runs_per_s": ran * len(names) / wall if wall > 0 and ran else None,
     }
+    if len(todo) < len(parts):  # resumed: the earlier runs' share
+        info["resumed_tasks"] = len(parts) - len(todo)
+        info["earlier_wall_time_s"] = done.wall_time_s
     return SweepResult(aggregate(samples, fallbacks), samples, fallbacks, tables, designs, info)
+
+
+#: Tasks in flight per worker thread (the next one is submitted when one finishes).
+TASKS_PER_THREAD = 2
+
+
+def _run_on(client: Any, todo, args, ranges, retries: int, store) -> None:
+    """Run the tasks ``todo`` on ``client``, at most :data:`TASKS_PER_THREAD` per worker
+    thread in flight (at least 4), ``store(result)`` for each as it finishes; the tasks still
+    in flight are cancelled when this ends early (an error, an interruption)."""
+    from itertools import islice
+
+    from dask.distributed import as_completed
+
+    token = _token(args, ranges)[:16]
+    queue = iter(todo)
+
+    def submit(s: int, e: int):
+        return client.submit(_task, *args, s, e, ranges, retries=retries, pure=False,
+                             key=f"lcc-sweep-{token}-{s}-{e}")  # fmt: skip
+
+    def window() -> int:
+        try:
+            threads = sum(client.nthreads().values())
+        except Exception:  # noqa: BLE001 - the scheduler is busy: keep the window
+            threads = 2
+        return max(4, TASKS_PER_THREAD * threads)
+
+    pending = {submit(s, e) for s, e in islice(queue, window())}
+    flow = as_completed(list(pending))
+    size, checked = len(pending), time.monotonic()
+    try:
+        for fut in flow:
+            pending.discard(fut)
+            out = fut.result()
+            _raise_config_error(out)
+            if time.monotonic() - checked > 5.0:  # workers may join (an external cluster)
+                size, checked = window(), time.monotonic()
+            for s, e in islice(queue, max(1, size - len(pending))):
+                nxt = submit(s, e)
+                pending.add(nxt)
+                flow.add(nxt)
+            store(out)
+    finally:
+        if pending:  # stopped early: nothing more to compute
+            try:
+                client.cancel(list(pending))
+            except Exception:  # noqa: BLE001 - the scheduler is gone
+                pass
 
 
 def format_summary(summary: Mapping[str, Mapping[str, Any]]) -> str:
