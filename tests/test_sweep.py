@@ -277,7 +277,13 @@ def test_cli_sweep_json_and_files(problem_file, serial, capsys, tmp_path):
     cap = capsys.readouterr()
     doc = json.loads(cap.out)  # exactly one JSON object on stdout
     assert f"recording: {rrd}" in cap.err
-    assert list(doc) == ["results", "sweep"]
+    assert list(doc) == ["results", "sweep", "provenance"]
+    from lcc_synth.provenance import file_sha256
+
+    prov = doc["provenance"]  # what made these numbers: the file's bytes, seeds, solvers
+    assert prov["problem"]["sha256"] == file_sha256(problem_file)
+    assert prov["backend"] == "builtin" and prov["seeds"] == {"seed": 11, "draws": 4}
+    assert set(prov["solvers"]) == set(doc["results"]) and prov["solvers"]["mpc"].startswith("osqp")
     assert doc["sweep"]["count"] == 4 and doc["sweep"]["tasks"] == 2
     first4 = {c: {k: v[:4] for k, v in per.items()} for c, per in serial.samples.items()}
     # fallbacks are per-run totals: compare everything else with the serial samples
