@@ -174,13 +174,14 @@ def test_seed_changes_the_draws(problem_file, serial):
 def client():
     from dask.distributed import Client
 
-    from lcc_synth.experiments.sweep import local_cluster
+    from lcc_synth.experiments.sweep import local_cluster, stop_cluster
 
     cluster = local_cluster(2)
     cl = Client(cluster)
     yield cl
-    cl.close()
-    cluster.close()
+    scratch = cluster.lcc_scratch.peek()[2][0]  # (object, function, args, kwargs)
+    stop_cluster(cluster, cl)
+    assert not os.path.exists(scratch)  # the lcc-sweep-dask-* scratch space: removed
 
 
 def test_local_cluster_equals_serial(problem_file, client, serial):
@@ -324,6 +325,37 @@ def test_cli_sweep_json_and_files(problem_file, serial, capsys, tmp_path):
     entities = summarize_recording(second).entities
     for c in doc["results"]:
         assert f"/small_sweep_scenario{hard.index}/{c}/velocity" in entities
+
+
+def test_a_config_error_on_a_worker_is_not_retried_and_ends_as_one_line(
+    problem_file, tmp_path, capsys, monkeypatch
+):
+    """Bad input met on a worker (here every task raises a ConfigError, as an unreadable
+    fallback gains file would) is not retried: each task runs once, the sweep stops at the
+    first one and the command ends with one line, exit 2 (Dask would retry a raised exception
+    3 times, and a ConfigError does not even survive pickling as one)."""
+    from cli_subprocess import one_line_error
+    from dask.distributed import LocalCluster
+
+    import lcc_synth.experiments.sweep as sweep_module
+
+    calls = []
+
+    def bad(scenario, system, tables, config, source, start, stop, ranges=None):
+        calls.append((start, stop))
+        raise ConfigError("controllers.mpc.fallback_gains_file", "cannot read g.json", source)
+
+    monkeypatch.setattr(sweep_module, "run_chunk", bad)  # the workers are threads here
+    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp",
+                      host="127.0.0.1",
+                      dashboard_address="127.0.0.1:0") as cluster:  # fmt: skip
+        code = main(["sweep", str(problem_file), "--scheduler", cluster.scheduler_address,
+                     "--no-record", "--no-progress", "--out", str(tmp_path / "res")])
+    err = capsys.readouterr().err
+    assert code == 2 and one_line_error(err), err
+    assert f"error: {problem_file}: controllers.mpc.fallback_gains_file: cannot read" in err
+    assert 1 <= len(calls) == len(set(calls)) <= 3  # 3 tasks of <= 3 scenarios, each once
+    assert list((tmp_path / "res").iterdir()) == []  # nothing finished: no results directory
 
 
 def _gains_doc(n: int) -> dict:
