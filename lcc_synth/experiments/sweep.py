@@ -70,7 +70,8 @@ from lcc_synth.simulation.scenario import Scenario, split_ranges
 from lcc_synth.simulation.scenario_file import scenario_from
 
 __all__ = [
-    "SWEEP_METRICS", "SWEEP_SAMPLES", "SWEEP_COUNTS", "MAX_COUNT", "SweepSpec", "SweepResult",
+    "SWEEP_METRICS", "SWEEP_SAMPLES", "SWEEP_COUNTS", "MAX_COUNT", "TASKS_PER_THREAD",
+    "SweepSpec", "SweepResult",
     "SweepProgress", "load_sweep", "chunks", "scenario_metrics", "run_chunk", "aggregate",
     "run_sweep", "local_cluster", "stop_cluster", "table_digest", "format_summary",
 ]  # fmt: skip
@@ -626,10 +627,16 @@ def stop_cluster(cluster: Any, client: Any = None, now: bool = False) -> None:
     0.05-0.3 s this way). ``cluster`` may be ``None`` (an external scheduler: only the client
     is closed). Never raises for a cluster that is already gone."""
     import gc
+    import logging
     import os
     import signal
 
     if now and cluster is not None:
+        # the scheduler logs each killed worker's broken connection (with a traceback): the
+        # stop is deliberate, nothing of it is news
+        names = [n for n in logging.root.manager.loggerDict if n.split(".")[0] == "distributed"]
+        for name in ["distributed", *names]:
+            logging.getLogger(name).setLevel(logging.CRITICAL)
         for nanny in list(getattr(cluster, "workers", {}).values()):
             try:
                 nanny.close_gracefully(reason="lcc-sweep-stopped")  # no restart of its worker
