@@ -358,6 +358,32 @@ def test_a_config_error_on_a_worker_is_not_retried_and_ends_as_one_line(
     assert list((tmp_path / "res").iterdir()) == []  # nothing finished: no results directory
 
 
+def test_an_interrupted_sweep_resumes_to_the_same_results(problem_file, serial, tmp_path):
+    """Stopped after its first task, written as partial files, read back and continued: the
+    samples, the summary and every count (MPC fallbacks too) equal the uninterrupted run's."""
+    from lcc_synth.experiments.sweep import SweepProgress
+    from lcc_synth.experiments.sweep_files import ResultsWriter, read_partial
+
+    spec = load_sweep(problem_file)  # 8 scenarios in 3 tasks
+    done = SweepProgress.new(spec)
+
+    def stop(progress):
+        raise KeyboardInterrupt  # as a signal after the first finished task would
+
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(spec, client=None, progress=False, done=done, on_task=stop)
+    assert list(done.tasks) == [(0, 3)]
+    assert ResultsWriter(tmp_path, spec).partial(done, "interrupted by SIGINT")
+    partial = read_partial(tmp_path)
+    partial.check(spec, problem_file)
+    again = partial.progress(spec)
+    assert list(again.tasks) == [(0, 3)] and again.digests == done.digests
+    res = run_sweep(spec, client=None, progress=False, done=again)
+    _assert_same_samples(res.samples, serial.samples)
+    assert res.summary == serial.summary and res.fallbacks == serial.fallbacks
+    assert res.info["resumed_tasks"] == 1 and res.info["tasks"] == 3
+
+
 def _gains_doc(n: int) -> dict:
     gains = {"s_0": 0.1, "v_0": -0.5, "s_1": -0.2, "v_1": 0.05, "s_2": -0.1, "v_2": 0.05}
     names = [f"{q}_{i}" for i in range(n + 1) for q in ("s", "v")]
