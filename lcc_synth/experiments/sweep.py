@@ -35,13 +35,15 @@ count, and an interrupted sweep has little to cancel.
 
 Finished work is kept
 ---------------------
-What a sweep has finished is a :class:`SweepProgress`: the samples of the finished tasks and
-their counts. :func:`run_sweep` fills the one it is given (``done=``), calls ``on_task``
-after each task (``lcc-synth sweep`` writes the partial results files from it,
-:mod:`lcc_synth.experiments.sweep_files`) and, given one that already holds finished tasks
-(an interrupted sweep read back), runs only the others: the samples, the summary and every
-count equal those of an uninterrupted sweep bit for bit (a task's result depends on its
-scenario indices only).
+What a sweep has finished is a :class:`~lcc_synth.experiments.sweep_samples.SweepProgress`:
+the samples of the finished tasks and their counts. :func:`run_sweep` fills the one it is
+given (``done=``), calls ``on_task`` after each task (``lcc-synth sweep`` writes the partial
+results files from it, :mod:`lcc_synth.experiments.sweep_files`) and, given one that already
+holds finished tasks (an interrupted sweep read back), runs only the others: the samples, the
+summary and every count equal those of an uninterrupted sweep bit for bit (a task's result
+depends on its scenario indices only). The cluster's side (a local cluster whose workers leave
+the signals to the client, its stop, the window of tasks in flight) is in
+:mod:`lcc_synth.experiments.sweep_cluster`.
 
 The problem file's tables (``[sweep]`` ``count`` and ``batch_size``, the ``[lo, hi]`` ranges)
 are in ``problems/REFERENCE.md``.
@@ -50,7 +52,6 @@ are in ``problems/REFERENCE.md``.
 from __future__ import annotations
 
 import hashlib
-import json
 import pickle
 import threading
 import time
@@ -62,7 +63,21 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.metrics import WAVE_METRICS, MetricsConfig
+from lcc_synth.experiments.sweep_cluster import (
+    TASKS_PER_THREAD,
+    local_cluster,
+    run_tasks,
+    stop_cluster,
+)
+from lcc_synth.experiments.sweep_samples import (
+    SWEEP_COUNTS,
+    SWEEP_METRICS,
+    SWEEP_SAMPLES,
+    SweepProgress,
+    aggregate,
+    table_digest,
+)
+from lcc_synth.metrics import MetricsConfig
 from lcc_synth.models.records import Record, system_tables
 from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
 from lcc_synth.schema import declared
@@ -76,25 +91,6 @@ __all__ = [
     "format_summary",
 ]  # fmt: skip
 
-#: Per-scenario metrics of a sweep -> label (distributions: mean, p5, p95).
-SWEEP_METRICS: dict[str, str] = {
-    "aave": "AAVE (m/s)",
-    "fuel_ml": "fuel (mL)",
-    "min_spacing": "min spacing (m)",
-    "min_ttc": "min TTC (s)",
-    "max_abs_command": "max |u| (m/s²)",
-    "rms_jerk_cav": "CAV RMS jerk (m/s³)",
-    "max_jerk_1s_cav": "CAV max 1 s jerk (m/s³)", **WAVE_METRICS,
-}
-#: Every per-scenario sample of a sweep -> label (``samples.csv``'s columns, the recording).
-SWEEP_SAMPLES: dict[str, str] = {
-    **SWEEP_METRICS, "jerk_1s_over_limit_s": "time over ISO jerk limit (s)",
-    "collisions": "collisions", "aeb_activations": "AEB steps",
-}
-#: Per-scenario counts of a sweep (summed over the scenarios).
-SWEEP_COUNTS = ("collisions", "aeb_activations", "fallbacks")
-#: Metrics whose distributions leave out the runs with a collision (no efficiency to average).
-_EFFICIENCY = ("aave", "fuel_ml")
 #: Largest ``[sweep].count`` and ``batch_size`` (declared in :mod:`lcc_synth.schema`).
 MAX_COUNT = int(declared("sweep").key("count").hi)
 _MAX_BATCH = int(declared("sweep").key("batch_size").hi)
@@ -357,185 +353,6 @@ def _raise_config_error(out: Mapping[str, Any]) -> None:
 # --------------------------------------------------------------------------------------------
 
 
-def _dist(x: np.ndarray) -> dict[str, Any]:
-    x = np.asarray(x, dtype=float)
-    ok = x[np.isfinite(x)]
-    if ok.size == 0:
-        return {"mean": None, "p5": None, "p95": None, "n": 0}
-    return {
-        "mean": float(ok.mean()),
-        "p5": float(np.percentile(ok, 5)),
-        "p95": float(np.percentile(ok, 95)),
-        "n": int(ok.size),
-    }
-
-
-def aggregate(
-    samples: Mapping[str, Mapping[str, np.ndarray]], fallbacks: Mapping[str, int]
-) -> dict[str, dict[str, Any]]:
-    """Per controller: ``{metric: {mean, p5, p95, n}}`` over the finite per-scenario values
-    (``n`` of them: a vehicle that never closes in has an infinite time to collision), AAVE
-    and fuel over the scenarios WITHOUT a collision only (``collided_excluded`` of them left
-    out, whatever their values), and the counts ``collisions`` (collided vehicles),
-    ``collision_scenarios`` (collided runs), ``aeb_activations`` (steps), ``aeb_scenarios``,
-    ``jerk_scenarios`` (scenarios whose CAV's 1 s average jerk exceeds ISO 15622's limit
-    outside emergency braking), ``fallbacks`` (MPC fallback steps) and ``scenarios``."""
-    out = {}
-    for name, per in samples.items():
-        coll = np.asarray(per["collisions"])
-        entry: dict[str, Any] = {}
-        for k in SWEEP_METRICS:
-            if k in _EFFICIENCY:
-                entry[k] = _dist(np.where(coll > 0, np.nan, np.asarray(per[k], dtype=float)))
-                entry[k]["collided_excluded"] = int(np.count_nonzero(coll))
-            else:
-                entry[k] = _dist(per[k])
-        aeb = np.asarray(per["aeb_activations"])
-        entry["collisions"] = int(coll.sum())
-        entry["collision_scenarios"] = int(np.count_nonzero(coll))
-        entry["aeb_activations"] = int(aeb.sum())
-        entry["aeb_scenarios"] = int(np.count_nonzero(aeb))
-        entry["jerk_scenarios"] = int(np.count_nonzero(np.asarray(per["jerk_1s_over_limit_s"]) > 0))
-        entry["fallbacks"] = int(fallbacks.get(name, 0))
-        entry["scenarios"] = int(coll.size)
-        out[name] = entry
-    return out
-
-
-def table_digest(table: Mapping[str, Any]) -> str:
-    """SHA-256 of a controller table as the workers receive it (keys sorted, floats exact),
-    to check that a resumed sweep runs the same controllers (e.g. the same synthesised
-    ``h2`` gains) as the interrupted one."""
-    from lcc_synth.experiments.tables import json_safe
-
-    text = json.dumps(json_safe(dict(table)), sort_keys=True, default=repr)
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
-_INT_SAMPLES = ("collisions", "aeb_activations")
-
-
-@dataclass
-class SweepProgress:
-    """The finished part of a sweep: what an interrupted sweep keeps and a resumed one starts
-    from.
-
-    Attributes
-    ----------
-    count, batch_size : int
-        The sweep's scenarios and scenarios per task.
-    names : list of str
-        The controllers, in order.
-    samples : dict
-        ``{controller: {sample: (count,) float array}}``, NaN for the scenarios not finished.
-    tasks : dict
-        ``{(start, stop): {"fallbacks": {controller: int}, "sim_time": {controller: s},
-        "wall_time": s}}`` of the finished tasks, in the order they finished.
-    digests : dict
-        ``{controller: table_digest}`` of the tables the finished tasks ran (empty until
-        :func:`run_sweep` has prepared them).
-    tables : dict
-        The controller tables (set by :func:`run_sweep`; empty before).
-    wall_time_s : float
-        Wall time of the earlier runs of this sweep (an interrupted one), seconds.
-    """
-
-    count: int
-    batch_size: int
-    names: list[str]
-    samples: dict[str, dict[str, np.ndarray]]
-    tasks: dict[tuple[int, int], dict[str, Any]] = field(default_factory=dict)
-    digests: dict[str, str] = field(default_factory=dict)
-    tables: dict[str, dict[str, Any]] = field(default_factory=dict)
-    wall_time_s: float = 0.0
-
-    @classmethod
-    def new(cls, spec: SweepSpec) -> SweepProgress:
-        """Nothing finished yet."""
-        names = list(spec.controllers)
-        samples = {c: {k: np.full(spec.count, np.nan) for k in SWEEP_SAMPLES} for c in names}
-        return cls(spec.count, spec.batch_size, names, samples)
-
-    def check(self, spec: SweepSpec) -> None:
-        """Raise ``ValueError`` unless this is progress of a sweep of ``spec``'s shape."""
-        got = (self.count, self.batch_size, self.names)
-        want = (spec.count, spec.batch_size, list(spec.controllers))
-        if got != want:
-            raise ValueError(f"progress of a sweep {got}, not of this one {want}")
-
-    def set_tables(self, tables: Mapping[str, Mapping[str, Any]]) -> None:
-        """Record the digests of the controller tables; with finished tasks, check that
-        ``tables`` are those the finished tasks ran.
-
-        Raises
-        ------
-        ConfigError
-            For ``--resume``: the controllers (e.g. a synthesised ``h2`` gain) differ.
-        """
-        now = {c: table_digest(tables[c]) for c in self.names}
-        if self.tasks and self.digests:
-            differ = [c for c in self.names if self.digests.get(c) != now[c]]
-            if differ:
-                raise ConfigError(
-                    "--resume",
-                    f"the controller tables of {', '.join(differ)} differ from those of the "
-                    "interrupted sweep (e.g. a synthesised gain): its samples cannot be "
-                    "continued with these",
-                )
-        self.digests = now
-        self.tables = {c: dict(tables[c]) for c in self.names}
-
-    def store(self, out: Mapping[str, Any]) -> None:
-        """Keep a finished task's result (:func:`run_chunk`); the task counts as finished
-        only once everything of it is stored."""
-        s, e = int(out["start"]), int(out["stop"])
-        for c in self.names:
-            for k, v in out["metrics"][c].items():
-                self.samples[c][k][s:e] = v
-        self.tasks[(s, e)] = {
-            "fallbacks": {c: int(out["fallbacks"][c]) for c in self.names},
-            "sim_time": {c: float(out["sim_time"][c]) for c in self.names},
-            "wall_time": float(out["wall_time"]),
-        }
-
-    @property
-    def done(self) -> int:
-        """Scenarios finished."""
-        return sum(e - s for s, e in self.tasks)
-
-    @property
-    def finished(self) -> bool:
-        """Every scenario finished."""
-        return self.done == self.count
-
-    def indices(self) -> np.ndarray:
-        """The finished scenarios' indices, ascending."""
-        if not self.tasks:
-            return np.zeros(0, dtype=np.int64)
-        return np.concatenate([np.arange(s, e) for s, e in sorted(self.tasks)])
-
-    def fallbacks(self) -> dict[str, int]:
-        """MPC fallback steps per controller over the finished tasks."""
-        return {c: sum(t["fallbacks"][c] for t in self.tasks.values()) for c in self.names}
-
-    def sim_time(self) -> dict[str, float]:
-        """Simulation seconds per controller over the finished tasks."""
-        return {c: float(sum(t["sim_time"][c] for t in self.tasks.values()))
-                for c in self.names}  # fmt: skip
-
-    def finished_samples(self) -> dict[str, dict[str, np.ndarray]]:
-        """The samples of the finished scenarios only (in scenario order; the counts as
-        integers): every scenario's when :attr:`finished`."""
-        idx = None if self.finished else self.indices()
-        out = {}
-        for c, per in self.samples.items():
-            out[c] = {}
-            for k, v in per.items():
-                v = v if idx is None else v[idx]
-                out[c][k] = v.astype(np.int64) if k in _INT_SAMPLES else v
-        return out
-
-
 @dataclass
 class SweepResult:
     """A finished sweep.
@@ -562,109 +379,6 @@ class SweepResult:
     tables: dict[str, dict[str, Any]]
     designs: dict[str, Any]
     info: dict[str, Any]
-
-
-def local_cluster(n_workers: int = 2, local_directory: str | None = None):
-    """A ``LocalCluster`` of ``n_workers`` single-threaded processes on 127.0.0.1, scratch
-    space of the workers and of the scheduler in ``local_directory`` (by default a temporary
-    directory ``lcc-sweep-dask-*``, removed with the cluster: :func:`stop_cluster`).
-
-    The scheduler's HTTP endpoint (health, metrics; the dashboard if bokeh is installed)
-    listens on a free port of 127.0.0.1 only, never on the fixed port 8787."""
-    import shutil
-    import tempfile
-    import weakref
-
-    from dask.distributed import LocalCluster
-
-    n_workers = _count(n_workers, "--workers", 256)
-    scratch = None
-    if local_directory is None:
-        scratch = local_directory = tempfile.mkdtemp(prefix="lcc-sweep-dask-")
-    try:
-        cluster = LocalCluster(
-            n_workers=n_workers,
-            threads_per_worker=1,
-            processes=True,
-            host="127.0.0.1",
-            dashboard_address="127.0.0.1:0",
-            local_directory=local_directory,
-            scheduler_kwargs={"local_directory": local_directory},  # not $TMPDIR/dask-scratch-space
-            silence_logs=40,
-            preload=[__name__],  # dask_setup: the workers leave SIGINT / SIGTERM to the client
-        )
-    except BaseException:
-        if scratch is not None:
-            shutil.rmtree(scratch, True)
-        raise
-    # removed with the cluster object, or by stop_cluster (at once: an interrupted run leaves
-    # the interpreter with os._exit, which runs no finalizer)
-    cluster.lcc_scratch = (weakref.finalize(cluster, shutil.rmtree, scratch, True)
-                           if scratch is not None else None)  # fmt: skip
-    return cluster
-
-
-def dask_setup(worker: Any) -> None:
-    """Run by each worker of :func:`local_cluster` when it starts (a Dask preload): the worker
-    ignores SIGINT and SIGTERM. A Ctrl-C in a terminal reaches the whole process group; the
-    client stops the sweep, keeps what finished and stops the workers itself
-    (:func:`stop_cluster`); a worker that died of the same Ctrl-C would print a
-    ``KeyboardInterrupt`` traceback (and its nanny an error). A worker whose client dies ends
-    too (Dask's parent monitor)."""
-    import signal
-
-    if threading.current_thread() is threading.main_thread():
-        for s in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(s, signal.SIG_IGN)
-
-
-def stop_cluster(cluster: Any, client: Any = None, now: bool = False) -> None:
-    """Close ``client`` and the :func:`local_cluster` ``cluster`` and remove its scratch space.
-
-    With ``now`` (an interrupted or failed sweep), first mark the nannies as closing (they do
-    not restart their workers) and kill the worker processes: a worker inside a task holds a
-    graceful close for seconds (measured: 4 s with a task that does not return); killed, the
-    whole stop of an interrupted ``lcc-synth sweep`` took 0.13-0.45 s here. ``cluster`` may be
-    ``None`` (an external scheduler: only the client is closed, the caller cancels its
-    tasks). Never raises for a cluster that is already gone."""
-    import gc
-    import logging
-    import os
-    import signal
-
-    if now and cluster is not None:
-        # the scheduler logs each killed worker's broken connection (with a traceback): the
-        # stop is deliberate, nothing of it is news
-        names = [n for n in logging.root.manager.loggerDict if n.split(".")[0] == "distributed"]
-        for name in ["distributed", *names]:
-            logging.getLogger(name).setLevel(logging.CRITICAL)
-        for nanny in list(getattr(cluster, "workers", {}).values()):
-            try:
-                nanny.close_gracefully(reason="lcc-sweep-stopped")  # no restart of its worker
-                pid = nanny.pid
-            except Exception:  # noqa: BLE001 - not a nanny (a worker of a thread cluster)
-                continue
-            if pid:
-                try:
-                    os.kill(pid, signal.SIGKILL)
-                except OSError:
-                    pass
-    quick = {"timeout": 5} if now else {}
-    try:
-        if client is not None:
-            client.close(**quick)
-    except Exception:  # noqa: BLE001 - the scheduler is gone already
-        pass
-    try:
-        if cluster is not None:
-            cluster.close(**quick)
-    except Exception:  # noqa: BLE001 - the cluster is closed below regardless
-        pass
-    finally:
-        scratch = getattr(cluster, "lcc_scratch", None)
-        if scratch is not None:
-            scratch()
-        gc.collect()  # multiprocessing's semaphores of the worker queues: released now
 
 
 def _inline_gains_file(name: str, table: Mapping[str, Any], spec: SweepSpec) -> dict[str, Any]:
@@ -775,6 +489,7 @@ def run_sweep(
         bar.update(done.done)
 
         def store(out: dict[str, Any]) -> None:
+            _raise_config_error(out)
             done.store(out)
             bar.update(out["stop"] - out["start"])
             if on_task is not None:
@@ -784,7 +499,13 @@ def run_sweep(
             for s, e in todo:
                 store(run_chunk(*args, s, e, spec.ranges))
         elif todo:
-            _run_on(client, todo, args, spec.ranges, retries, store)
+            token = _token(args, spec.ranges)[:16]
+
+            def submit(s: int, e: int):
+                return client.submit(_task, *args, s, e, spec.ranges, retries=retries,
+                                     pure=False, key=f"lcc-sweep-{token}-{s}-{e}")  # fmt: skip
+
+            run_tasks(client, todo, submit, store)
     wall = time.perf_counter() - t0
     samples = done.finished_samples()
     fallbacks = done.fallbacks()
@@ -808,55 +529,6 @@ def run_sweep(
         info["resumed_tasks"] = len(parts) - len(todo)
         info["earlier_wall_time_s"] = done.wall_time_s
     return SweepResult(aggregate(samples, fallbacks), samples, fallbacks, tables, designs, info)
-
-
-#: Tasks in flight per worker thread (the next one is submitted when one finishes).
-TASKS_PER_THREAD = 2
-
-
-def _run_on(client: Any, todo, args, ranges, retries: int, store) -> None:
-    """Run the tasks ``todo`` on ``client``, at most :data:`TASKS_PER_THREAD` per worker
-    thread in flight (at least 4), ``store(result)`` for each as it finishes; the tasks still
-    in flight are cancelled when this ends early (an error, an interruption)."""
-    from itertools import islice
-
-    from dask.distributed import as_completed
-
-    token = _token(args, ranges)[:16]
-    queue = iter(todo)
-
-    def submit(s: int, e: int):
-        return client.submit(_task, *args, s, e, ranges, retries=retries, pure=False,
-                             key=f"lcc-sweep-{token}-{s}-{e}")  # fmt: skip
-
-    def window() -> int:
-        try:
-            threads = sum(client.nthreads().values())
-        except Exception:  # noqa: BLE001 - the scheduler is busy: keep the window
-            threads = 2
-        return max(4, TASKS_PER_THREAD * threads)
-
-    pending = {submit(s, e) for s, e in islice(queue, window())}
-    flow = as_completed(list(pending))
-    size, checked = len(pending), time.monotonic()
-    try:
-        for fut in flow:
-            pending.discard(fut)
-            out = fut.result()
-            _raise_config_error(out)
-            if time.monotonic() - checked > 5.0:  # workers may join (an external cluster)
-                size, checked = window(), time.monotonic()
-            for s, e in islice(queue, max(1, size - len(pending))):
-                nxt = submit(s, e)
-                pending.add(nxt)
-                flow.add(nxt)
-            store(out)
-    finally:
-        if pending:  # stopped early: nothing more to compute
-            try:
-                client.cancel(list(pending))
-            except Exception:  # noqa: BLE001 - the scheduler is gone
-                pass
 
 
 def format_summary(summary: Mapping[str, Mapping[str, Any]]) -> str:

@@ -29,7 +29,7 @@ with everything that finished.
 :func:`read_partial` reads a partial directory back (``lcc-synth sweep --resume DIR``):
 :meth:`PartialSweep.check` refuses a sweep that differs from the interrupted one (one line
 naming what differs), :meth:`PartialSweep.progress` gives the
-:class:`~lcc_synth.experiments.sweep.SweepProgress` that
+:class:`~lcc_synth.experiments.sweep_samples.SweepProgress` that
 :func:`~lcc_synth.experiments.sweep.run_sweep` continues from, to the same samples, summary
 and counts as an uninterrupted sweep, bit for bit.
 """
