@@ -20,7 +20,7 @@ from pathlib import Path
 
 from dask.distributed import Client
 
-from lcc_synth.experiments.sweep import load_sweep, local_cluster, run_sweep
+from lcc_synth.experiments.sweep import load_sweep, local_cluster, run_sweep, stop_cluster
 from lcc_synth.problem import load_problem
 
 PROBLEM = Path(__file__).resolve().parents[1] / "problems" / "sweep_robustness.toml"
@@ -48,8 +48,7 @@ def main() -> None:
     try:
         res = run_sweep(spec, client=client, progress=False)
     finally:
-        client.close()
-        cluster.close()
+        stop_cluster(cluster, client)  # and its scratch space
     info = res.info
     sc = spec.scenario
     nv = sc.n_vehicles

@@ -90,7 +90,7 @@ EXPECTED_OPTIONS = {
     "regions": {"--json", "--png", "--step", *_RECORD},
     "simulate": {"--json", "--seeds", "--record-seeds", *_RECORD, *_STEPS},
     "synthesize": {"--json", "--out", "--figure", "--no-progress", *_RECORD},
-    "sweep": {"--json", "--count", "--batch-size", "--seed", "--scheduler", "--workers",
+    "sweep": {"--json", "--count", "--batch-size", "--seed", "--scheduler", "--workers", "--resume",
               "--controllers", "--out", "--no-figures", "--no-progress", *_RECORD},
     "review": {"--summary", "--json", "--web", "--web-port", "--port"},
 }  # fmt: skip

@@ -174,13 +174,14 @@ def test_seed_changes_the_draws(problem_file, serial):
 def client():
     from dask.distributed import Client
 
-    from lcc_synth.experiments.sweep import local_cluster
+    from lcc_synth.experiments.sweep import local_cluster, stop_cluster
 
     cluster = local_cluster(2)
     cl = Client(cluster)
     yield cl
-    cl.close()
-    cluster.close()
+    scratch = cluster.lcc_scratch.peek()[2][0]  # (object, function, args, kwargs)
+    stop_cluster(cluster, cl)
+    assert not os.path.exists(scratch)  # the lcc-sweep-dask-* scratch space: removed
 
 
 def test_local_cluster_equals_serial(problem_file, client, serial):
@@ -277,7 +278,13 @@ def test_cli_sweep_json_and_files(problem_file, serial, capsys, tmp_path):
     cap = capsys.readouterr()
     doc = json.loads(cap.out)  # exactly one JSON object on stdout
     assert f"recording: {rrd}" in cap.err
-    assert list(doc) == ["results", "sweep"]
+    assert list(doc) == ["results", "sweep", "provenance"]
+    from lcc_synth.provenance import file_sha256
+
+    prov = doc["provenance"]  # what made these numbers: the file's bytes, seeds, solvers
+    assert prov["problem"]["sha256"] == file_sha256(problem_file)
+    assert prov["backend"] == "builtin" and prov["seeds"] == {"seed": 11, "draws": 4}
+    assert set(prov["solvers"]) == set(doc["results"]) and prov["solvers"]["mpc"].startswith("osqp")
     assert doc["sweep"]["count"] == 4 and doc["sweep"]["tasks"] == 2
     first4 = {c: {k: v[:4] for k, v in per.items()} for c, per in serial.samples.items()}
     # fallbacks are per-run totals: compare everything else with the serial samples
@@ -318,6 +325,63 @@ def test_cli_sweep_json_and_files(problem_file, serial, capsys, tmp_path):
     entities = summarize_recording(second).entities
     for c in doc["results"]:
         assert f"/small_sweep_scenario{hard.index}/{c}/velocity" in entities
+
+
+def test_a_config_error_on_a_worker_is_not_retried_and_ends_as_one_line(
+    problem_file, tmp_path, capsys, monkeypatch
+):
+    """Bad input met on a worker (here every task raises a ConfigError, as an unreadable
+    fallback gains file would) is not retried: each task runs once, the sweep stops at the
+    first one and the command ends with one line, exit 2 (Dask would retry a raised exception
+    3 times, and a ConfigError does not even survive pickling as one)."""
+    from cli_subprocess import one_line_error
+    from dask.distributed import LocalCluster
+
+    import lcc_synth.experiments.sweep as sweep_module
+
+    calls = []
+
+    def bad(scenario, system, tables, config, source, start, stop, ranges=None):
+        calls.append((start, stop))
+        raise ConfigError("controllers.mpc.fallback_gains_file", "cannot read g.json", source)
+
+    monkeypatch.setattr(sweep_module, "run_chunk", bad)  # the workers are threads here
+    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp",
+                      host="127.0.0.1",
+                      dashboard_address="127.0.0.1:0") as cluster:  # fmt: skip
+        code = main(["sweep", str(problem_file), "--scheduler", cluster.scheduler_address,
+                     "--no-record", "--no-progress", "--out", str(tmp_path / "res")])
+    err = capsys.readouterr().err
+    assert code == 2 and one_line_error(err), err
+    assert f"error: {problem_file}: controllers.mpc.fallback_gains_file: cannot read" in err
+    assert 1 <= len(calls) == len(set(calls)) <= 3  # 3 tasks of <= 3 scenarios, each once
+    assert list((tmp_path / "res").iterdir()) == []  # nothing finished: no results directory
+
+
+def test_an_interrupted_sweep_resumes_to_the_same_results(problem_file, serial, tmp_path):
+    """Stopped after its first task, written as partial files, read back and continued: the
+    samples, the summary and every count (MPC fallbacks too) equal the uninterrupted run's."""
+    from lcc_synth.experiments.sweep import SweepProgress
+    from lcc_synth.experiments.sweep_files import ResultsWriter, read_partial
+
+    spec = load_sweep(problem_file)  # 8 scenarios in 3 tasks
+    done = SweepProgress.new(spec)
+
+    def stop(progress):
+        raise KeyboardInterrupt  # as a signal after the first finished task would
+
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(spec, client=None, progress=False, done=done, on_task=stop)
+    assert list(done.tasks) == [(0, 3)]
+    assert ResultsWriter(tmp_path, spec).partial(done, "interrupted by SIGINT")
+    partial = read_partial(tmp_path)
+    partial.check(spec, problem_file)
+    again = partial.progress(spec)
+    assert list(again.tasks) == [(0, 3)] and again.digests == done.digests
+    res = run_sweep(spec, client=None, progress=False, done=again)
+    _assert_same_samples(res.samples, serial.samples)
+    assert res.summary == serial.summary and res.fallbacks == serial.fallbacks
+    assert res.info["resumed_tasks"] == 1 and res.info["tasks"] == 3
 
 
 def _gains_doc(n: int) -> dict:

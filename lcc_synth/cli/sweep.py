@@ -3,8 +3,9 @@
 Runs ``[sweep] count`` random scenarios for every controller (see
 :mod:`lcc_synth.experiments.sweep`), prints mean and 5th / 95th percentiles of the metrics and
 the counts of collisions, emergency brakings and MPC fallbacks, and writes under
-``results/<problem>-<UTC timestamp>/``: ``sweep.json`` (the ``--json`` document),
-``samples.csv`` (every scenario's metrics) and ``distributions.png``; and a Rerun recording
+``results/<problem>-<UTC timestamp>/``: ``sweep.json`` (the ``--json`` document, with its
+provenance), ``samples.csv`` (every scenario's metrics) and ``distributions.png``
+(:mod:`lcc_synth.experiments.sweep_files`); and a Rerun recording
 (``logs/<problem>-<UTC timestamp>.rrd``, ``--rrd PATH`` / ``--no-record``) of every scenario's
 metrics per controller and the summary (:mod:`lcc_synth.recording.sweep`), with beside it
 ``<stem>-scenario<i>.rrd``: the hardest scenario simulated again with every controller
@@ -13,6 +14,20 @@ metrics per controller and the summary (:mod:`lcc_synth.recording.sweep`), with 
 By default the tasks run on a local Dask cluster (``--workers`` single-threaded processes, no
 dashboard, scratch space in a temporary directory); ``--scheduler ADDRESS`` uses an existing
 cluster instead (its workers need the same ``lcc_synth`` installed).
+
+Before the work (exit 2, one line): the sweep's memory and disk estimate
+(:mod:`lcc_synth.experiments.sweep_estimate`) must fit, naming ``--count`` (or
+``[sweep].count``) otherwise; the results directory is created (exclusively) and a file is
+written in it, and ``--rrd``'s directory is probed, before the cluster starts. A sweep
+estimated to run longer than a minute prints its estimate first (one line on stderr).
+
+Nothing finished is lost: the partial ``samples.csv`` and ``sweep.json`` (``"partial":
+true``) are written while the sweep runs (after the first task, then every few seconds) and
+once more when it is interrupted (SIGINT, SIGTERM: the workers are stopped, the scratch space
+removed, exit 130 / 143) or fails; ``--resume DIR`` continues that sweep in ``DIR`` to the
+results of an uninterrupted one, bit for bit. The recording is written for a complete sweep
+only. A results file that cannot be written at the end (a full disk) is one line naming it
+(exit 1), after the summary is printed.
 """
 
 from __future__ import annotations
@@ -42,41 +57,123 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--workers", type=int, default=None, metavar="N",
         help="worker processes of the local cluster (default 2; not with --scheduler)",
     )
+    parser.add_argument(
+        "--resume", metavar="DIR",
+        help="continue the interrupted sweep whose results directory is DIR, in DIR (the same "
+        "problem file; --count, --batch-size, --seed and --controllers default to its own and "
+        "must match it)",
+    )  # fmt: skip
     add_output_arguments(parser, "the sweep", "the PNG")
     add_recording(parser, steps=False)
 
 
-def _client(args):
+def _signals_held():
+    """A context manager: a SIGINT or SIGTERM that arrives while the block runs is held until
+    it ends, then the handler that was installed runs (the ``lcc-synth`` entry point's raises
+    :class:`~lcc_synth.errors.Interrupted`); a second one exits at once, as after the first.
+
+    Around the start of the Dask cluster (1-3 s): a cluster that is starting cannot be stopped
+    half-way, and one whose object never reached the caller could not be closed at all. (The
+    handler must be Python's: blocking the signals in this thread would not hold them, the
+    native threads of the numerical libraries would take them.) A no-op outside the main
+    thread."""
+    import os
+    import signal
+    import threading
+    from contextlib import contextmanager
+
+    @contextmanager
+    def held():
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        got: list[int] = []
+
+        def hold(signum, frame):
+            if got:
+                os._exit(128 + signum)
+            got.append(signum)
+
+        old = {s: signal.signal(s, hold) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            yield
+        finally:
+            for s, h in old.items():
+                signal.signal(s, h)
+            if got and callable(old[got[0]]):
+                old[got[0]](got[0], None)
+            elif got and old[got[0]] == signal.SIG_DFL:
+                os.kill(os.getpid(), got[0])
+
+    return held()
+
+
+def _client(args, into: dict) -> None:
+    """The Dask client (and the local cluster) in ``into["client"]`` (``into["cluster"]``),
+    each stored as soon as it exists, so that a failure in between still closes the other."""
     from dask.distributed import Client
 
     from lcc_synth.errors import ConfigError
 
     if args.scheduler:
         try:
-            return Client(args.scheduler, timeout="15s"), None
+            into["client"] = Client(args.scheduler, timeout="15s")
+            return
         except (OSError, TimeoutError, ValueError) as err:
             raise ConfigError(
                 "--scheduler", f"cannot connect to the Dask scheduler {args.scheduler!r}: {err}"
             ) from None
     from lcc_synth.experiments.sweep import local_cluster
 
-    cluster = local_cluster(2 if args.workers is None else args.workers)
-    return Client(cluster), cluster
+    into["cluster"] = local_cluster(2 if args.workers is None else args.workers)
+    into["client"] = Client(into["cluster"])
+
+
+def _lock(directory) -> int:
+    """An exclusive lock on the results directory for this run (two runs resuming the same
+    directory would write over each other); released when the process ends."""
+    import fcntl
+    import os
+
+    from lcc_synth.errors import ConfigError
+
+    fd = os.open(directory, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        raise ConfigError("--resume", f"{directory} is being written by another lcc-synth "
+                          "sweep right now") from None  # fmt: skip
+    return fd
+
+
+def _settings(args, partial):
+    """``count, batch_size, seed, controllers`` of the command line, where it gives none
+    those of the interrupted sweep (``--resume``)."""
+    names = None if args.controllers is None else args.controllers.split(",")
+    got = {"count": args.count, "batch_size": args.batch_size, "seed": args.seed,
+           "controllers": names}  # fmt: skip
+    if partial is not None:
+        got = {k: (v if v is not None else partial.overrides()[k]) for k, v in got.items()}
+    return got
 
 
 def run(args: argparse.Namespace) -> int:
-    import csv
+    import os
     from datetime import UTC, datetime
 
-    from lcc_synth.errors import ConfigError
+    from lcc_synth.errors import ConfigError, FileError
     from lcc_synth.experiments.sweep import (
         SWEEP_METRICS,
-        SWEEP_SAMPLES,
+        SweepProgress,
         format_summary,
         load_sweep,
         run_sweep,
+        stop_cluster,
     )
-    from lcc_synth.experiments.tables import json_safe, run_directory
+    from lcc_synth.experiments.sweep_estimate import LONG_S, estimate_sweep
+    from lcc_synth.experiments.sweep_files import ResultsWriter, complete_doc, read_partial
+    from lcc_synth.outputs import check_directory, new_directory, writing
     from lcc_synth.recording import recording_path
     from lcc_synth.synthesis.h2 import SynthesisError
 
@@ -84,49 +181,88 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--workers", "does not apply with --scheduler (its cluster has its own)")
     if args.workers is not None and not 1 <= args.workers <= 256:
         raise ConfigError("--workers", f"must be an integer in [1, 256], got {args.workers}")
-    names = None if args.controllers is None else args.controllers.split(",")
-    spec = load_sweep(args.problem, args.count, args.batch_size, args.seed, names)
+    partial = read_partial(args.resume) if args.resume else None
+    got = _settings(args, partial)
+    spec = load_sweep(args.problem, got["count"], got["batch_size"], got["seed"],
+                      got["controllers"])  # fmt: skip
+    if partial is not None:
+        partial.check(spec, args.problem)
     rrd = recording_path(args, spec.name)  # a bad --rrd fails before the sweep runs
     stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
     log = sys.stderr if args.json else sys.stdout
     progress = not args.no_progress
 
-    client, cluster = _client(args)
-    try:
-        try:
-            result = run_sweep(spec, client=client, progress=progress)
-        except SynthesisError as err:
-            print(f"lcc-synth sweep: synthesis failed: {err}", file=sys.stderr)
-            return 1
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-
-    doc = json_safe({"results": result.summary, "sweep": result.info})
-    out_dir = run_directory(args.out, spec.name, stamp)
-    (out_dir / "sweep.json").write_text(json.dumps(doc, indent=2) + "\n")
-    with (out_dir / "samples.csv").open("w", newline="") as fh:
-        w = csv.writer(fh)
-        keys = list(SWEEP_SAMPLES)
-        w.writerow(["scenario", "controller", *keys])
-        for c, per in result.samples.items():
-            for i in range(spec.count):
-                w.writerow([i, c, *(per[k][i] for k in keys)])
-    written = [out_dir / "sweep.json", out_dir / "samples.csv"]
-    if not args.no_figures:
-        from lcc_synth.figures import plot_sweep_distributions
-
-        written.append(
-            plot_sweep_distributions(
-                result.samples, out_dir / "distributions.png", metrics=SWEEP_METRICS,
-                title=f"{spec.name}: {spec.count} scenarios (box 25-75 %, whiskers 5-95 %, "
-                "dot = mean)",
-            )
-        )
-    info = result.info
+    # before the work: memory, disk, a results directory that takes files
+    estimate = estimate_sweep(spec, 2 if args.workers is None else args.workers, rrd is not None)
+    count_field = "--count" if args.count is not None else "sweep.count"
+    hint = "lower the count"
     if rrd is not None:
-        _record(rrd, spec, result)
+        from lcc_synth.resources import format_bytes
+
+        plain = estimate_sweep(spec, estimate.workers, record=False).memory
+        hint += f", or pass --no-record (the recording copies the samples; {format_bytes(plain)}"
+        hint += " without it)"
+    estimate.require_memory(count_field, hint)
+    if partial is not None:
+        out_dir = check_directory(partial.directory, "--resume")
+        estimate.require_disk(count_field, out_dir)
+    else:
+        check_directory(args.out, "--out")
+        estimate.require_disk(count_field, args.out)
+        out_dir = check_directory(new_directory(args.out, spec.name, stamp), "--out")
+    done = SweepProgress.new(spec)
+    start = -1  # scenarios finished when this run started (-1: a new results directory)
+    writer = ResultsWriter(out_dir, spec)
+    handles: dict = {}
+    result = None
+    try:
+        lock = _lock(out_dir)
+        if rrd is not None:
+            check_directory(rrd.parent, "--rrd")
+        if partial is not None:
+            done = partial.progress(spec)
+            start = done.done
+        if estimate.seconds > LONG_S and not args.scheduler:
+            print(f"lcc-synth sweep: estimate: {estimate.describe()}", file=sys.stderr,
+                  flush=True)  # fmt: skip
+        with _signals_held():
+            _client(args, handles)
+        if args.scheduler and estimate.seconds > LONG_S:
+            threads = sum(handles["client"].nthreads().values()) or 1
+            again = estimate_sweep(spec, threads, rrd is not None)
+            print(f"lcc-synth sweep: estimate: {again.describe()}",
+                  file=sys.stderr, flush=True)  # fmt: skip
+        result = run_sweep(spec, client=handles["client"], progress=progress, done=done,
+                           on_task=writer.on_task)  # fmt: skip
+    except SynthesisError as err:
+        _keep(writer, done, args, out_dir, start, "failed: synthesis")
+        print(f"lcc-synth sweep: synthesis failed: {err}", file=sys.stderr)
+        return 1
+    except BaseException as err:
+        _keep(writer, done, args, out_dir, start, _status(err))
+        raise
+    finally:
+        stop_cluster(handles.get("cluster"), handles.get("client"), now=result is None)
+
+    failure = None
+    try:
+        doc = complete_doc(spec, result)
+        writer.complete(done, doc)
+        if not args.no_figures:
+            from lcc_synth.figures import plot_sweep_distributions
+
+            with writing(out_dir / "distributions.png", overwrite=True) as png:
+                plot_sweep_distributions(
+                    result.samples, png.tmp, metrics=SWEEP_METRICS,
+                    title=f"{spec.name}: {spec.count} scenarios (box 25-75 %, whiskers 5-95 %, "
+                    "dot = mean)",
+                )
+    except FileError as err:
+        failure = err
+    except BaseException as err:  # interrupted while writing: keep what is on disk usable
+        _keep(writer, done, args, out_dir, start, _status(err))
+        raise
+    info = result.info
     if args.json:
         print(json.dumps(doc))
     else:
@@ -137,12 +273,69 @@ def run(args: argparse.Namespace) -> int:
         print(format_summary(result.summary))
     print(
         f"time: {info['wall_time_s']:.1f} s on {info['scheduler']} "
-        f"({info['scenarios_per_s']:.1f} scenarios/s, {info['runs_per_s']:.1f} "
+        f"({_rate(info['scenarios_per_s'])} scenarios/s, {_rate(info['runs_per_s'])} "
         f"scenario-controller runs/s); synthesis {info['synthesis_time_s']:.1f} s",
         file=log,
     )
-    print(f"results: {out_dir}", file=log)
+    if failure is None:
+        print(f"results: {out_dir}", file=log)
+    sys.stdout.flush()
+    if rrd is not None:
+        try:
+            _record(rrd, spec, result)
+        except FileError as err:
+            if failure is None:
+                raise
+            print(f"lcc-synth sweep: the recording was not written either: {err}",
+                  file=sys.stderr)  # fmt: skip
+    if failure is not None:
+        if writer.written > 0:
+            print(f"lcc-synth sweep: {out_dir} keeps the partial results of {writer.written} of "
+                  f"{spec.count} scenarios", file=sys.stderr)  # fmt: skip
+        raise failure
+    os.close(lock)
     return 0
+
+
+def _rate(x) -> str:
+    return "-" if x is None else f"{x:.1f}"
+
+
+def _status(err: BaseException) -> str:
+    from lcc_synth.errors import Interrupted
+
+    if isinstance(err, Interrupted):
+        return f"interrupted by {err.signame}"
+    if isinstance(err, KeyboardInterrupt):
+        return "interrupted"
+    return f"failed: {type(err).__name__}: {err}"
+
+
+def _remove_empty(directory) -> None:
+    from lcc_synth.outputs import remove_if_empty
+
+    remove_if_empty(directory)
+
+
+def _keep(writer, done, args, out_dir, start: int, status: str) -> None:
+    """A sweep that stopped (``status``): write what finished as the partial results and say
+    how to continue it. ``start``: the scenarios finished when this run started (-1: its
+    results directory is new, and removed if it stays empty)."""
+    stopped = status.startswith("interrupted")
+    if done.done > max(start, 0):
+        ok = writer.partial(done, status)
+        kept = done.done if ok else writer.written
+    else:  # nothing new: the files on disk are as they were
+        kept = start
+        if start < 0:
+            _remove_empty(out_dir)
+    if kept > 0 and (stopped or done.done > max(start, 0)):
+        print(f"lcc-synth sweep: kept {kept} of {done.count} scenarios in {out_dir} "
+              f"(samples.csv, sweep.json: partial); continue with: lcc-synth sweep "
+              f"{args.problem} --resume {out_dir} (the recording is written when the sweep "
+              "is complete)", file=sys.stderr, flush=True)  # fmt: skip
+    elif stopped and kept <= 0:
+        print("lcc-synth sweep: no scenario had finished: nothing to keep", file=sys.stderr)
 
 
 def _record(rrd, spec, result) -> None:

@@ -24,10 +24,26 @@ Scenarios are cut into tasks of ``batch_size`` consecutive indices; a task simul
 scenarios as ONE batch per controller (the simulator's batch axis; all controllers on the same
 draws) and returns the per-scenario metrics. Tasks run on a Dask cluster (a ``LocalCluster`` of
 processes by default, or any scheduler address) with retries; Dask recomputes the tasks of a
-worker that dies. ``h2`` controllers are synthesised once, in the client, and ``gains_file``
-controllers are read there; workers receive plain controller tables and build (and cache, per
-process and thread) the controllers themselves (an MPC's ``fallback_gains_file`` is read on
-the worker: give it a path the workers can read).
+worker that dies. A task whose input is bad (a :class:`~lcc_synth.errors.ConfigError` raised on
+the worker) is not retried: the error comes back to the client as it is. ``h2`` controllers are
+synthesised once, in the client, and ``gains_file`` controllers are read there; workers
+receive plain controller tables and build (and cache, per process and thread) the controllers
+themselves (an MPC's ``fallback_gains_file`` is read on the worker: give it a path the
+workers can read). At most a few tasks per worker thread are submitted at a time (the next one
+when one finishes): the client and the scheduler hold a bounded number of tasks whatever the
+count, and an interrupted sweep has little to cancel.
+
+Finished work is kept
+---------------------
+What a sweep has finished is a :class:`~lcc_synth.experiments.sweep_samples.SweepProgress`:
+the samples of the finished tasks and their counts. :func:`run_sweep` fills the one it is
+given (``done=``), calls ``on_task`` after each task (``lcc-synth sweep`` writes the partial
+results files from it, :mod:`lcc_synth.experiments.sweep_files`) and, given one that already
+holds finished tasks (an interrupted sweep read back), runs only the others: the samples, the
+summary and every count equal those of an uninterrupted sweep bit for bit (a task's result
+depends on its scenario indices only). The cluster's side (a local cluster whose workers leave
+the signals to the client, its stop, the window of tasks in flight) is in
+:mod:`lcc_synth.experiments.sweep_cluster`.
 
 The problem file's tables (``[sweep]`` ``count`` and ``batch_size``, the ``[lo, hi]`` ranges)
 are in ``problems/REFERENCE.md``.
@@ -39,7 +55,7 @@ import hashlib
 import pickle
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -47,7 +63,21 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.metrics import WAVE_METRICS, MetricsConfig
+from lcc_synth.experiments.sweep_cluster import (
+    TASKS_PER_THREAD,
+    local_cluster,
+    run_tasks,
+    stop_cluster,
+)
+from lcc_synth.experiments.sweep_samples import (
+    SWEEP_COUNTS,
+    SWEEP_METRICS,
+    SWEEP_SAMPLES,
+    SweepProgress,
+    aggregate,
+    table_digest,
+)
+from lcc_synth.metrics import MetricsConfig
 from lcc_synth.models.records import Record, system_tables
 from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
 from lcc_synth.schema import declared
@@ -55,30 +85,12 @@ from lcc_synth.simulation.scenario import Scenario, split_ranges
 from lcc_synth.simulation.scenario_file import scenario_from
 
 __all__ = [
-    "SWEEP_METRICS", "SWEEP_SAMPLES", "SWEEP_COUNTS", "MAX_COUNT", "SweepSpec", "SweepResult",
-    "load_sweep", "chunks", "scenario_metrics", "run_chunk", "aggregate", "run_sweep",
-    "local_cluster", "format_summary",
+    "SWEEP_METRICS", "SWEEP_SAMPLES", "SWEEP_COUNTS", "MAX_COUNT", "TASKS_PER_THREAD",
+    "SweepSpec", "SweepResult", "SweepProgress", "load_sweep", "chunks", "scenario_metrics",
+    "run_chunk", "aggregate", "run_sweep", "local_cluster", "stop_cluster", "table_digest",
+    "format_summary",
 ]  # fmt: skip
 
-#: Per-scenario metrics of a sweep -> label (distributions: mean, p5, p95).
-SWEEP_METRICS: dict[str, str] = {
-    "aave": "AAVE (m/s)",
-    "fuel_ml": "fuel (mL)",
-    "min_spacing": "min spacing (m)",
-    "min_ttc": "min TTC (s)",
-    "max_abs_command": "max |u| (m/s²)",
-    "rms_jerk_cav": "CAV RMS jerk (m/s³)",
-    "max_jerk_1s_cav": "CAV max 1 s jerk (m/s³)", **WAVE_METRICS,
-}
-#: Every per-scenario sample of a sweep -> label (``samples.csv``'s columns, the recording).
-SWEEP_SAMPLES: dict[str, str] = {
-    **SWEEP_METRICS, "jerk_1s_over_limit_s": "time over ISO jerk limit (s)",
-    "collisions": "collisions", "aeb_activations": "AEB steps",
-}
-#: Per-scenario counts of a sweep (summed over the scenarios).
-SWEEP_COUNTS = ("collisions", "aeb_activations", "fallbacks")
-#: Metrics whose distributions leave out the runs with a collision (no efficiency to average).
-_EFFICIENCY = ("aave", "fuel_ml")
 #: Largest ``[sweep].count`` and ``batch_size`` (declared in :mod:`lcc_synth.schema`).
 MAX_COUNT = int(declared("sweep").key("count").hi)
 _MAX_BATCH = int(declared("sweep").key("batch_size").hi)
@@ -318,54 +330,27 @@ def run_chunk(
     }
 
 
+def _task(*args: Any) -> dict[str, Any]:
+    """:func:`run_chunk` as a Dask task: a :class:`ConfigError` (bad input, the same on every
+    try) comes back as a value, ``{"config_error": (field, message, source)}``, so that Dask
+    does not retry it (its retries are for failures that may pass) and the client raises it
+    (a ``ConfigError`` does not survive pickling as an exception: its arguments differ from
+    its message)."""
+    try:
+        return run_chunk(*args)
+    except ConfigError as err:
+        return {"config_error": (err.field, err.message, err.source)}
+
+
+def _raise_config_error(out: Mapping[str, Any]) -> None:
+    if "config_error" in out:
+        field_name, message, source = out["config_error"]
+        raise ConfigError(field_name, message, source)
+
+
 # --------------------------------------------------------------------------------------------
 # Aggregation
 # --------------------------------------------------------------------------------------------
-
-
-def _dist(x: np.ndarray) -> dict[str, Any]:
-    x = np.asarray(x, dtype=float)
-    ok = x[np.isfinite(x)]
-    if ok.size == 0:
-        return {"mean": None, "p5": None, "p95": None, "n": 0}
-    return {
-        "mean": float(ok.mean()),
-        "p5": float(np.percentile(ok, 5)),
-        "p95": float(np.percentile(ok, 95)),
-        "n": int(ok.size),
-    }
-
-
-def aggregate(
-    samples: Mapping[str, Mapping[str, np.ndarray]], fallbacks: Mapping[str, int]
-) -> dict[str, dict[str, Any]]:
-    """Per controller: ``{metric: {mean, p5, p95, n}}`` over the finite per-scenario values
-    (``n`` of them: a vehicle that never closes in has an infinite time to collision), AAVE
-    and fuel over the scenarios WITHOUT a collision only (``collided_excluded`` of them left
-    out, whatever their values), and the counts ``collisions`` (collided vehicles),
-    ``collision_scenarios`` (collided runs), ``aeb_activations`` (steps), ``aeb_scenarios``,
-    ``jerk_scenarios`` (scenarios whose CAV's 1 s average jerk exceeds ISO 15622's limit
-    outside emergency braking), ``fallbacks`` (MPC fallback steps) and ``scenarios``."""
-    out = {}
-    for name, per in samples.items():
-        coll = np.asarray(per["collisions"])
-        entry: dict[str, Any] = {}
-        for k in SWEEP_METRICS:
-            if k in _EFFICIENCY:
-                entry[k] = _dist(np.where(coll > 0, np.nan, np.asarray(per[k], dtype=float)))
-                entry[k]["collided_excluded"] = int(np.count_nonzero(coll))
-            else:
-                entry[k] = _dist(per[k])
-        aeb = np.asarray(per["aeb_activations"])
-        entry["collisions"] = int(coll.sum())
-        entry["collision_scenarios"] = int(np.count_nonzero(coll))
-        entry["aeb_activations"] = int(aeb.sum())
-        entry["aeb_scenarios"] = int(np.count_nonzero(aeb))
-        entry["jerk_scenarios"] = int(np.count_nonzero(np.asarray(per["jerk_1s_over_limit_s"]) > 0))
-        entry["fallbacks"] = int(fallbacks.get(name, 0))
-        entry["scenarios"] = int(coll.size)
-        out[name] = entry
-    return out
 
 
 @dataclass
@@ -394,36 +379,6 @@ class SweepResult:
     tables: dict[str, dict[str, Any]]
     designs: dict[str, Any]
     info: dict[str, Any]
-
-
-def local_cluster(n_workers: int = 2, local_directory: str | None = None):
-    """A ``LocalCluster`` of ``n_workers`` single-threaded processes on 127.0.0.1, scratch
-    space in ``local_directory`` (a temporary directory by default).
-
-    The scheduler's HTTP endpoint (health, metrics; the dashboard if bokeh is installed)
-    listens on a free port of 127.0.0.1 only, never on the fixed port 8787."""
-    import shutil
-    import tempfile
-    import weakref
-
-    from dask.distributed import LocalCluster
-
-    n_workers = _count(n_workers, "--workers", 256)
-    scratch = None
-    if local_directory is None:
-        scratch = local_directory = tempfile.mkdtemp(prefix="lcc-sweep-dask-")
-    cluster = LocalCluster(
-        n_workers=n_workers,
-        threads_per_worker=1,
-        processes=True,
-        host="127.0.0.1",
-        dashboard_address="127.0.0.1:0",
-        local_directory=local_directory,
-        silence_logs=40,
-    )
-    if scratch is not None:  # removed with the cluster object
-        weakref.finalize(cluster, shutil.rmtree, scratch, True)
-    return cluster
 
 
 def _inline_gains_file(name: str, table: Mapping[str, Any], spec: SweepSpec) -> dict[str, Any]:
@@ -464,6 +419,8 @@ def run_sweep(
     client: Any = None,
     progress: bool = True,
     retries: int = 3,
+    done: SweepProgress | None = None,
+    on_task: Callable[[SweepProgress], None] | None = None,
 ) -> SweepResult:
     """Run the sweep: synthesise ``h2`` controllers here, then every task on ``client``.
 
@@ -476,7 +433,22 @@ def run_sweep(
     progress : bool
         Progress bars on stderr (synthesis, scenarios done).
     retries : int
-        Retries of a failing task (a task lost with its worker is recomputed by Dask).
+        Retries of a failing task (a task lost with its worker is recomputed by Dask; a
+        :class:`ConfigError` is not retried).
+    done : SweepProgress, optional
+        Filled as tasks finish (the caller keeps what finished when the sweep is interrupted
+        or fails); one that holds finished tasks (an interrupted sweep) runs only the others.
+    on_task : callable, optional
+        ``on_task(done)`` after each finished task (in this thread).
+
+    Raises
+    ------
+    ConfigError
+        A controller that cannot be built, a bad input met on a worker, ``done`` of other
+        controller tables.
+    KeyboardInterrupt
+        (:class:`~lcc_synth.errors.Interrupted`) the tasks not finished are cancelled; ``done``
+        holds the finished ones.
     """
     from lcc_synth.experiments.comparison import prepare_controllers, progress_bar
 
@@ -504,51 +476,40 @@ def run_sweep(
     except ConfigError as err:
         raise err.with_source(spec.source) if spec.source else err from None
 
+    done = SweepProgress.new(spec) if done is None else done
+    done.check(spec)
+    done.set_tables(tables)
     parts = chunks(spec.count, spec.batch_size)
+    todo = [p for p in parts if p not in done.tasks]
     args = (spec.scenario, spec.system, tables, spec.metrics, spec.source)
     names = list(tables)
-    samples = {
-        c: {k: np.full(spec.count, np.nan) for k in SWEEP_SAMPLES} for c in names
-    }
-    fallbacks = dict.fromkeys(names, 0)
-    sim_time = dict.fromkeys(names, 0.0)
-    task_times = []
     t0 = time.perf_counter()
-
-    def store(out: dict[str, Any]) -> None:
-        s, e = out["start"], out["stop"]
-        for c, per in out["metrics"].items():
-            for k, v in per.items():
-                samples[c][k][s:e] = v
-            fallbacks[c] += out["fallbacks"][c]
-            sim_time[c] += out["sim_time"][c]
-        task_times.append(out["wall_time"])
-
     with progress_bar(spec.count, "scenarios", progress) as bar:
         bar.unit = "scenario"
-        if client is None:
-            for s, e in parts:
-                store(run_chunk(*args, s, e, spec.ranges))
-                bar.update(e - s)
-        else:
-            from dask.distributed import as_completed
+        bar.update(done.done)
 
+        def store(out: dict[str, Any]) -> None:
+            _raise_config_error(out)
+            done.store(out)
+            bar.update(out["stop"] - out["start"])
+            if on_task is not None:
+                on_task(done)
+
+        if client is None:
+            for s, e in todo:
+                store(run_chunk(*args, s, e, spec.ranges))
+        elif todo:
             token = _token(args, spec.ranges)[:16]
-            futures = [
-                client.submit(
-                    run_chunk, *args, s, e, spec.ranges, retries=retries, pure=False,
-                    key=f"lcc-sweep-{token}-{s}-{e}",
-                )
-                for s, e in parts
-            ]
-            for fut in as_completed(futures):
-                out = fut.result()
-                store(out)
-                bar.update(out["stop"] - out["start"])
+
+            def submit(s: int, e: int):
+                return client.submit(_task, *args, s, e, spec.ranges, retries=retries,
+                                     pure=False, key=f"lcc-sweep-{token}-{s}-{e}")  # fmt: skip
+
+            run_tasks(client, todo, submit, store)
     wall = time.perf_counter() - t0
-    for c in names:
-        for k in ("collisions", "aeb_activations"):
-            samples[c][k] = samples[c][k].astype(np.int64)
+    samples = done.finished_samples()
+    fallbacks = done.fallbacks()
+    ran = sum(e - s for s, e in todo)  # scenarios run by this call
     info = {
         "count": spec.count,
         "batch_size": spec.batch_size,
@@ -559,11 +520,14 @@ def run_sweep(
         "synthesis_time_s": t_design,
         "wall_time_s": wall,
         "total_time_s": time.perf_counter() - t_all,
-        "task_time_s_sum": float(sum(task_times)),
-        "simulation_time_s": sim_time,
-        "scenarios_per_s": spec.count / wall if wall > 0 else None,
-        "runs_per_s": spec.count * len(names) / wall if wall > 0 else None,
+        "task_time_s_sum": float(sum(t["wall_time"] for t in done.tasks.values())),
+        "simulation_time_s": done.sim_time(),
+        "scenarios_per_s": ran / wall if wall > 0 and ran else None,
+        "runs_per_s": ran * len(names) / wall if wall > 0 and ran else None,
     }
+    if len(todo) < len(parts):  # resumed: the earlier runs' share
+        info["resumed_tasks"] = len(parts) - len(todo)
+        info["earlier_wall_time_s"] = done.wall_time_s
     return SweepResult(aggregate(samples, fallbacks), samples, fallbacks, tables, designs, info)
 
 
