@@ -37,7 +37,8 @@ from typing import Any
 
 from lcc_synth.errors import Interrupted
 
-__all__ = ["CLEANUP_DEADLINE", "POLL_S", "handling", "interrupted", "deliver", "call_in_child"]
+__all__ = ["CLEANUP_DEADLINE", "POLL_S", "handling", "held_signals", "interrupted", "deliver",
+           "call_in_child"]
 
 #: Seconds the clean-up after a signal may take before the process exits regardless.
 CLEANUP_DEADLINE = 20.0
@@ -98,6 +99,39 @@ def handling() -> Iterator[None]:
         _STATE["active"] = False
         for s, h in old.items():
             signal.signal(s, h)
+
+
+@contextmanager
+def held_signals() -> Iterator[None]:
+    """A SIGINT or SIGTERM that arrives while the block runs is held until it ends; then the
+    handler that was installed runs (under :func:`handling`: it raises
+    :class:`~lcc_synth.errors.Interrupted`); a second one exits at once, as after the first.
+
+    For a block that cannot be stopped half-way: the start of a Dask cluster (1-3 s), whose
+    object could not be closed at all if the signal arrived before it reached the caller. (The
+    handler must be Python's: blocking the signals in this thread would not hold them, the
+    native threads of the numerical libraries would take them.) A no-op outside the main
+    thread."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    got: list[int] = []
+
+    def hold(signum: int, frame: Any) -> None:
+        if got:
+            os._exit(128 + signum)
+        got.append(signum)
+
+    old = {s: signal.signal(s, hold) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+        if got and callable(old[got[0]]):
+            old[got[0]](got[0], None)
+        elif got and old[got[0]] == signal.SIG_DFL:
+            os.kill(os.getpid(), got[0])
 
 
 def _child(fn: Callable[..., Any], args: tuple, kwargs: dict, fd: int) -> None:

@@ -43,6 +43,7 @@ from lcc_synth.errors import ConfigError, FileError
 
 __all__ = [
     "SPACE_MARGIN",
+    "SPACE_FLOOR",
     "path_part",
     "child",
     "free_bytes",

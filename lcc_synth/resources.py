@@ -108,18 +108,54 @@ RECORDER_BYTES = 1.5e8
 _PROGRESS = {"enabled": False}
 
 
+def _read_int(path: str) -> int | None:
+    try:
+        with open(path) as fh:
+            text = fh.read().strip()
+    except OSError:
+        return None
+    return int(text) if text.isdigit() else None  # "max": no limit
+
+
+def _container_room() -> int | None:
+    """Bytes this process may still allocate under its container's (cgroup v2 or v1) memory
+    limit and its address-space limit (``RLIMIT_AS``); ``None`` when neither is set."""
+    import resource
+
+    rooms = []
+    for limit, used in (("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"),
+                        ("/sys/fs/cgroup/memory/memory.limit_in_bytes",
+                         "/sys/fs/cgroup/memory/memory.usage_in_bytes")):  # fmt: skip
+        cap, now = _read_int(limit), _read_int(used)
+        if cap is not None and now is not None and cap < (1 << 60):  # v1: "no limit" is huge
+            rooms.append(max(cap - now, 0))
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    if soft != resource.RLIM_INFINITY:
+        try:
+            import psutil
+
+            rooms.append(max(soft - psutil.Process().memory_info().vms, 0))
+        except Exception:  # pragma: no cover - psutil is a dependency
+            pass
+    return min(rooms) if rooms else None
+
+
 def available_memory() -> int:
-    """Bytes of memory available now (``psutil``; ``/proc/meminfo`` as a fallback)."""
+    """Bytes of memory available now: the machine's (``psutil``; ``/proc/meminfo`` as a
+    fallback), or less when a container's memory limit (cgroup) or this process's
+    address-space limit leaves less room."""
     try:
         import psutil
 
-        return int(psutil.virtual_memory().available)
+        avail = int(psutil.virtual_memory().available)
     except Exception:  # pragma: no cover - psutil is a dependency
+        avail = 1 << 62
         with open("/proc/meminfo") as fh:
             for line in fh:
                 if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-        return 1 << 62
+                    avail = int(line.split()[1]) * 1024
+    room = _container_room()
+    return avail if room is None else min(avail, room)
 
 
 def format_bytes(n: float) -> str:

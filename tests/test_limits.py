@@ -163,3 +163,14 @@ def test_osqp_interrupt_flag_is_read_after_a_converged_solve():
         s.solve(np.zeros(2), np.zeros(2), np.zeros(2))
     s._interrupted = lambda: 0
     assert s.solve(np.zeros(2), np.zeros(2), np.zeros(2)).ok
+
+
+def test_available_memory_sees_an_address_space_limit():
+    """A process limited below the machine's free memory (``ulimit -v``, the way a batch
+    scheduler caps a job) gets the limit's room, not the machine's free memory."""
+    code = ("import resource; resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30)); "
+            "from lcc_synth.resources import available_memory; print(available_memory())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=60)  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    assert 0 < int(out.stdout) < 3 << 30

@@ -67,47 +67,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_recording(parser, steps=False)
 
 
-def _signals_held():
-    """A context manager: a SIGINT or SIGTERM that arrives while the block runs is held until
-    it ends, then the handler that was installed runs (the ``lcc-synth`` entry point's raises
-    :class:`~lcc_synth.errors.Interrupted`); a second one exits at once, as after the first.
-
-    Around the start of the Dask cluster (1-3 s): a cluster that is starting cannot be stopped
-    half-way, and one whose object never reached the caller could not be closed at all. (The
-    handler must be Python's: blocking the signals in this thread would not hold them, the
-    native threads of the numerical libraries would take them.) A no-op outside the main
-    thread."""
-    import os
-    import signal
-    import threading
-    from contextlib import contextmanager
-
-    @contextmanager
-    def held():
-        if threading.current_thread() is not threading.main_thread():
-            yield
-            return
-        got: list[int] = []
-
-        def hold(signum, frame):
-            if got:
-                os._exit(128 + signum)
-            got.append(signum)
-
-        old = {s: signal.signal(s, hold) for s in (signal.SIGINT, signal.SIGTERM)}
-        try:
-            yield
-        finally:
-            for s, h in old.items():
-                signal.signal(s, h)
-            if got and callable(old[got[0]]):
-                old[got[0]](got[0], None)
-            elif got and old[got[0]] == signal.SIG_DFL:
-                os.kill(os.getpid(), got[0])
-
-    return held()
-
-
 def _client(args, into: dict) -> None:
     """The Dask client (and the local cluster) in ``into["client"]`` (``into["cluster"]``),
     each stored as soon as it exists, so that a failure in between still closes the other."""
@@ -225,7 +184,9 @@ def run(args: argparse.Namespace) -> int:
         if estimate.seconds > LONG_S and not args.scheduler:
             print(f"lcc-synth sweep: estimate: {estimate.describe()}", file=sys.stderr,
                   flush=True)  # fmt: skip
-        with _signals_held():
+        from lcc_synth.interrupts import held_signals
+
+        with held_signals():
             _client(args, handles)
         if args.scheduler and estimate.seconds > LONG_S:
             threads = sum(handles["client"].nthreads().values()) or 1

@@ -333,9 +333,7 @@ def run_chunk(
 def _task(*args: Any) -> dict[str, Any]:
     """:func:`run_chunk` as a Dask task: a :class:`ConfigError` (bad input, the same on every
     try) comes back as a value, ``{"config_error": (field, message, source)}``, so that Dask
-    does not retry it (its retries are for failures that may pass) and the client raises it
-    (a ``ConfigError`` does not survive pickling as an exception: its arguments differ from
-    its message)."""
+    does not retry it (its retries are for failures that may pass) and the client raises it."""
     try:
         return run_chunk(*args)
     except ConfigError as err:
