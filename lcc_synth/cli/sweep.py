@@ -240,10 +240,13 @@ def run(args: argparse.Namespace) -> int:
     )
     if failure is None:
         print(f"results: {out_dir}", file=log)
+    failed = _failure_lines(result.summary)
+    for line in failed:
+        print(f"lcc-synth sweep: {line}", file=sys.stderr)
     sys.stdout.flush()
     if rrd is not None:
         try:
-            _record(rrd, spec, result)
+            _record(rrd, spec, result, doc.get("provenance"), "\n".join(failed))
         except FileError as err:
             if failure is None:
                 raise
@@ -255,7 +258,14 @@ def run(args: argparse.Namespace) -> int:
                   f"{spec.count} scenarios", file=sys.stderr)  # fmt: skip
         raise failure
     os.close(lock)
-    return 0
+    return 1 if failed else 0
+
+
+def _failure_lines(summary) -> list[str]:
+    """``failed: NAME: ...`` for every controller whose solver failed (fell back) on some step
+    of some scenario: what makes the sweep exit 1."""
+    return [f"failed: {name}: its solver failed on {e['fallbacks']} steps (MPC fallbacks) "
+            "over the scenarios" for name, e in summary.items() if e.get("fallbacks")]
 
 
 def _rate(x) -> str:
@@ -299,10 +309,11 @@ def _keep(writer, done, args, out_dir, start: int, status: str) -> None:
         print("lcc-synth sweep: no scenario had finished: nothing to keep", file=sys.stderr)
 
 
-def _record(rrd, spec, result) -> None:
+def _record(rrd, spec, result, provenance=None, failed: str = "") -> None:
     """The sweep's recording at ``rrd`` and, next to it (``<stem>-scenario<i>.rrd``), a
     simulation recording of its hardest scenario with every controller
-    (:mod:`lcc_synth.experiments.sweep_review`)."""
+    (:mod:`lcc_synth.experiments.sweep_review`); both carry the ``provenance`` and say
+    ``failed`` (the solver failures) in their status."""
     from contextlib import ExitStack
 
     from lcc_synth.experiments.sweep import SWEEP_SAMPLES
@@ -315,7 +326,8 @@ def _record(rrd, spec, result) -> None:
     what = (f"scenario {hard.index}: {hard.controller} "
             f"{'collided' if hard.collided else f'min spacing {hard.min_spacing:.3g} m'}")
     info = {**result.info, "hardest scenario": what, "its recording": str(second)}
-    record_sweep_file(rrd, spec.name, result.samples, SWEEP_SAMPLES, result.summary, info)
+    rrd = record_sweep_file(rrd, spec.name, result.samples, SWEEP_SAMPLES, result.summary, info,
+                            provenance=provenance, failed=failed)  # fmt: skip
     print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
     scenario, runs, ctrls = simulate_scenario(spec, result.tables, hard.index)
     view = argparse.Namespace(rrd=str(second), no_record=False, record_every="minmax")
@@ -323,8 +335,12 @@ def _record(rrd, spec, result) -> None:
                              scenario=scenario)  # fmt: skip
     with ExitStack() as stack:
         recorder = SimulationRecorder(view, stack)
+        recorder.provenance = provenance
         for name, res in runs.items():
             recorder(one, name, res)
         recorder.metrics({name: summary(res, spec.metrics) for name, res in runs.items()})
+        if failed:
+            recorder.status("partial", failed)
+    second = recorder.written or second
     print(f"hardest {what}; every controller on it: {second} (lcc-synth review {second})",
           file=sys.stderr)

@@ -543,8 +543,11 @@ def format_summary(summary: Mapping[str, Mapping[str, Any]]) -> str:
             "AEB steps (scen.)", "over ISO jerk (scen.)", "MPC fallbacks"]
     rows = []
     for name, e in summary.items():
+        steps = int(e.get("fallbacks") or 0)  # the solver failed (fell back) on these steps
+        label = (f"{name} (QP failed on {steps} step{'s' if steps != 1 else ''})" if steps
+                 else name)  # fmt: skip
         rows.append(
-            [name, *(cell(e[k], fmt.get(k, ".3g")) for k in SWEEP_METRICS),
+            [label, *(cell(e[k], fmt.get(k, ".3g")) for k in SWEEP_METRICS),
              f"{e['collisions']} ({e['collision_scenarios']})",
              f"{e['aeb_activations']} ({e['aeb_scenarios']})", str(e["jerk_scenarios"]),
              str(e["fallbacks"])]

@@ -43,6 +43,7 @@ from lcc_synth.recording.core import (
     open_recording,
     record_provenance,
     record_text,
+    set_status,
     written_path,
 )
 from lcc_synth.recording.layout import sweep_blueprint
@@ -115,11 +116,13 @@ def record_sweep_file(
     info: Mapping[str, Any] | None = None,
     overwrite: bool = False,
     provenance: Mapping[str, Any] | None = None,
+    failed: str = "",
 ) -> Path:
     """Write a sweep recording to ``path`` (see :func:`record_sweep`) with its default layout
     (:func:`~lcc_synth.recording.layout.sweep_blueprint`) and ``provenance`` at
     ``/provenance``; returns the file written (:func:`~.core.open_recording`: ``overwrite`` an
-    existing one, else the next free name)."""
+    existing one, else the next free name). ``failed`` (the controllers whose solver failed)
+    makes its status **partial**."""
     path = Path(path)
     _scenario_count(samples, labels)  # bad samples: an error before the file is created
     blueprint = sweep_blueprint(name, list(labels.items()))
@@ -127,6 +130,8 @@ def record_sweep_file(
         if provenance is not None:
             record_provenance(rec, provenance)
         record_sweep(rec, name, samples, labels, summary, info)
+        if failed:
+            set_status(rec, "partial", failed)
     return written_path(rec) or path
 
 
