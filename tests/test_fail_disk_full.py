@@ -51,8 +51,8 @@ def _stop_fill_continue(proc, disk, appeared) -> None:
 def test_recording_on_a_disk_that_fills_is_one_line_not_a_hang(small_disk, tmp_path):
     rrd = small_disk / "x.rrd"
     proc = start_cli(
-        ["simulate", PROBLEMS / "paper_table2.toml", "--seeds", "30", "--rrd", rrd,
-         "--record-every", "1"],
+        ["simulate", PROBLEMS / "paper_table2.toml", "--seeds", "30", "--record-seeds", "0,1",
+         "--rrd", rrd],
         cwd=tmp_path,
     )  # fmt: skip
     _stop_fill_continue(proc, small_disk, lambda: any(small_disk.glob(".x.part-*.rrd")))
@@ -84,8 +84,16 @@ def test_run_results_on_a_disk_that_fills_print_the_table_first(small_disk, tmp_
 
 
 def test_space_is_checked_before_the_work(small_disk, tmp_path):
-    """Too little free space for the results is refused before anything runs (exit 2, the
-    flag named), not discovered after the work."""
+    """Too little free space is refused before anything runs (exit 2, the flag named), not
+    discovered after the work: the results of ``run`` on a full disk, and an exact recording
+    of 30 draws (about 0.3 GB estimated) on the 64 MB disk."""
+    rrd = small_disk / "big.rrd"
+    proc = start_cli(["simulate", PROBLEMS / "paper_table2.toml", "--seeds", "30",
+                      "--record-every", "1", "--rrd", rrd], cwd=tmp_path)  # fmt: skip
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 2, err
+    assert one_line_error(err) and "--rrd" in err and "free" in err, err
+    assert out == "" and not list(small_disk.iterdir())
     fill(small_disk)
     proc = start_cli(["run", "--out", small_disk / "results", "--no-record"], cwd=tmp_path)
     out, err = proc.communicate(timeout=120)
