@@ -104,30 +104,20 @@ MAX_FILE_BYTES = 1 << 20
 
 
 def load_problem(path: str | Path) -> Problem:
-    """Read a TOML problem file; a missing, oversized (above :data:`MAX_FILE_BYTES`) or binary
-    file, a TOML syntax error or an unknown top-level key is a ConfigError."""
+    """Read a TOML problem file; a missing, unreadable, oversized (above
+    :data:`MAX_FILE_BYTES`) or binary file (:func:`lcc_synth.schema.readers.read_file`), a TOML
+    syntax error or an unknown top-level key is a ConfigError naming the file."""
     p = Path(path)
-    if not p.is_file():
-        raise ConfigError("path", "no such problem file", str(p))
-    size = p.stat().st_size
-    if size > MAX_FILE_BYTES:
-        raise ConfigError(
-            "path",
-            f"is {size / 2**20:.1f} MiB; a problem file is a small text file "
-            f"(at most {MAX_FILE_BYTES // 2**20} MiB)",
-            str(p),
-        )
+    text = _readers.read_file(p, "path", str(p), "problem file", MAX_FILE_BYTES,
+                              content_field="toml")
     try:
-        with p.open("rb") as fh:
-            data = tomllib.loads(fh.read().decode("utf-8"))
-    except UnicodeDecodeError as err:
-        raise ConfigError(
-            "toml", f"not a UTF-8 text file (byte {err.start}): a binary file?", str(p)
-        ) from None
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError("toml", f"not valid TOML: {err}", str(p)) from None
     except RecursionError:
         raise ConfigError("toml", "nested too deeply", str(p)) from None
+    except ValueError as err:  # e.g. an integer of too many digits
+        raise ConfigError("toml", f"not valid TOML: {err}", str(p)) from None
     try:
         check_top_level(data)
     except ConfigError as err:

@@ -32,6 +32,7 @@ import numpy as np
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.records import Record
 from lcc_synth.schema import declared
+from lcc_synth.schema.readers import read_file
 
 __all__ = [
     "Sine",
@@ -266,13 +267,16 @@ def overrides(
 # --------------------------------------------------------------------------------------------
 
 
-def read_profile_csv(path: Path, field: str) -> tuple[list[float], list[float]]:
-    """Two columns ``t, value`` (comma separated, optional header line)."""
-    if not path.is_file():
-        raise ConfigError(field, f"no such CSV file: {path}")
+def read_profile_csv(
+    path: Path, field: str, source: str | None = None
+) -> tuple[list[float], list[float]]:
+    """Two columns ``t, value`` (comma separated, optional header line), read by
+    :func:`lcc_synth.schema.readers.read_file` (a missing, unreadable or binary file is a
+    ConfigError naming ``field`` and the path)."""
+    text = read_file(path, field, source, "CSV file")
     times: list[float] = []
     vals: list[float] = []
-    for lineno, line in enumerate(path.read_text().splitlines(), start=1):
+    for lineno, line in enumerate(text.splitlines(), start=1):
         line = line.strip()
         if not line or line.startswith("#"):
             continue
