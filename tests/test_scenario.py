@@ -179,7 +179,9 @@ def test_scenario_validation_in_python():
 
 
 def test_gains_file_controller(tmp_path):
-    gains = {"kind": "lcc", "m": 1, "n": 2, "semantics": "added",
+    names = ["s_-1", "v_-1", "s_0", "v_0", "s_1", "v_1", "s_2", "v_2"]
+    gains = {"kind": "lcc", "m": 1, "n": 2, "semantics": "added", "state_names": names,
+             "K": [0.2, -0.3, 0, 0, 0, 0, 0, 0.1],  # the gains file's K (issue 28: required)
              "gains": {"s_-1": 0.2, "v_-1": -0.3, "v_2": 0.1}, "h2_true": 1.0}  # fmt: skip
     (tmp_path / "g.json").write_text(json.dumps(gains))
     path = write(tmp_path, '[controllers.h2]\ntype = "gains_file"\nfile = "g.json"\n')

@@ -13,12 +13,13 @@ input (``[controllers.NAME.gains.u_3]``, ``s_3 = ...``: states ``s_i, v_i`` of p
 form of :meth:`~lcc_synth.models.platoon.PlatoonGains.as_table`), and a ``gains_file`` is the
 platoon form of the synthesis: a JSON object with ``kind``, ``size``, ``cavs``, ``ring``,
 ``semantics``, ``state_names``, ``K`` (one row per CAV), ``gains`` (``{"u_20": {"s_20": ..}}``)
-and ``h2_true``; ``gains`` is read when present, else ``K`` on ``state_names``.
+and ``h2_true``. Both forms are read by :mod:`lcc_synth.synthesis.gains_file`
+(:func:`read_gains_file`): ``K`` and ``gains`` are both required and must agree entry for entry,
+and a platoon file's ``gains`` may not be empty.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from lcc_synth.controllers.base import Controller
@@ -32,12 +33,13 @@ from lcc_synth.controllers.static import (
 from lcc_synth.controllers.switch import SwitchedOn
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains
-from lcc_synth.models.linear import KINDS, model_from_hdv
+from lcc_synth.models.linear import model_from_hdv
 from lcc_synth.models.platoon import PLATOON_KINDS, PlatoonGains
 from lcc_synth.problem import warn_large_gains
 from lcc_synth.schema import declared
 
-__all__ = ["CONTROLLER_TYPES", "STATIC_RUN_KEYS", "build_controller"]
+__all__ = ["CONTROLLER_TYPES", "STATIC_RUN_KEYS", "build_controller", "check_gains_files",
+           "gains_file_path", "read_fallback_file", "read_gains_at", "read_gains_file"]
 
 CONTROLLER_TYPES = ("hdv", "static", "gains_file", "mpc", "deep_lcc", *BASELINE_TYPES)
 
@@ -112,34 +114,11 @@ def _build(name: str, table, system, source: str | None, field: str) -> Controll
             raw = T.get(table, "gains", field)
             where = field
         else:
-            rel = T.get(table, "file", field)
-            path = Path(rel)
-            if not path.is_absolute() and source:
-                path = Path(source).parent / path
-            if not path.is_file():
-                raise ConfigError(f"{field}.file", f"no such gains file: {path}")
-            try:
-                data = json.loads(path.read_text())
-            except json.JSONDecodeError as err:
-                raise ConfigError(f"{field}.file", f"{path} is not valid JSON: {err}") from None
-            for key in ("kind", "m", "n", "semantics", "gains"):
-                if key not in data:
-                    raise ConfigError(f"{field}.file", f"{path} lacks the key {key!r}")
-            kind = data["kind"]
-            if kind not in KINDS:
-                raise ConfigError(f"{field}.file", f"{path}: kind must be one of {KINDS}")
-            if (data["m"], data["n"]) != (system.m, system.n):
-                raise ConfigError(
-                    f"{field}.file",
-                    f"{path} holds gains for m={data['m']}, n={data['n']}; the problem has "
-                    f"m={system.m}, n={system.n}",
-                )
-            semantics = data["semantics"]
-            raw = data["gains"]
-            if not isinstance(raw, dict):
-                raise ConfigError(f"{field}.file", f"{path}: gains must be an object")
+            gains, doc = read_gains_file(table, field, system, source)
+            kind, semantics, raw = doc["kind"], gains.semantics, gains.gains
             where = f"{field}.file"
-        warn_large_gains(raw, f"{where}.gains")
+        if ctype == "static":
+            warn_large_gains(raw, f"{where}.gains")  # a gains file's: by read_gains
         sample_time = _sample_time(table, field, ctype)
         equilibrium = T.get(table, "equilibrium", field)
         tau = None
@@ -166,49 +145,70 @@ def _build(name: str, table, system, source: str | None, field: str) -> Controll
     except ConfigError as err:
         raise err.with_source(source) if source and not err.source else err from None
 
-def _gains_json(field: str, table, source: str | None, T) -> tuple[dict, Path]:
-    """The JSON object of a ``gains_file`` table and its path."""
-    rel = T.get(table, "file", field)
+
+def gains_file_path(rel: str, source: str | None) -> Path:
+    """The path of a gains file named in a problem file: relative to its folder."""
     path = Path(rel)
-    if not path.is_absolute() and source:
-        path = Path(source).parent / path
-    if not path.is_file():
-        raise ConfigError(f"{field}.file", f"no such gains file: {path}")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as err:
-        raise ConfigError(f"{field}.file", f"{path} is not valid JSON: {err}") from None
-    if not isinstance(data, dict):
-        raise ConfigError(f"{field}.file", f"{path} must hold a JSON object")
-    return data, path
+    return path if path.is_absolute() or not source else Path(source).parent / path
 
 
-def _platoon_file_gains(data: dict, path: Path, model, system, where: str) -> PlatoonGains:
-    """The :class:`PlatoonGains` of a platoon gains file, checked against ``system``."""
+def read_gains_at(path: Path, where: str, system, source: str | None = None):
+    """The gains file ``path`` (named by the field ``where``) for ``system``, read and
+    validated by :func:`lcc_synth.synthesis.gains_file.read_gains` (single CAV: ``(StaticGains,
+    document)``, for the problem's ``m`` and ``n``) or
+    :func:`~lcc_synth.synthesis.gains_file.read_platoon_gains` (``kind = "platoon" | "ring"``:
+    ``(PlatoonGains, document)``, for the problem's layout); every error names ``where``, the
+    gains file and the key."""
+    from lcc_synth.synthesis.gains_file import read_gains, read_platoon_gains
+
+    if system.platoon is None:
+        return read_gains(path, where, source, system)
+    gains, doc = read_platoon_gains(path, system.linear_model(warn=False), where, source)
     P = system.platoon
-    for key in ("kind", "size", "cavs", "semantics"):
-        if key not in data:
-            raise ConfigError(where, f"{path} lacks the key {key!r}")
-    got = (data["kind"], data["size"], list(data["cavs"]), bool(data.get("ring", P.ring)))
+    got = (doc["kind"], doc["size"], list(doc["cavs"]), doc["ring"])
     want = (system.kind, P.size, list(P.cavs), bool(P.ring))
     if got != want:
         raise ConfigError(where, f"{path} holds gains for kind={got[0]!r}, size={got[1]}, "
                           f"cavs={got[2]}, ring={got[3]}; the problem has kind={want[0]!r}, "
-                          f"size={want[1]}, cavs={want[2]}, ring={want[3]}")  # fmt: skip
-    names = data.get("state_names")
-    if names is not None and tuple(names) != model.state_names:
-        raise ConfigError(where, f"{path}: state_names {names} are not the model's "
-                          f"{list(model.state_names)}")  # fmt: skip
-    if isinstance(data.get("gains"), dict):
-        warn_large_gains({f"{u}.{k}": g for u, row in data["gains"].items()
-                          if isinstance(row, dict) for k, g in row.items()}, f"{where}.gains")
-        return PlatoonGains.from_table(data["gains"], model, data["semantics"], f"{where}.gains")
-    if "K" not in data:
-        raise ConfigError(where, f"{path} lacks the key 'gains' (or 'K')")
-    try:
-        return PlatoonGains(data["K"], model.cavs, data["semantics"])
-    except (ConfigError, ValueError, TypeError) as err:
-        raise ConfigError(f"{where}.K", f"{path}: {getattr(err, 'message', err)}") from None
+                          f"size={want[1]}, cavs={want[2]}, ring={want[3]}", source)  # fmt: skip
+    return gains, doc
+
+
+def read_gains_file(table, field: str, system, source: str | None = None):
+    """The gains of a ``type = "gains_file"`` table (:func:`read_gains_at` of its ``file``)."""
+    T = declared("controllers.NAME:gains_file")
+    return read_gains_at(gains_file_path(T.get(table, "file", field), source), f"{field}.file",
+                         system, source)  # fmt: skip
+
+
+def read_fallback_file(table, field: str, system, source: str | None = None):
+    """The gains of an MPC table's ``fallback_gains_file`` (:func:`read_gains_at`; for the
+    MPC's own ``kind``): ``(gains, path)``, or ``None`` without one."""
+    value = declared("controllers.NAME:mpc").raw(table, "fallback_gains_file")
+    if value is None:
+        return None
+    where = f"{field}.fallback_gains_file"
+    if not isinstance(value, str) or not value:
+        raise ConfigError(where, f"must be the path of a gains file, got {value!r}", source)
+    path = gains_file_path(value, source)
+    gains, doc = read_gains_at(path, where, system, source)
+    if doc["kind"] != system.kind:
+        raise ConfigError(where, f"{path} holds gains for kind={doc['kind']!r}; the MPC "
+                          f"controls kind={system.kind!r}", source)  # fmt: skip
+    return gains, path
+
+
+def check_gains_files(tables, system, source: str | None = None) -> None:
+    """Read every gains file the controller ``tables`` name (``gains_file``, an MPC's
+    ``fallback_gains_file``) for ``system``: ``run`` and ``sweep`` call it when they load the
+    problem, before any design or simulation (the controllers read them again when built)."""
+    for name, table in tables.items():
+        if not isinstance(table, dict):
+            continue
+        if table.get("type") == "gains_file" and "file" in table:
+            read_gains_file(table, f"controllers.{name}", system, source)
+        elif table.get("type") == "mpc":
+            read_fallback_file(table, f"controllers.{name}", system, source)
 
 
 def _platoon_controller(name: str, table, system, ctype: str, field: str, source: str | None):
@@ -231,12 +231,16 @@ def _platoon_controller(name: str, table, system, ctype: str, field: str, source
             raise ConfigError(f"{field}.gains", f"kind = {kind!r} takes one table per CAV "
                               f"input: [{field}.gains.u_i] with s_j / v_j = gain, for "
                               f"u_i in {list(model.input_names)}")  # fmt: skip
+        if not any(raw.values()):
+            raise ConfigError(f"{field}.gains", f"is empty: give each CAV's gains "
+                              f"[{field}.gains.u_i], u_i in {list(model.input_names)} (an empty "
+                              "table is not a zero gain; drive the CAVs with type = \"hdv\" "
+                              "for their HDV law)")  # fmt: skip
         warn_large_gains({f"{u}.{k}": g for u, row in raw.items() for k, g in row.items()},
                          f"{field}.gains")  # fmt: skip
         gains = PlatoonGains.from_table(raw, model, T.get(table, "semantics", field),
                                         f"{field}.gains")  # fmt: skip
     else:
-        data, path = _gains_json(field, table, source, T)
-        gains = _platoon_file_gains(data, path, model, system, f"{field}.file")
+        gains, _ = read_gains_file(table, field, system, source)
     return PlatoonGainController(name, gains, model, _sample_time(table, field, ctype),
                                  T.get(table, "measurement_filter", field))  # fmt: skip

@@ -428,31 +428,21 @@ def local_cluster(n_workers: int = 2, local_directory: str | None = None):
 
 def _inline_gains_file(name: str, table: Mapping[str, Any], spec: SweepSpec) -> dict[str, Any]:
     """A ``gains_file`` controller as a ``static`` table holding the file's gains, read here in
-    the client: workers of a remote cluster need not see the file."""
+    the client (:func:`lcc_synth.controllers.registry.read_gains_file`): workers of a remote
+    cluster need not see the file."""
     if table.get("type") != "gains_file":
         return dict(table)
     from lcc_synth.controllers.registry import STATIC_RUN_KEYS as passed
-    from lcc_synth.synthesis.gains_file import read_gains
+    from lcc_synth.controllers.registry import read_gains_file
 
     field_name = f"controllers.{name}"
-    gf = declared("controllers.NAME:gains_file")
-    gf.check(table, field_name)
-    path = Path(gf.get(table, "file", field_name))
-    if not path.is_absolute() and spec.source:
-        path = Path(spec.source).parent / path
-    try:
-        gains, doc = read_gains(path)
-    except ConfigError as err:
-        raise ConfigError(f"{field_name}.file ({err.field})", err.message, spec.source) from None
-    if (doc["m"], doc["n"]) != (spec.system.m, spec.system.n):
-        raise ConfigError(
-            f"{field_name}.file",
-            f"{path} holds gains for m={doc['m']}, n={doc['n']}; the problem has "
-            f"m={spec.system.m}, n={spec.system.n}",
-            spec.source,
-        )
-    out = {"type": "static", "kind": doc["kind"], "semantics": gains.semantics,
-           "gains": dict(gains.gains)}
+    declared("controllers.NAME:gains_file").check(table, field_name)
+    gains, doc = read_gains_file(table, field_name, spec.system, spec.source)
+    if spec.system.platoon is not None:  # the platoon form {u_i: {state: gain}}
+        rows = gains.as_table(spec.system.linear_model(warn=False))
+    else:
+        rows = dict(gains.gains)
+    out = {"type": "static", "kind": doc["kind"], "semantics": gains.semantics, "gains": rows}
     for key in passed:
         if key in table:
             out[key] = table[key]

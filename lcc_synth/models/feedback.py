@@ -19,7 +19,6 @@ needs the head velocity (no HDV ahead). Sign convention: ``u = +K x`` (no minus 
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -28,6 +27,7 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.linear import LCCModel
+from lcc_synth.models.platoon import check_gain
 from lcc_synth.models.records import Record
 
 __all__ = ["SEMANTICS", "StaticGains", "hdv_law", "cav_feedback", "input_feedback", "closed_loop"]
@@ -62,11 +62,7 @@ class StaticGains(Record):
                 raise ConfigError(
                     f"gains.{name}", "state names look like s_-2, v_-2, s_0, v_1 or -p_0"
                 )
-            if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
-                raise ConfigError(f"gains.{name}", f"must be a number, got {value!r}")
-            if not math.isfinite(float(value)):
-                raise ConfigError(f"gains.{name}", f"must be finite, got {value!r}")
-            clean[str(name)] = float(value)
+            clean[str(name)] = check_gain(f"gains.{name}", value)
         object.__setattr__(self, "gains", clean)
 
     @classmethod

@@ -7,11 +7,19 @@ from __future__ import annotations
 
 from lcc_synth.schema.spec import REQUIRED, Derived, Key, Table
 
-__all__ = ["TABLES"]
+__all__ = ["GAIN_MAX", "TABLES"]
 
 _SYN = ("synthesize",)  # and the h2 controllers of run and sweep
 _SEM = ("added", "replace")
 _OMEGA = "rad/s"
+
+#: Largest magnitude of a static feedback gain (per unit: 1/s² on a spacing, 1/s on a velocity).
+#: Above 100 a gain is valid but implausible (a warning); beyond this it is an error: the
+#: rounding of a state of order 10 (float64, eps ≈ 2.2e-16) alone would move the command by
+#: more than 2e-3 m/s² (by the acceleration limits themselves near 1e15: the command would be
+#: rounding noise), and the checks that square the closed-loop eigenvalues overflow near 1e154
+#: (a gain of -1e300 ended in an OverflowError).
+GAIN_MAX = 1.0e12
 
 SYNTHESIS = Table(
     "synthesis",
@@ -210,8 +218,8 @@ GAIN_TABLE = Table(
     "[maps.NAME.gains]); the names are those of the model's state.",
     ("simulate", "sweep", "run", "synthesize", "analyze", "regions"),
     any_key=Key("STATE", "number", "Gain on s_i (spacing error), v_i (velocity error) or "
-                "-p_0 (FD-LCC position); above 100 per unit is a warning.", 0.0,
-                unit="1/s² or 1/s"),
+                "-p_0 (FD-LCC position); above 100 per unit is a warning (also in a gains "
+                "file).", 0.0, lo=-GAIN_MAX, hi=GAIN_MAX, unit="1/s² or 1/s"),
 )
 
 REGIONS = Table(
