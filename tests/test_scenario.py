@@ -173,9 +173,9 @@ def test_scenario_validation_in_python():
         Scenario(m=0, n=1, batch=0)
     with pytest.raises(ConfigError, match="v_star"):
         Scenario(m=0, n=1, v_star=40.0)
-    bad = Scenario(m=0, n=2, heterogeneity={"s_go": 40.0})  # s_go can fall below s_st
-    with pytest.raises(ConfigError, match="heterogeneity"):
-        bad.draw()
+    # s_go can fall below s_st: refused as a bound, before any draw (issue 28)
+    with pytest.raises(ConfigError, match="heterogeneity.s_go: must be < 30"):
+        Scenario(m=0, n=2, heterogeneity={"s_go": 40.0})
 
 
 def test_gains_file_controller(tmp_path):

@@ -183,6 +183,11 @@ def load_suite(
 ) -> Suite:
     """Read a suite problem file, keeping only the named scenarios / controllers.
 
+    Every scenario of the file is read and checked, selected or not (a value that only a
+    scenario left out by ``--scenarios`` would use is still an error), and so are the
+    controllers' ``start`` times in every scenario they drive and the gains files they name,
+    all before any design or simulation.
+
     Raises
     ------
     ConfigError
@@ -214,8 +219,8 @@ def load_suite(
         if not scen_t:
             raise ConfigError("scenarios", "needs at least one [scenarios.NAME] table")
         chosen = select_names(list(scen_t), scenarios, "--scenarios")
-        suite_scenarios: dict[str, SuiteScenario] = {}
-        for sname in chosen:
+        every: dict[str, SuiteScenario] = {}  # selected or not: every scenario is checked
+        for sname in scen_t:
             f = f"scenarios.{sname}"
             table = scen_t[sname]
             if not isinstance(table, dict):
@@ -238,7 +243,8 @@ def load_suite(
             if mcfg.baseline is not None:
                 raise ConfigError(f"{f}.metrics.baseline", "is not used by a suite; remove it")
             sc = replace(sc, name=sname)
-            suite_scenarios[sname] = SuiteScenario(sname, lname, sc, mcfg, title)
+            every[sname] = SuiteScenario(sname, lname, sc, mcfg, title)
+        suite_scenarios = {sname: every[sname] for sname in chosen}
 
         ctrl_t = top.get(data, "controllers", "")
         C = declared("controllers.NAME:suite")
@@ -275,6 +281,7 @@ def load_suite(
                 if "type" in t and t["type"] != table["type"]:
                     raise ConfigError(f"{f}.layouts.{lname}.type", "cannot change the type")
             ctrls[cname] = dict(table)
+        _check_controllers(ctrls, names, extra, every, layouts, src)
         for sname, ss in suite_scenarios.items():  # only_layouts / only_scenarios leave none
             if not any(applies(ctrls[c], ss.layout, sname) for c in names):
                 raise ConfigError("--controllers" if controllers else f"scenarios.{sname}",
@@ -292,6 +299,28 @@ def load_suite(
         )
     except ConfigError as err:
         raise err.with_source(src) if not err.source else err from None
+
+
+def _check_controllers(
+    ctrls: Mapping[str, Mapping[str, Any]], names: Sequence[str], extra: Sequence[str],
+    scenarios: Mapping[str, SuiteScenario], layouts: Mapping[str, System], source: str,
+) -> None:  # fmt: skip
+    """What can be checked of the controllers before any design: in every scenario of the file
+    (selected or not) each controller that drives there switches on before its end
+    (:func:`lcc_synth.experiments.spec.check_starts`), and on every layout of a scenario the
+    gains files they (and the controllers ``extra`` their MPCs fall back to) name are read
+    (:func:`lcc_synth.controllers.registry.check_gains_files`)."""
+    from lcc_synth.controllers.registry import check_gains_files
+    from lcc_synth.experiments.spec import check_starts
+
+    for sname, ss in scenarios.items():
+        tables = {c: controller_table(ctrls[c], ss.layout) for c in names
+                  if applies(ctrls[c], ss.layout, sname)}  # fmt: skip
+        check_starts(tables, ss.scenario, f" in scenario {sname!r}")
+    for lname in dict.fromkeys(ss.layout for ss in scenarios.values()):
+        tables = {c: controller_table(ctrls[c], lname) for c in [*names, *extra]
+                  if applies(ctrls[c], lname)}  # fmt: skip
+        check_gains_files(tables, layouts[lname], source)
 
 
 # --------------------------------------------------------------------------------------------

@@ -51,7 +51,7 @@ from lcc_synth.metrics import WAVE_METRICS, MetricsConfig
 from lcc_synth.models.records import Record, system_tables
 from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
 from lcc_synth.schema import declared
-from lcc_synth.simulation.scenario import Scenario, split_ranges
+from lcc_synth.simulation.scenario import Scenario, check_ranges, split_ranges
 from lcc_synth.simulation.scenario_file import scenario_from
 
 __all__ = [
@@ -129,12 +129,20 @@ def load_sweep(
 ) -> SweepSpec:  # fmt: skip
     """Read a sweep problem file; ``count``, ``batch_size``, ``seed`` override the file.
 
+    Everything is checked here, in the client, before any design or simulation: besides the
+    scenario's own values, every value a random draw can produce (a ``[lo, hi]`` range at both
+    ends, :func:`~lcc_synth.simulation.scenario.check_ranges`; the heterogeneity half-widths
+    as bounds, :class:`~lcc_synth.simulation.scenario.Scenario`), the controllers' ``start``
+    times and the gains files they name (read here, the workers get their gains as data).
+
     Raises
     ------
     ConfigError
         A bad table or value, an unknown controller name, counts out of range.
     """
+    from lcc_synth.controllers.registry import check_gains_files
     from lcc_synth.experiments.comparison import fallback_names, select_names
+    from lcc_synth.experiments.spec import check_starts
     from lcc_synth.metrics import metrics_from
 
     problem = path if isinstance(path, Problem) else load_problem(path)
@@ -146,6 +154,7 @@ def load_sweep(
         nv = system.columns  # [lo, hi] settings drawn per scenario:
         sc_table, ranges = split_ranges(declared("").get(data, "scenario", ""), nv)
         scenario = scenario_from({**data, "scenario": sc_table}, system, problem.path.parent)
+        check_ranges(scenario, ranges)  # the upper bounds too (the lower: just now)
         metrics = metrics_from(data, system, scenario=scenario)
         SW = declared("sweep")
         sw = declared("").get(data, "sweep", "")
@@ -175,6 +184,8 @@ def load_sweep(
             if "layouts" in t:
                 raise ConfigError(f"controllers.{name}.layouts", "a sweep has one layout")
             ctrls[name] = dict(t)
+        check_starts({k: ctrls[k] for k in names}, scenario)
+        check_gains_files(ctrls, system, src)  # read in the client, before any design
         return SweepSpec(
             name=problem.name,
             system=system,
