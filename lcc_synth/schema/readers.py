@@ -275,8 +275,9 @@ def read_file(
     if len(data) > max_bytes:
         size = p.stat().st_size if p.exists() else len(data)
         limit = f"{max_bytes / 2**20:g} MiB" if max_bytes >= 2**20 else f"{max_bytes} bytes"
+        kind = "file" if binary else "text file"
         raise _file_error(p, field, source, f"is {size / 2**20:.1f} MiB; a {what} is a small "
-                          f"file (at most {limit})")  # fmt: skip
+                          f"{kind} (at most {limit})")  # fmt: skip
     if binary:
         return data
     inside = content_field or field
