@@ -129,11 +129,17 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
     ``info[name] = (controller_info, controller_stats, wall_time_s)``.
 
     ``collided`` marks a controller with a collision in some draw (its AAVE and fuel there are
-    NaN: the means are over the other draws); those controllers come last."""
+    NaN: the means are over the other draws); those controllers come last.
+
+    A relative AAVE reduction needs a baseline AAVE above round-off: when the baseline's AAVE
+    of a draw is at round-off level (:func:`lcc_synth.metrics.aave_roundoff`, ``eps * max|v| *
+    steps`` of the run: nothing happened, e.g. the perturbation came after the window), the
+    reduction is not meaningful: ``aave_pct`` and ``aave_pct_std`` are ``None`` and
+    ``aave_pct_note`` says why (the table prints ``n/a``)."""
     import numpy as np
 
     from lcc_synth.experiments.tables import collided
-    from lcc_synth.metrics import PHASE_PREFIX, aggregate
+    from lcc_synth.metrics import PHASE_PREFIX, aave_roundoff, aggregate
 
     cfg = spec.metrics
     out: dict[str, Any] = {}
@@ -143,7 +149,17 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
         entry["collided"] = entry["scenarios_with_collision"] > 0
         out[name] = entry
     if cfg.baseline is not None:
-        a0, f0 = per[cfg.baseline]["aave"], per[cfg.baseline]["fuel_ml"]
+        base = per[cfg.baseline]
+        a0, f0 = base["aave"], base["fuel_ml"]
+        floor = aave_roundoff(spec.scenario.v_star, base["max_abs_velocity_error"],
+                              spec.scenario.steps)  # fmt: skip
+        at_roundoff = np.isfinite(a0) & (np.abs(a0) <= floor)
+        note = None
+        if at_roundoff.any():
+            k = int(np.flatnonzero(at_roundoff)[0])
+            note = (f"not meaningful: the baseline {cfg.baseline}'s AAVE {a0[k]:.3g} m/s is at "
+                    f"round-off level (<= eps x max|v| x steps = {floor[k]:.3g} m/s: nothing "
+                    "happened to reduce)")  # fmt: skip
         for name, arrays in per.items():
             if name == cfg.baseline:
                 continue
@@ -151,7 +167,7 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
             rf = _pct(f0, arrays["fuel_ml"])
             ok = np.isfinite(ra) & np.isfinite(rf)  # scenarios without a collision in either
             nan = float("nan")
-            out[name]["reduction_vs_baseline"] = {
+            red = out[name]["reduction_vs_baseline"] = {
                 "baseline": cfg.baseline,
                 "aave_pct": float(np.mean(ra[ok])) if ok.any() else nan,
                 "aave_pct_std": float(np.std(ra[ok])) if ok.any() else nan,
@@ -159,6 +175,8 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
                 "fuel_pct_std": float(np.std(rf[ok])) if ok.any() else nan,
                 "scenarios": int(ok.sum()),
             }
+            if note is not None:
+                red.update(aave_pct=None, aave_pct_std=None, aave_pct_note=note)
             if cfg.phases:  # [metrics] phases: each phase's fuel reduction (mean over draws)
                 out[name]["reduction_vs_baseline"]["fuel_phases_pct"] = {
                     p: _mean_finite(_pct(per[cfg.baseline][k], arrays[k]))
@@ -233,7 +251,8 @@ def print_table(spec, rep: dict[str, Any], file=None, collisions=None) -> None:
             r = e.get("reduction_vs_baseline")
             if r:
                 row += [
-                    _fmt(r["aave_pct"], r["aave_pct_std"], b, 2),
+                    "n/a" if r["aave_pct"] is None else _fmt(r["aave_pct"], r["aave_pct_std"],
+                                                             b, 2),
                     _fmt(r["fuel_pct"], r["fuel_pct_std"], b, 2),
                 ]
             else:
@@ -253,6 +272,9 @@ def print_table(spec, rep: dict[str, Any], file=None, collisions=None) -> None:
     print("  ".join(c.ljust(w) for c, w in zip(cols, widths, strict=True)), file=file)
     for r in rows:
         print("  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)), file=file)
+    notes = {(e.get("reduction_vs_baseline") or {}).get("aave_pct_note") for e in rep.values()}
+    for note in sorted(n for n in notes if n):
+        print(f"AAVE red. % n/a: {note}", file=file)
     for line in phase_lines(rep, cfg):
         print(line, file=file)
     for line in collision_lines(rep, collisions):
