@@ -14,12 +14,6 @@ Failed runs: a scenario with a collision has NaN AAVE and fuel (its run stopped 
 collision; whatever it burnt until then is no efficiency to compare), whenever the collision
 happened.
 
-Round-off: an AAVE below :func:`aave_roundoff` (``eps * max|v| * steps``, the most the rounding
-of the velocities can add up to over the run; e.g. 1e-11 m/s for 3000 steps at 15 m/s) cannot be
-told from a run in which nothing happened. A relative reduction versus such a baseline
-(``lcc-synth simulate`` with ``[metrics] baseline``) is not a percentage: it is reported as not
-meaningful (``None`` in JSON with the reason in ``aave_pct_note``, ``n/a`` in the table).
-
 Comfort: the CAV's jerk ``da/dt`` of its applied acceleration, as an RMS of the step-to-step
 finite differences (:func:`rms_jerk`) and as ISO 15622's "average over 1 s" (:func:`jerk_1s`):
 ``j1(t) = (a(t) - a(t - 1 s)) / 1 s``, judged against ISO 15622's limit at the CAV's speed
@@ -82,7 +76,6 @@ __all__ = [
     "min_spacing",
     "min_time_to_collision",
     "max_abs_velocity_error",
-    "aave_roundoff",
     "max_abs_command",
     "rms_jerk",
     "JERK_WINDOW",
@@ -313,38 +306,6 @@ def min_time_to_collision(result) -> np.ndarray:
 def max_abs_velocity_error(result) -> np.ndarray:
     """``max_t |v_i - v*|`` (m/s) of every vehicle, ``(batch, nv)``."""
     return np.nanmax(np.abs(result.velocity - result.v_star[:, None, None]), axis=1)
-
-
-def aave_roundoff(v_star, max_velocity_error, steps: int) -> np.ndarray:
-    """The round-off level of an AAVE (m/s), per scenario: ``eps * max|v| * steps``.
-
-    Each simulation step rounds every velocity to ``eps |v|`` (``eps`` = 2.2e-16, the float64
-    spacing relative to 1), and over ``steps`` steps those errors add up to at most
-    ``steps * eps * max|v|``: a run whose AAVE is below that cannot be told from one in which
-    nothing happened (e.g. a perturbation after the metric window, the string at its
-    equilibrium: AAVE of order 1e-12 m/s), and a relative change of such an AAVE is rounding
-    noise, not a reduction. The scale comes from the data: ``max|v| = |v*| +`` the run's
-    largest velocity error.
-
-    Parameters
-    ----------
-    v_star : float or array
-        Equilibrium velocity (m/s), per scenario or one for all.
-    max_velocity_error : array
-        :func:`max_abs_velocity_error` of the run, ``(batch, nv)``.
-    steps : int
-        Simulated steps.
-
-    Returns
-    -------
-    numpy.ndarray
-        ``(batch,)`` round-off level of each scenario's AAVE.
-    """
-    mv = np.atleast_2d(np.asarray(max_velocity_error, dtype=float))
-    with warnings.catch_warnings():  # an all-NaN row: a run stopped by a collision
-        warnings.simplefilter("ignore", RuntimeWarning)
-        v = np.abs(np.asarray(v_star, dtype=float)) + np.nanmax(mv, axis=1)
-    return np.finfo(float).eps * v * int(steps)
 
 
 def max_abs_command(result) -> np.ndarray:

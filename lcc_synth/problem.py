@@ -41,12 +41,12 @@ from pathlib import Path
 from typing import Any
 
 from lcc_synth.errors import ConfigError, ImplausibleValueWarning
+from lcc_synth.models.gains import GAIN_MAX
 from lcc_synth.models.hdv import IDM, OVM, model_from_dict
 from lcc_synth.models.linear import LCCModel, model_from_hdv
 from lcc_synth.models.platoon import PLATOON_KINDS, Platoon, PlatoonModel, platoon_model
 from lcc_synth.schema import TOP_LEVEL, check_top_level, declared
 from lcc_synth.schema import readers as _readers
-from lcc_synth.schema.design import GAIN_MAX
 from lcc_synth.schema.readers import (  # re-exported: the typed readers behind the schema
     check_range,
     get_bool,
@@ -153,8 +153,8 @@ def warn_implausible(name: str, message: str) -> None:
 
 def warn_large_gains(gains: Mapping[str, Any], field: str, limit: float = GAIN_LIMIT) -> None:
     """Warn for every gain of ``gains`` (a ``gains`` table) with magnitude above ``limit``
-    (one beyond :data:`~lcc_synth.schema.design.GAIN_MAX` is an error, raised where the gain is
-    read: :func:`lcc_synth.models.platoon.check_gain`)."""
+    (one beyond :data:`~lcc_synth.models.gains.GAIN_MAX` is an error, raised where the gain is
+    read: :func:`lcc_synth.models.gains.valid_gain`)."""
     for key, value in gains.items():
         if isinstance(value, int | float) and not isinstance(value, bool):
             if math.isfinite(value) and limit < abs(value) <= GAIN_MAX:

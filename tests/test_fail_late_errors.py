@@ -4,7 +4,7 @@ before any work, never on the Dask workers.
 The heterogeneity half-widths are checked as bounds (every value ``nominal ± w`` a draw can
 produce must be valid as a fixed ``[hdv]`` value: :class:`lcc_synth.simulation.scenario.Scenario`)
 and a ``[lo, hi]`` range at both ends
-(:func:`~lcc_synth.simulation.scenario.check_ranges`), when ``load_sweep`` reads the file. Such
+(:func:`~lcc_synth.simulation.checks.check_ranges`), when ``load_sweep`` reads the file. Such
 a sweep used to start its cluster, synthesise its controllers and lose every task on the
 workers (8 "Compute Failed" tracebacks, retries of an error that cannot change). Now: exit 2,
 one line naming the field and the allowed value, in about the time of the imports, without a

@@ -25,7 +25,6 @@ from lcc_synth.cli.simulate import report
 from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.comparison import load_suite
 from lcc_synth.experiments.spec import load_spec
-from lcc_synth.metrics import aave_roundoff
 from lcc_synth.simulation.backends import run_scenario
 
 TABLE2 = (PROBLEMS / "paper_table2.toml").read_text()  # duration 100 s, t_start 0.01 s
@@ -150,7 +149,7 @@ def test_reduction_of_a_round_off_baseline_is_not_a_percentage(tmp_path):
     spec, results, rep = _report(_quiet(tmp_path))
     a0 = rep["all_hdv"]["aave"]
     assert 0 < a0 < 1e-10  # the old report said a 27.67 % "reduction" of such numbers
-    floor = aave_roundoff(15.0, np.array([[0.0]]), spec.scenario.steps)[0]
+    floor = np.finfo(float).eps * 15.0 * spec.scenario.steps  # eps max|v| steps: 1e-11 m/s
     assert a0 < floor < 1e-10
     for name in ("fd_lcc", "cf_lcc"):
         red = rep[name]["reduction_vs_baseline"]
@@ -161,6 +160,7 @@ def test_reduction_of_a_round_off_baseline_is_not_a_percentage(tmp_path):
     assert proc.returncode == 0, proc.stderr
     red = json.loads(proc.stdout)["results"]["fd_lcc"]["reduction_vs_baseline"]
     assert red["aave_pct"] is None and "round-off" in red["aave_pct_note"]
+    assert red["fuel_pct"] is not None
     proc = run_cli(["simulate", "quiet.toml", "--no-record"], cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     row = next(ln for ln in proc.stdout.splitlines() if ln.startswith("fd_lcc"))

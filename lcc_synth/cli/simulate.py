@@ -131,15 +131,18 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
     ``collided`` marks a controller with a collision in some draw (its AAVE and fuel there are
     NaN: the means are over the other draws); those controllers come last.
 
-    A relative AAVE reduction needs a baseline AAVE above round-off: when the baseline's AAVE
-    of a draw is at round-off level (:func:`lcc_synth.metrics.aave_roundoff`, ``eps * max|v| *
-    steps`` of the run: nothing happened, e.g. the perturbation came after the window), the
-    reduction is not meaningful: ``aave_pct`` and ``aave_pct_std`` are ``None`` and
-    ``aave_pct_note`` says why (the table prints ``n/a``)."""
+    A relative AAVE reduction needs a baseline AAVE above round-off. Each step rounds every
+    velocity to ``eps |v|`` (``eps`` = 2.2e-16), and over the run's ``steps`` those errors add
+    up to at most ``eps * max|v| * steps`` (``max|v| = |v*| +`` the baseline run's largest
+    velocity error: a scale from the data, e.g. 1e-11 m/s for 3000 steps at 15 m/s). A baseline
+    AAVE at or below that level cannot be told from a run in which nothing happened (e.g. the
+    perturbation came after the window); a relative change of it is rounding noise, not a
+    reduction: ``aave_pct`` and ``aave_pct_std`` are then ``None``, ``aave_pct_note`` says why
+    and the table prints ``n/a``."""
     import numpy as np
 
     from lcc_synth.experiments.tables import collided
-    from lcc_synth.metrics import PHASE_PREFIX, aave_roundoff, aggregate
+    from lcc_synth.metrics import PHASE_PREFIX, aggregate
 
     cfg = spec.metrics
     out: dict[str, Any] = {}
@@ -151,8 +154,9 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
     if cfg.baseline is not None:
         base = per[cfg.baseline]
         a0, f0 = base["aave"], base["fuel_ml"]
-        floor = aave_roundoff(spec.scenario.v_star, base["max_abs_velocity_error"],
-                              spec.scenario.steps)  # fmt: skip
+        mv = np.asarray(base["max_abs_velocity_error"], dtype=float)  # (batch, nv)
+        v_max = abs(float(spec.scenario.v_star)) + np.where(np.isfinite(mv), mv, 0.0).max(axis=1)
+        floor = np.finfo(float).eps * v_max * spec.scenario.steps  # the AAVE's round-off level
         at_roundoff = np.isfinite(a0) & (np.abs(a0) <= floor)
         note = None
         if at_roundoff.any():

@@ -14,17 +14,16 @@ form of :meth:`~lcc_synth.models.platoon.PlatoonGains.as_table`), and a ``gains_
 platoon form of the synthesis: a JSON object with ``kind``, ``size``, ``cavs``, ``ring``,
 ``semantics``, ``state_names``, ``K`` (one row per CAV), ``gains`` (``{"u_20": {"s_20": ..}}``)
 and ``h2_true``. Both forms are read by :mod:`lcc_synth.synthesis.gains_file`
-(:func:`read_gains_file`): ``K`` and ``gains`` are both required and must agree entry for entry,
-and a platoon file's ``gains`` may not be empty.
+(:mod:`lcc_synth.controllers.gains_files`): ``K`` and ``gains`` are both required and must agree
+entry for entry, and a platoon file's ``gains`` may not be empty.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from lcc_synth.controllers.base import Controller
 from lcc_synth.controllers.baseline_tables import baseline_from_table
 from lcc_synth.controllers.baselines import BASELINE_TYPES
+from lcc_synth.controllers.gains_files import read_gains_file
 from lcc_synth.controllers.static import (
     HDVController,
     PlatoonGainController,
@@ -38,8 +37,7 @@ from lcc_synth.models.platoon import PLATOON_KINDS, PlatoonGains
 from lcc_synth.problem import warn_large_gains
 from lcc_synth.schema import declared
 
-__all__ = ["CONTROLLER_TYPES", "STATIC_RUN_KEYS", "build_controller", "check_gains_files",
-           "gains_file_path", "read_fallback_file", "read_gains_at", "read_gains_file"]
+__all__ = ["CONTROLLER_TYPES", "STATIC_RUN_KEYS", "build_controller"]
 
 CONTROLLER_TYPES = ("hdv", "static", "gains_file", "mpc", "deep_lcc", *BASELINE_TYPES)
 
@@ -144,71 +142,6 @@ def _build(name: str, table, system, source: str | None, field: str) -> Controll
         return ctrl
     except ConfigError as err:
         raise err.with_source(source) if source and not err.source else err from None
-
-
-def gains_file_path(rel: str, source: str | None) -> Path:
-    """The path of a gains file named in a problem file: relative to its folder."""
-    path = Path(rel)
-    return path if path.is_absolute() or not source else Path(source).parent / path
-
-
-def read_gains_at(path: Path, where: str, system, source: str | None = None):
-    """The gains file ``path`` (named by the field ``where``) for ``system``, read and
-    validated by :func:`lcc_synth.synthesis.gains_file.read_gains` (single CAV: ``(StaticGains,
-    document)``, for the problem's ``m`` and ``n``) or
-    :func:`~lcc_synth.synthesis.gains_file.read_platoon_gains` (``kind = "platoon" | "ring"``:
-    ``(PlatoonGains, document)``, for the problem's layout); every error names ``where``, the
-    gains file and the key."""
-    from lcc_synth.synthesis.gains_file import read_gains, read_platoon_gains
-
-    if system.platoon is None:
-        return read_gains(path, where, source, system)
-    gains, doc = read_platoon_gains(path, system.linear_model(warn=False), where, source)
-    P = system.platoon
-    got = (doc["kind"], doc["size"], list(doc["cavs"]), doc["ring"])
-    want = (system.kind, P.size, list(P.cavs), bool(P.ring))
-    if got != want:
-        raise ConfigError(where, f"{path} holds gains for kind={got[0]!r}, size={got[1]}, "
-                          f"cavs={got[2]}, ring={got[3]}; the problem has kind={want[0]!r}, "
-                          f"size={want[1]}, cavs={want[2]}, ring={want[3]}", source)  # fmt: skip
-    return gains, doc
-
-
-def read_gains_file(table, field: str, system, source: str | None = None):
-    """The gains of a ``type = "gains_file"`` table (:func:`read_gains_at` of its ``file``)."""
-    T = declared("controllers.NAME:gains_file")
-    return read_gains_at(gains_file_path(T.get(table, "file", field), source), f"{field}.file",
-                         system, source)  # fmt: skip
-
-
-def read_fallback_file(table, field: str, system, source: str | None = None):
-    """The gains of an MPC table's ``fallback_gains_file`` (:func:`read_gains_at`; for the
-    MPC's own ``kind``): ``(gains, path)``, or ``None`` without one."""
-    value = declared("controllers.NAME:mpc").raw(table, "fallback_gains_file")
-    if value is None:
-        return None
-    where = f"{field}.fallback_gains_file"
-    if not isinstance(value, str) or not value:
-        raise ConfigError(where, f"must be the path of a gains file, got {value!r}", source)
-    path = gains_file_path(value, source)
-    gains, doc = read_gains_at(path, where, system, source)
-    if doc["kind"] != system.kind:
-        raise ConfigError(where, f"{path} holds gains for kind={doc['kind']!r}; the MPC "
-                          f"controls kind={system.kind!r}", source)  # fmt: skip
-    return gains, path
-
-
-def check_gains_files(tables, system, source: str | None = None) -> None:
-    """Read every gains file the controller ``tables`` name (``gains_file``, an MPC's
-    ``fallback_gains_file``) for ``system``: ``run`` and ``sweep`` call it when they load the
-    problem, before any design or simulation (the controllers read them again when built)."""
-    for name, table in tables.items():
-        if not isinstance(table, dict):
-            continue
-        if table.get("type") == "gains_file" and "file" in table:
-            read_gains_file(table, f"controllers.{name}", system, source)
-        elif table.get("type") == "mpc":
-            read_fallback_file(table, f"controllers.{name}", system, source)
 
 
 def _platoon_controller(name: str, table, system, ctype: str, field: str, source: str | None):

@@ -46,6 +46,7 @@ from lcc_synth.controllers.base import Controller
 from lcc_synth.controllers.registry import CONTROLLER_TYPES, build_controller
 from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.h2_tables import synthesize_table
+from lcc_synth.experiments.suite_tables import applies, check_suite_controllers, controller_table
 from lcc_synth.experiments.tables import SUITE_METRICS, rank_failed_last
 from lcc_synth.metrics import MetricsConfig, metrics_from
 from lcc_synth.models.records import Record, system_tables, toml_text
@@ -281,7 +282,7 @@ def load_suite(
                 if "type" in t and t["type"] != table["type"]:
                     raise ConfigError(f"{f}.layouts.{lname}.type", "cannot change the type")
             ctrls[cname] = dict(table)
-        _check_controllers(ctrls, names, extra, every, layouts, src)
+        check_suite_controllers(ctrls, names, extra, every, layouts, src)
         for sname, ss in suite_scenarios.items():  # only_layouts / only_scenarios leave none
             if not any(applies(ctrls[c], ss.layout, sname) for c in names):
                 raise ConfigError("--controllers" if controllers else f"scenarios.{sname}",
@@ -301,60 +302,9 @@ def load_suite(
         raise err.with_source(src) if not err.source else err from None
 
 
-def _check_controllers(
-    ctrls: Mapping[str, Mapping[str, Any]], names: Sequence[str], extra: Sequence[str],
-    scenarios: Mapping[str, SuiteScenario], layouts: Mapping[str, System], source: str,
-) -> None:  # fmt: skip
-    """What can be checked of the controllers before any design: in every scenario of the file
-    (selected or not) each controller that drives there switches on before its end
-    (:func:`lcc_synth.experiments.spec.check_starts`), and on every layout of a scenario the
-    gains files they (and the controllers ``extra`` their MPCs fall back to) name are read
-    (:func:`lcc_synth.controllers.registry.check_gains_files`)."""
-    from lcc_synth.controllers.registry import check_gains_files
-    from lcc_synth.experiments.spec import check_starts
-
-    for sname, ss in scenarios.items():
-        tables = {c: controller_table(ctrls[c], ss.layout) for c in names
-                  if applies(ctrls[c], ss.layout, sname)}  # fmt: skip
-        check_starts(tables, ss.scenario, f" in scenario {sname!r}")
-    for lname in dict.fromkeys(ss.layout for ss in scenarios.values()):
-        tables = {c: controller_table(ctrls[c], lname) for c in [*names, *extra]
-                  if applies(ctrls[c], lname)}  # fmt: skip
-        check_gains_files(tables, layouts[lname], source)
-
-
 # --------------------------------------------------------------------------------------------
 # Controllers per layout
 # --------------------------------------------------------------------------------------------
-
-
-def _merge(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
-    out = dict(base)
-    for key, value in over.items():
-        if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
-            out[key] = _merge(out[key], value)
-        else:
-            out[key] = value
-    return out
-
-
-def controller_table(table: Mapping[str, Any], layout: str) -> dict[str, Any]:
-    """The controller table for ``layout``: the base keys merged with its ``layouts`` entry."""
-    base = {k: v for k, v in table.items() if k not in ("layouts", "only_layouts",
-                                                        "only_scenarios")}
-    over = table.get("layouts", {}).get(layout, {})
-    return _merge(base, over)
-
-
-def applies(table: Mapping[str, Any], layout: str, scenario: str | None = None) -> bool:
-    """Does the controller of ``table`` run on ``layout`` (and in ``scenario``, when given)?
-    (``only_layouts``: the layouts it is for, e.g. the paper's gains, written for two
-    single-CAV strings; ``only_scenarios``: the scenarios; absent: every one.) A controller
-    left out has no row there."""
-    only = table.get("only_layouts")
-    scen = table.get("only_scenarios")
-    return (only is None or layout in only) and (scenario is None or scen is None
-                                                 or scenario in scen)  # fmt: skip
 
 
 def layout_controllers(suite: Suite, layout: str) -> tuple[dict[str, Any], dict[str, Any]]:

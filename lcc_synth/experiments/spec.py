@@ -16,7 +16,8 @@ from lcc_synth.metrics import MetricsConfig, metrics_from
 from lcc_synth.models.records import Record, system_tables, toml_text
 from lcc_synth.problem import Problem, System, load_problem, system_from
 from lcc_synth.schema import declared
-from lcc_synth.simulation.scenario import Scenario, check_start
+from lcc_synth.simulation.checks import check_start
+from lcc_synth.simulation.scenario import Scenario
 from lcc_synth.simulation.scenario_file import scenario_from
 from lcc_synth.simulation.timestep import check_time_step
 
@@ -83,7 +84,7 @@ def check_starts(
     tables: Mapping[str, Any], scenario: Scenario, where: str = ""
 ) -> None:
     """Every controller's ``start`` (its switch-on time) must come before the last sample of
-    ``scenario`` (:func:`~lcc_synth.simulation.scenario.check_start`), else it would never
+    ``scenario`` (:func:`~lcc_synth.simulation.checks.check_start`), else it would never
     drive: a ConfigError naming ``controllers.NAME.start`` (``where``, e.g. ``" in scenario
     X"``, says which run). Tables of an unknown type are left to the loaders' own error."""
     from lcc_synth.schema import TABLES

@@ -51,7 +51,8 @@ from lcc_synth.metrics import WAVE_METRICS, MetricsConfig
 from lcc_synth.models.records import Record, system_tables
 from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
 from lcc_synth.schema import declared
-from lcc_synth.simulation.scenario import Scenario, check_ranges, split_ranges
+from lcc_synth.simulation.checks import check_ranges
+from lcc_synth.simulation.scenario import Scenario, split_ranges
 from lcc_synth.simulation.scenario_file import scenario_from
 
 __all__ = [
@@ -129,18 +130,16 @@ def load_sweep(
 ) -> SweepSpec:  # fmt: skip
     """Read a sweep problem file; ``count``, ``batch_size``, ``seed`` override the file.
 
-    Everything is checked here, in the client, before any design or simulation: besides the
-    scenario's own values, every value a random draw can produce (a ``[lo, hi]`` range at both
-    ends, :func:`~lcc_synth.simulation.scenario.check_ranges`; the heterogeneity half-widths
-    as bounds, :class:`~lcc_synth.simulation.scenario.Scenario`), the controllers' ``start``
-    times and the gains files they name (read here, the workers get their gains as data).
+    Everything is checked here, in the client, before any work: every value a random draw can
+    produce (:mod:`lcc_synth.simulation.checks`), the controllers' ``start`` times and the
+    gains files they name.
 
     Raises
     ------
     ConfigError
         A bad table or value, an unknown controller name, counts out of range.
     """
-    from lcc_synth.controllers.registry import check_gains_files
+    from lcc_synth.controllers.gains_files import check_gains_files
     from lcc_synth.experiments.comparison import fallback_names, select_names
     from lcc_synth.experiments.spec import check_starts
     from lcc_synth.metrics import metrics_from
@@ -439,12 +438,12 @@ def local_cluster(n_workers: int = 2, local_directory: str | None = None):
 
 def _inline_gains_file(name: str, table: Mapping[str, Any], spec: SweepSpec) -> dict[str, Any]:
     """A ``gains_file`` controller as a ``static`` table holding the file's gains, read here in
-    the client (:func:`lcc_synth.controllers.registry.read_gains_file`): workers of a remote
+    the client (:func:`lcc_synth.controllers.gains_files.read_gains_file`): workers of a remote
     cluster need not see the file."""
     if table.get("type") != "gains_file":
         return dict(table)
+    from lcc_synth.controllers.gains_files import read_gains_file
     from lcc_synth.controllers.registry import STATIC_RUN_KEYS as passed
-    from lcc_synth.controllers.registry import read_gains_file
 
     field_name = f"controllers.{name}"
     declared("controllers.NAME:gains_file").check(table, field_name)

@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lcc_synth.errors import ConfigError
+from lcc_synth.models.gains import valid_gain
 from lcc_synth.models.linear import LCCModel
-from lcc_synth.models.platoon import check_gain
 from lcc_synth.models.records import Record
 
 __all__ = ["SEMANTICS", "StaticGains", "hdv_law", "cav_feedback", "input_feedback", "closed_loop"]
@@ -62,7 +62,7 @@ class StaticGains(Record):
                 raise ConfigError(
                     f"gains.{name}", "state names look like s_-2, v_-2, s_0, v_1 or -p_0"
                 )
-            clean[str(name)] = check_gain(f"gains.{name}", value)
+            clean[str(name)] = valid_gain(f"gains.{name}", value)
         object.__setattr__(self, "gains", clean)
 
     @classmethod

@@ -43,6 +43,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from lcc_synth.errors import ConfigError
+from lcc_synth.models.gains import GAIN_MAX, valid_gain
 from lcc_synth.models.hdv import CarFollowingModel, LinearCoefficients, linear_coefficients
 from lcc_synth.models.records import Record
 
@@ -59,7 +60,6 @@ __all__ = [
     "selection_matrix",
     "discretize",
     "SEMANTICS",
-    "check_gain",
     "PlatoonGains",
     "hdv_law_rows",
 ]
@@ -466,34 +466,6 @@ def discretize(A: np.ndarray, B: np.ndarray, Ts: float) -> tuple[np.ndarray, np.
 SEMANTICS = ("added", "replace")
 
 
-def _gain_key():
-    """The declared key of a gain (its range)."""
-    from lcc_synth.schema import declared
-
-    return declared("controllers.NAME.gains").any_key
-
-
-def check_gain(name: str, value) -> float:
-    """``float(value)`` for a static feedback gain: a finite number within the declared range of
-    a gain (``[controllers.NAME.gains]`` in :mod:`lcc_synth.schema`, magnitude at most
-    :data:`~lcc_synth.schema.design.GAIN_MAX`), else a ConfigError naming ``name``.
-
-    Used by :class:`~lcc_synth.models.feedback.StaticGains` and :class:`PlatoonGains`, so a gain
-    from a problem table, a gains file or the API is refused before any use of it could
-    overflow (an implausible gain above 100 is only a warning, see
-    :func:`lcc_synth.problem.warn_large_gains`)."""
-    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
-        raise ConfigError(name, f"must be a number, got {value!r}")
-    x = float(value)
-    if not math.isfinite(x):
-        raise ConfigError(name, f"must be finite, got {value!r}")
-    key = _gain_key()
-    if not key.lo <= x <= key.hi:
-        raise ConfigError(name, f"must be in [{key.lo:g}, {key.hi:g}] (a gain per unit, "
-                          f"1/s² or 1/s; above 100 is already implausible), got {x:g}")  # fmt: skip
-    return x
-
-
 def hdv_law_rows(model: PlatoonModel) -> np.ndarray:
     """``(n_cav, nx)`` rows ``K0`` with ``K0 x`` = each CAV's own HDV law linearised at its
     equilibrium (eq. 8: ``a1 s_i - a2 v_i + a3 v_{i-1}``; on the ring vehicle 1's
@@ -538,11 +510,11 @@ class PlatoonGains(Record):
             raise ConfigError("gains", f"needs one row per CAV ({len(self.cavs)}), got {K.shape}")
         if not np.all(np.isfinite(K)):
             raise ConfigError("gains", "must be finite")
-        big = np.argwhere(np.abs(K) > _gain_key().hi)
+        big = np.argwhere(np.abs(K) > GAIN_MAX)
         if big.size:
             k, j = (int(i) for i in big[0])
             try:
-                check_gain("gains", K[k, j])
+                valid_gain("gains", K[k, j])
             except ConfigError as err:
                 raise ConfigError("gains", f"row {k + 1} (CAV {self.cavs[k]}), entry {j + 1}: "
                                   f"{err.message}") from None  # fmt: skip
@@ -602,5 +574,5 @@ class PlatoonGains(Record):
                     raise ConfigError(f"{field}.{u}.{nm}", f"unknown state; states are "
                                       f"s_1, v_1 .. s_{model.platoon.size}, "
                                       f"v_{model.platoon.size}")  # fmt: skip
-                K[k, model.index(nm)] = check_gain(f"{field}.{u}.{nm}", g)
+                K[k, model.index(nm)] = valid_gain(f"{field}.{u}.{nm}", g)
         return cls(K, model.cavs, semantics)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lcc_synth.controllers.registry import read_fallback_file
+from lcc_synth.controllers.gains_files import read_fallback_file
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains
 from lcc_synth.models.platoon import PlatoonGains

@@ -5,21 +5,14 @@ its sub-tables (also the keys of an ``h2`` suite controller), ``[analysis]``, ``
 
 from __future__ import annotations
 
+from lcc_synth.models.gains import GAIN_MAX
 from lcc_synth.schema.spec import REQUIRED, Derived, Key, Table
 
-__all__ = ["GAIN_MAX", "TABLES"]
+__all__ = ["TABLES"]
 
 _SYN = ("synthesize",)  # and the h2 controllers of run and sweep
 _SEM = ("added", "replace")
 _OMEGA = "rad/s"
-
-#: Largest magnitude of a static feedback gain (per unit: 1/s² on a spacing, 1/s on a velocity).
-#: Above 100 a gain is valid but implausible (a warning); beyond this it is an error: the
-#: rounding of a state of order 10 (float64, eps ≈ 2.2e-16) alone would move the command by
-#: more than 2e-3 m/s² (by the acceleration limits themselves near 1e15: the command would be
-#: rounding noise), and the checks that square the closed-loop eigenvalues overflow near 1e154
-#: (a gain of -1e300 ended in an OverflowError).
-GAIN_MAX = 1.0e12
 
 SYNTHESIS = Table(
     "synthesis",

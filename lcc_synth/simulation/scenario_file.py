@@ -13,8 +13,9 @@ import numpy as np
 from lcc_synth.errors import ConfigError
 from lcc_synth.problem import System
 from lcc_synth.schema import declared
+from lcc_synth.simulation.checks import check_timing
 from lcc_synth.simulation.perturbations import perturbation_from_table
-from lcc_synth.simulation.scenario import MODEL_PARAMS, V2V, Scenario, check_timing
+from lcc_synth.simulation.scenario import MODEL_PARAMS, V2V, Scenario
 from lcc_synth.simulation.sumo_net import SumoSettings
 
 __all__ = ["scenario_from"]
@@ -57,7 +58,7 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
     of perturbations named by position.
 
     Besides every value's own range, the meaning of the values in this run is checked
-    (:func:`~lcc_synth.simulation.scenario.check_timing`: delays, latency and perturbation
+    (:func:`~lcc_synth.simulation.checks.check_timing`: delays, latency and perturbation
     windows against the run's length) and every value a heterogeneity draw can produce
     (:class:`~lcc_synth.simulation.scenario.Scenario`)."""
     f = "scenario"

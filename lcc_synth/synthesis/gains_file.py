@@ -32,8 +32,9 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import SEMANTICS, StaticGains
+from lcc_synth.models.gains import valid_gain
 from lcc_synth.models.linear import KINDS, model_from_hdv
-from lcc_synth.models.platoon import PlatoonGains, check_gain
+from lcc_synth.models.platoon import PlatoonGains
 from lcc_synth.problem import warn_large_gains
 from lcc_synth.schema.readers import read_json
 from lcc_synth.synthesis.platoon_report import PlatoonReport
@@ -111,7 +112,7 @@ def _number_row(row: Any, names: list[str], key: str, what: str) -> list[float]:
         got = f"{len(row)} entries" if isinstance(row, list) else _short(row)
         raise ConfigError(key, f"must be {what}: {len(names)} numbers, one per state of "
                           f"state_names, got {got}")  # fmt: skip
-    return [check_gain(f"{key}[{j}] ({nm})", x) for j, (x, nm) in enumerate(zip(row, names,
+    return [valid_gain(f"{key}[{j}] ({nm})", x) for j, (x, nm) in enumerate(zip(row, names,
                                                                                strict=True))]
 
 
@@ -196,7 +197,7 @@ def _platoon_gains(doc: dict[str, Any], model, label: str) -> PlatoonGains:
         for nm, g in row.items():
             if nm not in names:
                 raise ConfigError(f"gains.{u}.{nm}", "not a state of state_names")
-            check_gain(f"gains.{u}.{nm}", g)
+            valid_gain(f"gains.{u}.{nm}", g)
         for j, nm in enumerate(names):
             if float(row.get(nm, 0.0)) != rows[k][j]:
                 raise ConfigError("gains", f"{u}.{nm} = {row.get(nm, 0.0)!r} disagrees with "
