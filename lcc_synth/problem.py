@@ -41,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from lcc_synth.errors import ConfigError, ImplausibleValueWarning
+from lcc_synth.models.gains import GAIN_MAX
 from lcc_synth.models.hdv import IDM, OVM, model_from_dict
 from lcc_synth.models.linear import LCCModel, model_from_hdv
 from lcc_synth.models.platoon import PLATOON_KINDS, Platoon, PlatoonModel, platoon_model
@@ -104,30 +105,20 @@ MAX_FILE_BYTES = 1 << 20
 
 
 def load_problem(path: str | Path) -> Problem:
-    """Read a TOML problem file; a missing, oversized (above :data:`MAX_FILE_BYTES`) or binary
-    file, a TOML syntax error or an unknown top-level key is a ConfigError."""
+    """Read a TOML problem file; a missing, unreadable, oversized (above
+    :data:`MAX_FILE_BYTES`) or binary file (:func:`lcc_synth.schema.readers.read_file`), a TOML
+    syntax error or an unknown top-level key is a ConfigError naming the file."""
     p = Path(path)
-    if not p.is_file():
-        raise ConfigError("path", "no such problem file", str(p))
-    size = p.stat().st_size
-    if size > MAX_FILE_BYTES:
-        raise ConfigError(
-            "path",
-            f"is {size / 2**20:.1f} MiB; a problem file is a small text file "
-            f"(at most {MAX_FILE_BYTES // 2**20} MiB)",
-            str(p),
-        )
+    text = _readers.read_file(p, "path", str(p), "problem file", MAX_FILE_BYTES,
+                              content_field="toml")
     try:
-        with p.open("rb") as fh:
-            data = tomllib.loads(fh.read().decode("utf-8"))
-    except UnicodeDecodeError as err:
-        raise ConfigError(
-            "toml", f"not a UTF-8 text file (byte {err.start}): a binary file?", str(p)
-        ) from None
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ConfigError("toml", f"not valid TOML: {err}", str(p)) from None
     except RecursionError:
         raise ConfigError("toml", "nested too deeply", str(p)) from None
+    except ValueError as err:  # e.g. an integer of too many digits
+        raise ConfigError("toml", f"not valid TOML: {err}", str(p)) from None
     try:
         check_top_level(data)
     except ConfigError as err:
@@ -161,10 +152,12 @@ def warn_implausible(name: str, message: str) -> None:
 
 
 def warn_large_gains(gains: Mapping[str, Any], field: str, limit: float = GAIN_LIMIT) -> None:
-    """Warn for every gain of ``gains`` (a ``gains`` table) with magnitude above ``limit``."""
+    """Warn for every gain of ``gains`` (a ``gains`` table) with magnitude above ``limit``
+    (one beyond :data:`~lcc_synth.models.gains.GAIN_MAX` is an error, raised where the gain is
+    read: :func:`lcc_synth.models.gains.valid_gain`)."""
     for key, value in gains.items():
         if isinstance(value, int | float) and not isinstance(value, bool):
-            if math.isfinite(value) and abs(value) > limit:
+            if math.isfinite(value) and limit < abs(value) <= GAIN_MAX:
                 warn_implausible(
                     f"{field}.{key}",
                     f"gain {value:g} has magnitude above {limit:g} per unit (the paper's gains "

@@ -19,15 +19,16 @@ __all__ = ["file_sha256", "solver_of", "provenance"]
 
 
 def file_sha256(path: str | Path) -> str | None:
-    """Hex SHA-256 of the file's bytes (``None`` if it cannot be read)."""
-    digest = hashlib.sha256()
+    """Hex SHA-256 of the file's bytes, read by :func:`lcc_synth.schema.readers.read_file`
+    (``None`` if it cannot be read)."""
+    from lcc_synth.errors import ConfigError
+    from lcc_synth.schema.readers import read_file
+
     try:
-        with open(path, "rb") as fh:
-            for block in iter(lambda: fh.read(1 << 16), b""):
-                digest.update(block)
-    except OSError:
+        data = read_file(path, "path", str(path), binary=True)
+    except ConfigError:
         return None
-    return digest.hexdigest()
+    return hashlib.sha256(data).hexdigest()
 
 
 def _version(module: str) -> str:

@@ -210,6 +210,8 @@ def test_fd_lcc_cannot_estimate_and_describe_reports_the_option(tmp_path):
     # gains files take the same keys
     path = tmp_path / "g.json"
     path.write_text('{"kind": "cf_lcc", "m": 0, "n": 2, "semantics": "replace", '
+                    '"state_names": ["s_0", "v_0", "s_1", "v_1", "s_2", "v_2"], '
+                    '"K": [0.1, -0.5, 0, 0, 0, 0], '  # a gains file's K is required
                     '"gains": {"s_0": 0.1, "v_0": -0.5}}')  # fmt: skip
     gf = {"type": "gains_file", "file": str(path), "equilibrium": "estimated",
           "equilibrium_tau": 2.5}  # fmt: skip

@@ -97,6 +97,8 @@ def test_build_controller_factory_makes_an_mpc(tmp_path):
 
 def test_fallback_gains_file_relative_to_problem(tmp_path):
     gains = {"kind": "cf_lcc", "m": 0, "n": 3, "semantics": "replace",
+             "state_names": [f"{q}_{i}" for i in range(4) for q in "sv"],
+             "K": [0.0, -0.7, -0.1, 0.0, 0.0, 0.0, 0.0, 0.0],  # required (issue 28)
              "gains": {"v_0": -0.7, "s_1": -0.1}}
     (tmp_path / "g.json").write_text(json.dumps(gains))
     ctrl = mpc_controller_from_table(

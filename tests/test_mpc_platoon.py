@@ -558,8 +558,11 @@ def test_fallback_gains_file_in_platoon_form(tmp_path):
     from lcc_synth.mpc import mpc_controller_from_table
 
     system = _problem("platoon")
-    gains = {"kind": "platoon", "semantics": "replace",
-             "gains": {"u_2": {"v_2": -0.5, "s_2": 0.2}, "u_4": {"v_4": -0.6}}}
+    K = np.zeros((2, 10))
+    K[0, 2], K[0, 3], K[1, 7] = 0.2, -0.5, -0.6  # the gains file's K is required (issue 28)
+    gains = {"kind": "platoon", "size": 5, "cavs": [2, 4], "ring": False, "semantics": "replace",
+             "state_names": [f"{q}_{i}" for i in range(1, 6) for q in "sv"], "K": K.tolist(),
+             "gains": {"u_2": {"v_2": -0.5, "s_2": 0.2}, "u_4": {"v_4": -0.6}}, "h2_true": None}
     (tmp_path / "g.json").write_text(json.dumps(gains))
     ctrl = mpc_controller_from_table(
         "mpc", {"type": "mpc", "horizon": 10, "fallback_gains_file": "g.json",

@@ -173,13 +173,15 @@ def test_scenario_validation_in_python():
         Scenario(m=0, n=1, batch=0)
     with pytest.raises(ConfigError, match="v_star"):
         Scenario(m=0, n=1, v_star=40.0)
-    bad = Scenario(m=0, n=2, heterogeneity={"s_go": 40.0})  # s_go can fall below s_st
-    with pytest.raises(ConfigError, match="heterogeneity"):
-        bad.draw()
+    # s_go can fall below s_st: refused as a bound, before any draw (issue 28)
+    with pytest.raises(ConfigError, match="heterogeneity.s_go: must be < 30"):
+        Scenario(m=0, n=2, heterogeneity={"s_go": 40.0})
 
 
 def test_gains_file_controller(tmp_path):
-    gains = {"kind": "lcc", "m": 1, "n": 2, "semantics": "added",
+    names = ["s_-1", "v_-1", "s_0", "v_0", "s_1", "v_1", "s_2", "v_2"]
+    gains = {"kind": "lcc", "m": 1, "n": 2, "semantics": "added", "state_names": names,
+             "K": [0.2, -0.3, 0, 0, 0, 0, 0, 0.1],  # the gains file's K (issue 28: required)
              "gains": {"s_-1": 0.2, "v_-1": -0.3, "v_2": 0.1}, "h2_true": 1.0}  # fmt: skip
     (tmp_path / "g.json").write_text(json.dumps(gains))
     path = write(tmp_path, '[controllers.h2]\ntype = "gains_file"\nfile = "g.json"\n')

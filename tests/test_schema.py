@@ -298,6 +298,8 @@ def _load_coverage_corpus(tmp: Path) -> None:
 
     (tmp / "speed.csv").write_text("t,v\n20,15\n25,14\n")
     gains = {"kind": "cf_lcc", "m": 0, "n": 2, "semantics": "replace",
+             "state_names": ["s_0", "v_0", "s_1", "v_1", "s_2", "v_2"],
+             "K": [0.1, -0.5, -0.2, 0.0, 0.0, 0.0],  # a gains file's K is required (issue 28)
              "gains": {"s_0": 0.1, "v_0": -0.5, "s_1": -0.2}}  # fmt: skip
     (tmp / "gains.json").write_text(json.dumps(gains))
     for name, text in (("sim", _COVERAGE_SIMULATE), ("syn", _COVERAGE_SYNTHESIZE),

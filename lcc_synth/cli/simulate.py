@@ -191,7 +191,16 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
     ``info[name] = (controller_info, controller_stats, wall_time_s)``.
 
     ``collided`` marks a controller with a collision in some draw (its AAVE and fuel there are
-    NaN: the means are over the other draws); those controllers come last."""
+    NaN: the means are over the other draws); those controllers come last.
+
+    A relative AAVE reduction needs a baseline AAVE above round-off. Each step rounds every
+    velocity to ``eps |v|`` (``eps`` = 2.2e-16), and over the run's ``steps`` those errors add
+    up to at most ``eps * max|v| * steps`` (``max|v| = |v*| +`` the baseline run's largest
+    velocity error: a scale from the data, e.g. 1e-11 m/s for 3000 steps at 15 m/s). A baseline
+    AAVE at or below that level cannot be told from a run in which nothing happened (e.g. the
+    perturbation came after the window); a relative change of it is rounding noise, not a
+    reduction: ``aave_pct`` and ``aave_pct_std`` are then ``None``, ``aave_pct_note`` says why
+    and the table prints ``n/a``."""
     import numpy as np
 
     from lcc_synth.experiments.tables import failed_steps, failure_rank
@@ -208,7 +217,18 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
     for name, why in getattr(spec, "failed", {}).items():  # could not be built: no metrics
         out[name] = {"failed": why, "collided": False, "failed_steps": 0}
     if cfg.baseline is not None and cfg.baseline in per:
-        a0, f0 = per[cfg.baseline]["aave"], per[cfg.baseline]["fuel_ml"]
+        base = per[cfg.baseline]
+        a0, f0 = base["aave"], base["fuel_ml"]
+        mv = np.asarray(base["max_abs_velocity_error"], dtype=float)  # (batch, nv)
+        v_max = abs(float(spec.scenario.v_star)) + np.where(np.isfinite(mv), mv, 0.0).max(axis=1)
+        floor = np.finfo(float).eps * v_max * spec.scenario.steps  # the AAVE's round-off level
+        at_roundoff = np.isfinite(a0) & (np.abs(a0) <= floor)
+        note = None
+        if at_roundoff.any():
+            k = int(np.flatnonzero(at_roundoff)[0])
+            note = (f"not meaningful: the baseline {cfg.baseline}'s AAVE {a0[k]:.3g} m/s is at "
+                    f"round-off level (<= eps x max|v| x steps = {floor[k]:.3g} m/s: nothing "
+                    "happened to reduce)")  # fmt: skip
         for name, arrays in per.items():
             if name == cfg.baseline:
                 continue
@@ -216,7 +236,7 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
             rf = _pct(f0, arrays["fuel_ml"])
             ok = np.isfinite(ra) & np.isfinite(rf)  # scenarios without a collision in either
             nan = float("nan")
-            out[name]["reduction_vs_baseline"] = {
+            red = out[name]["reduction_vs_baseline"] = {
                 "baseline": cfg.baseline,
                 "aave_pct": float(np.mean(ra[ok])) if ok.any() else nan,
                 "aave_pct_std": float(np.std(ra[ok])) if ok.any() else nan,
@@ -224,6 +244,8 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
                 "fuel_pct_std": float(np.std(rf[ok])) if ok.any() else nan,
                 "scenarios": int(ok.sum()),
             }
+            if note is not None:
+                red.update(aave_pct=None, aave_pct_std=None, aave_pct_note=note)
             if cfg.phases:  # [metrics] phases: each phase's fuel reduction (mean over draws)
                 out[name]["reduction_vs_baseline"]["fuel_phases_pct"] = {
                     p: _mean_finite(_pct(per[cfg.baseline][k], arrays[k]))
@@ -305,7 +327,8 @@ def print_table(spec, rep: dict[str, Any], file=None, collisions=None) -> None:
             r = e.get("reduction_vs_baseline")
             if r:
                 row += [
-                    _fmt(r["aave_pct"], r["aave_pct_std"], b, 2),
+                    "n/a" if r["aave_pct"] is None else _fmt(r["aave_pct"], r["aave_pct_std"],
+                                                             b, 2),
                     _fmt(r["fuel_pct"], r["fuel_pct_std"], b, 2),
                 ]
             else:
@@ -325,6 +348,9 @@ def print_table(spec, rep: dict[str, Any], file=None, collisions=None) -> None:
     print("  ".join(c.ljust(w) for c, w in zip(cols, widths, strict=True)), file=file)
     for r in rows:
         print("  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)), file=file)
+    notes = {(e.get("reduction_vs_baseline") or {}).get("aave_pct_note") for e in rep.values()}
+    for note in sorted(n for n in notes if n):
+        print(f"AAVE red. % n/a: {note}", file=file)
     for line in phase_lines(rep, cfg):
         print(line, file=file)
     for line in collision_lines(rep, collisions):

@@ -13,17 +13,17 @@ input (``[controllers.NAME.gains.u_3]``, ``s_3 = ...``: states ``s_i, v_i`` of p
 form of :meth:`~lcc_synth.models.platoon.PlatoonGains.as_table`), and a ``gains_file`` is the
 platoon form of the synthesis: a JSON object with ``kind``, ``size``, ``cavs``, ``ring``,
 ``semantics``, ``state_names``, ``K`` (one row per CAV), ``gains`` (``{"u_20": {"s_20": ..}}``)
-and ``h2_true``; ``gains`` is read when present, else ``K`` on ``state_names``.
+and ``h2_true``. Both forms are read by :mod:`lcc_synth.synthesis.gains_file`
+(:mod:`lcc_synth.controllers.gains_files`): ``K`` and ``gains`` are both required and must agree
+entry for entry, and a platoon file's ``gains`` may not be empty.
 """
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 from lcc_synth.controllers.base import Controller
 from lcc_synth.controllers.baseline_tables import baseline_from_table
 from lcc_synth.controllers.baselines import BASELINE_TYPES
+from lcc_synth.controllers.gains_files import read_gains_file
 from lcc_synth.controllers.static import (
     HDVController,
     PlatoonGainController,
@@ -32,7 +32,7 @@ from lcc_synth.controllers.static import (
 from lcc_synth.controllers.switch import SwitchedOn
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains
-from lcc_synth.models.linear import KINDS, model_from_hdv
+from lcc_synth.models.linear import model_from_hdv
 from lcc_synth.models.platoon import PLATOON_KINDS, PlatoonGains
 from lcc_synth.problem import warn_large_gains
 from lcc_synth.schema import declared
@@ -112,34 +112,11 @@ def _build(name: str, table, system, source: str | None, field: str) -> Controll
             raw = T.get(table, "gains", field)
             where = field
         else:
-            rel = T.get(table, "file", field)
-            path = Path(rel)
-            if not path.is_absolute() and source:
-                path = Path(source).parent / path
-            if not path.is_file():
-                raise ConfigError(f"{field}.file", f"no such gains file: {path}")
-            try:
-                data = json.loads(path.read_text())
-            except json.JSONDecodeError as err:
-                raise ConfigError(f"{field}.file", f"{path} is not valid JSON: {err}") from None
-            for key in ("kind", "m", "n", "semantics", "gains"):
-                if key not in data:
-                    raise ConfigError(f"{field}.file", f"{path} lacks the key {key!r}")
-            kind = data["kind"]
-            if kind not in KINDS:
-                raise ConfigError(f"{field}.file", f"{path}: kind must be one of {KINDS}")
-            if (data["m"], data["n"]) != (system.m, system.n):
-                raise ConfigError(
-                    f"{field}.file",
-                    f"{path} holds gains for m={data['m']}, n={data['n']}; the problem has "
-                    f"m={system.m}, n={system.n}",
-                )
-            semantics = data["semantics"]
-            raw = data["gains"]
-            if not isinstance(raw, dict):
-                raise ConfigError(f"{field}.file", f"{path}: gains must be an object")
+            gains, doc = read_gains_file(table, field, system, source)
+            kind, semantics, raw = doc["kind"], gains.semantics, gains.gains
             where = f"{field}.file"
-        warn_large_gains(raw, f"{where}.gains")
+        if ctype == "static":
+            warn_large_gains(raw, f"{where}.gains")  # a gains file's: by read_gains
         sample_time = _sample_time(table, field, ctype)
         equilibrium = T.get(table, "equilibrium", field)
         tau = None
@@ -166,50 +143,6 @@ def _build(name: str, table, system, source: str | None, field: str) -> Controll
     except ConfigError as err:
         raise err.with_source(source) if source and not err.source else err from None
 
-def _gains_json(field: str, table, source: str | None, T) -> tuple[dict, Path]:
-    """The JSON object of a ``gains_file`` table and its path."""
-    rel = T.get(table, "file", field)
-    path = Path(rel)
-    if not path.is_absolute() and source:
-        path = Path(source).parent / path
-    if not path.is_file():
-        raise ConfigError(f"{field}.file", f"no such gains file: {path}")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as err:
-        raise ConfigError(f"{field}.file", f"{path} is not valid JSON: {err}") from None
-    if not isinstance(data, dict):
-        raise ConfigError(f"{field}.file", f"{path} must hold a JSON object")
-    return data, path
-
-
-def _platoon_file_gains(data: dict, path: Path, model, system, where: str) -> PlatoonGains:
-    """The :class:`PlatoonGains` of a platoon gains file, checked against ``system``."""
-    P = system.platoon
-    for key in ("kind", "size", "cavs", "semantics"):
-        if key not in data:
-            raise ConfigError(where, f"{path} lacks the key {key!r}")
-    got = (data["kind"], data["size"], list(data["cavs"]), bool(data.get("ring", P.ring)))
-    want = (system.kind, P.size, list(P.cavs), bool(P.ring))
-    if got != want:
-        raise ConfigError(where, f"{path} holds gains for kind={got[0]!r}, size={got[1]}, "
-                          f"cavs={got[2]}, ring={got[3]}; the problem has kind={want[0]!r}, "
-                          f"size={want[1]}, cavs={want[2]}, ring={want[3]}")  # fmt: skip
-    names = data.get("state_names")
-    if names is not None and tuple(names) != model.state_names:
-        raise ConfigError(where, f"{path}: state_names {names} are not the model's "
-                          f"{list(model.state_names)}")  # fmt: skip
-    if isinstance(data.get("gains"), dict):
-        warn_large_gains({f"{u}.{k}": g for u, row in data["gains"].items()
-                          if isinstance(row, dict) for k, g in row.items()}, f"{where}.gains")
-        return PlatoonGains.from_table(data["gains"], model, data["semantics"], f"{where}.gains")
-    if "K" not in data:
-        raise ConfigError(where, f"{path} lacks the key 'gains' (or 'K')")
-    try:
-        return PlatoonGains(data["K"], model.cavs, data["semantics"])
-    except (ConfigError, ValueError, TypeError) as err:
-        raise ConfigError(f"{where}.K", f"{path}: {getattr(err, 'message', err)}") from None
-
 
 def _platoon_controller(name: str, table, system, ctype: str, field: str, source: str | None):
     """A ``static`` or ``gains_file`` controller of a ``platoon`` / ``ring`` problem."""
@@ -231,12 +164,16 @@ def _platoon_controller(name: str, table, system, ctype: str, field: str, source
             raise ConfigError(f"{field}.gains", f"kind = {kind!r} takes one table per CAV "
                               f"input: [{field}.gains.u_i] with s_j / v_j = gain, for "
                               f"u_i in {list(model.input_names)}")  # fmt: skip
+        if not any(raw.values()):
+            raise ConfigError(f"{field}.gains", f"is empty: give each CAV's gains "
+                              f"[{field}.gains.u_i], u_i in {list(model.input_names)} (an empty "
+                              "table is not a zero gain; drive the CAVs with type = \"hdv\" "
+                              "for their HDV law)")  # fmt: skip
         warn_large_gains({f"{u}.{k}": g for u, row in raw.items() for k, g in row.items()},
                          f"{field}.gains")  # fmt: skip
         gains = PlatoonGains.from_table(raw, model, T.get(table, "semantics", field),
                                         f"{field}.gains")  # fmt: skip
     else:
-        data, path = _gains_json(field, table, source, T)
-        gains = _platoon_file_gains(data, path, model, system, f"{field}.file")
+        gains, _ = read_gains_file(table, field, system, source)
     return PlatoonGainController(name, gains, model, _sample_time(table, field, ctype),
                                  T.get(table, "measurement_filter", field))  # fmt: skip

@@ -43,11 +43,13 @@ data-format version included) in ``cache_dir`` is reused by later runs.
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import math
 import os
 import sys
 import uuid
+import zipfile
 from dataclasses import dataclass, fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -59,6 +61,7 @@ from lcc_synth.deeplcc.hankel import DataSet, hankel
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.records import Record
 from lcc_synth.resources import progress
+from lcc_synth.schema.readers import read_file
 
 __all__ = [
     "PE_THRESHOLD",
@@ -357,11 +360,13 @@ def load_or_collect(base, settings: DataSettings) -> tuple[DataSet, str, bool]:
     path = Path(settings.cache_dir) / f"deeplcc-{key}.npz"
     if settings.cache and path.is_file():
         try:
-            with np.load(path) as z:
+            raw = read_file(path, f"{settings.field}.cache_dir", None,
+                            "DeeP-LCC data cache", binary=True)  # fmt: skip
+            with np.load(io.BytesIO(raw)) as z:
                 if int(z["version"]) == FORMAT_VERSION and str(z["key"]) == key:
                     return DataSet(z["u"], z["e"], z["y"], float(z["dt"])), key, True
-        except (OSError, KeyError, ValueError):
-            pass  # unreadable: collect again and overwrite
+        except (ConfigError, OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):
+            pass  # unreadable or damaged: collect again and overwrite
     data = collect(sc, settings)
     if settings.cache:
         try:

@@ -46,6 +46,7 @@ from lcc_synth.controllers.base import Controller
 from lcc_synth.controllers.registry import CONTROLLER_TYPES, build_controller
 from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.h2_tables import synthesize_table
+from lcc_synth.experiments.suite_tables import applies, check_suite_controllers, controller_table
 from lcc_synth.experiments.tables import SUITE_METRICS, rank_failed_last
 from lcc_synth.metrics import MetricsConfig, metrics_from
 from lcc_synth.models.records import Record, system_tables, toml_text
@@ -184,6 +185,11 @@ def load_suite(
 ) -> Suite:
     """Read a suite problem file, keeping only the named scenarios / controllers.
 
+    Every scenario of the file is read and checked, selected or not (a value that only a
+    scenario left out by ``--scenarios`` would use is still an error), and so are the
+    controllers' ``start`` times in every scenario they drive and the gains files they name,
+    all before any design or simulation.
+
     Raises
     ------
     ConfigError
@@ -215,8 +221,8 @@ def load_suite(
         if not scen_t:
             raise ConfigError("scenarios", "needs at least one [scenarios.NAME] table")
         chosen = select_names(list(scen_t), scenarios, "--scenarios")
-        suite_scenarios: dict[str, SuiteScenario] = {}
-        for sname in chosen:
+        every: dict[str, SuiteScenario] = {}  # selected or not: every scenario is checked
+        for sname in scen_t:
             f = f"scenarios.{sname}"
             table = scen_t[sname]
             if not isinstance(table, dict):
@@ -239,7 +245,8 @@ def load_suite(
             if mcfg.baseline is not None:
                 raise ConfigError(f"{f}.metrics.baseline", "is not used by a suite; remove it")
             sc = replace(sc, name=sname)
-            suite_scenarios[sname] = SuiteScenario(sname, lname, sc, mcfg, title)
+            every[sname] = SuiteScenario(sname, lname, sc, mcfg, title)
+        suite_scenarios = {sname: every[sname] for sname in chosen}
 
         ctrl_t = top.get(data, "controllers", "")
         C = declared("controllers.NAME:suite")
@@ -276,6 +283,7 @@ def load_suite(
                 if "type" in t and t["type"] != table["type"]:
                     raise ConfigError(f"{f}.layouts.{lname}.type", "cannot change the type")
             ctrls[cname] = dict(table)
+        check_suite_controllers(ctrls, names, extra, every, layouts, src)
         for sname, ss in suite_scenarios.items():  # only_layouts / only_scenarios leave none
             if not any(applies(ctrls[c], ss.layout, sname) for c in names):
                 raise ConfigError("--controllers" if controllers else f"scenarios.{sname}",
@@ -298,35 +306,6 @@ def load_suite(
 # --------------------------------------------------------------------------------------------
 # Controllers per layout
 # --------------------------------------------------------------------------------------------
-
-
-def _merge(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
-    out = dict(base)
-    for key, value in over.items():
-        if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
-            out[key] = _merge(out[key], value)
-        else:
-            out[key] = value
-    return out
-
-
-def controller_table(table: Mapping[str, Any], layout: str) -> dict[str, Any]:
-    """The controller table for ``layout``: the base keys merged with its ``layouts`` entry."""
-    base = {k: v for k, v in table.items() if k not in ("layouts", "only_layouts",
-                                                        "only_scenarios")}
-    over = table.get("layouts", {}).get(layout, {})
-    return _merge(base, over)
-
-
-def applies(table: Mapping[str, Any], layout: str, scenario: str | None = None) -> bool:
-    """Does the controller of ``table`` run on ``layout`` (and in ``scenario``, when given)?
-    (``only_layouts``: the layouts it is for, e.g. the paper's gains, written for two
-    single-CAV strings; ``only_scenarios``: the scenarios; absent: every one.) A controller
-    left out has no row there."""
-    only = table.get("only_layouts")
-    scen = table.get("only_scenarios")
-    return (only is None or layout in only) and (scenario is None or scen is None
-                                                 or scenario in scen)  # fmt: skip
 
 
 def layout_controllers(suite: Suite, layout: str) -> tuple[dict[str, Any], dict[str, Any]]:

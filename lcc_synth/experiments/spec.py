@@ -16,12 +16,13 @@ from lcc_synth.metrics import MetricsConfig, metrics_from
 from lcc_synth.models.records import Record, system_tables, toml_text
 from lcc_synth.problem import Problem, System, load_problem, system_from
 from lcc_synth.schema import declared
+from lcc_synth.simulation.checks import check_start
 from lcc_synth.simulation.scenario import Scenario
 from lcc_synth.simulation.scenario_file import scenario_from
 from lcc_synth.simulation.timestep import check_time_step
 
-__all__ = ["SimulationSpec", "controllers_from", "drop_failed_fallbacks", "fallback_target",
-           "load_spec", "resolve_fallbacks"]
+__all__ = ["SimulationSpec", "check_starts", "controllers_from", "drop_failed_fallbacks",
+           "fallback_target", "load_spec", "resolve_fallbacks"]
 
 
 @dataclass(frozen=True, repr=False)
@@ -80,6 +81,26 @@ def fallback_target(
         raise ConfigError(f"controllers.{name}.fallback", f"must name another controller of "
                           f"the file {others}, got {target!r}", source)  # fmt: skip
     return target
+
+
+def check_starts(
+    tables: Mapping[str, Any], scenario: Scenario, where: str = ""
+) -> None:
+    """Every controller's ``start`` (its switch-on time) must come before the last sample of
+    ``scenario`` (:func:`~lcc_synth.simulation.checks.check_start`), else it would never
+    drive: a ConfigError naming ``controllers.NAME.start`` (``where``, e.g. ``" in scenario
+    X"``, says which run). Tables of an unknown type are left to the loaders' own error."""
+    from lcc_synth.schema import TABLES
+
+    for name, table in tables.items():
+        if not isinstance(table, Mapping) or table.get("start") is None:
+            continue
+        T = TABLES.get(f"controllers.NAME:{table.get('type')}")
+        if T is None:
+            continue
+        field = f"controllers.{name}"
+        start = T.get(table, "start", field)
+        check_start(f"{field}.start", start, scenario, f"controller {name!r}{where}")
 
 
 def _nonzero(gains: Mapping[str, Any]) -> dict[str, Any]:
@@ -198,6 +219,7 @@ def load_spec(
             if seeds < 1:
                 raise ConfigError("--seeds", f"must be >= 1, got {seeds}")
             scenario = replace(scenario, batch=int(seeds))
+        check_starts(declared("").get(problem.data, "controllers", ""), scenario)  # no design yet
         failed: dict[str, str] | None = {} if keep_going else None
         controllers = controllers_from(problem.data, system, source, problem.name, failed)
         check_time_step(scenario, controllers)

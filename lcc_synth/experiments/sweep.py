@@ -81,6 +81,7 @@ from lcc_synth.metrics import MetricsConfig
 from lcc_synth.models.records import Record, system_tables
 from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
 from lcc_synth.schema import declared
+from lcc_synth.simulation.checks import check_ranges
 from lcc_synth.simulation.scenario import Scenario, split_ranges
 from lcc_synth.simulation.scenario_file import scenario_from
 
@@ -141,12 +142,18 @@ def load_sweep(
 ) -> SweepSpec:  # fmt: skip
     """Read a sweep problem file; ``count``, ``batch_size``, ``seed`` override the file.
 
+    Everything is checked here, in the client, before any work: every value a random draw can
+    produce (:mod:`lcc_synth.simulation.checks`), the controllers' ``start`` times and the
+    gains files they name.
+
     Raises
     ------
     ConfigError
         A bad table or value, an unknown controller name, counts out of range.
     """
+    from lcc_synth.controllers.gains_files import check_gains_files
     from lcc_synth.experiments.comparison import fallback_names, select_names
+    from lcc_synth.experiments.spec import check_starts
     from lcc_synth.metrics import metrics_from
 
     problem = path if isinstance(path, Problem) else load_problem(path)
@@ -158,6 +165,7 @@ def load_sweep(
         nv = system.columns  # [lo, hi] settings drawn per scenario:
         sc_table, ranges = split_ranges(declared("").get(data, "scenario", ""), nv)
         scenario = scenario_from({**data, "scenario": sc_table}, system, problem.path.parent)
+        check_ranges(scenario, ranges)  # the upper bounds too (the lower: just now)
         metrics = metrics_from(data, system, scenario=scenario)
         SW = declared("sweep")
         sw = declared("").get(data, "sweep", "")
@@ -187,6 +195,8 @@ def load_sweep(
             if "layouts" in t:
                 raise ConfigError(f"controllers.{name}.layouts", "a sweep has one layout")
             ctrls[name] = dict(t)
+        check_starts({k: ctrls[k] for k in names}, scenario)
+        check_gains_files(ctrls, system, src)  # read in the client, before any design
         return SweepSpec(
             name=problem.name,
             system=system,
@@ -381,31 +391,21 @@ class SweepResult:
 
 def _inline_gains_file(name: str, table: Mapping[str, Any], spec: SweepSpec) -> dict[str, Any]:
     """A ``gains_file`` controller as a ``static`` table holding the file's gains, read here in
-    the client: workers of a remote cluster need not see the file."""
+    the client (:func:`lcc_synth.controllers.gains_files.read_gains_file`): workers of a remote
+    cluster need not see the file."""
     if table.get("type") != "gains_file":
         return dict(table)
+    from lcc_synth.controllers.gains_files import read_gains_file
     from lcc_synth.controllers.registry import STATIC_RUN_KEYS as passed
-    from lcc_synth.synthesis.gains_file import read_gains
 
     field_name = f"controllers.{name}"
-    gf = declared("controllers.NAME:gains_file")
-    gf.check(table, field_name)
-    path = Path(gf.get(table, "file", field_name))
-    if not path.is_absolute() and spec.source:
-        path = Path(spec.source).parent / path
-    try:
-        gains, doc = read_gains(path)
-    except ConfigError as err:
-        raise ConfigError(f"{field_name}.file ({err.field})", err.message, spec.source) from None
-    if (doc["m"], doc["n"]) != (spec.system.m, spec.system.n):
-        raise ConfigError(
-            f"{field_name}.file",
-            f"{path} holds gains for m={doc['m']}, n={doc['n']}; the problem has "
-            f"m={spec.system.m}, n={spec.system.n}",
-            spec.source,
-        )
-    out = {"type": "static", "kind": doc["kind"], "semantics": gains.semantics,
-           "gains": dict(gains.gains)}
+    declared("controllers.NAME:gains_file").check(table, field_name)
+    gains, doc = read_gains_file(table, field_name, spec.system, spec.source)
+    if spec.system.platoon is not None:  # the platoon form {u_i: {state: gain}}
+        rows = gains.as_table(spec.system.linear_model(warn=False))
+    else:
+        rows = dict(gains.gains)
+    out = {"type": "static", "kind": doc["kind"], "semantics": gains.semantics, "gains": rows}
     for key in passed:
         if key in table:
             out[key] = table[key]

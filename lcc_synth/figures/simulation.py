@@ -249,7 +249,8 @@ def plot_metric_bars(report, path: str | Path, title: str | None = None) -> Path
         pct = "aave_pct" if key == "aave" else "fuel_pct"
         for bar, n, v in zip(bars, names, vals, strict=True):
             red = report[n].get("reduction_vs_baseline")
-            text = f"{v:.2f}" + (f"\n(-{red[pct]:.2f} %)" if red else "")
+            text = f"{v:.2f}" + (f"\n(-{red[pct]:.2f} %)" if red and red[pct] is not None
+                                 else "\n(n/a)" if red else "")  # fmt: skip
             ax.annotate(text, (bar.get_x() + bar.get_width() / 2, v / 2), ha="center",
                         va="center", fontsize=8, color="white", fontweight="bold")
         ax.set_ylabel(unit)

@@ -19,7 +19,6 @@ needs the head velocity (no HDV ahead). Sign convention: ``u = +K x`` (no minus 
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -27,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lcc_synth.errors import ConfigError
+from lcc_synth.models.gains import valid_gain
 from lcc_synth.models.linear import LCCModel
 from lcc_synth.models.records import Record
 
@@ -62,11 +62,7 @@ class StaticGains(Record):
                 raise ConfigError(
                     f"gains.{name}", "state names look like s_-2, v_-2, s_0, v_1 or -p_0"
                 )
-            if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
-                raise ConfigError(f"gains.{name}", f"must be a number, got {value!r}")
-            if not math.isfinite(float(value)):
-                raise ConfigError(f"gains.{name}", f"must be finite, got {value!r}")
-            clean[str(name)] = float(value)
+            clean[str(name)] = valid_gain(f"gains.{name}", value)
         object.__setattr__(self, "gains", clean)
 
     @classmethod

@@ -172,7 +172,8 @@ class IDM(Record):
     v0 : float
         Desired speed (m/s), > 0.
     T : float
-        Safe time headway (s), >= 0.
+        Safe time headway (s), > 0 (with ``T = 0`` the desired gap would not grow with speed:
+        a driver keeping only ``s0`` at any speed).
     s0 : float
         Jam distance (m), >= 0.
     a, b : float
@@ -191,7 +192,7 @@ class IDM(Record):
 
     def __post_init__(self) -> None:
         _check_nonneg("v0", self.v0, strictly=True)
-        _check_nonneg("T", self.T)
+        _check_nonneg("T", self.T, strictly=True)
         _check_nonneg("s0", self.s0)
         _check_nonneg("a", self.a, strictly=True)
         _check_nonneg("b", self.b, strictly=True)

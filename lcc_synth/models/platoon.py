@@ -43,6 +43,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from lcc_synth.errors import ConfigError
+from lcc_synth.models.gains import GAIN_MAX, valid_gain
 from lcc_synth.models.hdv import CarFollowingModel, LinearCoefficients, linear_coefficients
 from lcc_synth.models.records import Record
 
@@ -509,6 +510,14 @@ class PlatoonGains(Record):
             raise ConfigError("gains", f"needs one row per CAV ({len(self.cavs)}), got {K.shape}")
         if not np.all(np.isfinite(K)):
             raise ConfigError("gains", "must be finite")
+        big = np.argwhere(np.abs(K) > GAIN_MAX)
+        if big.size:
+            k, j = (int(i) for i in big[0])
+            try:
+                valid_gain("gains", K[k, j])
+            except ConfigError as err:
+                raise ConfigError("gains", f"row {k + 1} (CAV {self.cavs[k]}), entry {j + 1}: "
+                                  f"{err.message}") from None  # fmt: skip
         if self.semantics not in SEMANTICS:
             raise ConfigError("semantics", f"must be one of {list(SEMANTICS)}, got "
                               f"{self.semantics!r}")  # fmt: skip
@@ -565,7 +574,5 @@ class PlatoonGains(Record):
                     raise ConfigError(f"{field}.{u}.{nm}", f"unknown state; states are "
                                       f"s_1, v_1 .. s_{model.platoon.size}, "
                                       f"v_{model.platoon.size}")  # fmt: skip
-                if isinstance(g, bool) or not isinstance(g, int | float):
-                    raise ConfigError(f"{field}.{u}.{nm}", f"must be a number, got {g!r}")
-                K[k, model.index(nm)] = float(g)
+                K[k, model.index(nm)] = valid_gain(f"{field}.{u}.{nm}", g)
         return cls(K, model.cavs, semantics)

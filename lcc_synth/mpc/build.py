@@ -7,11 +7,9 @@ platoon form ``{u_i: {state: gain}}`` (default: each CAV's HDV law)."""
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 import numpy as np
 
+from lcc_synth.controllers.gains_files import read_fallback_file
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains
 from lcc_synth.models.platoon import PlatoonGains
@@ -20,31 +18,6 @@ from lcc_synth.mpc.platoon import PlatoonMPCController
 from lcc_synth.mpc.settings import settings_from_table
 
 __all__ = ["mpc_controller_from_table", "build_mpc"]
-
-
-def _load_gains_file(path: Path, system, field_name: str) -> StaticGains:
-    """Read a gains file (``lcc-synth synthesize --out``) as the fallback gain."""
-    if not path.is_file():
-        raise ConfigError(field_name, f"no such gains file: {path}")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as err:
-        raise ConfigError(field_name, f"{path} is not valid JSON: {err}") from None
-    for key in ("kind", "m", "n", "semantics", "gains"):
-        if key not in data:
-            raise ConfigError(field_name, f"{path} lacks the key {key!r}")
-    if data["kind"] != system.kind or data["m"] != system.m:
-        raise ConfigError(
-            field_name,
-            f"{path} holds gains for kind={data['kind']!r}, m={data['m']}; the MPC controls "
-            f"kind={system.kind!r}, m={system.m}",
-        )
-    if not isinstance(data["gains"], dict):
-        raise ConfigError(field_name, f"{path}: gains must be an object")
-    try:
-        return StaticGains(data["gains"], data["semantics"])
-    except ConfigError as err:
-        raise ConfigError(f"{field_name}.{err.field}", err.message) from None
 
 
 def _named_fallback(named, field_name: str) -> tuple[StaticGains, str]:
@@ -84,13 +57,10 @@ def mpc_controller_from_table(name: str, table, system, source: str | None = Non
         if named is not None and getattr(system, "platoon", None) is None:
             fallback, fb_source = _named_fallback(named, f"{field_name}.fallback")
         if settings.fallback_gains_file and getattr(system, "platoon", None) is None:
-            path = Path(settings.fallback_gains_file)
-            if not path.is_absolute() and source:
-                path = Path(source).parent / path
-            fallback = _load_gains_file(path, system, f"{field_name}.fallback_gains_file")
+            fallback, path = read_fallback_file(table, field_name, system, source)
             fb_source = str(path)
         if getattr(system, "platoon", None) is not None:  # kind = "platoon" | "ring"
-            return _platoon_mpc(name, settings, system, named, source, field_name)
+            return _platoon_mpc(name, settings, system, named, source, field_name, table)
         try:
             return MPCController(name, settings, system, fallback, fb_source)
         except ConfigError as err:
@@ -115,7 +85,7 @@ def _platoon_gains(data, model, field_name: str) -> PlatoonGains:
         raise ConfigError(f"{field_name}.{err.field}", err.message) from None
 
 
-def _platoon_mpc(name, settings, system, named, source, field_name):
+def _platoon_mpc(name, settings, system, named, source, field_name, table):
     """The joint MPC of every CAV of a platoon or ring (:mod:`lcc_synth.mpc.platoon`); its
     fallback rows from ``fallback = "NAME"`` or ``fallback_gains_file`` (platoon gain form),
     else each CAV's HDV law."""
@@ -132,20 +102,8 @@ def _platoon_mpc(name, settings, system, named, source, field_name):
         fallback = _platoon_gains(named, model, f"{field_name}.fallback")
         fb_source = f"controller {named.get('controller', '?')}"
     if settings.fallback_gains_file:
-        path = Path(settings.fallback_gains_file)
-        if not path.is_absolute() and source:
-            path = Path(source).parent / path
-        where = f"{field_name}.fallback_gains_file"
-        if not path.is_file():
-            raise ConfigError(where, f"no such gains file: {path}")
-        try:
-            data = json.loads(path.read_text())
-        except json.JSONDecodeError as err:
-            raise ConfigError(where, f"{path} is not valid JSON: {err}") from None
-        if isinstance(data, dict) and data.get("kind", system.kind) != system.kind:
-            raise ConfigError(where, f"{path} holds gains for kind={data['kind']!r}; the MPC "
-                              f"controls kind={system.kind!r}")  # fmt: skip
-        fallback, fb_source = _platoon_gains(data, model, where), str(path)
+        fallback, path = read_fallback_file(table, field_name, system, source)
+        fb_source = str(path)
     try:
         return PlatoonMPCController(name, settings, system, fallback, fb_source)
     except ConfigError as err:

@@ -21,9 +21,9 @@ _SUITE_TYPE = Key("type", "string", "The controller; h2 is synthesised for each 
                   REQUIRED, choices=(*_TYPES, "h2"))
 _SAMPLE_TIME = Key("sample_time", "number", "Controller period (zero-order hold; a multiple of "
                    "[scenario].dt); absent: every step.", None, lo=0.0, lo_open=True, unit="s")
-_START = Key("start", "number", "Switch-on time: before it every CAV drives with its HDV law "
-              "(lcc_synth.controllers.switch); absent: from the start of the run.", None,
-              unit="s")
+_START = Key("start", "number", "Switch-on time, before the run's last sample: before it "
+              "every CAV drives with its HDV law (lcc_synth.controllers.switch); absent: from the "
+              "start of the run.", None, unit="s")
 _EQUILIBRIUM = Key("equilibrium", "string", "Errors from the nominal v*, s* (fixed) or from a "
                    "low-pass estimate of the speed of the vehicle ahead (not fd_lcc).", "fixed",
                    choices=("fixed", "estimated"))

@@ -5,6 +5,7 @@ its sub-tables (also the keys of an ``h2`` suite controller), ``[analysis]``, ``
 
 from __future__ import annotations
 
+from lcc_synth.models.gains import GAIN_MAX
 from lcc_synth.schema.spec import REQUIRED, Derived, Key, Table
 
 __all__ = ["TABLES"]
@@ -210,8 +211,8 @@ GAIN_TABLE = Table(
     "[maps.NAME.gains]); the names are those of the model's state.",
     ("simulate", "sweep", "run", "synthesize", "analyze", "regions"),
     any_key=Key("STATE", "number", "Gain on s_i (spacing error), v_i (velocity error) or "
-                "-p_0 (FD-LCC position); above 100 per unit is a warning.", 0.0,
-                unit="1/s² or 1/s"),
+                "-p_0 (FD-LCC position); above 100 per unit is a warning (also in a gains "
+                "file).", 0.0, lo=-GAIN_MAX, hi=GAIN_MAX, unit="1/s² or 1/s"),
 )
 
 REGIONS = Table(

@@ -1,22 +1,32 @@
-"""Typed field readers of problem-file tables: each names the dotted field in its error.
+"""Typed field readers of problem-file tables, each naming the dotted field in its error, and
+the one reader of user files (:func:`read_file`, :func:`read_json`).
 
 These are the primitives behind :class:`lcc_synth.schema.Table`: a loader never calls them with
 its own default or range, it asks the declared key (``declared("scenario").get(sc, "dt", f)``),
 which passes the declared default, bounds and choices here. The messages are those of the
 strict-inputs corpus (``tests/test_strict_problems.py``): ``FIELD: must be > 0, got -1.0``,
 ``FIELD: is required (>= 0)``, ``FIELD: unknown key; did you mean 'dt'? allowed keys: [...]``.
+
+Every file the package reads from a user (a problem file, a gains file, a profile CSV, a
+DeeP-LCC data cache) is read by :func:`read_file` (:func:`read_json` for JSON): a missing,
+unreadable (permissions, a directory, an I/O error), oversized, binary or UTF-16 file, and
+invalid or too deeply nested JSON, is a :class:`~lcc_synth.errors.ConfigError` naming the field
+that named the file, the file itself and the reason, never a traceback.
 """
 
 from __future__ import annotations
 
 import difflib
+import json
 import math
 from collections.abc import Iterable, Mapping
+from pathlib import Path
 from typing import Any
 
 from lcc_synth.errors import ConfigError
 
 __all__ = [
+    "MAX_DATA_BYTES",
     "REQUIRED",
     "check_keys",
     "check_range",
@@ -27,6 +37,8 @@ __all__ = [
     "get_number_list",
     "get_str",
     "get_table",
+    "read_file",
+    "read_json",
 ]
 
 #: The default of a required key.
@@ -192,3 +204,109 @@ def get_number_list(
         raise ConfigError(name, f"must have {length} entries, got {len(value)}")
     wrapper = {str(i): v for i, v in enumerate(value)}
     return [get_number(wrapper, str(i), name, lo=lo, hi=hi) for i in range(len(value))]
+
+
+# --------------------------------------------------------------------------------------------
+# User files
+# --------------------------------------------------------------------------------------------
+
+#: Largest data file (gains JSON, profile CSV, data cache) :func:`read_file` reads by default:
+#: the gains file of a 400-vehicle ring is a few MiB; a larger file is not one of them.
+MAX_DATA_BYTES = 64 << 20
+
+#: Byte-order marks of UTF-16 and UTF-32 text (a text editor's "Unicode" encoding).
+_BOMS = {b"\xff\xfe\x00\x00": "UTF-32", b"\x00\x00\xfe\xff": "UTF-32",
+         b"\xff\xfe": "UTF-16", b"\xfe\xff": "UTF-16"}  # fmt: skip
+
+
+def _file_error(path: Path, field: str, source: str | None, reason: str) -> ConfigError:
+    """``SOURCE: FIELD: PATH: REASON`` (the path left out when it is the source itself)."""
+    where = "" if source is not None and str(path) == str(source) else f"{path}: "
+    return ConfigError(field, f"{where}{reason}", source)
+
+
+def read_file(
+    path: str | Path,
+    field: str,
+    source: str | None = None,
+    what: str = "file",
+    max_bytes: int = MAX_DATA_BYTES,
+    binary: bool = False,
+    content_field: str | None = None,
+) -> str | bytes:
+    """The contents of a user file: UTF-8 text (``binary``: the bytes).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    field : str
+        The field that named it (``"controllers.NAME.file"``); the error names it.
+    source : str, optional
+        The problem file that holds ``field`` (``None``: the file is not named by one).
+    what : str
+        What the file is, for the messages (``"gains file"``).
+    max_bytes : int
+        Largest size read (:data:`MAX_DATA_BYTES` by default).
+    binary : bool
+        Return the bytes (no decoding).
+    content_field : str, optional
+        The field of an error in the contents (not UTF-8); default ``field``. A problem file
+        names ``toml`` there, ``path`` for the file itself.
+
+    Raises
+    ------
+    ConfigError
+        ``field``, naming ``path``: no such file; not a regular file; cannot be read (the
+        operating system's reason, e.g. "Permission denied"); larger than ``max_bytes``; not
+        UTF-8 text (a binary, UTF-16 or UTF-32 file).
+    """
+    p = Path(path)
+    try:
+        if not p.exists():
+            raise _file_error(p, field, source, f"no such {what}")
+        if not p.is_file():
+            raise _file_error(p, field, source, f"is not a regular file (a {what} is expected)")
+        with p.open("rb") as fh:
+            data = fh.read(max_bytes + 1)
+    except OSError as err:
+        reason = err.strerror or str(err) or type(err).__name__
+        raise _file_error(p, field, source, f"cannot read the {what}: {reason}") from None
+    if len(data) > max_bytes:
+        size = p.stat().st_size if p.exists() else len(data)
+        limit = f"{max_bytes / 2**20:g} MiB" if max_bytes >= 2**20 else f"{max_bytes} bytes"
+        kind = "file" if binary else "text file"
+        raise _file_error(p, field, source, f"is {size / 2**20:.1f} MiB; a {what} is a small "
+                          f"{kind} (at most {limit})")  # fmt: skip
+    if binary:
+        return data
+    inside = content_field or field
+    for bom, name in _BOMS.items():
+        if data.startswith(bom):
+            raise _file_error(p, inside, source, f"is {name} text (byte-order mark): not a "
+                              f"UTF-8 text file; save the {what} as UTF-8")  # fmt: skip
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise _file_error(p, inside, source, f"not a UTF-8 text file (byte {err.start}): a "
+                          "binary file?") from None  # fmt: skip
+
+
+def read_json(
+    path: str | Path, field: str, source: str | None = None, what: str = "JSON file"
+) -> Any:
+    """The JSON document of a user file (read by :func:`read_file`).
+
+    Raises
+    ------
+    ConfigError
+        As :func:`read_file`, and for invalid JSON or JSON nested too deeply to parse.
+    """
+    text = read_file(path, field, source, what)
+    try:
+        return json.loads(text)
+    except RecursionError:
+        raise _file_error(Path(path), field, source, f"the {what} is nested too deeply to "
+                          "be read") from None  # fmt: skip
+    except ValueError as err:  # json.JSONDecodeError, an integer of too many digits
+        raise _file_error(Path(path), field, source, f"not valid JSON: {err}") from None

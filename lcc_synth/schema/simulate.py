@@ -52,7 +52,7 @@ _HDV_MEANING = {
     "s_go": ("OVM free-flow spacing.", "m"),
     "v_max": ("OVM maximum speed.", "m/s"),
     "v0": ("IDM desired speed.", "m/s"),
-    "T": ("IDM time headway.", "s"),
+    "T": ("IDM time headway, > 0.", "s"),
     "s0": ("IDM jam distance.", "m"),
     "a": ("IDM maximum acceleration.", "m/s²"),
     "b": ("IDM comfortable deceleration.", "m/s²"),
@@ -195,7 +195,8 @@ HETEROGENEITY = Table(
     "Each HDV of each scenario gets nominal + U[-w, w] for every parameter listed.",
     _SIM,
     any_key=Key("PARAMETER", "number", "Half-width w of the uniform draw of this [hdv] model "
-                "parameter (in its unit).", 0.0, lo=0.0),
+                "parameter (in its unit); every value nominal ± w must be valid as a fixed "
+                "[hdv] value (checked as bounds, before any run).", 0.0, lo=0.0),
 )
 
 HDV_VALUES = Table(
@@ -212,7 +213,8 @@ DELAY = Table(
     "HDV reaction delay: delay_i = mean + U[-spread, spread], rounded to steps.",
     _SIM,
     (
-        Key("mean", "number", "Mean reaction delay of the HDVs.", 0.0, lo=0.0, unit="s"),
+        Key("mean", "number", "Mean reaction delay of the HDVs (mean + spread shorter than "
+            "the run).", 0.0, lo=0.0, unit="s"),
         Key("spread", "number", "Half-width of its uniform draw.", 0.0, lo=0.0,
             hi=Derived("mean"), unit="s"),
         Key("model", "string", "full: every input is delayed; perception: spacing and relative "
@@ -228,7 +230,8 @@ V2V = Table(
         Key("loss_rate", "number", "Per-link packet-loss probability, or a number list with one "
             "entry per vehicle head..tail (m + n + 2; the CAV's is ignored)." + _SWEEP_RANGE,
             0.0, lo=0.0, hi=1.0),
-        Key("latency", "number", "Age of received values (rounded to steps)." + _SWEEP_RANGE,
+        Key("latency", "number", "Age of received values (rounded to steps; shorter than the "
+            "run)." + _SWEEP_RANGE,
             0.0, lo=0.0, unit="s"),
         Key("spacing_noise", "number", "Std of noise on received spacings." + _SWEEP_RANGE,
             0.0, lo=0.0, unit="m"),
@@ -253,7 +256,8 @@ _P_TYPE = Key("type", "string", "The kind of motion.", REQUIRED,
               choices=("sine", "brake", "brake_profile", "accel_profile", "speed_profile"))
 _P_VEHICLE = Key("vehicle", "any", 'The vehicle driven: "head" or a paper index (-m..n); '
                  'kind = platoon: "head" or a position 1..size; ring: a position.', "head")
-_P_START = Key("start", "number", "Start of the window (open interval start < t < end).",
+_P_START = Key("start", "number", "Start of the window (open interval start < t < end), "
+               "before the run's last sample.",
                20.0, unit="s")
 _P_DECEL = Key("decel", "number", "Braking acceleration, < 0.", -5.0, unit="m/s²")
 _P_TIMES = Key("times", "number list", "Breakpoint times (required unless csv).", REQUIRED,

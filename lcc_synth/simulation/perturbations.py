@@ -32,6 +32,7 @@ import numpy as np
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.records import Record
 from lcc_synth.schema import declared
+from lcc_synth.schema.readers import read_file
 
 __all__ = [
     "Sine",
@@ -113,6 +114,10 @@ class Sine(Record):
         return {"type": "sine", "vehicle": self.vehicle, "amplitude": self.amplitude,
                 "period": self.period, "start": self.start, "end": end}  # fmt: skip
 
+    def window(self) -> tuple[float, float, str]:
+        """``(start, end, key)``: when it may act, and the key that sets the start."""
+        return self.start, self.start + self.period if self.end is None else self.end, "start"
+
     def values(self, t: np.ndarray, dt: float) -> np.ndarray:
         end = self.start + self.period if self.end is None else self.end
         out = self.amplitude * np.cos(2.0 * np.pi / self.period * (t - self.start))
@@ -136,6 +141,10 @@ class Brake(Record):
         """The ``[[scenario.perturbations]]`` entry of this perturbation."""
         return {"type": "brake", "vehicle": self.vehicle, "start": self.start,
                 "duration": self.duration, "decel": self.decel}  # fmt: skip
+
+    def window(self) -> tuple[float, float, str]:
+        """``(start, end, key)``: when it may act, and the key that sets the start."""
+        return self.start, self.start + self.duration, "start"
 
     def values(self, t: np.ndarray, dt: float) -> np.ndarray:
         active = _window(t, self.start, self.start + self.duration, dt)
@@ -164,6 +173,11 @@ class BrakeProfile(Record):
         """The ``[[scenario.perturbations]]`` entry of this perturbation."""
         keys = ("vehicle", "start", "decel", "decel_time", "hold_time", "accel", "accel_time")
         return {"type": "brake_profile", **{k: getattr(self, k) for k in keys}}
+
+    def window(self) -> tuple[float, float, str]:
+        """``(start, end, key)``: when it may act, and the key that sets the start."""
+        return (self.start, self.start + self.decel_time + self.hold_time + self.accel_time,
+                "start")  # fmt: skip
 
     def values(self, t: np.ndarray, dt: float) -> np.ndarray:
         t1 = self.start + self.decel_time
@@ -227,6 +241,10 @@ class Profile(Record):
         idx = np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 1)
         return vals[idx]
 
+    def window(self) -> tuple[float, float, str]:
+        """``(start, end, key)``: when it may act, and the key that sets the start."""
+        return float(self.times[0]), float(self.times[-1]), "times"
+
     def values(self, t: np.ndarray, dt: float) -> np.ndarray:
         eps = 1e-6 * dt
         active = (t >= self.times[0] - eps) & (t < self.times[-1] - eps)
@@ -266,13 +284,16 @@ def overrides(
 # --------------------------------------------------------------------------------------------
 
 
-def read_profile_csv(path: Path, field: str) -> tuple[list[float], list[float]]:
-    """Two columns ``t, value`` (comma separated, optional header line)."""
-    if not path.is_file():
-        raise ConfigError(field, f"no such CSV file: {path}")
+def read_profile_csv(
+    path: Path, field: str, source: str | None = None
+) -> tuple[list[float], list[float]]:
+    """Two columns ``t, value`` (comma separated, optional header line), read by
+    :func:`lcc_synth.schema.readers.read_file` (a missing, unreadable or binary file is a
+    ConfigError naming ``field`` and the path)."""
+    text = read_file(path, field, source, "CSV file")
     times: list[float] = []
     vals: list[float] = []
-    for lineno, line in enumerate(path.read_text().splitlines(), start=1):
+    for lineno, line in enumerate(text.splitlines(), start=1):
         line = line.strip()
         if not line or line.startswith("#"):
             continue

@@ -21,6 +21,7 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import IDM, MODELS, OVM
 from lcc_synth.models.records import Record
 from lcc_synth.schema import declared
+from lcc_synth.simulation.checks import check_draw_bounds
 from lcc_synth.simulation.perturbations import Perturbation
 from lcc_synth.simulation.sumo_net import SumoSettings, check_sumo_scenario
 from lcc_synth.simulation.v2v import V2V
@@ -217,6 +218,7 @@ class Scenario(Record):
                     f"not a parameter of the {self.hdv.name} model; allowed: {list(allowed)}",
                 )
             _num(f"scenario.heterogeneity.{key}", w, lo=0.0)
+        self._check_draw_bounds()
         for key in self.hdv_values or {}:
             if key not in allowed:
                 raise ConfigError(
@@ -230,6 +232,31 @@ class Scenario(Record):
                 )
         if self.backend == "sumo":
             check_sumo_scenario(self)
+
+    def _hdv_base(self) -> dict[str, np.ndarray] | None:
+        """Every model parameter's value of every HDV before the draws (nominal, or the
+        explicit ``hdv_values``): ``{name: 1-D array}``; ``None`` when ``hdv_values`` does not
+        broadcast (:meth:`draw` reports it)."""
+        nv, mask = self.n_vehicles, self.is_hdv()
+        out = {}
+        for key in MODEL_PARAMS[self.hdv.name]:
+            value = (self.hdv_values or {}).get(key, getattr(self.hdv, key))
+            try:
+                arr = np.asarray(value, dtype=float)
+                arr = np.broadcast_to(arr, np.broadcast_shapes(arr.shape, (nv,)))
+            except (TypeError, ValueError):
+                return None
+            out[key] = arr.reshape(-1, nv)[:, mask].ravel()
+        return out
+
+    def _check_draw_bounds(self) -> None:
+        """Every value the heterogeneity draws can produce must be valid
+        (:func:`~lcc_synth.simulation.checks.check_draw_bounds`), found here, before any draw
+        (a sweep would otherwise find it on its workers)."""
+        widths = {k: float(w) for k, w in self.heterogeneity.items() if float(w) > 0}
+        base = self._hdv_base() if widths else None
+        if base and next(iter(base.values())).size:
+            check_draw_bounds(MODELS[self.hdv.name], base, widths, self.v_star)
 
     def lags(self) -> tuple[float, ...]:
         """The actuator lag ``tau`` (s) of each CAV (``cav_lag`` per CAV)."""
@@ -344,6 +371,11 @@ class Scenario(Record):
     def steps(self) -> int:
         """Number of samples."""
         return int(round(self.duration / self.dt))
+
+    @property
+    def last_time(self) -> float:
+        """Time of the last sample, ``t_start + (steps - 1) dt``."""
+        return float(self.t_start + (self.steps - 1) * self.dt)
 
     @property
     def n_vehicles(self) -> int:

@@ -13,6 +13,7 @@ import numpy as np
 from lcc_synth.errors import ConfigError
 from lcc_synth.problem import System
 from lcc_synth.schema import declared
+from lcc_synth.simulation.checks import check_timing
 from lcc_synth.simulation.perturbations import perturbation_from_table
 from lcc_synth.simulation.scenario import MODEL_PARAMS, V2V, Scenario
 from lcc_synth.simulation.sumo_net import SumoSettings
@@ -54,7 +55,12 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
     ``[scenario.hdv_values]`` table is then an error), every vehicle starting at its own
     equilibrium spacing at ``v*``, spacing errors from each vehicle's own equilibrium
     (``spacing_reference = "own_equilibrium"``, the platoon model's linearisation), vehicles
-    of perturbations named by position."""
+    of perturbations named by position.
+
+    Besides every value's own range, the meaning of the values in this run is checked
+    (:func:`~lcc_synth.simulation.checks.check_timing`: delays, latency and perturbation
+    windows against the run's length) and every value a heterogeneity draw can produce
+    (:class:`~lcc_synth.simulation.scenario.Scenario`)."""
     f = "scenario"
     S = declared("scenario")
     sc = declared("").get(data, "scenario", "")
@@ -128,7 +134,7 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
     spacing_reference = S.get(sc, "spacing_reference", f)
     if system.platoon is not None:
         spacing_reference = "own_equilibrium"
-    return Scenario(
+    out = Scenario(
         m=m,
         n=n,
         hdv=system.hdv,
@@ -158,6 +164,8 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
         cav_lag=S.get(sc, "cav_lag", f),
         **layout,
     )
+    check_timing(out)
+    return out
 
 
 def _sumo_from(table: Mapping[str, Any], f: str) -> SumoSettings:

@@ -24,6 +24,7 @@ whole inputs ``u = input_K x + input_kh v_h``), ``conserved`` (ring: the unit di
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -31,8 +32,11 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import SEMANTICS, StaticGains
-from lcc_synth.models.linear import KINDS
+from lcc_synth.models.gains import valid_gain
+from lcc_synth.models.linear import KINDS, model_from_hdv
 from lcc_synth.models.platoon import PlatoonGains
+from lcc_synth.problem import warn_large_gains
+from lcc_synth.schema.readers import read_json
 from lcc_synth.synthesis.platoon_report import PlatoonReport
 from lcc_synth.synthesis.report import SynthesisReport, _jsonable
 
@@ -66,56 +70,148 @@ def platoon_gains_document(rep: PlatoonReport) -> dict[str, Any]:
     return _jsonable(doc)
 
 
-def read_platoon_gains(path: str | Path, model=None) -> tuple[PlatoonGains, dict[str, Any]]:
+def _located(err: ConfigError, path: Path, field: str | None, source: str | None):
+    """An error inside the gains file ``path``: ``FIELD: PATH: KEY: ...`` when a field of a
+    problem file named it, else ``PATH: KEY: ...``."""
+    if field is None:
+        return err if err.source else err.with_source(str(path))
+    return ConfigError(field, f"{path}: {err.field}: {err.message}", source)
+
+
+def _label(path: Path, field: str | None) -> str:
+    """How a warning names a key of the gains file: ``FIELD: PATH: `` or ``PATH: ``."""
+    return f"{field}: {path}: " if field else f"{path}: "
+
+
+def _read_document(path: Path, field: str | None, source: str | None) -> dict:
+    """The JSON object of a gains file, read by :func:`lcc_synth.schema.readers.read_json`."""
+    doc = read_json(path, field or "file", source if field else str(path), "gains file")
+    if not isinstance(doc, dict):
+        raise _located(ConfigError("file", "must hold a JSON object (the gains document of "
+                                   "lcc-synth synthesize --out)"), path, field, source)
+    return doc
+
+
+def _string_list(doc: Mapping[str, Any], key: str) -> list[str]:
+    names = doc[key]
+    if not (isinstance(names, list) and names and all(isinstance(x, str) for x in names)
+            and len(set(names)) == len(names)):
+        raise ConfigError(key, f"must be a non-empty list of distinct state names, got "
+                          f"{_short(names)}")  # fmt: skip
+    return names
+
+
+def _short(value: Any, limit: int = 80) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _number_row(row: Any, names: list[str], key: str, what: str) -> list[float]:
+    """``row`` as one number per state of ``names`` (finite, within a gain's range)."""
+    if not isinstance(row, list) or len(row) != len(names):
+        got = f"{len(row)} entries" if isinstance(row, list) else _short(row)
+        raise ConfigError(key, f"must be {what}: {len(names)} numbers, one per state of "
+                          f"state_names, got {got}")  # fmt: skip
+    return [valid_gain(f"{key}[{j}] ({nm})", x) for j, (x, nm) in enumerate(zip(row, names,
+                                                                               strict=True))]
+
+
+def read_platoon_gains(
+    path: str | Path, model=None, field: str | None = None, source: str | None = None
+) -> tuple[PlatoonGains, dict[str, Any]]:
     """Read and validate a platoon / ring gains file; returns the gains and the document.
+
+    The file must hold every key of :data:`PLATOON_REQUIRED_KEYS`; ``K`` one row per CAV of
+    ``cavs``, each with one entry per state of ``state_names``, and ``gains`` (``{"u_i":
+    {state: gain}}``) the same gains, entry for entry (a state missing from ``gains`` has gain 0
+    in ``K``). An empty ``gains`` table (no CAV row, or only empty rows) is an error, not a zero
+    gain.
 
     Parameters
     ----------
+    path : str or Path
     model : PlatoonModel, optional
-        When given, the file must be for its CAVs and states (and ``K`` is checked against
-        ``gains`` through :meth:`~lcc_synth.models.platoon.PlatoonGains.from_table`).
+        When given, the file must be for its CAVs and states.
+    field, source : str, optional
+        The field of a problem file that named the file, and that problem file: errors are then
+        ``SOURCE: FIELD: PATH: KEY: ...``; else ``PATH: KEY: ...``.
 
     Raises
     ------
     ConfigError
-        Missing file, invalid JSON, a missing key, or inconsistent contents.
+        A missing or unreadable file (:func:`lcc_synth.schema.readers.read_json`), invalid
+        JSON, a missing key, or inconsistent contents.
     """
-    doc = _load_json(path)
-    src = str(path)
+    p = Path(path)
+    doc = _read_document(p, field, source)
+    try:
+        return _platoon_gains(doc, model, _label(p, field)), doc
+    except ConfigError as err:
+        raise _located(err, p, field, source) from None
+
+
+def _platoon_gains(doc: dict[str, Any], model, label: str) -> PlatoonGains:
     for key in PLATOON_REQUIRED_KEYS:
         if key not in doc:
-            raise ConfigError(key, "missing key of a platoon gains file", src)
+            raise ConfigError(key, "missing key of a platoon gains file (the keys: "
+                              f"{', '.join(PLATOON_REQUIRED_KEYS)})")  # fmt: skip
     if doc["kind"] not in ("platoon", "ring"):
-        raise ConfigError("kind", f"must be 'platoon' or 'ring', got {doc['kind']!r}", src)
-    names, K, cavs = doc["state_names"], doc["K"], doc["cavs"]
-    if not (isinstance(K, list) and isinstance(cavs, list) and len(K) == len(cavs)
-            and all(isinstance(r, list) and len(r) == len(names) for r in K)):
-        raise ConfigError("K", "must be one row per CAV, each as long as state_names", src)
+        raise ConfigError("kind", f"must be 'platoon' or 'ring', got {_short(doc['kind'])}")
+    size, cavs = doc["size"], doc["cavs"]
+    if isinstance(size, bool) or not isinstance(size, int) or size < 1:
+        raise ConfigError("size", f"must be an integer >= 1, got {_short(size)}")
+    if not (isinstance(cavs, list) and cavs and all(
+            isinstance(c, int) and not isinstance(c, bool) and 1 <= c <= size for c in cavs)
+            and cavs == sorted(set(cavs))):  # fmt: skip
+        raise ConfigError("cavs", f"must be a non-empty sorted list of distinct positions in "
+                          f"[1, {size}], got {_short(cavs)}")  # fmt: skip
+    if doc["ring"] is not (doc["kind"] == "ring"):
+        raise ConfigError("ring", f"must be {str(doc['kind'] == 'ring').lower()} for kind = "
+                          f"{doc['kind']!r}, got {_short(doc['ring'])}")  # fmt: skip
     if doc["semantics"] not in SEMANTICS:
-        raise ConfigError("semantics", f"must be one of {list(SEMANTICS)}", src)
-    try:
-        gains = PlatoonGains(np.array(K, float), tuple(cavs), doc["semantics"])
-        if model is not None:
-            table = PlatoonGains.from_table(doc["gains"], model, doc["semantics"])
-            if tuple(model.cavs) != gains.cavs or not np.array_equal(table.K, gains.K):
-                raise ConfigError("gains", "disagrees with K or with the model's CAVs/states")
-    except ConfigError as err:
-        raise err.with_source(src) from None
-    return gains, doc
-
-
-def _load_json(path: str | Path) -> dict:
-    p = Path(path)
-    src = str(p)
-    if not p.is_file():
-        raise ConfigError("file", "no such gains file", src)
-    try:
-        doc = json.loads(p.read_text())
-    except json.JSONDecodeError as err:
-        raise ConfigError("file", f"not valid JSON: {err}", src) from None
-    if not isinstance(doc, dict):
-        raise ConfigError("file", "must hold a JSON object", src)
-    return doc
+        raise ConfigError("semantics", f"must be one of {list(SEMANTICS)}, got "
+                          f"{_short(doc['semantics'])}")  # fmt: skip
+    names = _string_list(doc, "state_names")
+    if len(names) != 2 * size:
+        raise ConfigError("state_names", f"must name the {2 * size} states s_1, v_1 .. "
+                          f"s_{size}, v_{size}, got {len(names)}")  # fmt: skip
+    K = doc["K"]
+    if not isinstance(K, list) or len(K) != len(cavs):
+        got = f"{len(K)} rows" if isinstance(K, list) else _short(K)
+        raise ConfigError("K", f"must be one row per CAV ({len(cavs)}: cavs {cavs}), each "
+                          f"with {len(names)} entries (state_names), got {got}")  # fmt: skip
+    rows = [_number_row(r, names, f"K[{k}]", f"CAV {c}'s row") for k, (c, r)
+            in enumerate(zip(cavs, K, strict=True))]  # fmt: skip
+    table = doc["gains"]
+    if not isinstance(table, dict) or not any(isinstance(r, dict) and r for r in table.values()):
+        raise ConfigError("gains", "is empty: give each CAV's gains {\"u_i\": {state: gain}} "
+                          "(an empty table is not a zero gain; drive the CAVs with type = "
+                          "\"hdv\" for their HDV law)")  # fmt: skip
+    inputs = [f"u_{c}" for c in cavs]
+    for u, row in table.items():
+        if u not in inputs:
+            raise ConfigError(f"gains.{u}", f"not a CAV input of the file; its CAVs: {inputs}")
+        if not isinstance(row, dict):
+            raise ConfigError(f"gains.{u}", "must be an object {state: gain}")
+        k = inputs.index(u)
+        for nm, g in row.items():
+            if nm not in names:
+                raise ConfigError(f"gains.{u}.{nm}", "not a state of state_names")
+            valid_gain(f"gains.{u}.{nm}", g)
+        for j, nm in enumerate(names):
+            if float(row.get(nm, 0.0)) != rows[k][j]:
+                raise ConfigError("gains", f"{u}.{nm} = {row.get(nm, 0.0)!r} disagrees with "
+                                  f"K[{k}][{j}] = {rows[k][j]!r}")  # fmt: skip
+    for k, u in enumerate(inputs):
+        if u not in table and any(rows[k]):
+            raise ConfigError(f"gains.{u}", f"is missing, but K[{k}] is not zero")
+    if model is not None:
+        if tuple(model.cavs) != tuple(cavs) or tuple(model.state_names) != tuple(names):
+            raise ConfigError("cavs", f"the file's CAVs {cavs} on {len(names)} states are not "
+                              f"the model's: CAVs {list(model.cavs)} on {model.nx} states")
+    warn_large_gains({f"{u}.{nm}": g for u, row in table.items() for nm, g in row.items()},
+                     f"{label}gains")  # fmt: skip
+    return PlatoonGains(np.array(rows, float), tuple(cavs), doc["semantics"])
 
 
 def gains_document(rep: SynthesisReport | PlatoonReport) -> dict[str, Any]:
@@ -165,41 +261,77 @@ def write_gains(
     return write_text(path, json.dumps(gains_document(rep), indent=2) + "\n", overwrite)
 
 
-def read_gains(path: str | Path) -> tuple[StaticGains, dict[str, Any]]:
+def read_gains(
+    path: str | Path, field: str | None = None, source: str | None = None, system=None
+) -> tuple[StaticGains, dict[str, Any]]:
     """Read and validate a gains file; returns the gains and the whole document.
+
+    The file must hold every key of :data:`REQUIRED_KEYS`; ``K`` one number per state of
+    ``state_names``, and ``gains`` the same gains by state name, entry for entry (a state
+    missing from ``gains`` has gain 0 in ``K``).
+
+    Parameters
+    ----------
+    path : str or Path
+    field, source : str, optional
+        The field of a problem file that named the file, and that problem file: errors are then
+        ``SOURCE: FIELD: PATH: KEY: ...``; else ``PATH: KEY: ...``.
+    system : lcc_synth.problem.System, optional
+        When given, the file must hold gains for its ``m`` and ``n``, on the states of the
+        file's ``kind`` for them.
 
     Raises
     ------
     ConfigError
-        Missing file, invalid JSON, a missing key, or inconsistent contents.
+        A missing or unreadable file (:func:`lcc_synth.schema.readers.read_json`), invalid
+        JSON, a missing key, or inconsistent contents.
     """
-    src = str(Path(path))
-    doc = _load_json(path)
+    p = Path(path)
+    doc = _read_document(p, field, source)
+    try:
+        return _static_gains(doc, system, _label(p, field)), doc
+    except ConfigError as err:
+        raise _located(err, p, field, source) from None
+
+
+def _static_gains(doc: dict[str, Any], system, label: str) -> StaticGains:
     if doc.get("kind") in ("platoon", "ring"):
         raise ConfigError("kind", f"{doc['kind']!r}: a platoon gains file (one row per CAV); "
-                          "read it with read_platoon_gains", src)  # fmt: skip
+                          "read it with read_platoon_gains")  # fmt: skip
     for key in REQUIRED_KEYS:
         if key not in doc:
-            raise ConfigError(key, "missing key of a gains file", src)
+            raise ConfigError(key, "missing key of a gains file (the keys: "
+                              f"{', '.join(REQUIRED_KEYS)})")  # fmt: skip
     if doc["kind"] not in KINDS:
-        raise ConfigError("kind", f"must be one of {list(KINDS)}, got {doc['kind']!r}", src)
+        raise ConfigError("kind", f"must be one of {list(KINDS)}, got {_short(doc['kind'])}")
     for key in ("m", "n"):
         if isinstance(doc[key], bool) or not isinstance(doc[key], int) or doc[key] < 0:
-            raise ConfigError(key, f"must be an integer >= 0, got {doc[key]!r}", src)
+            raise ConfigError(key, f"must be an integer >= 0, got {_short(doc[key])}")
     if doc["semantics"] not in SEMANTICS:
         raise ConfigError(
-            "semantics", f"must be one of {list(SEMANTICS)}, got {doc['semantics']!r}", src
+            "semantics", f"must be one of {list(SEMANTICS)}, got {_short(doc['semantics'])}"
         )
-    if not isinstance(doc["gains"], dict):
-        raise ConfigError("gains", "must be an object {state_name: value}", src)
-    names, K = doc["state_names"], doc["K"]
-    if not (isinstance(names, list) and isinstance(K, list) and len(names) == len(K)):
-        raise ConfigError("K", "state_names and K must be lists of the same length", src)
+    names = _string_list(doc, "state_names")
+    K = _number_row(doc["K"], names, "K", "a list")
+    table = doc["gains"]
+    if not isinstance(table, dict):
+        raise ConfigError("gains", f"must be an object {{state_name: value}}, got {_short(table)}")
+    for name in table:
+        if name not in names:
+            raise ConfigError(f"gains.{name}", f"not a state of state_names {names}")
     for name, value in zip(names, K, strict=True):
-        if doc["gains"].get(name, 0.0) != value:
-            raise ConfigError(f"gains.{name}", f"disagrees with K ({value!r})", src)
-    try:
-        gains = StaticGains(doc["gains"], doc["semantics"])
-    except ConfigError as err:
-        raise err.with_source(src) from None
-    return gains, doc
+        got = table.get(name, 0.0)
+        if isinstance(got, bool) or not isinstance(got, int | float) or float(got) != value:
+            raise ConfigError(f"gains.{name}", f"{_short(got)} disagrees with K ({value!r})")
+    if system is not None:
+        if (doc["m"], doc["n"]) != (system.m, system.n):
+            raise ConfigError("m", f"the file holds gains for m={doc['m']}, n={doc['n']}; the "
+                              f"problem has m={system.m}, n={system.n}")  # fmt: skip
+        model = model_from_hdv(doc["kind"], system.m, system.n, system.hdv, system.v_star,
+                               warn=False)  # fmt: skip
+        if tuple(names) != tuple(model.state_names):
+            raise ConfigError("state_names", f"are not the states of a {doc['kind']} model "
+                              f"with m={system.m}, n={system.n}: {list(model.state_names)}")
+    gains = StaticGains(table, doc["semantics"])
+    warn_large_gains(gains.gains, f"{label}gains")
+    return gains
