@@ -140,10 +140,13 @@ def open_recording(
     rec = rr.RecordingStream(APP_ID, recording_id=uuid.uuid4())
     state = _state(rec)
     state.target = path
-    try:
-        rec.save(tmp, default_blueprint=blueprint)
+    try:  # the blueprint is sent afterwards, not through save(): save() writes a default
+        # blueprint synchronously and waits forever when the disk is full at that moment
+        rec.save(tmp)
     except Exception as err:  # noqa: BLE001 - Rerun raises its own error types
         raise FileError(path, str(err)) from None
+    if blueprint is not None:
+        rec.send_blueprint(blueprint, make_active=True, make_default=True)
     rec.send_recording_name(name)
     started = datetime.now(UTC).isoformat(timespec="seconds")
     record_text(rec, status, f"# Status\n\nstarted {started}: **running**\n")
