@@ -406,3 +406,38 @@ def test_gains_file_is_read_in_the_client(tmp_path, serial):
     (tmp_path / "g.json").write_text(json.dumps(_gains_doc(4)))
     with pytest.raises(ConfigError, match="m=0, n=4"):
         run_sweep(load_sweep(tmp_path / "p.toml", count=1), client=None, progress=False)
+
+
+def test_workers_drop_only_the_heartbeat_failure_record():
+    """The record a worker logs (with a traceback) when its heartbeat meets a scheduler that
+    a finished sweep has already stopped is dropped; the worker's other records, including
+    an unexpected heartbeat error, are kept. The message is Dask's own (read from its
+    source), so a change of wording in Dask fails here rather than on a user's terminal."""
+    import inspect
+    import logging
+
+    from distributed.worker import Worker
+
+    from lcc_synth.experiments import sweep_cluster
+
+    source = inspect.getsource(Worker.heartbeat)
+    assert sweep_cluster.HEARTBEAT_FAILURE in source
+    import signal
+
+    logger = logging.getLogger("distributed.worker")
+    before = list(logger.filters)
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        sweep_cluster.dask_setup(None)
+
+        def passes(msg):
+            record = logger.makeRecord(logger.name, logging.ERROR, __file__, 1, msg, (), None)
+            return logger.filter(record)
+
+        assert not passes(sweep_cluster.HEARTBEAT_FAILURE + ".")
+        assert passes("Unexpected exception during heartbeat. Closing worker.")
+        assert passes("Compute Failed")
+    finally:
+        logger.filters[:] = before
+        for s, handler in handlers.items():
+            signal.signal(s, handler)

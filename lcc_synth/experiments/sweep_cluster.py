@@ -23,6 +23,9 @@ from lcc_synth.errors import ConfigError
 
 __all__ = ["TASKS_PER_THREAD", "local_cluster", "dask_setup", "stop_cluster", "run_tasks"]
 
+#: How ``distributed.worker`` logs a heartbeat that did not reach the scheduler.
+HEARTBEAT_FAILURE = "Failed to communicate with scheduler during heartbeat"
+
 #: Tasks in flight per worker thread (the next one is submitted when one finishes).
 TASKS_PER_THREAD = 2
 
@@ -74,12 +77,26 @@ def dask_setup(worker: Any) -> None:
     client stops the sweep, keeps what finished and stops the workers itself
     (:func:`stop_cluster`); a worker that died of the same Ctrl-C would print a
     ``KeyboardInterrupt`` traceback (and its nanny an error). A worker whose client dies ends
-    too (Dask's parent monitor)."""
+    too (Dask's parent monitor).
+
+    The worker also drops its log record of a failed heartbeat: when a sweep ends, Dask stops
+    the scheduler before the workers, and a worker whose heartbeat fell in between logged it
+    with a ``CommClosedError`` traceback on the user's terminal (seen once in a CI run). The
+    worker handles that failure itself (it retries, and closes when the scheduler is gone);
+    a failed task still reaches the client as its exception."""
+    import logging
     import signal
 
+    logging.getLogger("distributed.worker").addFilter(_not_a_heartbeat_failure)
     if threading.current_thread() is threading.main_thread():
         for s in (signal.SIGINT, signal.SIGTERM):
             signal.signal(s, signal.SIG_IGN)
+
+
+def _not_a_heartbeat_failure(record: Any) -> bool:
+    """A logging filter: False for a worker's record of a heartbeat that did not reach the
+    scheduler (an ``OSError``, which the worker handles itself); every other record passes."""
+    return not str(record.msg).startswith(HEARTBEAT_FAILURE)
 
 
 def stop_cluster(cluster: Any, client: Any = None, now: bool = False) -> None:
