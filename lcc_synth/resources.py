@@ -56,7 +56,22 @@ from typing import Any
 from lcc_synth.errors import ConfigError
 
 __all__ = [
+    "MEMORY_FRACTION",
     "LONG_RUN_S",
+    "VEHICLE_STEP_S",
+    "STEP_S",
+    "SCENARIO_STEP_S",
+    "MPC_STEP_S",
+    "DEEPLCC_STEP_S",
+    "RECORD_RUN_S",
+    "RECORD_BYTE_S",
+    "RESULT_PEAK",
+    "DRAW_VEHICLE_BYTES",
+    "DRAW_SCENARIO_BYTES",
+    "METRIC_VEHICLE_BYTES",
+    "HISTORY_POINT_BYTES",
+    "VIEW_OBJECT_BYTES",
+    "RECORDER_BYTES",
     "WorkEstimate",
     "announce",
     "available_memory",

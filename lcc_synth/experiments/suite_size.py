@@ -1,5 +1,5 @@
 """The size of ``lcc-synth run``'s recording, before the work: the suite's scenarios with the
-controllers that run in each (:func:`~lcc_synth.experiments.comparison.applies`) handed to
+controllers that run in each (:func:`~lcc_synth.experiments.suite_tables.applies`) handed to
 :func:`lcc_synth.recording.size.estimate_suite_recording`, and the check ``run`` calls
 (:func:`check_suite_recording`: ``--max-recording-size``, the free space)."""
 
@@ -15,7 +15,7 @@ __all__ = ["check_suite_recording", "suite_recording_estimate"]
 def suite_recording_estimate(suite: Suite, decimate: int | str = "minmax") -> Any:
     """The estimated size of ``lcc-synth run``'s recording of ``suite``
     (:func:`lcc_synth.recording.size.estimate_suite_recording`): every scenario with the
-    controllers that run in it (:func:`~lcc_synth.experiments.comparison.applies`, their tables
+    controllers that run in it (:func:`~lcc_synth.experiments.suite_tables.applies`, their tables
     for its layout), the |Gamma| curves and gains of every layout; ``decimate`` as
     ``--record-every``. Returns a :class:`~lcc_synth.recording.size.RecordingEstimate`."""
     from lcc_synth.recording.size import estimate_suite_recording

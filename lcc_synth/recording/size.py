@@ -1,7 +1,7 @@
 """How big a recording will be, before the work is done (``--max-recording-size``).
 
-Method
-------
+Estimation method
+-----------------
 A simulation recording is the sum of its entities (:mod:`lcc_synth.recording.simulation`).
 Per recorded run (one controller on one scenario): five time series (velocity, spacing,
 acceleration: one series per vehicle; the CAV command and the AEB flag: one per CAV), the
