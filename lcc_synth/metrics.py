@@ -31,6 +31,11 @@ Several CAVs: the command, jerk and emergency-braking metrics cover every CAV â€
 over all of them, the RMS jerk of the worst CAV, the 1 s jerk's worst case, margin and time
 over the limit over every CAV (times summed over the CAVs), AEB samples summed.
 
+Safety verdict: a run is *unsafe* (:func:`unsafe_reasons`) when the CAV's emergency braking
+acted, or a vehicle behind the head came closer than :data:`UNSAFE_MIN_SPACING` (2 m) to the
+one ahead or within :data:`UNSAFE_MIN_TTC` (1 s) of hitting it; every table ranks unsafe runs
+after the safe ones (:mod:`lcc_synth.experiments.tables`).
+
 Wave metrics (the Sugiyama ring benchmark, Stern et al. 2018), over the window and vehicle set:
 ``velocity_std`` the standard deviation of the pooled speeds, every vehicle of the set at every
 recorded sample of the window (one population, ``ddof = 0``: ``sqrt(mean (v - mean v)^2)``),
@@ -86,6 +91,10 @@ __all__ = [
     "jerk_limit_violation_time",
     "aeb_activations",
     "collisions",
+    "UNSAFE_MIN_SPACING",
+    "UNSAFE_MIN_TTC",
+    "UNSAFE_RULE",
+    "unsafe_reasons",
     "BRAKING_THRESHOLD",
     "velocity_std",
     "mean_speed",
@@ -397,6 +406,40 @@ def aeb_activations(result) -> np.ndarray:
 def collisions(result) -> np.ndarray:
     """Number of vehicles that collided with the vehicle ahead, per scenario."""
     return result.collided.sum(axis=1)
+
+
+#: Minimum spacing (m) below which a run is unsafe (:func:`unsafe_reasons`).
+UNSAFE_MIN_SPACING = 2.0
+#: Minimum time to collision (s) below which a run is unsafe (:func:`unsafe_reasons`).
+UNSAFE_MIN_TTC = 1.0
+#: The rule, printed once under a table that has unsafe rows.
+UNSAFE_RULE = (f"(unsafe: emergency braking, a spacing under {UNSAFE_MIN_SPACING:g} m or a time "
+               f"to collision under {UNSAFE_MIN_TTC:g} s; ranked after every safe run, its "
+               "AAVE and fuel still shown)")  # fmt: skip
+
+
+def unsafe_reasons(metrics: Mapping[str, Any]) -> list[str]:
+    """Why a table row's run was unsafe (empty: it was safe): emergency braking on some step
+    (``aeb_activations``), a minimum spacing under :data:`UNSAFE_MIN_SPACING` or a minimum
+    time to collision under :data:`UNSAFE_MIN_TTC` (``min_spacing``, ``min_ttc``). A
+    collision is unsafe too (its spacing reached 0). Missing or NaN values judge nothing (a
+    controller that did not run has no metrics).
+
+    >>> unsafe_reasons({"aeb_activations": 297, "min_spacing": 0.096, "min_ttc": 0.05})
+    ['emergency braking on 297 steps', 'min spacing 0.10 m < 2 m', 'min TTC 0.05 s < 1 s']
+    >>> unsafe_reasons({"aeb_activations": 0, "min_spacing": 17.1, "min_ttc": 5.85})
+    []
+    """
+    out = []
+    aeb = metrics.get("aeb_activations")
+    if aeb is not None and float(aeb) > 0:  # NaN compares False
+        out.append(f"emergency braking on {int(aeb)} step{'s' if int(aeb) != 1 else ''}")
+    for key, limit, unit, name in (("min_spacing", UNSAFE_MIN_SPACING, "m", "min spacing"),
+                                   ("min_ttc", UNSAFE_MIN_TTC, "s", "min TTC")):  # fmt: skip
+        value = metrics.get(key)
+        if value is not None and float(value) < limit:  # NaN compares False
+            out.append(f"{name} {float(value):.2f} {unit} < {limit:g} {unit}")
+    return out
 
 
 #: Deceleration (m/sÂ²) below which a vehicle brakes (:func:`braking_events`).

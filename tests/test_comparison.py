@@ -323,7 +323,9 @@ def test_cli_run_json_files_and_recording(problem_file, capsys, tmp_path):
     assert list(doc) == ["results", "provenance"]
     assert set(doc["results"]) == {"brake", "sine"}
     assert set(doc["results"]["sine"]) == {"all_hdv", "paper"}
-    assert set(doc["results"]["sine"]["paper"]) == {*SUITE_METRICS, "collided", "failed_steps"}
+    assert set(doc["results"]["sine"]["paper"]) == {*SUITE_METRICS, "collided", "failed_steps",
+                                                    "unsafe"}  # fmt: skip
+    assert doc["results"]["sine"]["paper"]["unsafe"] == []  # issue 33: the reasons, none here
     prov = doc["provenance"]  # the file's own bytes, hashed independently
     import hashlib
 

@@ -31,8 +31,11 @@ def test_simulate_reports_a_failing_qp_and_exits_1(tmp_path):
     proc = run_cli(["simulate", problem, "--rrd", rrd], cwd=tmp_path)
     assert proc.returncode == 1, proc.stderr
     rows = {line.split("  ")[0]: line for line in proc.stdout.splitlines()}
-    assert "mpc (QP failed on 600 steps)" in rows  # the marker and the count in the table
-    assert list(rows).index("mpc (QP failed on 600 steps)") > list(rows).index("cf_lcc_added")
+    # the marker and the count in the table; falling back on every step, the MPC also needed
+    # emergency braking: unsafe (issue 33), ranked after the safe rows
+    assert "mpc (unsafe, QP failed on 600 steps)" in rows
+    assert list(rows).index("mpc (unsafe, QP failed on 600 steps)") > list(rows).index(
+        "cf_lcc_added")  # fmt: skip
     assert "failed: mpc: its solver failed on 600 of 600 steps" in proc.stderr
     assert "Traceback" not in proc.stderr
     assert rrd_verifies(rrd)

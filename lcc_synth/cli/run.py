@@ -245,16 +245,18 @@ def _print_results(args, suite, result, curves, settings, log, prov) -> None:
     """The table (``--json``: the JSON document on stdout), collisions, controller statistics
     and the as-run |Γ| lines."""
     from lcc_synth.analysis.string_stability import verdict_text
-    from lcc_synth.experiments.tables import format_table, json_safe
+    from lcc_synth.experiments.tables import format_table, json_rows, json_safe, unsafe_lines
 
     if args.json:
-        print(json.dumps(json_safe({"results": result.table, "provenance": prov})))
+        print(json.dumps(json_safe({"results": json_rows(result.table), "provenance": prov})))
         for line in _collision_lines(result):
             print(line, file=log)
         return
     print(_title(suite))
     print(format_table(result.table))
     for line in _collision_lines(result):
+        print(line)
+    for line in unsafe_lines(result.table):
         print(line)
     from lcc_synth.cli.output import controller_stats_lines
 

@@ -203,7 +203,7 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
     and the table prints ``n/a``."""
     import numpy as np
 
-    from lcc_synth.experiments.tables import failed_steps, failure_rank
+    from lcc_synth.experiments.tables import failed_steps, failure_rank, unsafe_reasons
     from lcc_synth.metrics import PHASE_PREFIX, aggregate
 
     cfg = spec.metrics
@@ -213,9 +213,10 @@ def report_from(spec, per: dict[str, dict], info: dict[str, tuple]) -> dict[str,
         entry["controller"], entry["controller_stats"], entry["wall_time_s"] = info[name]
         entry["collided"] = entry["scenarios_with_collision"] > 0
         entry["failed_steps"] = failed_steps(entry["controller_stats"])
+        entry["unsafe"] = unsafe_reasons(entry)  # worst case over the batch: ranked after safe
         out[name] = entry
     for name, why in getattr(spec, "failed", {}).items():  # could not be built: no metrics
-        out[name] = {"failed": why, "collided": False, "failed_steps": 0}
+        out[name] = {"failed": why, "collided": False, "failed_steps": 0, "unsafe": []}
     if cfg.baseline is not None and cfg.baseline in per:
         base = per[cfg.baseline]
         a0, f0 = base["aave"], base["fuel_ml"]
@@ -306,7 +307,7 @@ def print_table(spec, rep: dict[str, Any], file=None, collisions=None) -> None:
         cols += ["AAVE red. %", "fuel red. %"]
     cols += ["min s (m)", "min TTC (s)", "max|u|", "jerk rms", "jerk 1 s", "ISO 15622 jerk", "AEB",
              "collisions"]  # fmt: skip
-    from lcc_synth.experiments.tables import row_label
+    from lcc_synth.experiments.tables import UNSAFE_RULE, row_label
 
     rows = []
     for name, e in rep.items():
@@ -315,11 +316,12 @@ def print_table(spec, rep: dict[str, Any], file=None, collisions=None) -> None:
             continue
         b = e["batch"]
         k = e["scenarios_with_collision"]
-        mark = "" if not k else " (collided)" if b == 1 else f" (collided {k}/{b})"
+        marks = [] if not k else ["collided"] if b == 1 else [f"collided {k}/{b}"]
+        marks += ["unsafe"] if not k and e.get("unsafe") else []
         steps = e.get("failed_steps") or 0
-        mark += f" (QP failed on {steps} step{'s' if steps != 1 else ''})" if steps else ""
+        marks += [f"QP failed on {steps} step{'s' if steps != 1 else ''}"] if steps else []
         row = [
-            name + mark,
+            f"{name} ({', '.join(marks)})" if marks else name,
             _fmt(e["aave"], e["aave_std"], b, 4),
             _fmt(e["fuel_ml"], e["fuel_ml_std"], b, 2),
         ]
@@ -355,6 +357,12 @@ def print_table(spec, rep: dict[str, Any], file=None, collisions=None) -> None:
         print(line, file=file)
     for line in collision_lines(rep, collisions):
         print(line, file=file)
+    unsafe = {n: e["unsafe"] for n, e in rep.items()
+              if e.get("unsafe") and not e.get("scenarios_with_collision")}  # fmt: skip
+    for name, why in unsafe.items():
+        print(f"unsafe: {name}: {', '.join(why)}", file=file)
+    if unsafe:
+        print(UNSAFE_RULE, file=file)
     from lcc_synth.cli.output import controller_stats_lines
 
     stats = {n: e["controller_stats"] for n, e in rep.items() if "controller_stats" in e}

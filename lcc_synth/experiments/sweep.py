@@ -530,7 +530,10 @@ def run_sweep(
 
 
 def format_summary(summary: Mapping[str, Mapping[str, Any]]) -> str:
-    """Plain-text table: one row per controller, ``mean [p5, p95]`` per metric, then counts."""
+    """Plain-text table: one row per controller, ``mean [p5, p95]`` per metric, then counts;
+    safety before efficiency: the controllers with a collided run, then those with an unsafe
+    one (``unsafe_scenarios``, :func:`~lcc_synth.metrics.unsafe_reasons`; marked
+    ``(unsafe in k/N)``), then those whose solver failed come after the others."""
     fmt = {"aave": ".3f", "fuel_ml": ".1f", "min_spacing": ".2f", "min_ttc": ".2f",
            "max_abs_command": ".2f", "rms_jerk_cav": ".2f", "max_jerk_1s_cav": ".2f"}
 
@@ -540,17 +543,25 @@ def format_summary(summary: Mapping[str, Mapping[str, Any]]) -> str:
         return f"{d['mean']:{f}} [{d['p5']:{f}}, {d['p95']:{f}}]"
 
     head = ["controller", *(SWEEP_METRICS[k] for k in SWEEP_METRICS), "collisions (scen.)",
-            "AEB steps (scen.)", "over ISO jerk (scen.)", "MPC fallbacks"]
+            "AEB steps (scen.)", "unsafe (scen.)", "over ISO jerk (scen.)", "MPC fallbacks"]
     rows = []
-    for name, e in summary.items():
+
+    def rank(item: tuple[str, Mapping[str, Any]]) -> tuple[bool, bool, bool]:
+        e = item[1]  # safety before efficiency: controllers with unsafe runs after the others
+        return (e["collision_scenarios"] > 0, e.get("unsafe_scenarios", 0) > 0,
+                int(e.get("fallbacks") or 0) > 0)  # fmt: skip
+
+    for name, e in sorted(summary.items(), key=rank):
         steps = int(e.get("fallbacks") or 0)  # the solver failed (fell back) on these steps
-        label = (f"{name} (QP failed on {steps} step{'s' if steps != 1 else ''})" if steps
-                 else name)  # fmt: skip
+        marks = [f"unsafe in {e['unsafe_scenarios']}/{e['scenarios']}"] if (
+            e.get("unsafe_scenarios") and not e["collision_scenarios"]) else []  # fmt: skip
+        marks += [f"QP failed on {steps} step{'s' if steps != 1 else ''}"] if steps else []
+        label = f"{name} ({', '.join(marks)})" if marks else name
         rows.append(
             [label, *(cell(e[k], fmt.get(k, ".3g")) for k in SWEEP_METRICS),
              f"{e['collisions']} ({e['collision_scenarios']})",
-             f"{e['aeb_activations']} ({e['aeb_scenarios']})", str(e["jerk_scenarios"]),
-             str(e["fallbacks"])]
+             f"{e['aeb_activations']} ({e['aeb_scenarios']})",
+             str(e.get("unsafe_scenarios", "n/a")), str(e["jerk_scenarios"]), str(e["fallbacks"])]
         )
     widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(head)]
     lines = ["  ".join(h.ljust(w) for h, w in zip(head, widths, strict=True))]

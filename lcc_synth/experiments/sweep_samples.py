@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.metrics import WAVE_METRICS
+from lcc_synth.metrics import UNSAFE_MIN_SPACING, UNSAFE_MIN_TTC, WAVE_METRICS
 
 __all__ = ["SWEEP_METRICS", "SWEEP_SAMPLES", "SWEEP_COUNTS", "aggregate", "table_digest",
            "SweepProgress"]  # fmt: skip
@@ -67,7 +67,10 @@ def aggregate(
     out, whatever their values), and the counts ``collisions`` (collided vehicles),
     ``collision_scenarios`` (collided runs), ``aeb_activations`` (steps), ``aeb_scenarios``,
     ``jerk_scenarios`` (scenarios whose CAV's 1 s average jerk exceeds ISO 15622's limit
-    outside emergency braking), ``fallbacks`` (MPC fallback steps) and ``scenarios``."""
+    outside emergency braking), ``unsafe_scenarios`` (runs with emergency braking, a spacing
+    or a time to collision under the thresholds of
+    :func:`lcc_synth.metrics.unsafe_reasons`, collisions included), ``fallbacks``
+    (MPC fallback steps) and ``scenarios``."""
     out = {}
     for name, per in samples.items():
         coll = np.asarray(per["collisions"])
@@ -84,6 +87,10 @@ def aggregate(
         entry["aeb_activations"] = int(aeb.sum())
         entry["aeb_scenarios"] = int(np.count_nonzero(aeb))
         entry["jerk_scenarios"] = int(np.count_nonzero(np.asarray(per["jerk_1s_over_limit_s"]) > 0))
+        with np.errstate(invalid="ignore"):  # NaN (a head's spacing) judges nothing
+            unsafe = ((aeb > 0) | (np.asarray(per["min_spacing"], dtype=float) < UNSAFE_MIN_SPACING)
+                      | (np.asarray(per["min_ttc"], dtype=float) < UNSAFE_MIN_TTC))  # fmt: skip
+        entry["unsafe_scenarios"] = int(np.count_nonzero(unsafe))
         entry["fallbacks"] = int(fallbacks.get(name, 0))
         entry["scenarios"] = int(coll.size)
         out[name] = entry

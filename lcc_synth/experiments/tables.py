@@ -1,18 +1,31 @@
 """The tables of an experiment: the comparison table's columns (:data:`SUITE_METRICS`) and its
 terminal, Markdown, CSV and JSON forms, JSON-safe copies and the run's results directory.
 
-Failed runs rank last, in every form (:func:`rank_failed_last`; file order otherwise):
+Safety before efficiency: unsafe and failed runs rank last, in every form
+(:func:`rank_failed_last`; file order otherwise):
 
+* a run that was *unsafe* (:func:`~lcc_synth.metrics.unsafe_reasons`: the CAV's emergency
+  braking acted on some step, or some vehicle came closer than 2 m to the one ahead or within
+  1 s of hitting it) is marked ``NAME (unsafe)`` and comes after every safe run, whatever its
+  AAVE and fuel (which are still shown): a run that emergency braking saved is not the best
+  of its table. The thresholds: 2 m is about the standstill gap a driver keeps in a queue
+  (the OVM's ``s_st`` is 5 m), 1 s a time to collision below which an emergency brake warning
+  is due (common FCW thresholds are 1.5-2.5 s; 1 s marks a run as unsafe without flagging
+  ordinary close following). They are judged on the table's worst case: ``min spacing`` and
+  ``min TTC`` of every vehicle behind the head (the HDVs included: the CAV is there to lead
+  them), ``AEB steps`` of the CAVs;
 * a run whose controller's solver failed on some steps (``"failed_steps": k > 0``: QP steps
   that fell back to a shifted plan, the static gain or a held command, and controller errors;
   :func:`failed_steps`) is marked ``NAME (QP failed on k steps)`` and comes after the clean
   runs;
 * a run that collided (``"collided": true``, else ``collisions > 0``) has NaN AAVE and fuel
-  (:mod:`lcc_synth.metrics`), is marked ``NAME (collided)`` and comes after those;
+  (:mod:`lcc_synth.metrics`), is marked ``NAME (collided)`` and comes after those (the
+  ranking key, :func:`failure_rank`: not run, collided, unsafe, solver failures);
 * a controller that could not run at all (``"failed": "why"``, e.g. its synthesis failed) has
   no metrics (``n/a``), is marked ``NAME (not run)`` (the commands print why) and comes last.
 
-CSV has the columns ``collided``, ``failed_steps`` and ``not_run`` for them, JSON the keys.
+CSV has the columns ``collided``, ``unsafe`` (the reasons, ``; ``-separated), ``failed_steps``
+and ``not_run`` for them; JSON rows carry ``"unsafe": [reasons]`` (empty when safe).
 """
 
 from __future__ import annotations
@@ -24,6 +37,8 @@ from typing import Any
 
 import numpy as np
 
+from lcc_synth.metrics import UNSAFE_RULE, unsafe_reasons
+
 __all__ = [
     "SUITE_METRICS",
     "json_safe",
@@ -32,10 +47,12 @@ __all__ = [
     "failure_rank",
     "row_label",
     "rank_failed_last",
+    "unsafe_lines",
     "format_table",
     "markdown_table",
     "write_markdown",
     "write_csv",
+    "json_rows",
     "write_json",
     "run_directory",
 ]
@@ -95,21 +112,25 @@ def failed_steps(stats: Mapping[str, Any] | None) -> int:
     return int(stats.get("fallbacks", 0) or 0) + int(stats.get("errors", 0) or 0)
 
 
-def failure_rank(metrics: Mapping[str, Any]) -> tuple[bool, bool, bool]:
-    """Sort key of a row: clean runs, then solver failures, then collisions, then controllers
-    that did not run."""
-    return (bool(metrics.get("failed")), collided(metrics),
+def failure_rank(metrics: Mapping[str, Any]) -> tuple[bool, bool, bool, bool]:
+    """Sort key of a row: safe clean runs, then safe runs with solver failures, then unsafe
+    runs (:func:`unsafe_reasons`; those with solver failures after the others), then
+    collisions, then controllers that did not run."""
+    return (bool(metrics.get("failed")), collided(metrics), bool(unsafe_reasons(metrics)),
             bool(metrics.get("failed_steps") or 0))  # fmt: skip
 
 
 def row_label(name: str, metrics: Mapping[str, Any]) -> str:
     """``NAME`` with its failure marks: ``(not run)`` (the reason is printed under the table),
-    ``(collided)``, ``(QP failed on k steps)``."""
+    ``(collided)`` or else ``(unsafe)`` (:func:`unsafe_lines` say why), ``(QP failed on k
+    steps)``."""
     if metrics.get("failed"):
         return f"{name} (not run)"
     marks = []
     if collided(metrics):
         marks.append("collided")
+    elif unsafe_reasons(metrics):
+        marks.append("unsafe")
     k = int(metrics.get("failed_steps") or 0)
     if k:
         marks.append(f"QP failed on {k} step{'s' if k != 1 else ''}")
@@ -117,13 +138,22 @@ def row_label(name: str, metrics: Mapping[str, Any]) -> str:
 
 
 def rank_failed_last(table: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> dict[str, dict]:
-    """The table with, within every scenario, the runs whose solver failed, then those that
-    collided, then the controllers that did not run, moved after the clean runs (a stable
-    sort: file order otherwise)."""
+    """The table with, within every scenario, the runs whose solver failed, then the unsafe
+    runs, then those that collided, then the controllers that did not run, moved after the
+    safe clean runs (:func:`failure_rank`; a stable sort: file order otherwise)."""
     return {
         sname: dict(sorted(per.items(), key=lambda item: failure_rank(item[1])))
         for sname, per in table.items()
     }
+
+
+def unsafe_lines(table: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> list[str]:
+    """One line per unsafe run that did not collide (collisions have their own report):
+    ``unsafe: SCENARIO/CONTROLLER: reason, reason``, then the rule once."""
+    lines = [f"unsafe: {sname}/{cname}: {', '.join(why)}"
+             for sname, per in rank_failed_last(table).items() for cname, m in per.items()
+             if not m.get("failed") and not collided(m) and (why := unsafe_reasons(m))]  # fmt: skip
+    return [*lines, UNSAFE_RULE] if lines else lines
 
 
 def _cell(value: Any, fmt: str) -> str:
@@ -206,8 +236,9 @@ def write_csv(
 ) -> Path:  # fmt: skip
     """CSV with columns ``scenario, controller``, the :data:`SUITE_METRICS` keys (full
     precision; ``inf`` for a time to collision that never occurs, empty for NaN) and
-    ``collided`` (``true`` / ``false``), ``failed_steps`` and ``not_run`` (the reason, empty
-    when it ran): failed rows last in their scenario. Written atomically (as
+    ``collided`` (``true`` / ``false``), ``failed_steps``, ``not_run`` (the reason, empty
+    when it ran) and ``unsafe`` (:func:`unsafe_reasons`, ``; ``-separated, empty when safe):
+    unsafe and failed rows last in their scenario. Written atomically (as
     :func:`write_markdown`)."""
     import csv
     import io
@@ -217,7 +248,7 @@ def write_csv(
     fh = io.StringIO()
     w = csv.writer(fh)
     w.writerow(["scenario", "controller", *SUITE_METRICS, "collided", "failed_steps",
-                "not_run"])  # fmt: skip
+                "not_run", "unsafe"])  # fmt: skip
     for sname, per in rank_failed_last(table).items():
         for cname, metrics in per.items():
             vals = []
@@ -228,18 +259,26 @@ def write_csv(
                 else:
                     vals.append(repr(float(v)) if isinstance(v, float) else str(v))
             w.writerow([sname, cname, *vals, str(collided(metrics)).lower(),
-                        int(metrics.get("failed_steps") or 0), metrics.get("failed") or ""])
+                        int(metrics.get("failed_steps") or 0), metrics.get("failed") or "",
+                        "; ".join(unsafe_reasons(metrics))])  # fmt: skip
     return write_text(path, fh.getvalue(), overwrite)
+
+
+def json_rows(table: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> dict[str, dict]:
+    """The rows as ``run --json`` and ``table.json`` give them: ranked (:func:`rank_failed_last`)
+    and each with ``"unsafe"``, the list of :func:`unsafe_reasons` (empty when safe)."""
+    return {sname: {cname: {**m, "unsafe": unsafe_reasons(m)} for cname, m in per.items()}
+            for sname, per in rank_failed_last(table).items()}  # fmt: skip
 
 
 def write_json(
     table: Mapping[str, Any], path: str | Path, overwrite: bool = True, **extra: Any
 ) -> Path:
-    """``{"results": table, **extra}`` as JSON (non-finite numbers as ``null``; failed rows
-    last in their scenario), written atomically (as :func:`write_markdown`)."""
+    """``{"results": json_rows(table), **extra}`` as JSON (non-finite numbers as ``null``),
+    written atomically (as :func:`write_markdown`)."""
     import json
 
     from lcc_synth.outputs import write_text
 
-    doc = {"results": rank_failed_last(table), **extra}
+    doc = {"results": json_rows(table), **extra}
     return write_text(path, json.dumps(json_safe(doc), indent=2) + "\n", overwrite)

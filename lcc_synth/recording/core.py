@@ -463,12 +463,27 @@ def _state(rec: Any) -> _RecState:
 
 
 def _comparison_markdown(scenario: str, rows: Mapping[str, Mapping[str, Any]]) -> str:
-    ctrls = list(rows)
+    """A scenario's metrics, one column per controller: safety before efficiency, the columns
+    of runs that collided or were unsafe (:func:`lcc_synth.metrics.unsafe_reasons`) after the
+    safe ones, and a first row ``safety`` saying which and why."""
+    from lcc_synth.metrics import unsafe_reasons
+
+    def verdict(row: Mapping[str, Any]) -> tuple[bool, list[str]]:
+        numbers = {k: v for k, v in row.items()
+                   if isinstance(v, int | float | np.number) and not isinstance(v, bool)}
+        return bool(numbers.get("collisions")), unsafe_reasons(numbers)
+
+    ctrls = sorted(rows, key=lambda c: (verdict(rows[c])[0], bool(verdict(rows[c])[1])))
     keys: list[str] = []
     for row in rows.values():
         keys += [k for k, v in row.items() if _is_scalar(v) and k not in keys]
     lines = [f"# {scenario}: metrics", ""]
     lines += ["| metric | " + " | ".join(ctrls) + " |", "|---|" + "---|" * len(ctrls)]
+    cells = []
+    for c in ctrls:
+        hit, why = verdict(rows[c])
+        cells.append("collided" if hit else ("unsafe: " + ", ".join(why)) if why else "safe")
+    lines.append("| safety | " + " | ".join(cells) + " |")
     for k in keys:
         lines.append(f"| {k} | " + " | ".join(_fmt(rows[c].get(k, "")) for c in ctrls) + " |")
     return "\n".join(lines) + "\n"

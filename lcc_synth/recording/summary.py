@@ -134,7 +134,11 @@ def _metrics(texts: Mapping[str, str]) -> list[str]:
     present = {k for _, _, rows in tables for k in rows}
     keys = [k for k in KEY_METRICS if k in present] or sorted(present)[:6]
     head = ["scenario", "controller", *keys]
-    body = [[s if i == 0 else "", c, *(rows.get(k, {}).get(c, "") for k in keys)]
+    def label(c: str, rows: Mapping[str, Mapping[str, str]]) -> str:
+        verdict = rows.get("safety", {}).get(c, "")  # the recording's safety row, if any
+        return f"{c} ({verdict.split(':')[0]})" if verdict and verdict != "safe" else c
+
+    body = [[s if i == 0 else "", label(c, rows), *(rows.get(k, {}).get(c, "") for k in keys)]
             for s, ctrls, rows in tables for i, c in enumerate(ctrls)]  # fmt: skip
     widths = [max(len(r[j]) for r in [head, *body]) for j in range(len(head))]
     fmt = "  " + "  ".join(f"{{:<{w}}}" for w in widths)
