@@ -91,6 +91,9 @@ __all__ = [
     "jerk_limit_violation_time",
     "aeb_activations",
     "collisions",
+    "METRIC_DISPLAY",
+    "DISPLAY_LIMIT",
+    "format_metric",
     "UNSAFE_MIN_SPACING",
     "UNSAFE_MIN_TTC",
     "UNSAFE_RULE",
@@ -406,6 +409,63 @@ def aeb_activations(result) -> np.ndarray:
 def collisions(result) -> np.ndarray:
     """Number of vehicles that collided with the vehicle ahead, per scenario."""
     return result.collided.sum(axis=1)
+
+
+#: How a metric is shown in every table (``run``, the recordings, ``review --summary``): key ->
+#: (label with its unit, format of :func:`format_metric`). Keys not listed are shown as
+#: they are.
+METRIC_DISPLAY: dict[str, tuple[str, str]] = {
+    "aave": ("AAVE (m/s)", ".4f"),
+    "aave_std": ("AAVE std over the batch (m/s)", ".4f"),
+    "fuel_ml": ("fuel (mL)", ".2f"),
+    "fuel_ml_std": ("fuel std over the batch (mL)", ".2f"),
+    "velocity_std": ("velocity std (m/s)", ".3f"),
+    "mean_speed": ("mean speed (m/s)", ".3f"),
+    "braking_events": ("braking events", "d"),
+    "min_spacing": ("min spacing (m)", ".2f"),
+    "min_ttc": ("min TTC (s)", ".2f"),
+    "max_abs_command": ("max |u| (m/s²)", ".3f"),
+    "rms_jerk_cav": ("RMS jerk (m/s³)", ".2f"),
+    "max_jerk_1s_cav": ("max 1 s jerk (m/s³)", ".2f"),
+    "jerk_1s_margin_cav": ("ISO 15622 jerk margin (m/s³)", ".2f"),
+    "jerk_1s_over_limit_s": ("ISO 15622 jerk", "iso"),
+    "aeb_activations": ("AEB steps", "d"),
+    "aeb_episodes": ("AEB episodes", "d"),
+    "collisions": ("collisions", "d"),
+    "wall_time_s": ("wall time (s)", ".3f"),
+}
+#: A fixed-point value this large is shown as ``>= 1e6`` (a time to collision of 2.7e12 s is a
+#: closing speed at round-off: the vehicle is not closing in).
+DISPLAY_LIMIT = 1e6
+
+
+def format_metric(value: Any, fmt: str) -> str:
+    """``value`` as a table shows it: ``n/a`` (None), ``nan``, ``inf``; ``fmt`` ``"d"`` an
+    integer count, ``"iso"`` the time over ISO 15622's jerk limit as a verdict (``ok`` or
+    ``over X s``), else a format spec (fixed-point values of magnitude
+    :data:`DISPLAY_LIMIT` or more: ``>= 1e6``; a value that rounds to zero prints as zero, so
+    ``6e-12`` m/s² of round-off is ``0.000``).
+
+    >>> format_metric(2.66e12, ".2f"), format_metric(6e-12, ".3f"), format_metric(0.0, "iso")
+    ('>= 1e6', '0.000', 'ok')
+    """
+    if value is None:
+        return "n/a"
+    if isinstance(value, bool):
+        return str(value).lower()
+    v = float(value)
+    if np.isnan(v):
+        return "nan"
+    if np.isinf(v):
+        return "inf" if v > 0 else "-inf"
+    if fmt == "d":
+        return str(int(v))
+    if fmt == "iso":
+        return "ok" if v == 0 else f"over {v:.2f} s"
+    if fmt.endswith("f") and abs(v) >= DISPLAY_LIMIT:
+        return f"{'>=' if v > 0 else '<= -'} 1e6".replace("- ", "-")
+    text = format(v, fmt)
+    return format(0.0, fmt) if float(text.rstrip("%")) == 0 else text  # no "-0.000"
 
 
 #: Minimum spacing (m) below which a run is unsafe (:func:`unsafe_reasons`).

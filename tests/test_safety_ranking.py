@@ -144,3 +144,21 @@ def test_the_recording_ranks_it_last_and_says_why(head_brake):
     head, safety = table.splitlines()[2], table.splitlines()[4]
     assert head.rstrip(" |").endswith("cf_lcc_paper")
     assert safety.startswith("| safety | safe | safe | safe | unsafe: emergency braking on")
+    # labelled with units and rounded as the run table rounds them; nothing-carrying rows out
+    rows = {line.split(" | ")[0].lstrip("| "): line for line in table.splitlines()[4:]}
+    assert rows["AAVE (m/s)"].startswith("| AAVE (m/s) | 2.5057 | 2.4343 |")
+    assert "min spacing (m)" in rows and "batch" not in rows and "AAVE std over the batch (m/s)"\
+        not in rows and "collided" not in rows  # fmt: skip
+    proc = run_cli(["review", rrd, "--summary"], cwd=rrd.parent)
+    assert proc.returncode == 0, proc.stderr
+    last = [line for line in proc.stdout.splitlines() if "cf_lcc_paper" in line]
+    assert last and "cf_lcc_paper (unsafe)" in last[0] and "AAVE (m/s)" in proc.stdout
+
+
+def test_values_at_round_off_are_shown_as_such():
+    from lcc_synth.metrics import format_metric
+
+    assert format_metric(2.66e12, ".2f") == ">= 1e6"  # a closing speed at round-off
+    assert format_metric(6e-12, ".3f") == "0.000" and format_metric(-6e-12, ".3f") == "0.000"
+    assert format_metric(-0.0005, ".4f") == "-0.0005"
+    assert format_metric(0.01, "iso") == "over 0.01 s" and format_metric(None, ".2f") == "n/a"

@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from lcc_synth.metrics import UNSAFE_RULE, unsafe_reasons
+from lcc_synth.metrics import METRIC_DISPLAY, UNSAFE_RULE, format_metric, unsafe_reasons
 
 __all__ = [
     "SUITE_METRICS",
@@ -57,20 +57,14 @@ __all__ = [
     "run_directory",
 ]
 
-#: Metrics of the comparison table: key of :func:`lcc_synth.metrics.summary` -> (header, format).
-#: Format ``"iso"``: the time above ISO 15622's jerk limit as a verdict, ``ok`` or ``over X s``.
+#: Metrics of the comparison table: key of :func:`lcc_synth.metrics.summary` -> (header, format),
+#: as every table shows them (:data:`lcc_synth.metrics.METRIC_DISPLAY`). Format ``"iso"``: the
+#: time above ISO 15622's jerk limit as a verdict, ``ok`` or ``over X s``.
 SUITE_METRICS: dict[str, tuple[str, str]] = {
-    "aave": ("AAVE (m/s)", ".4f"),
-    "fuel_ml": ("fuel (mL)", ".2f"),
-    "min_spacing": ("min spacing (m)", ".2f"),
-    "min_ttc": ("min TTC (s)", ".2f"),
-    "max_abs_command": ("max |u| (m/s²)", ".3f"),
-    "rms_jerk_cav": ("RMS jerk (m/s³)", ".2f"),
-    "max_jerk_1s_cav": ("max 1 s jerk (m/s³)", ".2f"),
-    "jerk_1s_over_limit_s": ("ISO 15622 jerk", "iso"),
-    "aeb_activations": ("AEB steps", "d"),
-    "collisions": ("collisions", "d"),
-}
+    k: METRIC_DISPLAY[k]
+    for k in ("aave", "fuel_ml", "min_spacing", "min_ttc", "max_abs_command", "rms_jerk_cav",
+              "max_jerk_1s_cav", "jerk_1s_over_limit_s", "aeb_activations", "collisions")
+}  # fmt: skip
 
 
 def run_directory(root: str | Path, name: str, stamp: str) -> Path:
@@ -156,27 +150,13 @@ def unsafe_lines(table: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> list[s
     return [*lines, UNSAFE_RULE] if lines else lines
 
 
-def _cell(value: Any, fmt: str) -> str:
-    if value is None:
-        return "n/a"
-    if isinstance(value, float) and math.isnan(value):
-        return "nan"
-    if isinstance(value, float) and math.isinf(value):
-        return "inf" if value > 0 else "-inf"
-    if fmt == "d":
-        return str(int(value))
-    if fmt == "iso":
-        return "ok" if value == 0 else f"over {float(value):.2f} s"
-    return format(float(value), fmt)
-
-
 def _rows(table: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> list[list[str]]:
     rows = []
     for sname, per in rank_failed_last(table).items():
         for cname, metrics in per.items():
             rows.append(
                 [sname, row_label(cname, metrics)]
-                + [_cell(metrics.get(k), fmt) for k, (_, fmt) in SUITE_METRICS.items()]
+                + [format_metric(metrics.get(k), fmt) for k, (_, fmt) in SUITE_METRICS.items()]
             )
     return rows
 

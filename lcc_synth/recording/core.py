@@ -462,28 +462,54 @@ def _state(rec: Any) -> _RecState:
         return _RecState()
 
 
+#: Rows of a comparison table that carry nothing when every run has them at this value.
+_NOTHING_AT = {"batch": 1, "aave_std": 0, "fuel_ml_std": 0, "collided": False,
+               "scenarios_with_collision": 0, "failed_steps": 0}  # fmt: skip
+
+
 def _comparison_markdown(scenario: str, rows: Mapping[str, Mapping[str, Any]]) -> str:
-    """A scenario's metrics, one column per controller: safety before efficiency, the columns
-    of runs that collided or were unsafe (:func:`lcc_synth.metrics.unsafe_reasons`) after the
-    safe ones, and a first row ``safety`` saying which and why."""
-    from lcc_synth.metrics import unsafe_reasons
+    """A scenario's metrics, one column per controller, as a table of a paper: each metric
+    labelled with its unit and rounded as the ``run`` table rounds it
+    (:data:`lcc_synth.metrics.METRIC_DISPLAY`), without the rows that carry nothing (a batch
+    of 1 and its zero standard deviations, no collision, no solver failure). Safety before
+    efficiency: when the runs have safety metrics, a first row ``safety`` says which runs
+    collided or were unsafe (:func:`lcc_synth.metrics.unsafe_reasons`) and why, and their
+    columns come after the safe ones."""
+    from lcc_synth.metrics import METRIC_DISPLAY, format_metric, unsafe_reasons
+
+    def numbers(row: Mapping[str, Any]) -> dict[str, Any]:
+        return {k: v for k, v in row.items()
+                if isinstance(v, int | float | np.number) and not isinstance(v, bool)}
 
     def verdict(row: Mapping[str, Any]) -> tuple[bool, list[str]]:
-        numbers = {k: v for k, v in row.items()
-                   if isinstance(v, int | float | np.number) and not isinstance(v, bool)}
-        return bool(numbers.get("collisions")), unsafe_reasons(numbers)
+        return bool(numbers(row).get("collisions")), unsafe_reasons(numbers(row))
 
+    judged = any(k in numbers(r) for r in rows.values()
+                 for k in ("min_spacing", "min_ttc", "aeb_activations"))  # fmt: skip
     ctrls = sorted(rows, key=lambda c: (verdict(rows[c])[0], bool(verdict(rows[c])[1])))
+    if not judged:
+        ctrls = list(rows)
     keys: list[str] = []
     for row in rows.values():
         keys += [k for k, v in row.items() if _is_scalar(v) and k not in keys]
+    keys = [k for k in keys if not (k in _NOTHING_AT and all(
+        rows[c].get(k, _NOTHING_AT[k]) == _NOTHING_AT[k] for c in ctrls))]  # fmt: skip
     lines = [f"# {scenario}: metrics", ""]
     lines += ["| metric | " + " | ".join(ctrls) + " |", "|---|" + "---|" * len(ctrls)]
-    cells = []
-    for c in ctrls:
-        hit, why = verdict(rows[c])
-        cells.append("collided" if hit else ("unsafe: " + ", ".join(why)) if why else "safe")
-    lines.append("| safety | " + " | ".join(cells) + " |")
+    if judged:
+        cells = []
+        for c in ctrls:
+            hit, why = verdict(rows[c])
+            cells.append("collided" if hit else ("unsafe: " + ", ".join(why)) if why else "safe")
+        lines.append("| safety | " + " | ".join(cells) + " |")
+
+    def cell(k: str, v: Any) -> str:
+        if k in METRIC_DISPLAY and isinstance(v, int | float | np.number):
+            return _cell(format_metric(v, METRIC_DISPLAY[k][1]))
+        return _cell(_fmt(v))
+
     for k in keys:
-        lines.append(f"| {k} | " + " | ".join(_fmt(rows[c].get(k, "")) for c in ctrls) + " |")
+        label = _cell(METRIC_DISPLAY[k][0]) if k in METRIC_DISPLAY else k
+        lines.append(f"| {label} | " + " | ".join(cell(k, rows[c].get(k, "")) for c in ctrls)
+                     + " |")  # fmt: skip
     return "\n".join(lines) + "\n"

@@ -13,6 +13,7 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 
+from lcc_synth.metrics import METRIC_DISPLAY
 from lcc_synth.recording.reader import RecordingSummary
 
 __all__ = ["MAX_LINES", "full_lines", "markdown_pairs", "summary_lines"]
@@ -132,7 +133,10 @@ def _metrics(texts: Mapping[str, str]) -> list[str]:
     if not tables:
         return []
     present = {k for _, _, rows in tables for k in rows}
-    keys = [k for k in KEY_METRICS if k in present] or sorted(present)[:6]
+    # the rows are labelled with units (METRIC_DISPLAY); recordings before that used the keys
+    label = {k: METRIC_DISPLAY[k][0] for k in KEY_METRICS}
+    keys = ([label[k] for k in KEY_METRICS if label[k] in present]
+            or [k for k in KEY_METRICS if k in present] or sorted(present)[:6])  # fmt: skip
     head = ["scenario", "controller", *keys]
     def label(c: str, rows: Mapping[str, Mapping[str, str]]) -> str:
         verdict = rows.get("safety", {}).get(c, "")  # the recording's safety row, if any
