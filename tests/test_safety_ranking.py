@@ -152,7 +152,7 @@ def test_the_recording_ranks_it_last_and_says_why(head_brake):
     proc = run_cli(["review", rrd, "--summary"], cwd=rrd.parent)
     assert proc.returncode == 0, proc.stderr
     last = [line for line in proc.stdout.splitlines() if "cf_lcc_paper" in line]
-    assert last and "cf_lcc_paper (unsafe)" in last[0] and "AAVE (m/s)" in proc.stdout
+    assert "cf_lcc_paper (unsafe)" in last[-1] and "AAVE (m/s)" in proc.stdout
 
 
 def test_values_at_round_off_are_shown_as_such():
