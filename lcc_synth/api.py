@@ -516,7 +516,7 @@ def build_problem(
         if scenario is None or not controllers:
             raise ConfigError("controllers", "a simulation needs a scenario and a controller")
         sim = SimulationSpec(name, system, scenario, dict(controllers), metrics or
-                             MetricsConfig(), "python")  # fmt: skip
+                             MetricsConfig(), "python", description=description)  # fmt: skip
     if synthesis is not None and synthesis.system != system:
         raise ConfigError("synthesis", "is for another system than the problem's")
     return ProblemObjects(name, description, system, simulation=sim, synthesis=synthesis)

@@ -38,6 +38,8 @@ class SimulationSpec(Record):
     #: controllers that could not be built (``{name: why}``, e.g. a failed synthesis): the
     #: others run, and ``simulate`` reports these and exits 1
     failed: dict[str, str] = field(default_factory=dict)
+    #: the problem file's ``description`` (free text; the recording's context document)
+    description: str = ""
 
     def toml_tables(self) -> dict[str, Any]:
         """``name``, ``[hdv]``, ``[system]``, ``[scenario]``, ``[controllers.*]`` and
@@ -224,7 +226,9 @@ def load_spec(
         controllers = controllers_from(problem.data, system, source, problem.name, failed)
         check_time_step(scenario, controllers)
         metrics = metrics_from(problem.data, system, controllers, scenario)
+        description = problem.data.get("description", "")
         return SimulationSpec(problem.name, system, scenario, controllers, metrics, source,
-                              dict(failed or {}))  # fmt: skip
+                              dict(failed or {}), description if isinstance(description, str)
+                              else "")  # fmt: skip
     except ConfigError as err:
         raise err.with_source(source) if not err.source else err from None

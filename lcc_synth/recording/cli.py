@@ -14,9 +14,12 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
+from lcc_synth.recording.context import context_markdown, first_event
 from lcc_synth.recording.core import (
+    entity_name,
     open_recording,
     record_provenance,
+    record_text,
     set_status,
     written_path,
 )
@@ -212,6 +215,7 @@ class SimulationRecorder:
                 if callable(getattr(c, "history", None))
             ]
             self.ranges = plot_ranges(result)
+            self.event = first_event(getattr(spec, "scenario", None))
             self._layout = (spec.name, list(spec.controllers), mpc, batch > 1)
             self.rec = self.stack.enter_context(
                 open_recording(self.path, spec.name, self._blueprint(),
@@ -219,6 +223,9 @@ class SimulationRecorder:
             )
             if self.provenance is not None:
                 record_provenance(self.rec, self.provenance)
+            if getattr(spec, "scenario", None) is not None and hasattr(spec, "to_toml"):
+                record_text(self.rec, f"/{entity_name(spec.name)}/context",
+                            context_markdown(spec))  # fmt: skip
         else:
             self.ranges = merge_ranges(self.ranges, plot_ranges(result))
         controller = dict(spec.controllers).get(name)
@@ -239,9 +246,10 @@ class SimulationRecorder:
 
     def _blueprint(self):
         scenario, controllers, mpc, several = self._layout
+        ranges = {**self.ranges, "event": self.event}  # the time panel opens on the event
         if several:
-            return seeds_blueprint(scenario, controllers, self.seeds, mpc, self.ranges)
-        return simulation_blueprint(scenario, controllers, mpc, self.ranges)
+            return seeds_blueprint(scenario, controllers, self.seeds, mpc, ranges)
+        return simulation_blueprint(scenario, controllers, mpc, ranges)
 
     def metrics(
         self, report: Mapping[str, Mapping[str, Any]], per: Mapping[str, Any] | None = None

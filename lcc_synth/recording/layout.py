@@ -88,6 +88,29 @@ def _time_views(rrb, ranges: Mapping[str, Any]) -> dict[str, Any]:
     }
 
 
+def time_panel(rrb, ranges: Mapping[str, Any] | None = None):
+    """The time panel every recording opens with: expanded, on the simulated ``time``
+    timeline (not the viewer's ``log_time``, which it would show while loading), paused (the
+    web viewer otherwise plays from wherever it is), and, when ``ranges`` has the run's
+    ``"time"`` span, its time selection from the first event (``"event"``: a perturbation's
+    start, :func:`lcc_synth.recording.context.first_event`) to the end of the run."""
+    selection = None
+    t = (ranges or {}).get("time")
+    if t is not None:
+        event = (ranges or {}).get("event")
+        lo = float(event) if event is not None and t[0] <= float(event) <= t[1] else float(t[0])
+        selection = rrb_time_range(lo, float(t[1]))
+    return rrb.TimePanel(state="expanded", timeline="time", play_state="paused",
+                         time_selection=selection)  # fmt: skip
+
+
+def rrb_time_range(lo: float, hi: float):
+    """A Rerun absolute time range ``[lo, hi]`` seconds of a duration timeline."""
+    import rerun.encodings as enc
+
+    return enc.AbsoluteTimeRange(min=enc.TimeInt(seconds=lo), max=enc.TimeInt(seconds=hi))
+
+
 def _y_axis(rrb, ranges: Mapping[str, Any], key: str):
     r = ranges.get(key)
     return rrb.ScalarAxis(range=r, zoom_lock=False) if r is not None else None
@@ -162,6 +185,7 @@ def simulation_blueprint(
     )
     tabs = [
         rrb.TextDocumentView(origin=f"/{s}/metrics", name="metrics"),
+        rrb.TextDocumentView(origin=f"/{s}/context", name="context"),
         *[
             rrb.TextDocumentView(origin=f"/{s}/{c}/controller", name=f"{c}: controller")
             for c in ctrls
@@ -191,7 +215,7 @@ def simulation_blueprint(
         rrb.Horizontal(plots, right, column_shares=[3, 2]),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(state="collapsed"),
+        time_panel(rrb, ranges),
     )
 
 
@@ -221,7 +245,7 @@ def seeds_blueprint(
         rrb.Tabs(*tabs),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(state="collapsed"),
+        time_panel(rrb, ranges),
     )
 
 
