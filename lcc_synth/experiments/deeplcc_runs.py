@@ -86,12 +86,11 @@ class ScenarioDeePLCC:
     def for_scenario(self, scenario, draws=None):
         """DeeP-LCC on the data of ``scenario`` (a batch of one; ``draws``: its draws)."""
         from lcc_synth.controllers.switch import SwitchedOn
-        from lcc_synth.deeplcc.build import deep_lcc_controller_from_table
+        from lcc_synth.deeplcc.build import deep_lcc_on_data
         from lcc_synth.schema import declared
 
         base = collection_base(scenario, draws)
-        ctrl = deep_lcc_controller_from_table(self.name, self.table, self.system, self.source,
-                                              scenario=base)  # fmt: skip
+        ctrl = deep_lcc_on_data(self.name, self.settings, self.system, base, self.source)
         ctrl.record = self.record
         field_name = f"controllers.{self.name}"
         start = declared("controllers.NAME:deep_lcc").get(self.table, "start", field_name)
