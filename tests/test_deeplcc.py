@@ -486,7 +486,8 @@ def test_two_cavs_in_the_nonlinear_platoon_simulator(tmp_path):
     path = Path(__file__).resolve().parents[1] / "problems" / "platoon_deeplcc_brake.toml"
     spec = load_spec(path)
     table = {"type": "deep_lcc", "data": {"cache_dir": str(tmp_path)}}
-    ctrl = deep_lcc_controller_from_table("deep_lcc", table, spec.system, str(path))
+    ctrl = deep_lcc_controller_from_table("deep_lcc", table, spec.system, str(path),
+                                          spec.scenario)  # fmt: skip
     assert ctrl.cavs == (3, 6) and ctrl.controller().p == 8 + 2
     sc = replace(spec.scenario, duration=20.0)  # the brake and the recovery
     draws = sc.draw()

@@ -136,7 +136,7 @@ def test_mpc_and_deep_lcc_beat_all_hdv_on_nedc_fuel(spec, all_hdv, tmp_path_fact
 
     cache = tmp_path_factory.mktemp("deeplcc_nedc")
     table = {"type": "deep_lcc", "start": 30.0, "data": {"cache_dir": str(cache)}}
-    deep = build_controller("deep_lcc", table, spec.system, str(NEDC))
+    deep = build_controller("deep_lcc", table, spec.system, str(NEDC), spec.scenario)
     draws = spec.scenario.draw()
     runs = {"mpc": simulate(spec.scenario, spec.controllers["mpc"], draws),
             "deep_lcc": simulate(spec.scenario, deep, draws)}  # fmt: skip

@@ -80,3 +80,25 @@ def test_the_data_are_collected_once_at_first_use(monkeypatch):
     assert calls == ["controllers.deep_lcc.data"] and ctrl.built
     assert ctrl.controller().data_key == key == ctrl.describe()["data_key"]
     assert (first.acceleration == second.acceleration).all()
+
+
+def test_deep_lcc_builder_reads_no_file(monkeypatch):
+    """The builder takes the problem's scenario as an object: the problem file named in its
+    errors is never opened (here it does not exist), and the data key is that of the scenario
+    it was given, the loaded file's."""
+    import lcc_synth.problem as problem
+    from lcc_synth.experiments.spec import load_spec
+
+    spec = load_spec(PROBLEMS / "platoon_deeplcc_brake.toml")
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the builder read a problem file")
+
+    monkeypatch.setattr(problem, "load_problem", refuse)
+    table = {"type": "deep_lcc"}
+    missing = str(PROBLEMS / "no_such_problem.toml")
+    ctrl = build.deep_lcc_controller_from_table("deep_lcc", table, spec.system, missing,
+                                                spec.scenario)  # fmt: skip
+    assert ctrl.as_dict() == spec.controllers["deep_lcc"].as_dict()
+    nominal = build.deep_lcc_controller_from_table("deep_lcc", table, spec.system, missing)
+    assert nominal.base.perturbations == () and nominal.as_dict() != ctrl.as_dict()

@@ -53,7 +53,8 @@ def _sample_time(table, field: str, ctype: str) -> float | None:
     return declared(f"controllers.NAME:{ctype}").get(table, "sample_time", field)
 
 
-def build_controller(name: str, table, system, source: str | None = None) -> Controller:
+def build_controller(name: str, table, system, source: str | None = None,
+                     scenario=None) -> Controller:  # fmt: skip
     """Build the controller of a ``[controllers.NAME]`` table.
 
     Parameters
@@ -67,9 +68,12 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
         The problem's ``[hdv]`` + ``[system]``.
     source : str, optional
         The problem file (for error messages and relative paths).
+    scenario : lcc_synth.simulation.scenario.Scenario, optional
+        The problem's scenario: a ``deep_lcc`` controller collects its data on it (default:
+        the nominal string of ``system``).
     """
     field = f"controllers.{name}"
-    ctrl = _build(name, table, system, source, field)
+    ctrl = _build(name, table, system, source, field, scenario)
     if isinstance(table, dict) and "start" in table:
         ctype = table["type"]
         start = declared(f"controllers.NAME:{ctype}").get(table, "start", field)
@@ -78,7 +82,7 @@ def build_controller(name: str, table, system, source: str | None = None) -> Con
     return ctrl
 
 
-def _build(name: str, table, system, source: str | None, field: str) -> Controller:
+def _build(name: str, table, system, source: str | None, field: str, scenario) -> Controller:
     try:
         if not isinstance(table, dict):
             raise ConfigError(field, f"must be a table, got {table!r}")
@@ -94,7 +98,7 @@ def _build(name: str, table, system, source: str | None, field: str) -> Controll
         if ctype == "deep_lcc":
             from lcc_synth.deeplcc.build import deep_lcc_controller_from_table
 
-            return deep_lcc_controller_from_table(name, table, system, source=source)
+            return deep_lcc_controller_from_table(name, table, system, source, scenario)
         if ctype in BASELINE_TYPES:
             return baseline_from_table(name, ctype, table)
         T = declared(f"controllers.NAME:{ctype}")

@@ -2,10 +2,12 @@
 settings (:mod:`lcc_synth.deeplcc.settings`), the data-collection scenario and the data
 (:mod:`lcc_synth.deeplcc.data`, cached).
 
-The collection scenario is the problem file's own ``[scenario]`` (HDV parameters,
-heterogeneity, reaction delays, acceleration noise, limits; its perturbations are replaced by
-the excitation) when the file has one, else the nominal string of ``[hdv]`` + ``[system]``
-(a ``run`` / ``sweep`` suite, or no file).
+The collection's base scenario is given by the caller: the problem file's own ``[scenario]``
+(HDV parameters, heterogeneity, reaction delays, acceleration noise, limits; its perturbations
+are replaced by the excitation) for ``simulate`` (:func:`lcc_synth.experiments.spec.load_spec`),
+each scenario with its drawn HDVs for ``run`` and ``sweep``
+(:mod:`lcc_synth.experiments.deeplcc_runs`), else the nominal string of the system
+(:func:`lcc_synth.simulation.scenario_file.nominal_scenario`). Nothing here reads a file.
 
 Reading a table collects nothing: :func:`deep_lcc_controller_from_table` checks the settings
 and returns a :class:`DeferredDeePLCC`, which collects (or reads from the cache) its data and
@@ -22,23 +24,10 @@ from lcc_synth.deeplcc.controller import DeePLCCController
 from lcc_synth.deeplcc.data import collection_key, load_or_collect
 from lcc_synth.deeplcc.settings import DeePLCCSettings, deep_settings_from_table
 from lcc_synth.errors import ConfigError
+from lcc_synth.simulation.scenario_file import nominal_scenario
 
-__all__ = ["DeferredDeePLCC", "base_scenario", "build_deep_lcc", "deep_lcc_controller_from_table",
-           "deep_lcc_on_data"]  # fmt: skip
-
-
-def base_scenario(system, source: str | None = None):
-    """The scenario the data are collected on (module docstring)."""
-    from pathlib import Path
-
-    from lcc_synth.problem import load_problem
-    from lcc_synth.simulation.scenario_file import scenario_from
-
-    if source:
-        problem = load_problem(source)
-        if "scenario" in problem.data:
-            return scenario_from(problem.data, system, Path(source).parent)
-    return scenario_from({"scenario": {}}, system)  # the [scenario] defaults on this string
+__all__ = ["DeferredDeePLCC", "build_deep_lcc", "deep_lcc_controller_from_table",
+           "deep_lcc_on_data"]
 
 
 def _cavs(base) -> tuple[int, ...]:
@@ -94,19 +83,19 @@ class DeferredDeePLCC:
     name : str
     settings : DeePLCCSettings
     system : lcc_synth.problem.System
-    base : Scenario, optional
-        The collection's base scenario; ``None``: :func:`base_scenario` of ``source``.
+    base : lcc_synth.simulation.scenario.Scenario
+        The collection's base scenario.
     source : str, optional
         The problem file (errors name it).
     """
 
-    def __init__(self, name: str, settings: DeePLCCSettings, system, base=None,
+    def __init__(self, name: str, settings: DeePLCCSettings, system, base,
                  source: str | None = None):  # fmt: skip
         self.name = name
         self.settings = settings
         self.system = system
+        self.base = base
         self.source = source
-        self._base = base
         self._record = True
         self._built: DeePLCCController | None = None
 
@@ -114,13 +103,6 @@ class DeferredDeePLCC:
     def sample_time(self) -> float:
         """The controller's period (the data's sample time)."""
         return self.settings.sample_time
-
-    @property
-    def base(self):
-        """The collection's base scenario."""
-        if self._base is None:
-            self._base = base_scenario(self.system, self.source)
-        return self._base
 
     @property
     def cavs(self) -> tuple[int, ...]:
@@ -201,16 +183,18 @@ def deep_lcc_controller_from_table(name: str, table, system, source: str | None 
         The table (keys: :mod:`lcc_synth.deeplcc.settings`).
     system : lcc_synth.problem.System
     source : str, optional
-        The problem file (errors name it; its ``[scenario]`` is the collection's base).
+        The problem file (errors name it).
     scenario : lcc_synth.simulation.scenario.Scenario, optional
-        The collection's base scenario instead of the file's.
+        The collection's base scenario (module docstring; default: the nominal string of
+        ``system``, :func:`~lcc_synth.simulation.scenario_file.nominal_scenario`).
     """
     field_name = f"controllers.{name}"
     try:
         settings = deep_settings_from_table(dict(table), field_name)
+        base = nominal_scenario(system) if scenario is None else scenario
     except ConfigError as err:
         raise err.with_source(source) if source and not err.source else err from None
-    return DeferredDeePLCC(name, settings, system, scenario, source)
+    return DeferredDeePLCC(name, settings, system, base, source)
 
 
 def build_deep_lcc(system, name: str = "deep_lcc", scenario=None, **settings):

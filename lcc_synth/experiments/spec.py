@@ -170,7 +170,7 @@ def drop_failed_fallbacks(
 
 def controllers_from(
     data: Mapping[str, Any], system: System, source: str | None = None, label: str = "problem",
-    failures: dict[str, str] | None = None,
+    failures: dict[str, str] | None = None, scenario: Scenario | None = None,
 ):  # fmt: skip
     """Every ``[controllers.NAME]`` table, built in file order: ``type = "h2"`` synthesised
     for ``system`` first (:func:`lcc_synth.experiments.h2_tables.synthesize_h2_tables`, the
@@ -180,6 +180,7 @@ def controllers_from(
 
     With ``failures`` (a dict), a controller whose synthesis fails, and an MPC that falls back
     to it, are left out and recorded there (``{name: why}``); without it the error propagates.
+    ``scenario``: the problem's scenario, on which a ``deep_lcc`` controller collects its data.
     """
     tables = declared("").get(data, "controllers", "")
     if not tables:
@@ -192,14 +193,16 @@ def controllers_from(
         if failures:
             tables = drop_failed_fallbacks(tables, failures, source)
         tables = resolve_fallbacks(tables, system, source)
-        built = {name: build_controller(name, t, system, source) for name, t in tables.items()}
+        built = {name: build_controller(name, t, system, source, scenario)
+                 for name, t in tables.items()}  # fmt: skip
         for name in designs:  # written back as stated (a reload synthesises the same gain)
             built[name].source_table = dict(given[name])
         for name, t in given.items():  # an MPC's fallback = "NAME" is written back as stated
             if name in built and t.get("type") == "mpc" and isinstance(t.get("fallback"), str):
                 built[name].source_table = {**built[name].toml_table(), "fallback": t["fallback"]}
         return built
-    return {name: build_controller(name, t, system, source) for name, t in tables.items()}
+    return {name: build_controller(name, t, system, source, scenario)
+            for name, t in tables.items()}  # fmt: skip
 
 
 def load_spec(
@@ -221,7 +224,8 @@ def load_spec(
             scenario = replace(scenario, batch=int(seeds))
         check_starts(declared("").get(problem.data, "controllers", ""), scenario)  # no design yet
         failed: dict[str, str] | None = {} if keep_going else None
-        controllers = controllers_from(problem.data, system, source, problem.name, failed)
+        controllers = controllers_from(problem.data, system, source, problem.name, failed,
+                                       scenario)  # fmt: skip
         check_time_step(scenario, controllers)
         metrics = metrics_from(problem.data, system, controllers, scenario)
         return SimulationSpec(problem.name, system, scenario, controllers, metrics, source,
