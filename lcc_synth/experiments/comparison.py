@@ -43,8 +43,8 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.controllers.base import Controller
-from lcc_synth.controllers.registry import CONTROLLER_TYPES, build_controller
 from lcc_synth.errors import ConfigError
+from lcc_synth.experiments.controller_tables import CONTROLLER_TYPES, controller_from_table
 from lcc_synth.experiments.h2_tables import synthesize_table
 from lcc_synth.experiments.suite_tables import applies, check_suite_controllers, controller_table
 from lcc_synth.experiments.tables import SUITE_METRICS, rank_failed_last
@@ -338,9 +338,9 @@ def prepare_controllers(
     without it the :class:`~lcc_synth.synthesis.h2.SynthesisError` propagates.
 
     Returns ``(tables, designs)``: ``{name: table}`` with only the types of
-    :data:`lcc_synth.controllers.registry.CONTROLLER_TYPES`, and ``{name: SynthesisReport}``,
-    for the names of ``controllers`` that apply to ``layout`` (:func:`applies`;
-    ``fallbacks``: more tables, designed only to resolve the MPCs' fallbacks,
+    :data:`lcc_synth.experiments.controller_tables.CONTROLLER_TYPES`, and
+    ``{name: SynthesisReport}``, for the names of ``controllers`` that apply to ``layout``
+    (:func:`applies`; ``fallbacks``: more tables, designed only to resolve the MPCs' fallbacks,
     :attr:`Suite.fallbacks`).
     """
     tables: dict[str, dict[str, Any]] = {}
@@ -376,8 +376,9 @@ def prepare_controllers(
 def build_controllers(
     tables: Mapping[str, Mapping[str, Any]], system: System, source: str | None = None
 ) -> dict[str, Controller]:
-    """:func:`lcc_synth.controllers.registry.build_controller` for every table."""
-    return {name: build_controller(name, dict(t), system, source) for name, t in tables.items()}
+    """:func:`lcc_synth.experiments.controller_tables.controller_from_table` for every table."""
+    return {name: controller_from_table(name, dict(t), system, source)
+            for name, t in tables.items()}  # fmt: skip
 
 
 # --------------------------------------------------------------------------------------------

@@ -9,8 +9,8 @@ from pathlib import Path
 from typing import Any
 
 from lcc_synth.controllers.base import Controller
-from lcc_synth.controllers.registry import build_controller
 from lcc_synth.errors import ConfigError
+from lcc_synth.experiments.controller_tables import controller_from_table
 from lcc_synth.experiments.h2_tables import synthesize_h2_tables
 from lcc_synth.metrics import MetricsConfig, metrics_from
 from lcc_synth.models.records import Record, system_tables, toml_text
@@ -193,7 +193,7 @@ def controllers_from(
         if failures:
             tables = drop_failed_fallbacks(tables, failures, source)
         tables = resolve_fallbacks(tables, system, source)
-        built = {name: build_controller(name, t, system, source, scenario)
+        built = {name: controller_from_table(name, t, system, source, scenario)
                  for name, t in tables.items()}  # fmt: skip
         for name in designs:  # written back as stated (a reload synthesises the same gain)
             built[name].source_table = dict(given[name])
@@ -201,7 +201,7 @@ def controllers_from(
             if name in built and t.get("type") == "mpc" and isinstance(t.get("fallback"), str):
                 built[name].source_table = {**built[name].toml_table(), "fallback": t["fallback"]}
         return built
-    return {name: build_controller(name, t, system, source, scenario)
+    return {name: controller_from_table(name, t, system, source, scenario)
             for name, t in tables.items()}  # fmt: skip
 
 
