@@ -42,7 +42,7 @@ def main() -> None:
         table = dict(base)
         table["as_run"] = {"weight": w}
         t0 = time.perf_counter()
-        static, rep = synthesize_table("h2", table, system, suite.hdv_table, "pareto")
+        static, rep = synthesize_table("h2", table, system, "pareto")
         t_syn = time.perf_counter() - t0
         ctrl = controller_from_table("h2", static, system)
         loop_rep = rep.as_run["after"]

@@ -34,7 +34,7 @@ def test_run_mpc_falls_back_to_the_synthesised_h2_gain():
     suite = load_suite(SHOWCASE, ["head_brake"], ["h2", "mpc"])
     system = suite.layouts["string10"]
     tables, designs = prepare_controllers(
-        suite.controllers, system, "string10", suite.hdv_table, suite.source, suite.name
+        suite.controllers, system, "string10", suite.source, suite.name
     )
     h2 = tables["h2"]
     assert h2["type"] == "static" and h2["semantics"] == "replace"

@@ -92,7 +92,6 @@ class Suite(Record):
     layouts: dict[str, System]
     scenarios: dict[str, SuiteScenario]
     controllers: dict[str, dict[str, Any]]
-    hdv_table: dict[str, Any] = field(default_factory=dict)
     source: str | None = None
     #: controllers left out by ``--controllers`` that a selected MPC falls back to
     #: (``fallback = "NAME"``): designed for it, not run (:func:`fallback_names`)
@@ -295,7 +294,6 @@ def load_suite(
             layouts=layouts,
             scenarios=suite_scenarios,
             controllers={k: ctrls[k] for k in names},
-            hdv_table=dict(hdv_table),
             source=src,
             fallbacks={k: ctrls[k] for k in extra},
         )
@@ -323,7 +321,6 @@ def prepare_controllers(
     controllers: Mapping[str, Mapping[str, Any]],
     system: System,
     layout: str,
-    hdv_table: Mapping[str, Any],
     source: str | None = None,
     label: str = "suite",
     on_step: Callable[[str], None] | None = None,
@@ -355,7 +352,7 @@ def prepare_controllers(
         if table.get("type") == "h2":
             try:
                 table, rep = synthesize_table(
-                    name, table, system, hdv_table, f"{label}_{layout}_{name}", source
+                    name, table, system, f"{label}_{layout}_{name}", source
                 )
             except SynthesisError as err:
                 if failures is None:
@@ -495,7 +492,7 @@ def run_suite(
                 bar.set_postfix_str(f"{lname}/{cname}")
 
             tables[lname], designs[lname] = prepare_controllers(
-                per_layout[lname][0], system, lname, suite.hdv_table, suite.source, suite.name,
+                per_layout[lname][0], system, lname, suite.source, suite.name,
                 on_step=starting, fallbacks=per_layout[lname][1], failures=failures[lname],
             )
             bar.update(len([c for c in failures[lname] if c in per_layout[lname][0]]))

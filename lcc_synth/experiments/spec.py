@@ -186,10 +186,8 @@ def controllers_from(
     if not tables:
         raise ConfigError("controllers", "needs at least one [controllers.NAME] table")
     if all(isinstance(t, Mapping) for t in tables.values()):
-        hdv_table = declared("").get(data, "hdv", "")
         given = tables
-        tables, designs = synthesize_h2_tables(tables, system, hdv_table, source, label,
-                                               failures)  # fmt: skip
+        tables, designs = synthesize_h2_tables(tables, system, source, label, failures)
         if failures:
             tables = drop_failed_fallbacks(tables, failures, source)
         tables = resolve_fallbacks(tables, system, source)
