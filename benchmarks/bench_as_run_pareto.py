@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lcc_synth.controllers.registry import build_controller
 from lcc_synth.experiments.comparison import load_suite, metrics_row, synthesize_table
+from lcc_synth.experiments.controller_tables import controller_from_table
 from lcc_synth.experiments.string_as_run import controller_loop, measured_ratio
 from lcc_synth.simulation.engine import simulate
 
@@ -42,9 +42,9 @@ def main() -> None:
         table = dict(base)
         table["as_run"] = {"weight": w}
         t0 = time.perf_counter()
-        static, rep = synthesize_table("h2", table, system, suite.hdv_table, "pareto")
+        static, rep = synthesize_table("h2", table, system, "pareto")
         t_syn = time.perf_counter() - t0
-        ctrl = build_controller("h2", static, system)
+        ctrl = controller_from_table("h2", static, system)
         loop_rep = rep.as_run["after"]
         row = {"weight": w, "q_s0": args.q_s0, "peak": loop_rep["gamma_peak"],
                "margin": loop_rep["margin"],

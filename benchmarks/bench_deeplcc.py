@@ -69,7 +69,9 @@ def one_cav(full_steps: int) -> None:
 
     OSQPSolver.solve = recording
     try:
-        deep = deep_lcc_controller_from_table("deep_lcc", table, spec.system, str(path))
+        deep = deep_lcc_controller_from_table("deep_lcc", table, spec.system, str(path),
+                                              spec.scenario)  # fmt: skip
+        deep = deep.controller()  # collected (from the cache) and set up here
         res = simulate(spec.scenario, deep)
     finally:
         OSQPSolver.solve = original
@@ -208,7 +210,7 @@ def two_cav_nonlinear() -> None:
     path = ROOT / "problems" / "platoon_deeplcc_brake.toml"
     spec = load_spec(path)
     ctrl = deep_lcc_controller_from_table("deep_lcc", {"type": "deep_lcc"}, spec.system,
-                                          str(path))  # fmt: skip
+                                          str(path), spec.scenario).controller()  # fmt: skip
     draws = spec.scenario.draw()
     cpu: list[float] = []
     call = type(ctrl).__call__

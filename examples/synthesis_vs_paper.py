@@ -43,7 +43,7 @@ def main() -> None:
     import sys
 
     from lcc_synth.cli.arguments import add_example_out
-    from lcc_synth.controllers.registry import build_controller
+    from lcc_synth.experiments.controller_tables import controller_from_table
     from lcc_synth.experiments.spec import load_spec
     from lcc_synth.metrics import summary
     from lcc_synth.problem import load_problem
@@ -87,7 +87,7 @@ def main() -> None:
             "h2_unstructured": rep.h2_unstructured,
             "weights": rep.weights,
         }
-        ctrl = build_controller(
+        ctrl = controller_from_table(
             f"synth_{kind}", {"type": "gains_file", "file": str(path)}, sim.system, sim.source
         )
         for name, c in ((kind, sim.controllers[kind]), (f"synth_{kind}", ctrl)):

@@ -374,8 +374,7 @@ def test_as_run_design_reports_an_unstable_loop_it_cannot_fix():
     table = {"type": "h2", "design": "structured", "semantics": "replace", "pattern": [1, 2],
              "method": "direct", "weights": {"q_s": 0.1, "q_a": 3.0},
              "equilibrium": "estimated", "equilibrium_tau": 1.0, "as_run": True}
-    hdv = {"model": "ovm", "alpha": 0.6, "beta": 0.9, "s_st": 5.0, "s_go": 35.0, "v_max": 30.0}
-    static, rep = synthesize_table("h2", table, system, hdv, "t")
+    static, rep = synthesize_table("h2", table, system, "t")
     assert static["equilibrium"] == "estimated"
     assert rep.as_run["settings"]["equilibrium_tau"] == 1.0
     assert rep.as_run["after"]["verdict"] == "string_unstable" and not rep.as_run["string_stable"]

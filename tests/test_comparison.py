@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from lcc_synth.cli.main import main
-from lcc_synth.controllers.registry import build_controller
 from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.comparison import controller_table, load_suite, run_suite
+from lcc_synth.experiments.controller_tables import controller_from_table
 from lcc_synth.experiments.tables import (
     SUITE_METRICS,
     format_table,
@@ -178,15 +178,15 @@ def test_suite_table_equals_direct_simulation(suite_run, problem_file):
         rep = _direct_h2(problem_file, layout)
         paper = dict(data["controllers"]["paper"]["layouts"][layout], type="static")
         direct = {
-            "all_hdv": build_controller("all_hdv", {"type": "hdv"}, system),
-            "paper": build_controller("paper", paper, system),
-            "h2": build_controller(
+            "all_hdv": controller_from_table("all_hdv", {"type": "hdv"}, system),
+            "paper": controller_from_table("paper", paper, system),
+            "h2": controller_from_table(
                 "h2",
                 {"type": "static", "kind": rep.kind, "semantics": rep.semantics,
                  "gains": rep.gains},
                 system,
             ),
-            "mpc": build_controller(
+            "mpc": controller_from_table(
                 "mpc", {"type": "mpc", "sample_time": 0.1, "horizon": 15}, system
             ),
         }

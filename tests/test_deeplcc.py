@@ -410,9 +410,9 @@ def test_bad_settings_are_named_field_errors():
         ({"horizon": 0}, "controllers.d.horizon"),
         ({"data": {"T": 100, "cache": False}}, "controllers.d.data"),  # too short: PE refusal
     ):
-        with pytest.raises(ConfigError) as err:
+        with pytest.raises(ConfigError) as err:  # the data are judged when they are collected
             deep_lcc_controller_from_table("d", {"type": "deep_lcc", **table}, _system(),
-                                           scenario=sc)  # fmt: skip
+                                           scenario=sc).controller()  # fmt: skip
         assert err.value.field == field, err.value
 
 
@@ -486,8 +486,9 @@ def test_two_cavs_in_the_nonlinear_platoon_simulator(tmp_path):
     path = Path(__file__).resolve().parents[1] / "problems" / "platoon_deeplcc_brake.toml"
     spec = load_spec(path)
     table = {"type": "deep_lcc", "data": {"cache_dir": str(tmp_path)}}
-    ctrl = deep_lcc_controller_from_table("deep_lcc", table, spec.system, str(path))
-    assert ctrl.cavs == (3, 6) and ctrl.p == 8 + 2
+    ctrl = deep_lcc_controller_from_table("deep_lcc", table, spec.system, str(path),
+                                          spec.scenario)  # fmt: skip
+    assert ctrl.cavs == (3, 6) and ctrl.controller().p == 8 + 2
     sc = replace(spec.scenario, duration=20.0)  # the brake and the recovery
     draws = sc.draw()
     res = simulate(sc, ctrl, draws)

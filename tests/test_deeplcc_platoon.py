@@ -131,12 +131,12 @@ def test_bad_phases_are_named_field_errors(tmp_path, phases, field):
 def test_mpc_and_deep_lcc_beat_all_hdv_on_nedc_fuel(spec, all_hdv, tmp_path_factory):
     """Both predictive controllers (on from 30 s) use less fuel than all-HDV over 50-206 s and
     in the braking phases (70 -> 50, 100 -> 70 km/h), with no collision or emergency braking."""
-    from lcc_synth.controllers.registry import build_controller
+    from lcc_synth.experiments.controller_tables import controller_from_table
     from lcc_synth.metrics import summary
 
     cache = tmp_path_factory.mktemp("deeplcc_nedc")
     table = {"type": "deep_lcc", "start": 30.0, "data": {"cache_dir": str(cache)}}
-    deep = build_controller("deep_lcc", table, spec.system, str(NEDC))
+    deep = controller_from_table("deep_lcc", table, spec.system, str(NEDC), spec.scenario)
     draws = spec.scenario.draw()
     runs = {"mpc": simulate(spec.scenario, spec.controllers["mpc"], draws),
             "deep_lcc": simulate(spec.scenario, deep, draws)}  # fmt: skip
@@ -186,11 +186,11 @@ def test_recording_of_the_joint_mpc_history(tmp_path):
     from rerun.chunk import RrdReader
 
     from lcc_synth import recording as R
-    from lcc_synth.controllers.registry import build_controller
+    from lcc_synth.experiments.controller_tables import controller_from_table
 
     spec = load_spec(PROBLEMS / "platoon_deeplcc_brake.toml")
     sc = replace(spec.scenario, duration=3.0)
-    ctrl = build_controller("mpc", {"type": "mpc"}, spec.system)
+    ctrl = controller_from_table("mpc", {"type": "mpc"}, spec.system)
     res = simulate(sc, ctrl)
     h = ctrl.history()
     assert h["status"].ndim == 3 and h["plan"].ndim == 4 and "pred_time" not in h

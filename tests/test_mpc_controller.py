@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from lcc_synth.controllers.base import ControlContext, Observation
-from lcc_synth.controllers.registry import build_controller
 from lcc_synth.errors import ConfigError
+from lcc_synth.experiments.controller_tables import controller_from_table
 from lcc_synth.models.feedback import StaticGains, cav_feedback
 from lcc_synth.models.hdv import OVM
 from lcc_synth.mpc import MPCController, mpc_controller_from_table
@@ -85,8 +85,20 @@ def test_settings_dataclass_validates_directly():
         MPCSettings(horizon=0)
 
 
-def test_build_controller_factory_makes_an_mpc(tmp_path):
-    ctrl = build_controller("mpc", {"type": "mpc", "horizon": 10}, _system(), str(tmp_path / "p"))
+def test_the_controllers_package_builds_no_mpc():
+    """controllers.registry builds the types of its own package; an MPC table there is a
+    ConfigError naming the type and the entry that builds it (the package imports no MPC)."""
+    from lcc_synth.controllers.registry import build_controller
+
+    with pytest.raises(ConfigError) as err:
+        build_controller("mpc", {"type": "mpc"}, _system())
+    assert err.value.field == "controllers.mpc.type"
+    assert "controller_tables.controller_from_table" in err.value.message
+
+
+def test_controller_from_table_makes_an_mpc(tmp_path):
+    ctrl = controller_from_table("mpc", {"type": "mpc", "horizon": 10}, _system(),
+                                 str(tmp_path / "p"))  # fmt: skip
     assert isinstance(ctrl, MPCController)
     assert ctrl.sample_time == 0.1
     desc = ctrl.describe()

@@ -13,9 +13,9 @@ import pytest
 from test_mpc_controller import _ctx, _obs, _system
 
 from lcc_synth.cli.main import main
-from lcc_synth.controllers.registry import build_controller
 from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.comparison import load_suite, prepare_controllers
+from lcc_synth.experiments.controller_tables import controller_from_table
 from lcc_synth.experiments.spec import resolve_fallbacks
 from lcc_synth.mpc.settings import paper_fallback_gains
 
@@ -34,12 +34,12 @@ def test_run_mpc_falls_back_to_the_synthesised_h2_gain():
     suite = load_suite(SHOWCASE, ["head_brake"], ["h2", "mpc"])
     system = suite.layouts["string10"]
     tables, designs = prepare_controllers(
-        suite.controllers, system, "string10", suite.hdv_table, suite.source, suite.name
+        suite.controllers, system, "string10", suite.source, suite.name
     )
     h2 = tables["h2"]
     assert h2["type"] == "static" and h2["semantics"] == "replace"
     assert tables["mpc"]["fallback"]["controller"] == "h2"
-    mpc = build_controller("mpc", dict(tables["mpc"]), system, suite.source)
+    mpc = controller_from_table("mpc", dict(tables["mpc"]), system, suite.source)
     assert mpc.fallback_source == "controller h2"
     assert mpc.describe()["fallback"]["source"] == "controller h2"
     mpc.reset(_ctx(0, 10))

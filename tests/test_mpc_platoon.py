@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from lcc_synth.controllers.base import ControlContext, Observation
-from lcc_synth.controllers.registry import build_controller
 from lcc_synth.errors import ConfigError
+from lcc_synth.experiments.controller_tables import controller_from_table
 from lcc_synth.models.hdv import OVM, linear_coefficients
 from lcc_synth.models.platoon import Platoon, PlatoonGains, platoon_model
 from lcc_synth.mpc import MPCController
@@ -487,7 +487,7 @@ def _problem(kind, extra=""):
 @pytest.mark.parametrize("kind", ["platoon", "ring"])
 def test_registry_builds_the_joint_mpc_for_platoon_kinds(kind):
     system = _problem(kind)
-    ctrl = build_controller("mpc", {"type": "mpc", "horizon": 10}, system)
+    ctrl = controller_from_table("mpc", {"type": "mpc", "horizon": 10}, system)
     assert isinstance(ctrl, PlatoonMPCController)
     desc = ctrl.describe()
     assert desc["joint"] and desc["cavs"] == list(system.platoon.cavs)
@@ -510,7 +510,7 @@ def test_registry_builds_the_joint_mpc_for_platoon_kinds(kind):
 )
 def test_bad_platoon_mpc_keys_are_config_errors(table, field):
     with pytest.raises(ConfigError) as err:
-        build_controller("mpc", {"type": "mpc", **table}, _problem("platoon"))
+        controller_from_table("mpc", {"type": "mpc", **table}, _problem("platoon"))
     assert err.value.field == field
 
 

@@ -38,7 +38,7 @@ def _synthesized_gains(tmp_path, problem: Path) -> dict:
 def test_ring_h2_of_run_is_the_gain_of_synthesize_on_the_same_tables(tmp_path, capsys):
     suite = load_suite(SHOWCASE, scenarios=["ring_wave"])
     tables, designs = prepare_controllers(
-        suite.controllers, suite.layouts["ring20"], "ring20", suite.hdv_table, suite.source,
+        suite.controllers, suite.layouts["ring20"], "ring20", suite.source,
         suite.name, fallbacks=suite.fallbacks,
     )  # fmt: skip
     doc = _synthesized_gains(tmp_path, PROBLEMS / "ring_n20_cr5.toml")

@@ -429,9 +429,10 @@ def test_synthesis_defaults_are_the_code():
 
 def test_choices_are_the_code_constants():
     from lcc_synth.analysis.regions import DEFAULT_DENSE_PER_DECADE, DEFAULT_PER_DECADE
-    from lcc_synth.controllers.registry import CONTROLLER_TYPES, STATIC_RUN_KEYS
+    from lcc_synth.controllers.registry import STATIC_RUN_KEYS
     from lcc_synth.controllers.static import EQUILIBRIA
     from lcc_synth.experiments.comparison import SUITE_TYPES
+    from lcc_synth.experiments.controller_tables import CONTROLLER_TYPES
     from lcc_synth.metrics import VEHICLE_SETS
     from lcc_synth.models.feedback import SEMANTICS
     from lcc_synth.models.linear import KINDS
@@ -552,7 +553,7 @@ def test_bounds_choices_and_names_of_every_key_reach_the_loader(tid):
     t = declared(tid)
     bounds = choices = 0
     for k in t.keys:
-        if k.name == "type":  # checked by build_controller before the MPC's loader runs
+        if k.name == "type":  # checked by controller_from_table before the MPC's loader runs
             continue
         field = f"{prefix}.{k.name}"
         if k.type in ("number", "integer") and k.name != "spread":

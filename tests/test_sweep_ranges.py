@@ -40,7 +40,7 @@ def _spec(tmp_path, text, name="p.toml", **kw):
 def _chunk(spec, start, stop):
     from lcc_synth.experiments.comparison import prepare_controllers
 
-    tables, _ = prepare_controllers(spec.controllers, spec.system, "sweep", spec.hdv_table,
+    tables, _ = prepare_controllers(spec.controllers, spec.system, "sweep",
                                     spec.source, spec.name)  # fmt: skip
     return run_chunk(spec.scenario, spec.system, tables, spec.metrics, spec.source, start, stop,
                      spec.ranges)  # fmt: skip

@@ -1,12 +1,14 @@
-"""``build_controller``: the controller of a ``[controllers.NAME]`` problem table.
+"""``build_controller``: the controller of a ``[controllers.NAME]`` problem table of a type
+this package builds (:data:`BASIC_TYPES`).
 
 ``type = "hdv"`` and ``"static"`` build the controllers of :mod:`lcc_synth.controllers.static`,
 ``"gains_file"`` a static-gain controller from a gains file written by ``lcc-synth synthesize``,
-``"mpc"`` the controller of :mod:`lcc_synth.mpc` (imported only then), ``"deep_lcc"`` that of
-:mod:`lcc_synth.deeplcc` (likewise), ``"follower_stopper"``,
-``"pi_saturation"``, ``"acc"`` and ``"cacc"`` the field's baselines
+``"follower_stopper"``, ``"pi_saturation"``, ``"acc"`` and ``"cacc"`` the field's baselines
 (:mod:`lcc_synth.controllers.baselines`). Any type takes ``start`` (s): the controller switches
-on then, the CAVs driving with their HDV law before (:mod:`lcc_synth.controllers.switch`).
+on then, the CAVs driving with their HDV law before (:func:`switched_on`,
+:mod:`lcc_synth.controllers.switch`). The predictive types (``"mpc"``, ``"deep_lcc"``) are
+built by the packages above this one; the entry for every type is
+:func:`lcc_synth.experiments.controller_tables.controller_from_table`.
 
 For ``[system] kind = "platoon" | "ring"`` a ``static`` table gives one gain table per CAV
 input (``[controllers.NAME.gains.u_3]``, ``s_3 = ...``: states ``s_i, v_i`` of positions, the
@@ -37,9 +39,11 @@ from lcc_synth.models.platoon import PLATOON_KINDS, PlatoonGains
 from lcc_synth.problem import warn_large_gains
 from lcc_synth.schema import declared
 
-__all__ = ["CONTROLLER_TYPES", "STATIC_RUN_KEYS", "build_controller"]
+__all__ = ["BASIC_TYPES", "STATIC_RUN_KEYS", "build_controller", "switched_on"]
 
-CONTROLLER_TYPES = ("hdv", "static", "gains_file", "mpc", "deep_lcc", *BASELINE_TYPES)
+#: The types :func:`build_controller` builds: the HDV law, static gains, gains files and the
+#: field's baselines.
+BASIC_TYPES = ("hdv", "static", "gains_file", *BASELINE_TYPES)
 
 
 _EQ_KEYS = ("equilibrium", "equilibrium_tau", "measurement_filter")
@@ -54,27 +58,38 @@ def _sample_time(table, field: str, ctype: str) -> float | None:
 
 
 def build_controller(name: str, table, system, source: str | None = None) -> Controller:
-    """Build the controller of a ``[controllers.NAME]`` table.
+    """Build the controller of a ``[controllers.NAME]`` table of one of :data:`BASIC_TYPES`.
 
     Parameters
     ----------
     name : str
         The controller's name (the table key).
     table : mapping
-        ``type = "hdv" | "static" | "gains_file" | "mpc"`` and the type's keys (see
+        ``type = "hdv" | "static" | "gains_file" | ...`` and the type's keys (see
         ``problems/README.md``). ``gains_file`` paths are relative to ``source``'s folder.
     system : lcc_synth.problem.System
         The problem's ``[hdv]`` + ``[system]``.
     source : str, optional
         The problem file (for error messages and relative paths).
+
+    Raises
+    ------
+    ConfigError
+        A bad table; a type of another package (``mpc``, ``deep_lcc``: built by
+        :func:`lcc_synth.experiments.controller_tables.controller_from_table`).
     """
     field = f"controllers.{name}"
-    ctrl = _build(name, table, system, source, field)
+    return switched_on(_build(name, table, system, source, field), table, field)
+
+
+def switched_on(ctrl: Controller, table, field: str) -> Controller:
+    """``ctrl`` switched on at the table's ``start`` (:class:`SwitchedOn`), ``ctrl`` itself
+    when the table has none."""
     if isinstance(table, dict) and "start" in table:
         ctype = table["type"]
         start = declared(f"controllers.NAME:{ctype}").get(table, "start", field)
         if start is not None:
-            ctrl = SwitchedOn(ctrl, start)
+            return SwitchedOn(ctrl, start)
     return ctrl
 
 
@@ -83,18 +98,10 @@ def _build(name: str, table, system, source: str | None, field: str) -> Controll
         if not isinstance(table, dict):
             raise ConfigError(field, f"must be a table, got {table!r}")
         ctype = declared("controllers.NAME").get(table, "type", field)
-        if ctype == "mpc":
-            try:
-                from lcc_synth.mpc.build import mpc_controller_from_table
-            except ImportError as err:
-                raise ConfigError(
-                    f"{field}.type", f"'mpc' controllers need lcc_synth.mpc, which failed: {err}"
-                ) from None
-            return mpc_controller_from_table(name, table, system, source=source)
-        if ctype == "deep_lcc":
-            from lcc_synth.deeplcc.build import deep_lcc_controller_from_table
-
-            return deep_lcc_controller_from_table(name, table, system, source=source)
+        if ctype not in BASIC_TYPES:
+            raise ConfigError(f"{field}.type", f"{ctype!r} controllers are built by "
+                              "lcc_synth.experiments.controller_tables.controller_from_table, "
+                              f"not here (types here: {list(BASIC_TYPES)})")  # fmt: skip
         if ctype in BASELINE_TYPES:
             return baseline_from_table(name, ctype, table)
         T = declared(f"controllers.NAME:{ctype}")

@@ -76,6 +76,7 @@ __all__ = [
     "collection_bar",
     "collect",
     "data_key",
+    "collection_key",
     "load_or_collect",
 ]
 
@@ -343,6 +344,13 @@ def collect(scenario, settings: DataSettings) -> DataSet:
     return DataSet(u, e, y, dt)
 
 
+def collection_key(base, settings: DataSettings) -> str:
+    """The cache key (:func:`data_key`) of the data of ``settings`` on ``base``'s collection
+    scenario: known without collecting."""
+    sc = collection_scenario(base, settings)
+    return data_key(sc, settings, _cavs_of(sc))
+
+
 def load_or_collect(base, settings: DataSettings) -> tuple[DataSet, str, bool]:
     """The data of ``settings`` on ``base``'s collection scenario, from the cache when present.
 
@@ -355,8 +363,7 @@ def load_or_collect(base, settings: DataSettings) -> tuple[DataSet, str, bool]:
         Whether the data came from the cache.
     """
     sc = collection_scenario(base, settings)
-    cavs = _cavs_of(sc)
-    key = data_key(sc, settings, cavs)
+    key = collection_key(base, settings)
     path = Path(settings.cache_dir) / f"deeplcc-{key}.npz"
     if settings.cache and path.is_file():
         try:

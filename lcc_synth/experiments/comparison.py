@@ -43,8 +43,8 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.controllers.base import Controller
-from lcc_synth.controllers.registry import CONTROLLER_TYPES, build_controller
 from lcc_synth.errors import ConfigError
+from lcc_synth.experiments.controller_tables import CONTROLLER_TYPES, controller_from_table
 from lcc_synth.experiments.h2_tables import synthesize_table
 from lcc_synth.experiments.suite_tables import applies, check_suite_controllers, controller_table
 from lcc_synth.experiments.tables import SUITE_METRICS, rank_failed_last
@@ -92,7 +92,6 @@ class Suite(Record):
     layouts: dict[str, System]
     scenarios: dict[str, SuiteScenario]
     controllers: dict[str, dict[str, Any]]
-    hdv_table: dict[str, Any] = field(default_factory=dict)
     source: str | None = None
     #: controllers left out by ``--controllers`` that a selected MPC falls back to
     #: (``fallback = "NAME"``): designed for it, not run (:func:`fallback_names`)
@@ -295,7 +294,6 @@ def load_suite(
             layouts=layouts,
             scenarios=suite_scenarios,
             controllers={k: ctrls[k] for k in names},
-            hdv_table=dict(hdv_table),
             source=src,
             fallbacks={k: ctrls[k] for k in extra},
         )
@@ -323,7 +321,6 @@ def prepare_controllers(
     controllers: Mapping[str, Mapping[str, Any]],
     system: System,
     layout: str,
-    hdv_table: Mapping[str, Any],
     source: str | None = None,
     label: str = "suite",
     on_step: Callable[[str], None] | None = None,
@@ -338,9 +335,9 @@ def prepare_controllers(
     without it the :class:`~lcc_synth.synthesis.h2.SynthesisError` propagates.
 
     Returns ``(tables, designs)``: ``{name: table}`` with only the types of
-    :data:`lcc_synth.controllers.registry.CONTROLLER_TYPES`, and ``{name: SynthesisReport}``,
-    for the names of ``controllers`` that apply to ``layout`` (:func:`applies`;
-    ``fallbacks``: more tables, designed only to resolve the MPCs' fallbacks,
+    :data:`lcc_synth.experiments.controller_tables.CONTROLLER_TYPES`, and
+    ``{name: SynthesisReport}``, for the names of ``controllers`` that apply to ``layout``
+    (:func:`applies`; ``fallbacks``: more tables, designed only to resolve the MPCs' fallbacks,
     :attr:`Suite.fallbacks`).
     """
     tables: dict[str, dict[str, Any]] = {}
@@ -355,7 +352,7 @@ def prepare_controllers(
         if table.get("type") == "h2":
             try:
                 table, rep = synthesize_table(
-                    name, table, system, hdv_table, f"{label}_{layout}_{name}", source
+                    name, table, system, f"{label}_{layout}_{name}", source
                 )
             except SynthesisError as err:
                 if failures is None:
@@ -376,8 +373,9 @@ def prepare_controllers(
 def build_controllers(
     tables: Mapping[str, Mapping[str, Any]], system: System, source: str | None = None
 ) -> dict[str, Controller]:
-    """:func:`lcc_synth.controllers.registry.build_controller` for every table."""
-    return {name: build_controller(name, dict(t), system, source) for name, t in tables.items()}
+    """:func:`lcc_synth.experiments.controller_tables.controller_from_table` for every table."""
+    return {name: controller_from_table(name, dict(t), system, source)
+            for name, t in tables.items()}  # fmt: skip
 
 
 # --------------------------------------------------------------------------------------------
@@ -494,7 +492,7 @@ def run_suite(
                 bar.set_postfix_str(f"{lname}/{cname}")
 
             tables[lname], designs[lname] = prepare_controllers(
-                per_layout[lname][0], system, lname, suite.hdv_table, suite.source, suite.name,
+                per_layout[lname][0], system, lname, suite.source, suite.name,
                 on_step=starting, fallbacks=per_layout[lname][1], failures=failures[lname],
             )
             bar.update(len([c for c in failures[lname] if c in per_layout[lname][0]]))

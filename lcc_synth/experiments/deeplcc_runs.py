@@ -20,7 +20,7 @@ simulator), 0.3-1.0 s to set up the controller (mostly the exact reduction of th
 machine) and 0.5-1.0 s to drive the 40 s run (800 QPs); a cached data file is 0.22 MB.
 
 The rest is unchanged: :func:`scenario_controllers` builds every other table as
-:func:`lcc_synth.controllers.registry.build_controller` does and a
+:func:`lcc_synth.experiments.controller_tables.controller_from_table` does and a
 :class:`ScenarioDeePLCC` for each ``deep_lcc`` table (its settings checked, named-field errors,
 before any task); :func:`run_scenario` builds its controller for the scenario it runs;
 :func:`scenario_runs` runs scenarios one by one when a :class:`ScenarioDeePLCC` is among the
@@ -86,12 +86,11 @@ class ScenarioDeePLCC:
     def for_scenario(self, scenario, draws=None):
         """DeeP-LCC on the data of ``scenario`` (a batch of one; ``draws``: its draws)."""
         from lcc_synth.controllers.switch import SwitchedOn
-        from lcc_synth.deeplcc.build import deep_lcc_controller_from_table
+        from lcc_synth.deeplcc.build import deep_lcc_on_data
         from lcc_synth.schema import declared
 
         base = collection_base(scenario, draws)
-        ctrl = deep_lcc_controller_from_table(self.name, self.table, self.system, self.source,
-                                              scenario=base)  # fmt: skip
+        ctrl = deep_lcc_on_data(self.name, self.settings, self.system, base, self.source)
         ctrl.record = self.record
         field_name = f"controllers.{self.name}"
         start = declared("controllers.NAME:deep_lcc").get(self.table, "start", field_name)
@@ -129,11 +128,11 @@ def scenario_controllers(tables: Mapping[str, Mapping[str, Any]], system,
                          source: str | None = None):  # fmt: skip
     """The controllers of a sweep or of a suite's layout: :class:`ScenarioDeePLCC` for
     ``deep_lcc`` tables, the others by
-    :func:`lcc_synth.controllers.registry.build_controller`."""
-    from lcc_synth.controllers.registry import build_controller
+    :func:`lcc_synth.experiments.controller_tables.controller_from_table`."""
+    from lcc_synth.experiments.controller_tables import controller_from_table
 
     return {k: ScenarioDeePLCC(k, t, system, source) if t.get("type") == "deep_lcc"
-            else build_controller(k, dict(t), system, source) for k, t in tables.items()}
+            else controller_from_table(k, dict(t), system, source) for k, t in tables.items()}
 
 
 def scenario_runs(scenario, ranges, start: int, stop: int, controllers) -> list:

@@ -3,8 +3,9 @@
 ``lcc-synth run`` and ``sweep`` synthesise every ``h2`` controller per layout
 (:func:`lcc_synth.experiments.comparison.prepare_controllers`), ``lcc-synth simulate`` for its
 ``[system]`` (:func:`lcc_synth.experiments.spec.controllers_from`): both through
-:func:`synthesize_table`, which builds the ``[hdv]`` / ``[system]`` / ``[synthesis]`` problem
-of ``lcc-synth synthesize`` from the controller's keys and runs
+:func:`synthesize_table`, which reads the controller's keys as the ``[synthesis]`` table of
+``lcc-synth synthesize`` for the parsed system
+(:func:`lcc_synth.synthesis.config.synthesis_spec`, the reader ``synthesize`` uses) and runs
 :func:`lcc_synth.synthesis.design.synthesize` on it. So a synthesised controller equals the
 gain ``lcc-synth synthesize`` writes for the same tables, bit for bit.
 
@@ -28,23 +29,15 @@ from typing import Any
 
 from lcc_synth.controllers.registry import STATIC_RUN_KEYS
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.records import system_tables
-from lcc_synth.problem import Problem, System
+from lcc_synth.problem import System
 
 __all__ = ["synthesize_table", "synthesize_h2_tables"]
-
-
-def _system_data(system: System) -> dict[str, Any]:
-    if system.platoon is not None:  # size, cavs, v_star or circumference, hdv_values
-        return system_tables(system)["system"]
-    return {"kind": system.kind, "m": system.m, "n": system.n, "v_star": system.v_star}
 
 
 def synthesize_table(
     name: str,
     table: Mapping[str, Any],
     system: System,
-    hdv_table: Mapping[str, Any],
     label: str,
     source: str | None = None,
 ):
@@ -58,8 +51,6 @@ def synthesize_table(
         Its table for this system (``type = "h2"``, the keys of ``[synthesis]`` and the
         :data:`~lcc_synth.controllers.registry.STATIC_RUN_KEYS`).
     system : lcc_synth.problem.System
-    hdv_table : mapping
-        The problem's ``[hdv]`` table.
     label : str
         The name of the synthesis problem (the report's ``problem``).
     source : str, optional
@@ -80,7 +71,7 @@ def synthesize_table(
     lcc_synth.synthesis.SynthesisError
         Solver failure, infeasibility or an unusable result.
     """
-    from lcc_synth.synthesis.config import spec_from_problem
+    from lcc_synth.synthesis.config import synthesis_spec
     from lcc_synth.synthesis.design import synthesize
 
     synth = {k: v for k, v in table.items() if k != "type" and k not in STATIC_RUN_KEYS}
@@ -90,15 +81,9 @@ def synthesize_table(
             if key in table and key not in ar:
                 ar[key] = table[key]
         synth["as_run"] = ar
-    data = {
-        "name": label,
-        "hdv": dict(hdv_table),
-        "system": _system_data(system),
-        "synthesis": synth,
-    }
-    problem = Problem(Path(source) if source else Path(f"{label}.toml"), data)
+    where = str(Path(source) if source else Path(f"{label}.toml"))
     try:
-        spec = spec_from_problem(problem)
+        spec = synthesis_spec(label, system, synth, where)
     except ConfigError as err:
         fld = err.field
         fld = f"controllers.{name}" + fld[len("synthesis") :] if fld.startswith("synthesis") else (
@@ -122,7 +107,6 @@ def synthesize_table(
 def synthesize_h2_tables(
     tables: Mapping[str, Mapping[str, Any]],
     system: System,
-    hdv_table: Mapping[str, Any],
     source: str | None = None,
     label: str = "problem",
     failures: dict[str, str] | None = None,
@@ -149,7 +133,7 @@ def synthesize_h2_tables(
         if isinstance(table, Mapping) and table.get("type") == "h2":
             try:
                 out[name], designs[name] = synthesize_table(
-                    name, table, system, hdv_table, f"{label}_{name}", source
+                    name, table, system, f"{label}_{name}", source
                 )
             except SynthesisError as err:
                 if failures is None:

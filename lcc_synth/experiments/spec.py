@@ -9,8 +9,8 @@ from pathlib import Path
 from typing import Any
 
 from lcc_synth.controllers.base import Controller
-from lcc_synth.controllers.registry import build_controller
 from lcc_synth.errors import ConfigError
+from lcc_synth.experiments.controller_tables import controller_from_table
 from lcc_synth.experiments.h2_tables import synthesize_h2_tables
 from lcc_synth.metrics import MetricsConfig, metrics_from
 from lcc_synth.models.records import Record, system_tables, toml_text
@@ -172,7 +172,7 @@ def drop_failed_fallbacks(
 
 def controllers_from(
     data: Mapping[str, Any], system: System, source: str | None = None, label: str = "problem",
-    failures: dict[str, str] | None = None,
+    failures: dict[str, str] | None = None, scenario: Scenario | None = None,
 ):  # fmt: skip
     """Every ``[controllers.NAME]`` table, built in file order: ``type = "h2"`` synthesised
     for ``system`` first (:func:`lcc_synth.experiments.h2_tables.synthesize_h2_tables`, the
@@ -182,26 +182,27 @@ def controllers_from(
 
     With ``failures`` (a dict), a controller whose synthesis fails, and an MPC that falls back
     to it, are left out and recorded there (``{name: why}``); without it the error propagates.
+    ``scenario``: the problem's scenario, on which a ``deep_lcc`` controller collects its data.
     """
     tables = declared("").get(data, "controllers", "")
     if not tables:
         raise ConfigError("controllers", "needs at least one [controllers.NAME] table")
     if all(isinstance(t, Mapping) for t in tables.values()):
-        hdv_table = declared("").get(data, "hdv", "")
         given = tables
-        tables, designs = synthesize_h2_tables(tables, system, hdv_table, source, label,
-                                               failures)  # fmt: skip
+        tables, designs = synthesize_h2_tables(tables, system, source, label, failures)
         if failures:
             tables = drop_failed_fallbacks(tables, failures, source)
         tables = resolve_fallbacks(tables, system, source)
-        built = {name: build_controller(name, t, system, source) for name, t in tables.items()}
+        built = {name: controller_from_table(name, t, system, source, scenario)
+                 for name, t in tables.items()}  # fmt: skip
         for name in designs:  # written back as stated (a reload synthesises the same gain)
             built[name].source_table = dict(given[name])
         for name, t in given.items():  # an MPC's fallback = "NAME" is written back as stated
             if name in built and t.get("type") == "mpc" and isinstance(t.get("fallback"), str):
                 built[name].source_table = {**built[name].toml_table(), "fallback": t["fallback"]}
         return built
-    return {name: build_controller(name, t, system, source) for name, t in tables.items()}
+    return {name: controller_from_table(name, t, system, source, scenario)
+            for name, t in tables.items()}  # fmt: skip
 
 
 def load_spec(
@@ -223,7 +224,8 @@ def load_spec(
             scenario = replace(scenario, batch=int(seeds))
         check_starts(declared("").get(problem.data, "controllers", ""), scenario)  # no design yet
         failed: dict[str, str] | None = {} if keep_going else None
-        controllers = controllers_from(problem.data, system, source, problem.name, failed)
+        controllers = controllers_from(problem.data, system, source, problem.name, failed,
+                                       scenario)  # fmt: skip
         check_time_step(scenario, controllers)
         metrics = metrics_from(problem.data, system, controllers, scenario)
         description = problem.data.get("description", "")

@@ -106,7 +106,6 @@ class SweepSpec(Record):
     controllers: dict[str, dict[str, Any]]
     count: int
     batch_size: int
-    hdv_table: dict[str, Any] = field(default_factory=dict)
     source: str | None = None
     #: ``{"v2v.loss_rate": (lo, hi), ...}``: settings drawn per scenario.
     ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
@@ -206,7 +205,6 @@ def load_sweep(
             fallbacks={k: ctrls[k] for k in extra},
             count=n,
             batch_size=min(bs, n),
-            hdv_table=dict(declared("").get(data, "hdv", "")),
             source=src,
             ranges=ranges,
         )
@@ -458,7 +456,7 @@ def run_sweep(
             bar.update(1)
 
         tables, designs = prepare_controllers(
-            spec.controllers, spec.system, "sweep", spec.hdv_table, spec.source, spec.name,
+            spec.controllers, spec.system, "sweep", spec.source, spec.name,
             on_step=step, fallbacks=spec.fallbacks,
         )
     t_design = time.perf_counter() - t_all

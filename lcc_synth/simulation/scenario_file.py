@@ -18,8 +18,7 @@ from lcc_synth.simulation.perturbations import perturbation_from_table
 from lcc_synth.simulation.scenario import MODEL_PARAMS, V2V, Scenario
 from lcc_synth.simulation.sumo_net import SumoSettings
 
-__all__ = ["scenario_from"]
-
+__all__ = ["nominal_scenario", "scenario_from"]
 
 
 def _platoon_layout(system: System) -> dict[str, Any]:
@@ -166,6 +165,13 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
     )
     check_timing(out)
     return out
+
+
+def nominal_scenario(system: System):
+    """The :class:`Scenario` of an empty ``[scenario]`` table on ``system``'s string: every
+    default, no perturbation (e.g. the nominal string DeeP-LCC collects its data on when there
+    is no scenario of its own)."""
+    return scenario_from({}, system)
 
 
 def _sumo_from(table: Mapping[str, Any], f: str) -> SumoSettings:

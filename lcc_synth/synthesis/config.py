@@ -74,7 +74,7 @@ from lcc_synth.synthesis.h2 import Weights
 from lcc_synth.synthesis.lag_design import check_lag_design
 from lcc_synth.synthesis.platoon_config import PlatoonSynthesisSpec, platoon_spec
 
-__all__ = ["DESIGNS", "SynthesisSpec", "spec_from_problem"]
+__all__ = ["DESIGNS", "SynthesisSpec", "spec_from_problem", "synthesis_spec"]
 
 #: The designs of ``[synthesis].design`` (declared in :mod:`lcc_synth.schema`).
 DESIGNS = declared("synthesis").key("design").choices
@@ -201,111 +201,136 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec | PlatoonSynthesisSpec:
     try:
         check_top_level(problem.data)
         system = system_from(problem.data, src)
-        T = declared("synthesis")
-        t = declared("").get(problem.data, "synthesis", "")
-        T.check(t, "synthesis")
-        if system.platoon is not None:
-            check_lag_design(T.get(t, "cav_lag", "synthesis"), "", None, system.kind)
-            return platoon_spec(problem.name, system, t, src)
-        for key in ("comm_range", "patterns", "robust"):
-            if key in t:
-                T.get(t, key, "synthesis")  # a value out of range: that error first
-                raise ConfigError(f"synthesis.{key}", f"only kind = 'platoon' or 'ring' has one "
-                                  f"(kind = {system.kind!r}: use pattern)")  # fmt: skip
-        design = T.get(t, "design", "synthesis")
-        default_sem = "replace" if system.kind in ("fd_lcc", "cf_lcc") else "added"
-        semantics = T.get(t, "semantics", "synthesis", default=default_sem)
-        if semantics == "added" and system.kind == "fd_lcc":
-            raise ConfigError(
-                "synthesis.semantics", "fd_lcc has no vehicle ahead to follow: use 'replace'"
-            )
-        pattern = _pattern(t, system)
-        if design == "full_state":
-            method = T.get(t, "method", "synthesis", default="riccati", choices=("riccati", "lmi"))
-        else:
-            method = T.get(t, "method", "synthesis", default="lmi", choices=("lmi", "direct"))
-        cross_check = T.get(t, "cross_check", "synthesis")
-        tol = T.get(t, "tol", "synthesis")
-        max_iter = T.get(t, "max_iter", "synthesis")
-        band = T.get(t, "band", "synthesis")
-
-        W = declared("synthesis.weights")
-        w = T.get(t, "weights", "synthesis")
-        W.check(w, "synthesis.weights")
-        order = ("q_s", "q_s0", "q_v", "r", "q_a", "q_p", "head", "accel", "position")
-        kw = {key: W.get(w, key, "synthesis.weights") for key in order}
-        if kw["head"] == 0 and kw["accel"] == 0:
-            raise ConfigError("synthesis.weights", "head and accel cannot both be 0")
-        if system.kind == "fd_lcc" and kw["accel"] == 0:
-            raise ConfigError(
-                "synthesis.weights.accel",
-                "must be > 0 for fd_lcc (no head vehicle: the head disturbance does not exist)",
-            )
-        if kw["position"] == "weight" and kw["q_p"] <= 0:
-            raise ConfigError("synthesis.weights.q_p", "must be > 0 when position = 'weight'")
-        weights = Weights(**kw)
-
-        SP = declared("synthesis.sparsity")
-        sp = T.get(t, "sparsity", "synthesis")
-        SP.check(sp, "synthesis.sparsity")
-        sparsity = {key: SP.get(sp, key, "synthesis.sparsity") for key in SP.names}
-        if sparsity["gammas"] is not None and not sparsity["gammas"]:
-            raise ConfigError("synthesis.sparsity.gammas", "must not be empty")
-
-        ST = declared("synthesis.string")
-        st = T.get(t, "string", "synthesis")
-        ST.check(st, "synthesis.string")
-        string_gamma = ST.get(st, "gamma", "synthesis.string")
-        polish_steps = ST.get(st, "polish_steps", "synthesis.string")
-        string_margin = ST.get(st, "margin", "synthesis.string")
-        if design == "string_stable" and system.kind == "fd_lcc":
-            raise ConfigError(
-                "synthesis.design", "string_stable needs a head vehicle; fd_lcc has none"
-            )
-        if design == "string_stable" and weights.head == 0:
-            raise ConfigError(
-                "synthesis.weights.head",
-                "must be > 0 for design = 'string_stable' (the head disturbance is the point)",
-            )
-
-        baseline = None
-        B = declared("synthesis.baseline")
-        b = T.get(t, "baseline", "synthesis")
-        if b:
-            B.check(b, "synthesis.baseline")
-            bname = B.get(b, "name", "synthesis.baseline")
-            bsem = B.get(b, "semantics", "synthesis.baseline", default=semantics)
-            bg = B.get(b, "gains", "synthesis.baseline")
-            warn_large_gains(bg, "synthesis.baseline.gains")
-            try:
-                gains = StaticGains(bg, bsem)
-                gains.check(system.linear_model(warn=False))
-            except ConfigError as err:
-                raise ConfigError(f"synthesis.baseline.{err.field}", err.message) from None
-            baseline = (bname, gains)
-        as_run = _as_run(t, system, design)
-        cav_lag = check_lag_design(T.get(t, "cav_lag", "synthesis"), design, as_run,
-                                   system.kind)  # fmt: skip
-        return SynthesisSpec(
-            cav_lag=cav_lag,
-            as_run=as_run,
-            name=problem.name,
-            system=system,
-            design=design,
-            semantics=semantics,
-            weights=weights,
-            pattern=pattern,
-            method=method,
-            cross_check=cross_check,
-            tol=tol,
-            max_iter=max_iter,
-            band=band,
-            sparsity=sparsity,
-            string_gamma=string_gamma,
-            polish_steps=polish_steps,
-            string_margin=string_margin,
-            baseline=baseline,
-            source=src,
-        )
+        table = declared("").get(problem.data, "synthesis", "")
+        return synthesis_spec(problem.name, system, table, src)
     except ConfigError as err:
         raise err.with_source(src) if not err.source else err from None
+
+
+def synthesis_spec(
+    name: str, system: System, table: dict[str, Any], source: str | None = None
+) -> SynthesisSpec | PlatoonSynthesisSpec:
+    """The spec of a ``[synthesis]`` table for an already parsed ``system``.
+
+    Parameters
+    ----------
+    name : str
+        The problem's name (the report's ``problem``).
+    system : System
+        The string the gain is designed for.
+    table : dict
+        The ``[synthesis]`` table (errors name ``synthesis.KEY``).
+    source : str, optional
+        Where the table came from (kept in the spec).
+
+    Raises
+    ------
+    ConfigError
+        A bad key or value, naming ``synthesis...``.
+    """
+    t = table
+    T = declared("synthesis")
+    T.check(t, "synthesis")
+    if system.platoon is not None:
+        check_lag_design(T.get(t, "cav_lag", "synthesis"), "", None, system.kind)
+        return platoon_spec(name, system, t, source)
+    for key in ("comm_range", "patterns", "robust"):
+        if key in t:
+            T.get(t, key, "synthesis")  # a value out of range: that error first
+            raise ConfigError(f"synthesis.{key}", f"only kind = 'platoon' or 'ring' has one "
+                              f"(kind = {system.kind!r}: use pattern)")  # fmt: skip
+    design = T.get(t, "design", "synthesis")
+    default_sem = "replace" if system.kind in ("fd_lcc", "cf_lcc") else "added"
+    semantics = T.get(t, "semantics", "synthesis", default=default_sem)
+    if semantics == "added" and system.kind == "fd_lcc":
+        raise ConfigError(
+            "synthesis.semantics", "fd_lcc has no vehicle ahead to follow: use 'replace'"
+        )
+    pattern = _pattern(t, system)
+    if design == "full_state":
+        method = T.get(t, "method", "synthesis", default="riccati", choices=("riccati", "lmi"))
+    else:
+        method = T.get(t, "method", "synthesis", default="lmi", choices=("lmi", "direct"))
+    cross_check = T.get(t, "cross_check", "synthesis")
+    tol = T.get(t, "tol", "synthesis")
+    max_iter = T.get(t, "max_iter", "synthesis")
+    band = T.get(t, "band", "synthesis")
+
+    W = declared("synthesis.weights")
+    w = T.get(t, "weights", "synthesis")
+    W.check(w, "synthesis.weights")
+    order = ("q_s", "q_s0", "q_v", "r", "q_a", "q_p", "head", "accel", "position")
+    kw = {key: W.get(w, key, "synthesis.weights") for key in order}
+    if kw["head"] == 0 and kw["accel"] == 0:
+        raise ConfigError("synthesis.weights", "head and accel cannot both be 0")
+    if system.kind == "fd_lcc" and kw["accel"] == 0:
+        raise ConfigError(
+            "synthesis.weights.accel",
+            "must be > 0 for fd_lcc (no head vehicle: the head disturbance does not exist)",
+        )
+    if kw["position"] == "weight" and kw["q_p"] <= 0:
+        raise ConfigError("synthesis.weights.q_p", "must be > 0 when position = 'weight'")
+    weights = Weights(**kw)
+
+    SP = declared("synthesis.sparsity")
+    sp = T.get(t, "sparsity", "synthesis")
+    SP.check(sp, "synthesis.sparsity")
+    sparsity = {key: SP.get(sp, key, "synthesis.sparsity") for key in SP.names}
+    if sparsity["gammas"] is not None and not sparsity["gammas"]:
+        raise ConfigError("synthesis.sparsity.gammas", "must not be empty")
+
+    ST = declared("synthesis.string")
+    st = T.get(t, "string", "synthesis")
+    ST.check(st, "synthesis.string")
+    string_gamma = ST.get(st, "gamma", "synthesis.string")
+    polish_steps = ST.get(st, "polish_steps", "synthesis.string")
+    string_margin = ST.get(st, "margin", "synthesis.string")
+    if design == "string_stable" and system.kind == "fd_lcc":
+        raise ConfigError(
+            "synthesis.design", "string_stable needs a head vehicle; fd_lcc has none"
+        )
+    if design == "string_stable" and weights.head == 0:
+        raise ConfigError(
+            "synthesis.weights.head",
+            "must be > 0 for design = 'string_stable' (the head disturbance is the point)",
+        )
+
+    baseline = None
+    B = declared("synthesis.baseline")
+    b = T.get(t, "baseline", "synthesis")
+    if b:
+        B.check(b, "synthesis.baseline")
+        bname = B.get(b, "name", "synthesis.baseline")
+        bsem = B.get(b, "semantics", "synthesis.baseline", default=semantics)
+        bg = B.get(b, "gains", "synthesis.baseline")
+        warn_large_gains(bg, "synthesis.baseline.gains")
+        try:
+            gains = StaticGains(bg, bsem)
+            gains.check(system.linear_model(warn=False))
+        except ConfigError as err:
+            raise ConfigError(f"synthesis.baseline.{err.field}", err.message) from None
+        baseline = (bname, gains)
+    as_run = _as_run(t, system, design)
+    cav_lag = check_lag_design(T.get(t, "cav_lag", "synthesis"), design, as_run,
+                               system.kind)  # fmt: skip
+    return SynthesisSpec(
+        cav_lag=cav_lag,
+        as_run=as_run,
+        name=name,
+        system=system,
+        design=design,
+        semantics=semantics,
+        weights=weights,
+        pattern=pattern,
+        method=method,
+        cross_check=cross_check,
+        tol=tol,
+        max_iter=max_iter,
+        band=band,
+        sparsity=sparsity,
+        string_gamma=string_gamma,
+        polish_steps=polish_steps,
+        string_margin=string_margin,
+        baseline=baseline,
+        source=source,
+    )
