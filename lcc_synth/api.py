@@ -35,9 +35,8 @@ by the functions that need them (:func:`synthesize_h2`, :func:`mpc`, :func:`reco
 this 2-core machine: ``import lcc_synth`` 2-10 ms (``lcc_synth.errors`` only), the first API
 name 0.7-0.8 s; README's snippet (Table II's CF-LCC row, 100 s simulated, and the structured
 H2 gain) about 5 s, of which the synthesis about 1 s; ``examples/paper_walkthrough.py`` 7 s.
-``lcc.metrics`` and ``lcc.mpc`` share their names with :mod:`lcc_synth.metrics` and
-:mod:`lcc_synth.mpc`, which are callable as these functions
-(:func:`lcc_synth.models.records.callable_module`).
+``lcc.metrics`` and ``lcc.mpc`` are this module's :func:`metrics` and :func:`mpc` (the module
+:mod:`lcc_synth.metrics` and the package :mod:`lcc_synth.mpc` keep their names as modules).
 """
 
 from __future__ import annotations
@@ -332,14 +331,21 @@ def metrics(
 
     ``window`` (s) is required: AAVE and fuel depend on it (Table II uses
     :data:`TABLE2_WINDOW` = (20, 40)); ``vehicles``: ``"cav_and_behind"`` (Table II), ``"all"``,
-    ``"hdvs"`` or a list of paper indices."""
-    from lcc_synth.metrics import evaluate
+    ``"hdvs"`` or a list of paper indices.
+    """
+    from lcc_synth.metrics import summary
 
-    return evaluate(result, window=window, vehicles=vehicles)
+    return summary(result, _metrics_config(window, vehicles))
 
 
-def _vehicles(vehicles):
-    return vehicles if isinstance(vehicles, str) else tuple(vehicles)
+def _metrics_config(window: tuple[float, float], vehicles) -> MetricsConfig:
+    """The :class:`MetricsConfig` of an explicit window and vehicle set."""
+    vehicles = vehicles if isinstance(vehicles, str) else tuple(vehicles)
+    try:
+        t0, t1 = (float(t) for t in window)
+    except (TypeError, ValueError):
+        raise ConfigError("metrics.window", f"must be (t0, t1) in s, got {window!r}") from None
+    return MetricsConfig((t0, t1), vehicles)
 
 
 def aave(result, *, window: tuple[float, float], vehicles="cav_and_behind") -> np.ndarray:
@@ -347,7 +353,8 @@ def aave(result, *, window: tuple[float, float], vehicles="cav_and_behind") -> n
     :func:`lcc_synth.metrics.aave`."""
     from lcc_synth.metrics import aave as _aave
 
-    return _aave(result, MetricsConfig(tuple(window), _vehicles(vehicles)).window, vehicles)
+    config = _metrics_config(window, vehicles)
+    return _aave(result, config.window, config.vehicles)
 
 
 def fuel(result, *, window: tuple[float, float], vehicles="cav_and_behind") -> np.ndarray:
@@ -355,7 +362,8 @@ def fuel(result, *, window: tuple[float, float], vehicles="cav_and_behind") -> n
     :func:`lcc_synth.metrics.fuel`."""
     from lcc_synth.metrics import fuel as _fuel
 
-    return _fuel(result, MetricsConfig(tuple(window), _vehicles(vehicles)).window, vehicles)
+    config = _metrics_config(window, vehicles)
+    return _fuel(result, config.window, config.vehicles)
 
 
 def record(

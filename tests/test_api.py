@@ -112,24 +112,95 @@ def test_metric_window_is_explicit(runs):
         lcc.metrics(r, window=(40.0, 20.0))
 
 
-def test_metrics_and_mpc_mean_the_same_whichever_name_python_bound():
-    import lcc_synth.metrics
-    import lcc_synth.mpc
+def _fresh_json(code: str):
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=ROOT)  # fmt: skip
+    return json.loads(out.stdout)
+
+
+SIGNATURES = {  # what the functions are declared with, written here from api.py's source
+    "metrics": ["result", "window", "vehicles"],
+    "mpc": ["system", "name", "settings"],
+    "system": ["kind", "m", "n", "v_star", "hdv"],
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("order", ["modules_first", "names_first"])
+def test_metrics_and_mpc_are_the_api_functions_whichever_python_bound_first(order):
+    """Python binds ``lcc_synth.metrics`` (the module) on the package when it is imported; the
+    top-level names stay the API's functions, with their own help and signature, and the
+    modules still import by their path."""
+    modules = "import lcc_synth.metrics, lcc_synth.mpc, lcc_synth.mpc.controller; "
+    names = "lcc.metrics, lcc.mpc; "
+    code = (
+        "import inspect, json, pydoc, sys; import lcc_synth as lcc; "
+        + (modules + names if order == "modules_first" else names + modules)
+        + "from lcc_synth import api; from lcc_synth.metrics import summary; "
+        "from lcc_synth.mpc import MPCController; "
+        "print(json.dumps({n: {'is_api': getattr(lcc, n) is getattr(api, n), "
+        "'function': inspect.isfunction(getattr(lcc, n)), "
+        "'params': list(inspect.signature(getattr(lcc, n)).parameters), "
+        "'help': pydoc.render_doc(getattr(lcc, n), renderer=pydoc.plaintext)} "
+        "for n in ('metrics', 'mpc', 'system')} | "
+        "{'modules': [type(sys.modules[m]).__name__ for m in ('lcc_synth.metrics', "
+        "'lcc_synth.mpc')], 'summary': summary.__module__, 'mpc_class': MPCController.__name__}))"
+    )
+    out = _fresh_json(code)
+    for name, params in SIGNATURES.items():
+        assert out[name]["is_api"] and out[name]["function"], name
+        assert out[name]["params"] == params, name
+    assert "Every metric of a run" in out["metrics"]["help"]
+    assert "Performance and safety metrics" not in out["metrics"]["help"]  # the module's
+    assert "The safety-constrained MPC" in out["mpc"]["help"]
+    assert "Safety-constrained model predictive control" not in out["mpc"]["help"]
+    assert out["modules"] == ["module", "module"]  # plain modules, not made callable
+    assert out["summary"] == "lcc_synth.metrics" and out["mpc_class"] == "MPCController"
+
+
+def test_metrics_and_mpc_work_as_functions():
     from lcc_synth import api
 
-    assert lcc.metrics is lcc_synth.metrics  # bound by the import: callable as the function
     r = table2_runs()["all_hdv"]
     same = [json.dumps(f(r, window=(20, 40)), sort_keys=True) for f in (lcc.metrics, api.metrics)]
     assert same[0] == same[1]  # (NaN spacing of the head: compare the text)
-    from lcc_synth.metrics import per_scenario  # the module still works as a module
-
-    assert callable(per_scenario)
     ctrl = lcc.mpc(table2_system(), horizon=20, n_model=4)
     assert ctrl.settings.horizon == 20 and ctrl.settings.n_model == 4
-    a, b = (f(table2_system(), horizon=20).settings for f in (api.mpc, lcc.mpc))
-    assert a == b
     with pytest.raises(ConfigError, match=r"controllers\.mpc\.horizn"):
         lcc.mpc(table2_system(), horizn=20)
+    with pytest.raises(ConfigError, match=r"metrics\.window"):
+        lcc.metrics(r, window=("a", 40))
+
+
+def test_no_code_reaches_a_shadowed_module_through_the_package():
+    """``import lcc_synth.metrics as m``, ``from lcc_synth import mpc`` and
+    ``lcc_synth.mpc.<name>`` give the API's function, not the module: no code of the
+    repository may use them (``from lcc_synth.metrics import ...`` is the way)."""
+    import ast
+
+    shadowed = ("metrics", "mpc")
+
+    def through_package(node) -> bool:
+        if isinstance(node, ast.Import):  # import lcc_synth.metrics as m
+            return any(a.asname and a.name.split(".")[:2] in [["lcc_synth", s] for s in shadowed]
+                       for a in node.names)  # fmt: skip
+        if isinstance(node, ast.ImportFrom):  # from lcc_synth import metrics
+            return node.module == "lcc_synth" and any(a.name in shadowed for a in node.names)
+        if isinstance(node, ast.Attribute):  # lcc_synth.mpc.controller
+            inner = node.value
+            return (isinstance(inner, ast.Attribute) and inner.attr in shadowed
+                    and isinstance(inner.value, ast.Name) and inner.value.id == "lcc_synth")
+        return False
+
+    found = [
+        f"{path.relative_to(ROOT)}:{node.lineno}"
+        for folder in ("lcc_synth", "tests", "examples", "benchmarks", "docs")
+        for path in sorted((ROOT / folder).rglob("*.py"))
+        for node in ast.walk(ast.parse(path.read_text(), str(path)))
+        if through_package(node)
+    ]
+    probe = "import lcc_synth.metrics as mt\nfrom lcc_synth import mpc\nlcc_synth.mpc.controller\n"
+    assert [through_package(n) for n in ast.walk(ast.parse(probe))].count(True) == 3
+    assert found == []
 
 
 def test_analysis_functions_agree_with_the_paper():
@@ -224,8 +295,7 @@ def test_no_api_name_is_shadowed_by_a_module():
         importlib.import_module(f"lcc_synth.{info.name}")
     for name in api.__all__:
         obj = getattr(lcc, name)
-        module = isinstance(obj, types.ModuleType)
-        assert obj is getattr(api, name) or (module and callable(obj)), name
+        assert obj is getattr(api, name) and not isinstance(obj, types.ModuleType), name
 
 
 def test_paper_walkthrough_uses_only_the_top_level_api_and_prints_what_it_wrote(tmp_path):

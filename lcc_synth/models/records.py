@@ -14,8 +14,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
-import types
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -24,7 +22,6 @@ import numpy as np
 
 __all__ = [
     "REPR_ITEMS", "Record", "plain", "short", "toml_text", "drop_none", "system_tables",
-    "callable_module",
 ]  # fmt: skip
 
 #: Arrays and lists with more entries than this are shown by shape / length in ``repr``.
@@ -132,21 +129,3 @@ def system_tables(system: Any) -> dict[str, Any]:
                    "v_star": float(system.v_star)},
     }  # fmt: skip
 
-
-def callable_module(module_name: str, fn: Any) -> None:
-    """Make the module ``module_name`` callable as ``fn``.
-
-    The flat API's ``lcc.metrics(...)`` and ``lcc.mpc(...)`` share their names with the
-    module ``lcc_synth.metrics`` and the package ``lcc_synth.mpc``, which Python binds on
-    ``lcc_synth`` as soon as they are imported: calling the module calls ``fn``, so the name
-    means the same thing whichever was bound first.
-    """
-    module = sys.modules[module_name]
-
-    class CallableModule(types.ModuleType):
-        __doc__ = module.__doc__
-
-        def __call__(self, *args: Any, **kwargs: Any) -> Any:
-            return fn(*args, **kwargs)
-
-    module.__class__ = CallableModule
