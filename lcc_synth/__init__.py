@@ -37,7 +37,7 @@ _API = (
     "string_stability", "region_map", "h2_problem", "synthesize_h2", "hdv_controller",
     "static_controller",
     "mpc", "scenario", "simulate", "metrics", "aave", "fuel", "record",
-    "ProblemObjects", "build_problem", "load_problem", "TABLE2_WINDOW",
+    "ProblemObjects", "Regions", "build_problem", "load_problem", "TABLE2_WINDOW",
 )  # fmt: skip
 
 #: API names that are also the names of a submodule (the module stays importable by its path).

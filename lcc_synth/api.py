@@ -24,7 +24,7 @@ Table II metrics          :func:`metrics` (AAVE, fuel, spacing, TTC, jerk...; ``
                           explicit), :func:`aave`, :func:`fuel`
 recordings                :func:`record` (a Rerun ``.rrd`` file)
 problem files             :func:`load_problem` / :func:`build_problem` -> :class:`ProblemObjects`
-                          (``to_toml()``)
+                          (``to_toml()``; ``==`` by value)
 ========================  ====================================================================
 
 Results are small dataclasses with ``as_dict()`` and a one-line ``repr``
@@ -44,7 +44,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -53,7 +53,7 @@ from lcc_synth.metrics import MetricsConfig
 from lcc_synth.models.feedback import StaticGains
 from lcc_synth.models.hdv import IDM, OVM
 from lcc_synth.models.platoon import PlatoonGains, PlatoonModel
-from lcc_synth.models.records import Record, plain, system_tables, toml_text
+from lcc_synth.models.records import Record, ValueEq, plain, same, system_tables, toml_text
 from lcc_synth.problem import Problem, System, system_from
 from lcc_synth.simulation.perturbations import Brake, BrakeProfile, Profile, Sine
 from lcc_synth.simulation.scenario import V2V, Scenario
@@ -65,7 +65,7 @@ __all__ = [
     "string_stability", "region_map", "h2_problem", "synthesize_h2", "hdv_controller",
     "static_controller",
     "mpc", "scenario", "simulate", "metrics", "aave", "fuel", "record",
-    "ProblemObjects", "build_problem", "load_problem", "TABLE2_WINDOW",
+    "ProblemObjects", "Regions", "build_problem", "load_problem", "TABLE2_WINDOW",
 ]  # fmt: skip
 
 #: Table II's metric window (s): AAVE and fuel over 20 <= t <= 40.
@@ -411,9 +411,30 @@ def record(
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True, repr=False)
-class ProblemObjects(Record):
+class Regions(NamedTuple):
+    """``(specs, omega)`` of ``[regions]`` / ``[maps.*]`` (``{name: RegionSpec}``, the
+    frequencies); ``==`` by value (:func:`~lcc_synth.models.records.same`)."""
+
+    specs: dict[str, Any]
+    omega: Any
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, tuple):
+            return NotImplemented
+        return same(tuple(self), tuple(other))
+
+    def __ne__(self, other: object) -> bool:
+        return not self == other if isinstance(other, tuple) else NotImplemented
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class ProblemObjects(ValueEq, Record):
     """The objects a problem file holds, as the CLI builds them (``None``: not in the file).
+
+    ``==`` compares by value (:func:`~lcc_synth.models.records.same`: arrays by their
+    entries, controllers by what defines them): two loads of one file are equal.
 
     Attributes
     ----------
@@ -430,7 +451,7 @@ class ProblemObjects(Record):
         ``[layouts]``, ``[scenarios]``, ``[controllers]`` of ``lcc-synth run``.
     analysis : lcc_synth.analysis.cases.AnalysisOptions or None
         ``[analysis]`` of ``lcc-synth analyze``; ``cases`` its ``[cases.*]`` gains.
-    regions : tuple or None
+    regions : Regions or None
         ``(specs, omega)`` of ``[regions]`` / ``[maps.*]`` (``lcc-synth regions``); written
         back with every map's grid explicit (only the default frequency grid has a TOML form).
     source : str or None
@@ -543,7 +564,8 @@ def load_problem(path: str | Path) -> ProblemObjects:
     :func:`~lcc_synth.experiments.spec.load_spec`, :func:`~lcc_synth.synthesis.config.
     spec_from_problem`, :func:`~lcc_synth.experiments.sweep.load_sweep`,
     :func:`~lcc_synth.experiments.comparison.load_suite`, the analyze / regions readers).
-    Errors are :class:`ConfigError` naming the file and the dotted field."""
+    Errors are :class:`ConfigError` naming the file and the dotted field.
+    """
     from lcc_synth.problem import load_problem as _load
 
     prob = _load(path)
@@ -585,5 +607,5 @@ def load_problem(path: str | Path) -> ProblemObjects:
         lin = kw["system"].linear_model(warn=False) if "system" in kw else None
         if lin is None:
             raise ConfigError("system", "table is required by [maps]", src)
-        kw["regions"] = region_specs_from(data, lin, src)
+        kw["regions"] = Regions(*region_specs_from(data, lin, src))
     return ProblemObjects(prob.name, desc, **kw)
