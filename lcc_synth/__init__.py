@@ -33,7 +33,7 @@ __version__ = "0.1.0"
 _API = (
     "OVM", "IDM", "System", "Scenario", "V2V", "StaticGains", "MetricsConfig",
     "Brake", "Sine", "BrakeProfile", "Profile",
-    "system", "model", "controllability", "observability", "control_energy", "gains",
+    "system", "ring", "model", "controllability", "observability", "control_energy", "gains",
     "string_stability", "region_map", "h2_problem", "synthesize_h2", "hdv_controller",
     "static_controller",
     "mpc", "scenario", "simulate", "metrics", "aave", "fuel", "record",

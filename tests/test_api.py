@@ -121,7 +121,8 @@ def _fresh_json(code: str):
 SIGNATURES = {  # what the functions are declared with, written here from api.py's source
     "metrics": ["result", "window", "vehicles"],
     "mpc": ["system", "name", "settings"],
-    "system": ["kind", "m", "n", "v_star", "hdv"],
+    "system": ["kind", "m", "n", "v_star", "hdv", "size", "cavs", "hdv_values",
+               "circumference", "vehicle_length"],
 }  # fmt: skip
 
 
@@ -208,9 +209,9 @@ def test_analysis_functions_agree_with_the_paper():
     assert rep.controllable  # Theorem 2, the paper's OVM at v* = 15
     case_d = {"s_-2": 1.0, "v_-2": -1.0, "s_-1": 1.0, "v_-1": -1.0,
               "s_1": -1.0, "v_1": -1.0, "s_2": -1.0, "v_2": -1.0}  # fmt: skip
-    ss = lcc.string_stability(lcc.model("lcc", 2, 2), case_d)
+    ss = lcc.string_stability(lcc.model("lcc", 2, 2), lcc.gains(case_d, semantics="added"))
     assert ss.plant_stable and ss.string_stable  # Table I, case D
-    hdv = lcc.string_stability(lcc.model("lcc", 2, 2), {})
+    hdv = lcc.string_stability(lcc.model("lcc", 2, 2), lcc.gains({}, semantics="added"))
     assert not hdv.string_stable and hdv.gamma_peak == pytest.approx(1.13, abs=0.01)  # README
     short, long = (lcc.control_energy(lcc.model("fd_lcc", n=2), t) for t in (10.0, 20.0))
     assert 0 < short.lambda_min < long.lambda_min  # W(t) grows with the horizon
@@ -223,7 +224,43 @@ def test_bad_input_names_the_field():
     with pytest.raises(ConfigError, match=r"system\.v_star"):
         lcc.system("lcc", m=1, n=1, v_star=45.0)
     with pytest.raises(ConfigError, match=r"gains\.x_1"):
-        lcc.gains({"x_1": 1.0})
+        lcc.gains({"x_1": 1.0}, semantics="added")
+    with pytest.raises(ConfigError, match=r"semantics: must be one of \['added', 'replace'\]"):
+        lcc.gains({"s_1": 1.0}, semantics="add")
+
+
+def test_gains_state_their_semantics_wherever_a_user_gives_them():
+    """Table II's CF-LCC gain is the whole command ("replace": string stable, the paper's
+    Sec. V-B); read as "added" to the HDV law the same numbers give the opposite verdict, so
+    a plain mapping (which does not say which) is refused with the way to say it."""
+    cf = lcc.model("cf_lcc", n=10)
+    replace = lcc.string_stability(cf, lcc.gains(PAPER_GAINS, semantics="replace"))
+    added = lcc.string_stability(cf, lcc.gains(PAPER_GAINS, semantics="added"))
+    assert replace.string_stable and not added.string_stable
+    assert added.gamma_peak == pytest.approx(1.136, abs=5e-4)  # the issue's measurement
+    refused = 'write lcc.gains({...}, semantics="added"|"replace")'
+    for call in (
+        lambda: lcc.string_stability(cf, PAPER_GAINS),
+        lambda: lcc.string_stability(cf, {}),
+        lambda: lcc.region_map(lcc.model("lcc", 1, 1), 1, [0.0], [0.0], {"s_-1": 1.0}),
+    ):
+        with pytest.raises(ConfigError) as err:
+            call()
+        assert err.value.field == "gain" and refused in str(err.value)
+        assert "\n" not in str(err.value)  # one line
+    for call in (
+        lambda: lcc.gains(PAPER_GAINS),
+        lambda: lcc.static_controller(table2_system(), PAPER_GAINS, kind="cf_lcc"),
+    ):
+        with pytest.raises(ConfigError, match=r'^semantics: must be given with gains: "added"'):
+            call()
+    with pytest.raises(ConfigError, match="'added' contradicts the gains' 'replace'"):
+        lcc.gains(lcc.gains(PAPER_GAINS, semantics="replace"), semantics="added")
+    # a declared mapping (semantics=) or a gains object builds the same controller
+    a = lcc.static_controller(table2_system(), PAPER_GAINS, semantics="replace", kind="cf_lcc")
+    b = lcc.static_controller(table2_system(), lcc.gains(PAPER_GAINS, semantics="replace"),
+                              kind="cf_lcc")  # fmt: skip
+    assert a.as_dict() == b.as_dict() and a.gains.semantics == "replace"
 
 
 def test_results_are_records_with_as_dict_and_a_short_repr(runs):
@@ -235,7 +272,7 @@ def test_results_are_records_with_as_dict_and_a_short_repr(runs):
     d = sc.as_dict()
     assert d["perturbations"] == [{"vehicle": 1, "start": 20.0, "duration": 1.0, "decel": -5.0}]
     assert json.loads(json.dumps(d)) == d  # plain values
-    ss = lcc.string_stability(lcc.model("lcc", 1, 1), {})
+    ss = lcc.string_stability(lcc.model("lcc", 1, 1), lcc.gains({}, semantics="added"))
     assert repr(ss).startswith("StringStabilityReport(plant_stable=")
     assert json.dumps(ss.as_dict())
     assert repr(lcc.OVM()) == "OVM(alpha=0.6, beta=0.9, s_st=5, s_go=35, v_max=30, name='ovm')"
