@@ -32,12 +32,13 @@ problem files             :func:`load_problem` / :func:`build_problem` -> :class
 
 Results are small dataclasses with ``as_dict()`` and a one-line ``repr``
 (:class:`lcc_synth.models.records.Record`); the objects of a problem file compare with ``==`` by
-value (:func:`lcc_synth.models.records.same`). Bad input raises
+value (:func:`lcc_synth.models.records.same`). The main entry points carry ``>>>`` examples
+(run by ``tests/test_api_doctest.py``). Bad input raises
 :class:`~lcc_synth.errors.ConfigError` naming the dotted field, as a problem file would.
 Importing this module imports numpy and scipy.linalg; cvxpy, CasADi/OSQP and Rerun are imported
 by the functions that need them (:func:`synthesize_h2`, :func:`mpc`, :func:`record`). Measured on
-this 2-core machine: ``import lcc_synth`` 2-10 ms (``lcc_synth.errors`` only), the first API
-name 0.7-0.8 s; README's snippet (Table II's CF-LCC row, 100 s simulated, and the structured
+this 2-core machine: ``import lcc_synth`` 2-3 ms (``lcc_synth.errors`` only), the first API
+name 0.4-0.5 s; README's snippet (Table II's CF-LCC row, 100 s simulated, and the structured
 H2 gain) about 5 s, of which the synthesis about 1 s; ``examples/paper_walkthrough.py`` 7 s.
 ``lcc.metrics`` and ``lcc.mpc`` are this module's :func:`metrics` and :func:`mpc` (the module
 :mod:`lcc_synth.metrics` and the package :mod:`lcc_synth.mpc` keep their names as modules).
@@ -119,6 +120,20 @@ def system(
         Ring: its length (m), instead of ``v_star``.
     vehicle_length : float, optional
         Platoon or ring: every vehicle's length (m); default 0.
+
+    Examples
+    --------
+    >>> import lcc_synth as lcc
+    >>> string = lcc.system("fd_lcc", n=10)  # Table II: the CAV and 10 HDVs behind it
+    >>> string.kind, string.m, string.n, string.v_star, round(string.s_star, 3)
+    ('fd_lcc', 0, 10, 15.0, 20.0)
+    >>> platoon = lcc.system(size=8, cavs=[3, 6])  # DeeP-LCC's platoon: CAVs 3 and 6
+    >>> platoon.kind, platoon.platoon.types
+    ('platoon', ('hdv', 'hdv', 'cav', 'hdv', 'hdv', 'cav', 'hdv', 'hdv'))
+    >>> lcc.system("lcc", n=2)
+    Traceback (most recent call last):
+    ...
+    lcc_synth.errors.ConfigError: system.m: is required for kind = 'lcc': the number of HDVs ...
     """
     if kind is None and (size is not None or cavs is not None):
         kind = "platoon"
@@ -153,6 +168,16 @@ def ring(
     """A ring road of ``size`` vehicles with CAVs at ``cavs`` (``[system] kind = "ring"``):
     :func:`system` with ``kind = "ring"``; give ``v_star`` (default 15 m/s: every vehicle at
     its equilibrium spacing) or the ``circumference`` (m), not both.
+
+    Examples
+    --------
+    >>> import lcc_synth as lcc
+    >>> road = lcc.ring(20, cavs=[20])  # 20 vehicles, the last one automated
+    >>> road.kind, road.platoon.size, road.platoon.cavs, round(road.platoon.length, 6)
+    ('ring', 20, (20,), 400.0)
+    >>> sugiyama = lcc.ring(22, cavs=[22], circumference=230.0)  # 22 vehicles on 230 m
+    >>> round(sugiyama.v_star, 4)  # the OVM's V(230 m / 22) = 15 (1 - cos(pi 5.4545 / 30))
+    2.3812
     """
     return system("ring", v_star=v_star, hdv=hdv, size=size, cavs=cavs,
                   circumference=circumference, hdv_values=hdv_values,
@@ -177,6 +202,12 @@ def model(
     platoon or ring: a :class:`~lcc_synth.models.platoon.PlatoonModel`).
 
     Same parameters as :func:`system`; ``system(...).linear_model()``.
+
+    Examples
+    --------
+    >>> import lcc_synth as lcc
+    >>> lcc.model("lcc", m=1, n=1).state_names
+    ('s_-1', 'v_-1', 's_0', 'v_0', 's_1', 'v_1')
     """
     return system(kind, m, n, v_star, hdv, size=size, cavs=cavs, hdv_values=hdv_values,
                   circumference=circumference, vehicle_length=vehicle_length).linear_model()
@@ -205,6 +236,15 @@ def controllability(model: System | LCCModel | PlatoonModel, tol: float | None =
 
     ``model``: a :class:`System` (its :meth:`~lcc_synth.problem.System.linear_model`) or a
     linear model (:func:`model`).
+
+    Examples
+    --------
+    >>> import lcc_synth as lcc
+    >>> lcc.controllability(lcc.system("fd_lcc", n=10)).verdict  # Theorem 2
+    'controllable'
+    >>> rep = lcc.controllability(lcc.system("lcc", m=2, n=2))  # Theorem 3: not the HDVs ahead
+    >>> rep.controllable, rep.rank, rep.n_states
+    (False, 6, 10)
     """
     model = _linear(model)
     if isinstance(model, PlatoonModel):
@@ -269,6 +309,16 @@ def gains(
     model : System or PlatoonModel, optional
         The platoon or ring whose per-CAV tables ``values`` holds (then the result is a
         :class:`~lcc_synth.models.platoon.PlatoonGains`, else a :class:`StaticGains`).
+
+    Examples
+    --------
+    >>> import lcc_synth as lcc
+    >>> lcc.gains({"s_1": -1.0, "v_1": -1.0}, semantics="added")
+    StaticGains(gains={'s_1': -1, 'v_1': -1}, semantics='added')
+    >>> lcc.gains({"s_1": -1.0})
+    Traceback (most recent call last):
+    ...
+    lcc_synth.errors.ConfigError: semantics: must be given with gains: "added" (the CAV's ...
     """
     if isinstance(values, StaticGains | PlatoonGains):
         if semantics is not None and semantics != values.semantics:
@@ -323,6 +373,20 @@ def string_stability(
     (several CAVs) a :class:`~lcc_synth.models.platoon.PlatoonGains` (``lcc.gains({"u_3":
     {...}}, semantics=..., model=...)``):
     :func:`lcc_synth.analysis.platoon_string.platoon_string_stability`.
+
+    Examples
+    --------
+    Table II's CF-LCC gain is the whole command (``"replace"``): string stable; read as
+    ``"added"`` to the HDV law, the same numbers are not.
+
+    >>> import lcc_synth as lcc
+    >>> cf = lcc.model("cf_lcc", n=10)
+    >>> table2 = {"s_0": 0.1, "v_0": -0.5, "s_1": -0.2, "v_1": 0.05, "s_2": -0.1, "v_2": 0.05}
+    >>> lcc.string_stability(cf, lcc.gains(table2, semantics="replace")).string_stable
+    True
+    >>> added = lcc.string_stability(cf, lcc.gains(table2, semantics="added"))
+    >>> added.string_stable, round(added.gamma_peak, 3)
+    (False, 1.136)
     """
     model = _linear(model)
     gain = _stated(gain, model)
@@ -408,6 +472,17 @@ def synthesize_h2(system, *args: Any, **kwargs: Any):
 
     Solved by :func:`lcc_synth.synthesis.design.synthesize` (cvxpy + Clarabel for the LMI
     designs; the showcase's structured CF-LCC gain, 22 states, takes about 1 s here).
+
+    Examples
+    --------
+    A CF-LCC gain for a CAV that hears only HDV 1 of the two behind it:
+
+    >>> import lcc_synth as lcc
+    >>> h2 = lcc.synthesize_h2(lcc.system("cf_lcc", n=2), pattern=[1], semantics="replace")
+    >>> round(h2.check.h2, 4), h2.check.string_stable
+    (1.8809, True)
+    >>> {k: round(g, 3) for k, g in h2.gains.items() if g}
+    {'s_0': 1.003, 'v_0': -1.973, 's_1': -0.314, 'v_1': -0.189}
     """
     from lcc_synth.synthesis.design import synthesize
 
@@ -478,6 +553,16 @@ def scenario(system: System, perturbations: Sequence[Any] = (), **keys: Any) -> 
     (:func:`lcc_synth.simulation.scenario_file.scenario_for`): a platoon or ring takes its
     layout and per-vehicle parameters from the system, and perturbations name its vehicles by
     position (the paper's strings: by index, ``-m..n``, or ``"head"``).
+
+    Examples
+    --------
+    >>> import lcc_synth as lcc
+    >>> brake = lcc.scenario(lcc.system("fd_lcc", n=10), [lcc.Brake(vehicle=1)], duration=60.0)
+    >>> brake.n_vehicles, brake.steps, brake.perturbations
+    (12, 6000, (Brake(vehicle=1, start=20, duration=1, decel=-5),))
+    >>> wave = lcc.scenario(lcc.ring(20, cavs=[20]), [lcc.Brake(vehicle=1, start=5.0)])
+    >>> wave.n_vehicles, wave.cavs, wave.ring
+    (20, (19,), True)
     """
     from lcc_synth.simulation.scenario_file import scenario_for
 
@@ -489,6 +574,17 @@ def simulate(scenario: Scenario, controller):
     :class:`~lcc_synth.simulation.results.SimResult` (trajectories ``(batch, T, vehicles)``).
     :func:`lcc_synth.simulation.engine.simulate`, or SUMO with ``backend = "sumo"``
     (:func:`lcc_synth.simulation.backends.run_scenario`).
+
+    Examples
+    --------
+    >>> import lcc_synth as lcc
+    >>> string = lcc.system("fd_lcc", n=10)
+    >>> brake = lcc.scenario(string, [lcc.Brake(vehicle=1)], t_start=0.01)  # Table II
+    >>> run = lcc.simulate(brake, lcc.hdv_controller())
+    >>> run.velocity.shape  # (batch, samples, vehicles: the head, the CAV, 10 HDVs)
+    (1, 10000, 12)
+    >>> bool(run.collided.any())
+    False
     """
     from lcc_synth.simulation.backends import run_scenario
 
@@ -504,6 +600,16 @@ def metrics(
     ``window`` (s) is required: AAVE and fuel depend on it (Table II uses
     :data:`TABLE2_WINDOW` = (20, 40)); ``vehicles``: ``"cav_and_behind"`` (Table II), ``"all"``,
     ``"hdvs"`` or a list of paper indices.
+
+    Examples
+    --------
+    Table II's "all HDVs" row: HDV 1 brakes at -5 m/s² for 1 s at t = 20 s.
+
+    >>> import lcc_synth as lcc
+    >>> brake = lcc.scenario(lcc.system("fd_lcc", n=10), [lcc.Brake(vehicle=1)], t_start=0.01)
+    >>> row = lcc.metrics(lcc.simulate(brake, lcc.hdv_controller()), window=lcc.TABLE2_WINDOW)
+    >>> round(row["aave"], 4), round(row["fuel_ml"], 2)
+    (0.8928, 392.86)
     """
     from lcc_synth.metrics import summary
 
@@ -737,6 +843,17 @@ def load_problem(path: str | Path) -> ProblemObjects:
     spec_from_problem`, :func:`~lcc_synth.experiments.sweep.load_sweep`,
     :func:`~lcc_synth.experiments.comparison.load_suite`, the analyze / regions readers).
     Errors are :class:`ConfigError` naming the file and the dotted field.
+
+    Examples
+    --------
+    >>> import lcc_synth as lcc
+    >>> from pathlib import Path
+    >>> problems = Path(lcc.__file__).resolve().parents[1] / "problems"  # the repository's
+    >>> objs = lcc.load_problem(problems / "paper_table2.toml")
+    >>> objs.system.kind, objs.system.n, list(objs.controllers), objs.metrics.window
+    ('fd_lcc', 10, ['all_hdv', 'fd_lcc', 'cf_lcc'], (20.0, 40.0))
+    >>> objs == lcc.load_problem(problems / "paper_table2.toml")  # compared by value
+    True
     """
     from lcc_synth.problem import load_problem as _load
 
