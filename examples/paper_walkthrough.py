@@ -64,7 +64,7 @@ def main() -> int:
 
     # Sec. IV: head-to-tail string stability, Table I case D vs all HDVs; Fig. 7(a) coarsely
     for label, gains in (("all HDV", {}), ("case D", CASE_D)):
-        ss = lcc.string_stability(general, gains)
+        ss = lcc.string_stability(general, lcc.gains(gains, semantics="added"))
         saved[f"string_{label.replace(' ', '_')}"] = ss.as_dict()
         print(f"4. string stability, {label}: peak |Gamma| = {ss.gamma_peak:.3f} at "
               f"{ss.gamma_peak_omega:.3g} rad/s -> {ss.verdict}")  # fmt: skip

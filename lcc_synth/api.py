@@ -10,11 +10,14 @@ equal objects: tests/test_roundtrip.py checks every file under ``problems/``).
 paper                     API
 ========================  ====================================================================
 eq. (1)-(4), HDV models   :class:`OVM`, :class:`IDM`
-Sec. II, eq. (8)-(14)     :func:`system` (``[hdv]`` + ``[system]``), :func:`model` (the
-                          linearised LCC / CF-LCC / FD-LCC / CCC state space)
-Sec. III, Thm. 1-3        :func:`controllability`, :func:`observability`
+Sec. II, eq. (8)-(14)     :func:`system` (``[hdv]`` + ``[system]``; a mixed platoon with
+                          ``size``, ``cavs``), :func:`ring`, :func:`model` (the linearised
+                          LCC / CF-LCC / FD-LCC / CCC / platoon / ring state space)
+Sec. III, Thm. 1-3        :func:`controllability`, :func:`observability` (of a System or
+                          its model)
 Sec. III-C, Fig. 5        :func:`control_energy` (Gramian metrics at a horizon)
-Sec. IV, eq. (23)-(27)    :func:`gains`, :func:`string_stability` (head-to-tail ``Gamma``)
+Sec. IV, eq. (23)-(27)    :func:`gains` (``semantics`` "added" or "replace", always stated),
+                          :func:`string_stability` (head-to-tail ``Gamma``)
 Sec. IV-B, Fig. 7-8       :func:`region_map`
 H2 / LMI synthesis        :func:`h2_problem` (``[synthesis]``), :func:`synthesize_h2`
 Sec. V, eq. (29)          :func:`scenario`, :class:`Brake`, :class:`Sine`, :class:`BrakeProfile`,
@@ -24,20 +27,21 @@ Table II metrics          :func:`metrics` (AAVE, fuel, spacing, TTC, jerk...; ``
                           explicit), :func:`aave`, :func:`fuel`
 recordings                :func:`record` (a Rerun ``.rrd`` file)
 problem files             :func:`load_problem` / :func:`build_problem` -> :class:`ProblemObjects`
-                          (``to_toml()``)
+                          (``to_toml()``; ``==`` by value)
 ========================  ====================================================================
 
 Results are small dataclasses with ``as_dict()`` and a one-line ``repr``
-(:class:`lcc_synth.models.records.Record`). Bad input raises
+(:class:`lcc_synth.models.records.Record`); the objects of a problem file compare with ``==`` by
+value (:func:`lcc_synth.models.records.same`). The main entry points carry ``>>>`` examples
+(run by ``tests/test_api_doctest.py``). Bad input raises
 :class:`~lcc_synth.errors.ConfigError` naming the dotted field, as a problem file would.
 Importing this module imports numpy and scipy.linalg; cvxpy, CasADi/OSQP and Rerun are imported
 by the functions that need them (:func:`synthesize_h2`, :func:`mpc`, :func:`record`). Measured on
-this 2-core machine: ``import lcc_synth`` 2-10 ms (``lcc_synth.errors`` only), the first API
-name 0.7-0.8 s; README's snippet (Table II's CF-LCC row, 100 s simulated, and the structured
+this 2-core machine: ``import lcc_synth`` 2-3 ms (``lcc_synth.errors`` only), the first API
+name 0.4-0.5 s; README's snippet (Table II's CF-LCC row, 100 s simulated, and the structured
 H2 gain) about 5 s, of which the synthesis about 1 s; ``examples/paper_walkthrough.py`` 7 s.
-``lcc.metrics`` and ``lcc.mpc`` share their names with :mod:`lcc_synth.metrics` and
-:mod:`lcc_synth.mpc`, which are callable as these functions
-(:func:`lcc_synth.models.records.callable_module`).
+``lcc.metrics`` and ``lcc.mpc`` are this module's :func:`metrics` and :func:`mpc` (the module
+:mod:`lcc_synth.metrics` and the package :mod:`lcc_synth.mpc` keep their names as modules).
 """
 
 from __future__ import annotations
@@ -45,7 +49,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -53,8 +57,9 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import MetricsConfig
 from lcc_synth.models.feedback import StaticGains
 from lcc_synth.models.hdv import IDM, OVM
+from lcc_synth.models.linear import LCCModel
 from lcc_synth.models.platoon import PlatoonGains, PlatoonModel
-from lcc_synth.models.records import Record, plain, system_tables, toml_text
+from lcc_synth.models.records import Record, ValueEq, plain, same, system_tables, toml_text
 from lcc_synth.problem import Problem, System, system_from
 from lcc_synth.simulation.perturbations import Brake, BrakeProfile, Profile, Sine
 from lcc_synth.simulation.scenario import V2V, Scenario
@@ -62,11 +67,11 @@ from lcc_synth.simulation.scenario import V2V, Scenario
 __all__ = [
     "OVM", "IDM", "System", "Scenario", "V2V", "StaticGains", "MetricsConfig",
     "Brake", "Sine", "BrakeProfile", "Profile",
-    "system", "model", "controllability", "observability", "control_energy", "gains",
+    "system", "ring", "model", "controllability", "observability", "control_energy", "gains",
     "string_stability", "region_map", "h2_problem", "synthesize_h2", "hdv_controller",
     "static_controller",
     "mpc", "scenario", "simulate", "metrics", "aave", "fuel", "record",
-    "ProblemObjects", "build_problem", "load_problem", "TABLE2_WINDOW",
+    "ProblemObjects", "Regions", "build_problem", "load_problem", "TABLE2_WINDOW",
 ]  # fmt: skip
 
 #: Table II's metric window (s): AAVE and fuel over 20 <= t <= 40.
@@ -74,53 +79,174 @@ TABLE2_WINDOW = (20.0, 40.0)
 
 
 def system(
-    kind: str = "lcc",
-    m: int = 0,
-    n: int = 0,
-    v_star: float = 15.0,
+    kind: str | None = None,
+    m: int | None = None,
+    n: int | None = None,
+    v_star: float | None = None,
     hdv: OVM | IDM | None = None,
+    *,
+    size: int | None = None,
+    cavs: Sequence[int] | None = None,
+    hdv_values: Mapping[str, Sequence[float]] | None = None,
+    circumference: float | None = None,
+    vehicle_length: float | None = None,
 ) -> System:
     """The ``[hdv]`` + ``[system]`` tables: layout, equilibrium velocity and HDV model.
 
+    Every argument is the ``[system]`` key of the same name; one left out is left out of the
+    table (the file's default, or the file's error when the kind needs it), and the tables are
+    validated by :func:`lcc_synth.problem.system_from`, exactly as a problem file's.
+
     Parameters
     ----------
-    kind : {"lcc", "cf_lcc", "fd_lcc", "ccc"}
-        General LCC (Sec. II), car-following LCC, free-driving LCC, or CCC (no HDV behind).
-    m, n : int
-        HDVs ahead of / behind the CAV (``m = 0`` for CF-/FD-LCC, ``n = 0`` for CCC).
-    v_star : float
-        Equilibrium velocity (m/s).
+    kind : {"lcc", "cf_lcc", "fd_lcc", "ccc", "platoon", "ring"}, optional
+        General LCC (Sec. II), car-following LCC, free-driving LCC, CCC (no HDV behind), a
+        mixed platoon behind a head vehicle or a ring road (:func:`ring`). Default
+        ``"platoon"`` when ``size`` or ``cavs`` is given, else the file's ``"lcc"``.
+    m, n : int, optional
+        HDVs ahead of / behind the CAV (the paper's kinds: ``m`` for lcc and ccc, ``n`` for
+        lcc, cf_lcc and fd_lcc are required).
+    v_star : float, optional
+        Equilibrium velocity (m/s); default 15.
     hdv : OVM or IDM, optional
         HDV car-following model; default the paper's OVM (``OVM()``).
+    size : int, optional
+        Platoon or ring: the vehicles behind the head / on the ring (required).
+    cavs : sequence of int, optional
+        Platoon or ring: the CAV positions ``1..size``; default none (all HDVs).
+    hdv_values : mapping of str to sequence of float, optional
+        Platoon or ring: per-vehicle values of ``hdv``'s parameters, one per position.
+    circumference : float, optional
+        Ring: its length (m), instead of ``v_star``.
+    vehicle_length : float, optional
+        Platoon or ring: every vehicle's length (m); default 0.
 
-    Validated by :func:`lcc_synth.problem.system_from`, exactly as a problem file.
+    Examples
+    --------
+    >>> import lcc_synth as lcc
+    >>> string = lcc.system("fd_lcc", n=10)  # Table II: the CAV and 10 HDVs behind it
+    >>> string.kind, string.m, string.n, string.v_star, round(string.s_star, 3)
+    ('fd_lcc', 0, 10, 15.0, 20.0)
+    >>> platoon = lcc.system(size=8, cavs=[3, 6])  # DeeP-LCC's platoon: CAVs 3 and 6
+    >>> platoon.kind, platoon.platoon.types
+    ('platoon', ('hdv', 'hdv', 'cav', 'hdv', 'hdv', 'cav', 'hdv', 'hdv'))
+    >>> lcc.system("lcc", n=2)
+    Traceback (most recent call last):
+    ...
+    lcc_synth.errors.ConfigError: system.m: is required for kind = 'lcc': the number of HDVs ...
     """
+    if kind is None and (size is not None or cavs is not None):
+        kind = "platoon"
+    cavs = _as_list(cavs)  # the table's arrays are lists; other values reach the validation
+    if isinstance(hdv_values, Mapping):
+        hdv_values = {k: _as_list(v) for k, v in hdv_values.items()}
+    given = {"kind": kind, "m": m, "n": n, "v_star": v_star, "size": size, "cavs": cavs,
+             "hdv_values": hdv_values, "circumference": circumference,
+             "vehicle_length": vehicle_length}  # fmt: skip
     hdv = OVM() if hdv is None else hdv
-    table = {"kind": kind, "m": m, "n": n, "v_star": v_star}
+    table = {k: v for k, v in given.items() if v is not None}
     return system_from({"hdv": hdv.toml_table(), "system": table})
 
 
-def model(
-    kind: str = "lcc",
-    m: int = 0,
-    n: int = 0,
-    v_star: float = 15.0,
+def _as_list(x: Any) -> Any:
+    """A tuple, range or numpy array as the list a TOML array is; anything else unchanged."""
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    return list(x) if isinstance(x, tuple | range) else x
+
+
+def ring(
+    size: int,
+    cavs: Sequence[int] = (),
+    v_star: float | None = None,
     hdv: OVM | IDM | None = None,
-):
+    *,
+    circumference: float | None = None,
+    hdv_values: Mapping[str, Sequence[float]] | None = None,
+    vehicle_length: float | None = None,
+) -> System:
+    """A ring road of ``size`` vehicles with CAVs at ``cavs`` (``[system] kind = "ring"``):
+    :func:`system` with ``kind = "ring"``; give ``v_star`` (default 15 m/s: every vehicle at
+    its equilibrium spacing) or the ``circumference`` (m), not both.
+
+    Examples
+    --------
+    >>> import lcc_synth as lcc
+    >>> road = lcc.ring(20, cavs=[20])  # 20 vehicles, the last one automated
+    >>> road.kind, road.platoon.size, road.platoon.cavs, round(road.platoon.length, 6)
+    ('ring', 20, (20,), 400.0)
+    >>> sugiyama = lcc.ring(22, cavs=[22], circumference=230.0)  # 22 vehicles on 230 m
+    >>> round(sugiyama.v_star, 4)  # the OVM's V(230 m / 22) = 15 (1 - cos(pi 5.4545 / 30))
+    2.3812
+    """
+    return system("ring", v_star=v_star, hdv=hdv, size=size, cavs=cavs,
+                  circumference=circumference, hdv_values=hdv_values,
+                  vehicle_length=vehicle_length)  # fmt: skip
+
+
+def model(
+    kind: str | None = None,
+    m: int | None = None,
+    n: int | None = None,
+    v_star: float | None = None,
+    hdv: OVM | IDM | None = None,
+    *,
+    size: int | None = None,
+    cavs: Sequence[int] | None = None,
+    hdv_values: Mapping[str, Sequence[float]] | None = None,
+    circumference: float | None = None,
+    vehicle_length: float | None = None,
+) -> LCCModel | PlatoonModel:
     """The linearised state-space model of eq. (8)-(14) (an
-    :class:`~lcc_synth.models.linear.LCCModel`: ``A``, ``B``, ``H``, ``state_names``).
+    :class:`~lcc_synth.models.linear.LCCModel`: ``A``, ``B``, ``H``, ``state_names``; a
+    platoon or ring: a :class:`~lcc_synth.models.platoon.PlatoonModel`).
 
-    Same parameters as :func:`system`; ``system(...).linear_model()``."""
-    return system(kind, m, n, v_star, hdv).linear_model()
+    Same parameters as :func:`system`; ``system(...).linear_model()``.
+
+    Examples
+    --------
+    >>> import lcc_synth as lcc
+    >>> lcc.model("lcc", m=1, n=1).state_names
+    ('s_-1', 'v_-1', 's_0', 'v_0', 's_1', 'v_1')
+    """
+    return system(kind, m, n, v_star, hdv, size=size, cavs=cavs, hdv_values=hdv_values,
+                  circumference=circumference, vehicle_length=vehicle_length).linear_model()
 
 
-def controllability(model, tol: float | None = None):
+def _linear(model: Any) -> LCCModel | PlatoonModel:
+    """The linear model of ``model``: a System's (:meth:`~lcc_synth.problem.System.linear_model`)
+    or the model itself."""
+    if isinstance(model, System):
+        return model.linear_model()
+    if isinstance(model, LCCModel | PlatoonModel):
+        return model
+    raise ConfigError(
+        "model", "must be a System (lcc.system(...), lcc.ring(...)) or its linear model "
+        f"(lcc.model(...), system.linear_model()), got {type(model).__name__}",
+    )
+
+
+def controllability(model: System | LCCModel | PlatoonModel, tol: float | None = None):
     """Controllability of ``(A, B)`` (Sec. III, Theorems 1-3): a
     :class:`~lcc_synth.analysis.controllability.ControllabilityReport` (rank, verdict,
     uncontrollable modes). :func:`lcc_synth.analysis.controllability.controllability_report`;
-    a platoon or ring model (several CAVs; the ring on its invariant hyperplane, the conserved
+    a platoon or ring (several CAVs; the ring on its invariant hyperplane, the conserved
     total spacing named):
-    :func:`lcc_synth.analysis.platoon_controllability.platoon_controllability`."""
+    :func:`lcc_synth.analysis.platoon_controllability.platoon_controllability`.
+
+    ``model``: a :class:`System` (its :meth:`~lcc_synth.problem.System.linear_model`) or a
+    linear model (:func:`model`).
+
+    Examples
+    --------
+    >>> import lcc_synth as lcc
+    >>> lcc.controllability(lcc.system("fd_lcc", n=10)).verdict  # Theorem 2
+    'controllable'
+    >>> rep = lcc.controllability(lcc.system("lcc", m=2, n=2))  # Theorem 3: not the HDVs ahead
+    >>> rep.controllable, rep.rank, rep.n_states
+    (False, 6, 10)
+    """
+    model = _linear(model)
     if isinstance(model, PlatoonModel):
         from lcc_synth.analysis.platoon_controllability import platoon_controllability
 
@@ -130,12 +256,18 @@ def controllability(model, tol: float | None = None):
     return controllability_report(model, tol)
 
 
-def observability(model, outputs: Sequence[str] | None = None, tol: float | None = None):
+def observability(
+    model: System | LCCModel | PlatoonModel,
+    outputs: Sequence[str] | None = None,
+    tol: float | None = None,
+):
     """Observability from the measured ``outputs`` (state names; default the paper's set, eq.
     19 / 21: the tail HDV's velocity ``v_n``, plus the CAV's ``s_0, v_0`` for LCC and CCC;
     :func:`~lcc_synth.analysis.controllability.default_outputs`; a platoon or ring: every
     CAV's own states plus the tail's velocity,
-    :func:`lcc_synth.analysis.platoon_controllability.platoon_observability`)."""
+    :func:`lcc_synth.analysis.platoon_controllability.platoon_observability`). ``model``: a
+    :class:`System` or its linear model."""
+    model = _linear(model)
     if isinstance(model, PlatoonModel):
         from lcc_synth.analysis.platoon_controllability import platoon_observability
 
@@ -145,51 +277,145 @@ def observability(model, outputs: Sequence[str] | None = None, tol: float | None
     return observability_report(model, outputs or default_outputs(model), tol)
 
 
-def control_energy(model, horizon: float):
+def control_energy(model: System | LCCModel | PlatoonModel, horizon: float):
     """Gramian energy metrics at ``horizon`` seconds (Sec. III-C, Fig. 5): an
     :class:`~lcc_synth.analysis.energy.EnergyReport` (``lambda_min``, ``trace_inv``...).
     :func:`lcc_synth.analysis.energy.energy_report`; a numerically singular Gramian raises
-    :class:`~lcc_synth.analysis.energy.NumericallySingularError`."""
+    :class:`~lcc_synth.analysis.energy.NumericallySingularError`. ``model``: a
+    :class:`System` or its linear model."""
     from lcc_synth.analysis.energy import energy_report
 
-    return energy_report(model, horizon)
+    return energy_report(_linear(model), horizon)
 
 
-def gains(values: Mapping[str, float] | StaticGains, semantics: str = "added") -> StaticGains:
-    """Static CAV gains of eq. (23), keyed by state name (``{"s_1": -1.0, "v_1": -1.0}``):
-    ``"added"`` to the CAV's HDV law, or ``"replace"`` (the whole command)."""
-    if isinstance(values, StaticGains):
+def gains(
+    values: Mapping[str, Any] | StaticGains | PlatoonGains,
+    semantics: str | None = None,
+    model: System | PlatoonModel | None = None,
+) -> StaticGains | PlatoonGains:
+    """Static CAV gains of eq. (23), with how they enter the command stated.
+
+    Parameters
+    ----------
+    values : mapping, StaticGains or PlatoonGains
+        State name -> gain (``{"s_1": -1.0, "v_1": -1.0}``, missing states 0); on a platoon or
+        ring one table per CAV input, ``{"u_3": {"s_3": ..., "v_2": ...}, ...}`` (then give
+        ``model``). A gains object is returned as it is.
+    semantics : {"added", "replace"}
+        Required with a mapping (the paper uses both; there is no default): ``"added"``, the
+        CAV keeps its HDV law and the gains add to it (eq. 23, Sec. IV and V-A); ``"replace"``,
+        the gains are the whole command (Sec. V-B, Table II). With a gains object it must agree
+        with the object's.
+    model : System or PlatoonModel, optional
+        The platoon or ring whose per-CAV tables ``values`` holds (then the result is a
+        :class:`~lcc_synth.models.platoon.PlatoonGains`, else a :class:`StaticGains`).
+
+    Examples
+    --------
+    >>> import lcc_synth as lcc
+    >>> lcc.gains({"s_1": -1.0, "v_1": -1.0}, semantics="added")
+    StaticGains(gains={'s_1': -1, 'v_1': -1}, semantics='added')
+    >>> lcc.gains({"s_1": -1.0})
+    Traceback (most recent call last):
+    ...
+    lcc_synth.errors.ConfigError: semantics: must be given with gains: "added" (the CAV's ...
+    """
+    if isinstance(values, StaticGains | PlatoonGains):
+        if semantics is not None and semantics != values.semantics:
+            raise ConfigError(
+                "semantics", f"{semantics!r} contradicts the gains' {values.semantics!r}"
+            )
         return values
+    if not isinstance(values, Mapping):
+        raise ConfigError("gains", f"must be a mapping of state name -> gain, got "
+                          f"{type(values).__name__}")  # fmt: skip
+    if semantics is None:
+        raise ConfigError("semantics", 'must be given with gains: "added" (the CAV\'s HDV law plus '
+                          'the gains, eq. 23) or "replace" (the gains are the whole command)')
+    platoon = model.linear_model(warn=False) if isinstance(model, System) else model
+    if isinstance(platoon, PlatoonModel):
+        return PlatoonGains.from_table(dict(values), platoon, semantics)
+    if any(isinstance(v, Mapping) for v in values.values()):
+        raise ConfigError(
+            "model", "per-CAV gain tables ({'u_3': {...}}) are for a platoon or ring: give "
+            "model=lcc.system(size=..., cavs=[...]) (or lcc.ring(...))",
+        )
     return StaticGains(dict(values), semantics)
 
 
-def string_stability(model, gain: Mapping[str, float] | StaticGains, method: str = "grid"):
+def _stated(gain: Any, model: LCCModel | PlatoonModel) -> StaticGains | PlatoonGains:
+    """``gain`` as given to an analysis of ``model``: a gains object (which states its
+    semantics) of the model's layout."""
+    if isinstance(gain, Mapping):
+        raise ConfigError("gain", 'a plain mapping does not say how the gains enter the command: '
+                          'write lcc.gains({...}, semantics="added"|"replace")')  # fmt: skip
+    platoon = isinstance(model, PlatoonModel)
+    if not isinstance(gain, PlatoonGains if platoon else StaticGains):
+        raise ConfigError("gain", "must be lcc.gains({...}, semantics=...) for " + (
+            "a platoon or ring, one table per CAV ({'u_3': {...}}, model=...)" if platoon else
+            "one CAV ({'s_1': ..., 'v_1': ...})") + f", got {type(gain).__name__}")  # fmt: skip
+    return gain
+
+
+def string_stability(
+    model: System | LCCModel | PlatoonModel,
+    gain: StaticGains | PlatoonGains,
+    method: str = "grid",
+):
     """Head-to-tail string stability of the closed loop with static gains (Sec. IV, eq.
     (24)-(27)): a :class:`~lcc_synth.analysis.string_stability.StringStabilityReport`
     (``plant_stable``, ``string_stable``, ``gamma_peak`` and its frequency, ``verdict``).
-    A mapping is read as ``"added"`` gains (:func:`gains`).
-    :func:`lcc_synth.analysis.string_stability.gains_string_stability`. On an open platoon
-    (several CAVs) ``gain`` is a :class:`~lcc_synth.models.platoon.PlatoonGains` or its table
-    ``{"u_3": {"s_3": ..., "v_2": ...}, ...}`` (read as ``"added"``):
-    :func:`lcc_synth.analysis.platoon_string.platoon_string_stability`."""
+    :func:`lcc_synth.analysis.string_stability.gains_string_stability`.
+
+    ``model``: a :class:`System` or its linear model. ``gain``: from :func:`gains`, which
+    states the semantics (a plain mapping is refused: the paper's ``"added"`` and
+    ``"replace"`` gains give opposite verdicts for the same numbers). On an open platoon
+    (several CAVs) a :class:`~lcc_synth.models.platoon.PlatoonGains` (``lcc.gains({"u_3":
+    {...}}, semantics=..., model=...)``):
+    :func:`lcc_synth.analysis.platoon_string.platoon_string_stability`.
+
+    Examples
+    --------
+    Table II's CF-LCC gain is the whole command (``"replace"``): string stable; read as
+    ``"added"`` to the HDV law, the same numbers are not.
+
+    >>> import lcc_synth as lcc
+    >>> cf = lcc.model("cf_lcc", n=10)
+    >>> table2 = {"s_0": 0.1, "v_0": -0.5, "s_1": -0.2, "v_1": 0.05, "s_2": -0.1, "v_2": 0.05}
+    >>> lcc.string_stability(cf, lcc.gains(table2, semantics="replace")).string_stable
+    True
+    >>> added = lcc.string_stability(cf, lcc.gains(table2, semantics="added"))
+    >>> added.string_stable, round(added.gamma_peak, 3)
+    (False, 1.136)
+    """
+    model = _linear(model)
+    gain = _stated(gain, model)
     if isinstance(model, PlatoonModel):
         from lcc_synth.analysis.platoon_string import platoon_string_stability
 
-        if not isinstance(gain, PlatoonGains):
-            gain = PlatoonGains.from_table(dict(gain), model, "added")
         return platoon_string_stability(model, gain, method=method)
     from lcc_synth.analysis.string_stability import gains_string_stability
 
-    return gains_string_stability(model, gains(gain), method=method)
+    return gains_string_stability(model, gain, method=method)
 
 
-def region_map(model, vehicle: int, mu, k, gain=None, omega=None, name: str = ""):
+def region_map(
+    model: System | LCCModel,
+    vehicle: int,
+    mu,
+    k,
+    gain: StaticGains | None = None,
+    omega=None,
+    name: str = "",
+):
     """Stability / string-stability map over the gains ``(mu, k)`` of one HDV's spacing and
     velocity (Sec. IV-B, Fig. 7-8): a :class:`~lcc_synth.analysis.regions.RegionMap`.
-    :func:`lcc_synth.analysis.regions.region_map`."""
+    ``gain``: the other gains, fixed (from :func:`gains`). ``model``: a :class:`System` or its
+    linear model. :func:`lcc_synth.analysis.regions.region_map`."""
     from lcc_synth.analysis.regions import region_map as _region_map
 
-    g = None if gain is None else gains(gain)
+    model = _linear(model)
+    g = None if gain is None else _stated(gain, model)
     return _region_map(model, vehicle, np.asarray(mu, float), np.asarray(k, float), g, omega,
                        name)  # fmt: skip
 
@@ -246,6 +472,17 @@ def synthesize_h2(system, *args: Any, **kwargs: Any):
 
     Solved by :func:`lcc_synth.synthesis.design.synthesize` (cvxpy + Clarabel for the LMI
     designs; the showcase's structured CF-LCC gain, 22 states, takes about 1 s here).
+
+    Examples
+    --------
+    A CF-LCC gain for a CAV that hears only HDV 1 of the two behind it:
+
+    >>> import lcc_synth as lcc
+    >>> h2 = lcc.synthesize_h2(lcc.system("cf_lcc", n=2), pattern=[1], semantics="replace")
+    >>> round(h2.check.h2, 4), h2.check.string_stable
+    (1.8809, True)
+    >>> {k: round(g, 3) for k, g in h2.gains.items() if g}
+    {'s_0': 1.003, 'v_0': -1.973, 's_1': -0.314, 'v_1': -0.189}
     """
     from lcc_synth.synthesis.design import synthesize
 
@@ -273,7 +510,7 @@ def _controller(name: str, table: dict[str, Any], system: System):
 
 def static_controller(
     system: System,
-    gain: Mapping[str, float] | StaticGains,
+    gain: Mapping[str, Any] | StaticGains | PlatoonGains,
     name: str = "static",
     semantics: str | None = None,
     kind: str | None = None,
@@ -281,16 +518,17 @@ def static_controller(
 ):
     """A static-gain controller (``type = "static"``, eq. 23) on ``system``.
 
-    ``gain``: a mapping (with ``semantics``, default ``"added"``) or :class:`StaticGains`;
-    ``kind``: the model the gains are written for (default ``system.kind``; e.g. ``"cf_lcc"``
-    gains on an ``fd_lcc`` string with a head vehicle, as in Table II); ``**run``:
-    ``sample_time``, ``equilibrium``, ``equilibrium_tau``, ``measurement_filter``.
-    :func:`lcc_synth.controllers.registry.build_controller`."""
-    g = gain if isinstance(gain, StaticGains) else gains(gain, semantics or "added")
-    if semantics is not None and semantics != g.semantics:
-        raise ConfigError("semantics", f"{semantics!r} contradicts the gains' {g.semantics!r}")
+    ``gain``: from :func:`gains`, or a mapping with its ``semantics`` (``"added"`` or
+    ``"replace"``, required: :func:`gains`); on a platoon or ring one table per CAV input
+    (``{"u_3": {...}}``). ``kind``: the model the gains are written for (default
+    ``system.kind``; e.g. ``"cf_lcc"`` gains on an ``fd_lcc`` string with a head vehicle, as
+    in Table II); ``**run``: ``sample_time``, ``equilibrium``, ``equilibrium_tau``,
+    ``measurement_filter``. :func:`lcc_synth.controllers.registry.build_controller`."""
+    g = gains(gain, semantics, system if system.platoon is not None else None)
+    table_gains = (g.as_table(system.linear_model(warn=False)) if isinstance(g, PlatoonGains)
+                   else dict(g.gains))  # fmt: skip
     table = {"type": "static", "kind": kind or system.kind, "semantics": g.semantics,
-             "gains": dict(g.gains), **run}  # fmt: skip
+             "gains": table_gains, **run}  # fmt: skip
     return _controller(name, table, system)
 
 
@@ -309,16 +547,45 @@ def mpc(system: System, name: str = "mpc", **settings: Any):
 def scenario(system: System, perturbations: Sequence[Any] = (), **keys: Any) -> Scenario:
     """A :class:`Scenario` on ``system``: ``perturbations`` (:class:`Brake`, :class:`Sine`...)
     and any ``[scenario]`` field (``dt`` = 0.01, ``duration`` = 100, ``t_start``, ``a_min`` =
-    -5, ``a_max`` = 2, ``cav_aeb`` = True, ``batch``, ``seed``, ``heterogeneity``, ``v2v``...)."""
-    return Scenario(m=system.m, n=system.n, hdv=system.hdv, v_star=system.v_star,
-                    perturbations=tuple(perturbations), **keys)  # fmt: skip
+    -5, ``a_max`` = 2, ``cav_aeb`` = True, ``batch``, ``seed``, ``heterogeneity``, ``v2v``...).
+
+    Built as a problem file's ``[scenario]`` on its ``[system]``
+    (:func:`lcc_synth.simulation.scenario_file.scenario_for`): a platoon or ring takes its
+    layout and per-vehicle parameters from the system, and perturbations name its vehicles by
+    position (the paper's strings: by index, ``-m..n``, or ``"head"``).
+
+    Examples
+    --------
+    >>> import lcc_synth as lcc
+    >>> brake = lcc.scenario(lcc.system("fd_lcc", n=10), [lcc.Brake(vehicle=1)], duration=60.0)
+    >>> brake.n_vehicles, brake.steps, brake.perturbations
+    (12, 6000, (Brake(vehicle=1, start=20, duration=1, decel=-5),))
+    >>> wave = lcc.scenario(lcc.ring(20, cavs=[20]), [lcc.Brake(vehicle=1, start=5.0)])
+    >>> wave.n_vehicles, wave.cavs, wave.ring
+    (20, (19,), True)
+    """
+    from lcc_synth.simulation.scenario_file import scenario_for
+
+    return scenario_for(system, perturbations, **keys)
 
 
 def simulate(scenario: Scenario, controller):
     """Run the nonlinear mixed-traffic simulation: a
     :class:`~lcc_synth.simulation.results.SimResult` (trajectories ``(batch, T, vehicles)``).
     :func:`lcc_synth.simulation.engine.simulate`, or SUMO with ``backend = "sumo"``
-    (:func:`lcc_synth.simulation.backends.run_scenario`)."""
+    (:func:`lcc_synth.simulation.backends.run_scenario`).
+
+    Examples
+    --------
+    >>> import lcc_synth as lcc
+    >>> string = lcc.system("fd_lcc", n=10)
+    >>> brake = lcc.scenario(string, [lcc.Brake(vehicle=1)], t_start=0.01)  # Table II
+    >>> run = lcc.simulate(brake, lcc.hdv_controller())
+    >>> run.velocity.shape  # (batch, samples, vehicles: the head, the CAV, 10 HDVs)
+    (1, 10000, 12)
+    >>> bool(run.collided.any())
+    False
+    """
     from lcc_synth.simulation.backends import run_scenario
 
     return run_scenario(scenario, controller)
@@ -332,14 +599,31 @@ def metrics(
 
     ``window`` (s) is required: AAVE and fuel depend on it (Table II uses
     :data:`TABLE2_WINDOW` = (20, 40)); ``vehicles``: ``"cav_and_behind"`` (Table II), ``"all"``,
-    ``"hdvs"`` or a list of paper indices."""
-    from lcc_synth.metrics import evaluate
+    ``"hdvs"`` or a list of paper indices.
 
-    return evaluate(result, window=window, vehicles=vehicles)
+    Examples
+    --------
+    Table II's "all HDVs" row: HDV 1 brakes at -5 m/s² for 1 s at t = 20 s.
+
+    >>> import lcc_synth as lcc
+    >>> brake = lcc.scenario(lcc.system("fd_lcc", n=10), [lcc.Brake(vehicle=1)], t_start=0.01)
+    >>> row = lcc.metrics(lcc.simulate(brake, lcc.hdv_controller()), window=lcc.TABLE2_WINDOW)
+    >>> round(row["aave"], 4), round(row["fuel_ml"], 2)
+    (0.8928, 392.86)
+    """
+    from lcc_synth.metrics import summary
+
+    return summary(result, _metrics_config(window, vehicles))
 
 
-def _vehicles(vehicles):
-    return vehicles if isinstance(vehicles, str) else tuple(vehicles)
+def _metrics_config(window: tuple[float, float], vehicles) -> MetricsConfig:
+    """The :class:`MetricsConfig` of an explicit window and vehicle set."""
+    vehicles = vehicles if isinstance(vehicles, str) else tuple(vehicles)
+    try:
+        t0, t1 = (float(t) for t in window)
+    except (TypeError, ValueError):
+        raise ConfigError("metrics.window", f"must be (t0, t1) in s, got {window!r}") from None
+    return MetricsConfig((t0, t1), vehicles)
 
 
 def aave(result, *, window: tuple[float, float], vehicles="cav_and_behind") -> np.ndarray:
@@ -347,7 +631,8 @@ def aave(result, *, window: tuple[float, float], vehicles="cav_and_behind") -> n
     :func:`lcc_synth.metrics.aave`."""
     from lcc_synth.metrics import aave as _aave
 
-    return _aave(result, MetricsConfig(tuple(window), _vehicles(vehicles)).window, vehicles)
+    config = _metrics_config(window, vehicles)
+    return _aave(result, config.window, config.vehicles)
 
 
 def fuel(result, *, window: tuple[float, float], vehicles="cav_and_behind") -> np.ndarray:
@@ -355,7 +640,8 @@ def fuel(result, *, window: tuple[float, float], vehicles="cav_and_behind") -> n
     :func:`lcc_synth.metrics.fuel`."""
     from lcc_synth.metrics import fuel as _fuel
 
-    return _fuel(result, MetricsConfig(tuple(window), _vehicles(vehicles)).window, vehicles)
+    config = _metrics_config(window, vehicles)
+    return _fuel(result, config.window, config.vehicles)
 
 
 def record(
@@ -403,9 +689,30 @@ def record(
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True, repr=False)
-class ProblemObjects(Record):
+class Regions(NamedTuple):
+    """``(specs, omega)`` of ``[regions]`` / ``[maps.*]`` (``{name: RegionSpec}``, the
+    frequencies); ``==`` by value (:func:`~lcc_synth.models.records.same`)."""
+
+    specs: dict[str, Any]
+    omega: Any
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, tuple):
+            return NotImplemented
+        return same(tuple(self), tuple(other))
+
+    def __ne__(self, other: object) -> bool:
+        return not self == other if isinstance(other, tuple) else NotImplemented
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class ProblemObjects(ValueEq, Record):
     """The objects a problem file holds, as the CLI builds them (``None``: not in the file).
+
+    ``==`` compares by value (:func:`~lcc_synth.models.records.same`: arrays by their
+    entries, controllers by what defines them): two loads of one file are equal.
 
     Attributes
     ----------
@@ -422,7 +729,7 @@ class ProblemObjects(Record):
         ``[layouts]``, ``[scenarios]``, ``[controllers]`` of ``lcc-synth run``.
     analysis : lcc_synth.analysis.cases.AnalysisOptions or None
         ``[analysis]`` of ``lcc-synth analyze``; ``cases`` its ``[cases.*]`` gains.
-    regions : tuple or None
+    regions : Regions or None
         ``(specs, omega)`` of ``[regions]`` / ``[maps.*]`` (``lcc-synth regions``); written
         back with every map's grid explicit (only the default frequency grid has a TOML form).
     source : str or None
@@ -535,7 +842,19 @@ def load_problem(path: str | Path) -> ProblemObjects:
     :func:`~lcc_synth.experiments.spec.load_spec`, :func:`~lcc_synth.synthesis.config.
     spec_from_problem`, :func:`~lcc_synth.experiments.sweep.load_sweep`,
     :func:`~lcc_synth.experiments.comparison.load_suite`, the analyze / regions readers).
-    Errors are :class:`ConfigError` naming the file and the dotted field."""
+    Errors are :class:`ConfigError` naming the file and the dotted field.
+
+    Examples
+    --------
+    >>> import lcc_synth as lcc
+    >>> from pathlib import Path
+    >>> problems = Path(lcc.__file__).resolve().parents[1] / "problems"  # the repository's
+    >>> objs = lcc.load_problem(problems / "paper_table2.toml")
+    >>> objs.system.kind, objs.system.n, list(objs.controllers), objs.metrics.window
+    ('fd_lcc', 10, ['all_hdv', 'fd_lcc', 'cf_lcc'], (20.0, 40.0))
+    >>> objs == lcc.load_problem(problems / "paper_table2.toml")  # compared by value
+    True
+    """
     from lcc_synth.problem import load_problem as _load
 
     prob = _load(path)
@@ -577,5 +896,5 @@ def load_problem(path: str | Path) -> ProblemObjects:
         lin = kw["system"].linear_model(warn=False) if "system" in kw else None
         if lin is None:
             raise ConfigError("system", "table is required by [maps]", src)
-        kw["regions"] = region_specs_from(data, lin, src)
+        kw["regions"] = Regions(*region_specs_from(data, lin, src))
     return ProblemObjects(prob.name, desc, **kw)

@@ -61,7 +61,7 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.records import Record, callable_module
+from lcc_synth.models.records import Record
 from lcc_synth.problem import System
 from lcc_synth.schema import declared
 from lcc_synth.simulation.perturbations import vehicle_column
@@ -105,7 +105,6 @@ __all__ = [
     "WAVE_METRICS",
     "wave_metrics",
     "summary",
-    "evaluate",
     "per_scenario",
     "concatenate",
     "aggregate",
@@ -689,15 +688,3 @@ def metrics_from(
         phases.append((str(name), (float(w[0]), float(w[1]))))
     return MetricsConfig(window, vehicles, baseline, table.get(mt, "accel_smoothing", f),
                          tuple(phases))
-
-
-def evaluate(
-    result, *, window: tuple[float, float], vehicles: str | Sequence[int | str] = "cav_and_behind"
-) -> dict[str, Any]:
-    """:func:`summary` of ``result`` over an explicit metric ``window`` (s) and vehicle set
-    (``lcc.metrics(...)``; calling this module calls it). Table II: ``window=(20, 40)``."""
-    vehicles = vehicles if isinstance(vehicles, str) else tuple(vehicles)
-    return summary(result, MetricsConfig(tuple(float(t) for t in window), vehicles))
-
-
-callable_module(__name__, evaluate)

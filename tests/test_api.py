@@ -112,24 +112,96 @@ def test_metric_window_is_explicit(runs):
         lcc.metrics(r, window=(40.0, 20.0))
 
 
-def test_metrics_and_mpc_mean_the_same_whichever_name_python_bound():
-    import lcc_synth.metrics
-    import lcc_synth.mpc
+def _fresh_json(code: str):
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=ROOT)  # fmt: skip
+    return json.loads(out.stdout)
+
+
+SIGNATURES = {  # what the functions are declared with, written here from api.py's source
+    "metrics": ["result", "window", "vehicles"],
+    "mpc": ["system", "name", "settings"],
+    "system": ["kind", "m", "n", "v_star", "hdv", "size", "cavs", "hdv_values",
+               "circumference", "vehicle_length"],
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("order", ["modules_first", "names_first"])
+def test_metrics_and_mpc_are_the_api_functions_whichever_python_bound_first(order):
+    """Python binds ``lcc_synth.metrics`` (the module) on the package when it is imported; the
+    top-level names stay the API's functions, with their own help and signature, and the
+    modules still import by their path."""
+    modules = "import lcc_synth.metrics, lcc_synth.mpc, lcc_synth.mpc.controller; "
+    names = "lcc.metrics, lcc.mpc; "
+    code = (
+        "import inspect, json, pydoc, sys; import lcc_synth as lcc; "
+        + (modules + names if order == "modules_first" else names + modules)
+        + "from lcc_synth import api; from lcc_synth.metrics import summary; "
+        "from lcc_synth.mpc import MPCController; "
+        "print(json.dumps({n: {'is_api': getattr(lcc, n) is getattr(api, n), "
+        "'function': inspect.isfunction(getattr(lcc, n)), "
+        "'params': list(inspect.signature(getattr(lcc, n)).parameters), "
+        "'help': pydoc.render_doc(getattr(lcc, n), renderer=pydoc.plaintext)} "
+        "for n in ('metrics', 'mpc', 'system')} | "
+        "{'modules': [type(sys.modules[m]).__name__ for m in ('lcc_synth.metrics', "
+        "'lcc_synth.mpc')], 'summary': summary.__module__, 'mpc_class': MPCController.__name__}))"
+    )
+    out = _fresh_json(code)
+    for name, params in SIGNATURES.items():
+        assert out[name]["is_api"] and out[name]["function"], name
+        assert out[name]["params"] == params, name
+    assert "Every metric of a run" in out["metrics"]["help"]
+    assert "Performance and safety metrics" not in out["metrics"]["help"]  # the module's
+    assert "The safety-constrained MPC" in out["mpc"]["help"]
+    assert "Safety-constrained model predictive control" not in out["mpc"]["help"]
+    assert out["modules"] == ["module", "module"]  # plain modules, not made callable
+    assert out["summary"] == "lcc_synth.metrics" and out["mpc_class"] == "MPCController"
+
+
+def test_metrics_and_mpc_work_as_functions():
     from lcc_synth import api
 
-    assert lcc.metrics is lcc_synth.metrics  # bound by the import: callable as the function
     r = table2_runs()["all_hdv"]
     same = [json.dumps(f(r, window=(20, 40)), sort_keys=True) for f in (lcc.metrics, api.metrics)]
     assert same[0] == same[1]  # (NaN spacing of the head: compare the text)
-    from lcc_synth.metrics import per_scenario  # the module still works as a module
-
-    assert callable(per_scenario)
     ctrl = lcc.mpc(table2_system(), horizon=20, n_model=4)
     assert ctrl.settings.horizon == 20 and ctrl.settings.n_model == 4
-    a, b = (f(table2_system(), horizon=20).settings for f in (api.mpc, lcc.mpc))
-    assert a == b
     with pytest.raises(ConfigError, match=r"controllers\.mpc\.horizn"):
         lcc.mpc(table2_system(), horizn=20)
+    with pytest.raises(ConfigError, match=r"metrics\.window"):
+        lcc.metrics(r, window=("a", 40))
+
+
+def test_no_code_reaches_a_shadowed_module_through_the_package():
+    """``import lcc_synth.metrics as m``, ``from lcc_synth import mpc`` and
+    ``lcc_synth.mpc.<name>`` give the API's function, not the module: no code of the
+    repository may use them (``from lcc_synth.metrics import ...`` is the way)."""
+    import ast
+
+    shadowed = ("metrics", "mpc")
+
+    def through_package(node) -> bool:
+        if isinstance(node, ast.Import):  # import lcc_synth.metrics as m
+            return any(a.asname and a.name.split(".")[:2] in [["lcc_synth", s] for s in shadowed]
+                       for a in node.names)  # fmt: skip
+        if isinstance(node, ast.ImportFrom):  # from lcc_synth import metrics
+            return node.module == "lcc_synth" and any(a.name in shadowed for a in node.names)
+        if isinstance(node, ast.Attribute):  # lcc_synth.mpc.controller
+            inner = node.value
+            return (isinstance(inner, ast.Attribute) and inner.attr in shadowed
+                    and isinstance(inner.value, ast.Name) and inner.value.id == "lcc_synth")
+        return False
+
+    found = [
+        f"{path.relative_to(ROOT)}:{node.lineno}"
+        for folder in ("lcc_synth", "tests", "examples", "benchmarks", "docs")
+        for path in sorted((ROOT / folder).rglob("*.py"))
+        for node in ast.walk(ast.parse(path.read_text(), str(path)))
+        if through_package(node)
+    ]
+    probe = "import lcc_synth.metrics as mt\nfrom lcc_synth import mpc\nlcc_synth.mpc.controller\n"
+    assert [through_package(n) for n in ast.walk(ast.parse(probe))].count(True) == 3
+    assert found == []
 
 
 def test_analysis_functions_agree_with_the_paper():
@@ -137,9 +209,9 @@ def test_analysis_functions_agree_with_the_paper():
     assert rep.controllable  # Theorem 2, the paper's OVM at v* = 15
     case_d = {"s_-2": 1.0, "v_-2": -1.0, "s_-1": 1.0, "v_-1": -1.0,
               "s_1": -1.0, "v_1": -1.0, "s_2": -1.0, "v_2": -1.0}  # fmt: skip
-    ss = lcc.string_stability(lcc.model("lcc", 2, 2), case_d)
+    ss = lcc.string_stability(lcc.model("lcc", 2, 2), lcc.gains(case_d, semantics="added"))
     assert ss.plant_stable and ss.string_stable  # Table I, case D
-    hdv = lcc.string_stability(lcc.model("lcc", 2, 2), {})
+    hdv = lcc.string_stability(lcc.model("lcc", 2, 2), lcc.gains({}, semantics="added"))
     assert not hdv.string_stable and hdv.gamma_peak == pytest.approx(1.13, abs=0.01)  # README
     short, long = (lcc.control_energy(lcc.model("fd_lcc", n=2), t) for t in (10.0, 20.0))
     assert 0 < short.lambda_min < long.lambda_min  # W(t) grows with the horizon
@@ -152,7 +224,43 @@ def test_bad_input_names_the_field():
     with pytest.raises(ConfigError, match=r"system\.v_star"):
         lcc.system("lcc", m=1, n=1, v_star=45.0)
     with pytest.raises(ConfigError, match=r"gains\.x_1"):
-        lcc.gains({"x_1": 1.0})
+        lcc.gains({"x_1": 1.0}, semantics="added")
+    with pytest.raises(ConfigError, match=r"semantics: must be one of \['added', 'replace'\]"):
+        lcc.gains({"s_1": 1.0}, semantics="add")
+
+
+def test_gains_state_their_semantics_wherever_a_user_gives_them():
+    """Table II's CF-LCC gain is the whole command ("replace": string stable, the paper's
+    Sec. V-B); read as "added" to the HDV law the same numbers give the opposite verdict, so
+    a plain mapping (which does not say which) is refused with the way to say it."""
+    cf = lcc.model("cf_lcc", n=10)
+    replace = lcc.string_stability(cf, lcc.gains(PAPER_GAINS, semantics="replace"))
+    added = lcc.string_stability(cf, lcc.gains(PAPER_GAINS, semantics="added"))
+    assert replace.string_stable and not added.string_stable
+    assert added.gamma_peak == pytest.approx(1.136, abs=5e-4)  # the issue's measurement
+    refused = 'write lcc.gains({...}, semantics="added"|"replace")'
+    for call in (
+        lambda: lcc.string_stability(cf, PAPER_GAINS),
+        lambda: lcc.string_stability(cf, {}),
+        lambda: lcc.region_map(lcc.model("lcc", 1, 1), 1, [0.0], [0.0], {"s_-1": 1.0}),
+    ):
+        with pytest.raises(ConfigError) as err:
+            call()
+        assert err.value.field == "gain" and refused in str(err.value)
+        assert "\n" not in str(err.value)  # one line
+    for call in (
+        lambda: lcc.gains(PAPER_GAINS),
+        lambda: lcc.static_controller(table2_system(), PAPER_GAINS, kind="cf_lcc"),
+    ):
+        with pytest.raises(ConfigError, match=r'^semantics: must be given with gains: "added"'):
+            call()
+    with pytest.raises(ConfigError, match="'added' contradicts the gains' 'replace'"):
+        lcc.gains(lcc.gains(PAPER_GAINS, semantics="replace"), semantics="added")
+    # a declared mapping (semantics=) or a gains object builds the same controller
+    a = lcc.static_controller(table2_system(), PAPER_GAINS, semantics="replace", kind="cf_lcc")
+    b = lcc.static_controller(table2_system(), lcc.gains(PAPER_GAINS, semantics="replace"),
+                              kind="cf_lcc")  # fmt: skip
+    assert a.as_dict() == b.as_dict() and a.gains.semantics == "replace"
 
 
 def test_results_are_records_with_as_dict_and_a_short_repr(runs):
@@ -164,7 +272,7 @@ def test_results_are_records_with_as_dict_and_a_short_repr(runs):
     d = sc.as_dict()
     assert d["perturbations"] == [{"vehicle": 1, "start": 20.0, "duration": 1.0, "decel": -5.0}]
     assert json.loads(json.dumps(d)) == d  # plain values
-    ss = lcc.string_stability(lcc.model("lcc", 1, 1), {})
+    ss = lcc.string_stability(lcc.model("lcc", 1, 1), lcc.gains({}, semantics="added"))
     assert repr(ss).startswith("StringStabilityReport(plant_stable=")
     assert json.dumps(ss.as_dict())
     assert repr(lcc.OVM()) == "OVM(alpha=0.6, beta=0.9, s_st=5, s_go=35, v_max=30, name='ovm')"
@@ -224,8 +332,7 @@ def test_no_api_name_is_shadowed_by_a_module():
         importlib.import_module(f"lcc_synth.{info.name}")
     for name in api.__all__:
         obj = getattr(lcc, name)
-        module = isinstance(obj, types.ModuleType)
-        assert obj is getattr(api, name) or (module and callable(obj)), name
+        assert obj is getattr(api, name) and not isinstance(obj, types.ModuleType), name
 
 
 def test_paper_walkthrough_uses_only_the_top_level_api_and_prints_what_it_wrote(tmp_path):

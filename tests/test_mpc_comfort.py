@@ -153,7 +153,7 @@ def test_closed_loop_safety_wins_over_a_strict_comfort_bound(monkeypatch):
     head's -5 m/s^2 brake safely: the MPC drops it on the steps where it would cost spacing
     and keeps the absolute safe spacing without emergency braking. Kept hard instead, the same
     bound lets the CAV into the safety margin."""
-    import lcc_synth.mpc.controller as ctl
+    from lcc_synth.mpc import controller as ctl
     from lcc_synth.mpc.report import bound_margin
 
     spec = load_spec(PROBLEMS / "mpc_head_brake.toml")

@@ -499,7 +499,7 @@ def test_api_dispatches_platoon_models():
     assert lcc.observability(ring).verdict == "observable"
     model = _deeplcc()
     table = {"u_3": {"s_3": 0.2, "v_3": -0.3}, "u_6": {"v_5": 0.1}}
-    ours = lcc.string_stability(model, table)
+    ours = lcc.string_stability(model, lcc.gains(table, semantics="added", model=model))
     direct = platoon_string_stability(model, PlatoonGains.from_table(table, model, "added"))
     assert ours.as_dict() == direct.as_dict()
 

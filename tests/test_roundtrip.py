@@ -119,7 +119,7 @@ def test_objects_built_in_python_round_trip(tmp_path):
     )  # fmt: skip
     controllers = {
         "hdv": lcc.hdv_controller("hdv", sample_time=0.1),
-        "gain": lcc.static_controller(system, {"s_1": -0.5, "v_-1": 0.2}, "gain",
+        "gain": lcc.static_controller(system, {"s_1": -0.5, "v_-1": 0.2}, "gain", "added",
                                       equilibrium="estimated", equilibrium_tau=2.0,
                                       measurement_filter=0.2),  # fmt: skip
     }

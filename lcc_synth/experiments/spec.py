@@ -13,7 +13,7 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.controller_tables import controller_from_table
 from lcc_synth.experiments.h2_tables import synthesize_h2_tables
 from lcc_synth.metrics import MetricsConfig, metrics_from
-from lcc_synth.models.records import Record, system_tables, toml_text
+from lcc_synth.models.records import Record, ValueEq, system_tables, toml_text
 from lcc_synth.problem import Problem, System, load_problem, system_from
 from lcc_synth.schema import declared
 from lcc_synth.simulation.checks import check_start
@@ -25,9 +25,11 @@ __all__ = ["SimulationSpec", "check_starts", "controllers_from", "drop_failed_fa
            "fallback_target", "load_spec", "resolve_fallbacks"]
 
 
-@dataclass(frozen=True, repr=False)
-class SimulationSpec(Record):
-    """Everything ``lcc-synth simulate`` needs from a problem file."""
+@dataclass(frozen=True, eq=False, repr=False)
+class SimulationSpec(ValueEq, Record):
+    """Everything ``lcc-synth simulate`` needs from a problem file. Equal (``==``) to another
+    when every field is (:func:`~lcc_synth.models.records.same`: the controllers by what
+    defines them, their ``as_dict()``)."""
 
     name: str
     system: System

@@ -236,20 +236,32 @@ def _member(result, b: int):
 
 
 def _one(result, config: MetricsConfig) -> dict[str, float | int]:
-    import lcc_synth.metrics as mt
+    from lcc_synth.metrics import (
+        aave,
+        aeb_activations,
+        collisions,
+        fuel,
+        jerk_limit_violation_time,
+        max_abs_command,
+        max_jerk_1s,
+        min_spacing,
+        min_time_to_collision,
+        rms_jerk,
+        wave_metrics,
+    )
 
     return {
-        "aave": mt.aave(result, config.window, config.vehicles)[0],
-        "fuel_ml": mt.fuel(result, config.window, config.vehicles)[0],
-        "min_spacing": np.nanmin(mt.min_spacing(result)[0, 1:]),
-        "min_ttc": np.nanmin(mt.min_time_to_collision(result)[0, 1:]),
-        "max_abs_command": mt.max_abs_command(result)[0],
-        "rms_jerk_cav": mt.rms_jerk(result)[0],
-        "max_jerk_1s_cav": mt.max_jerk_1s(result)[0],
-        "jerk_1s_over_limit_s": mt.jerk_limit_violation_time(result)[0],
-        "collisions": mt.collisions(result)[0],
-        "aeb_activations": mt.aeb_activations(result)[0],
-        **{k: x[0] for k, x in mt.wave_metrics(result, config).items()},  # the ring benchmark's
+        "aave": aave(result, config.window, config.vehicles)[0],
+        "fuel_ml": fuel(result, config.window, config.vehicles)[0],
+        "min_spacing": np.nanmin(min_spacing(result)[0, 1:]),
+        "min_ttc": np.nanmin(min_time_to_collision(result)[0, 1:]),
+        "max_abs_command": max_abs_command(result)[0],
+        "rms_jerk_cav": rms_jerk(result)[0],
+        "max_jerk_1s_cav": max_jerk_1s(result)[0],
+        "jerk_1s_over_limit_s": jerk_limit_violation_time(result)[0],
+        "collisions": collisions(result)[0],
+        "aeb_activations": aeb_activations(result)[0],
+        **{k: x[0] for k, x in wave_metrics(result, config).items()},  # the ring benchmark's
     }
 
 

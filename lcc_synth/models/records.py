@@ -1,10 +1,12 @@
 """Small result records: ``as_dict()`` and a readable ``__repr__`` for the package's dataclasses,
-and the TOML text of problem-file tables.
+equality by value, and the TOML text of problem-file tables.
 
 :class:`Record` is a mixin for frozen dataclasses (declare them with ``repr=False`` so that the
 mixin's ``__repr__`` is used): ``as_dict()`` gives plain Python values (dicts, lists, floats,
 strings; numpy arrays become nested lists, tuples lists), ``repr()`` one line with numbers to
 6 significant digits and arrays larger than :data:`REPR_ITEMS` entries shown by shape only.
+:func:`same` compares two values by value (numpy arrays included), and :class:`ValueEq` makes
+it the ``==`` of a dataclass that holds arrays or controllers (declared ``eq=False``).
 :func:`toml_text` writes nested tables (``None`` values left out: a missing key is the loader's
 default) with ``tomli_w``; floats are written with Python's shortest round-trip ``repr``, so a
 number read back is bit for bit the number written.
@@ -14,8 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
-import types
+import numbers
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -23,8 +24,8 @@ from typing import Any
 import numpy as np
 
 __all__ = [
-    "REPR_ITEMS", "Record", "plain", "short", "toml_text", "drop_none", "system_tables",
-    "callable_module",
+    "REPR_ITEMS", "Record", "ValueEq", "plain", "same", "short", "toml_text", "drop_none",
+    "system_tables",
 ]  # fmt: skip
 
 #: Arrays and lists with more entries than this are shown by shape / length in ``repr``.
@@ -72,6 +73,65 @@ def short(x: Any) -> str:
             return f"{{{len(x)} entries}}"
         return "{" + ", ".join(f"{k!r}: {short(v)}" for k, v in x.items()) + "}"
     return repr(x)
+
+
+def _nan(x: Any) -> bool:
+    return isinstance(x, numbers.Real) and not isinstance(x, bool) and math.isnan(x)
+
+
+def same(a: Any, b: Any) -> bool:
+    """Are ``a`` and ``b`` the same value?
+
+    Arrays are equal when their shapes and entries are (NaN equal to NaN); mappings when
+    their keys are and each key's values are the same; lists and tuples (of one type) entry
+    by entry; dataclasses of one type field by field (fields with ``compare=False`` left out;
+    their own ``__eq__`` is not used, so a dataclass holding arrays compares too); numbers by
+    value (``1 == 1.0``; NaN equal to NaN); other objects with an ``as_dict()`` (the
+    controllers: what defines them, not their run-time state) of one type by that dict;
+    anything else by ``==``.
+    """
+    if a is b:
+        return True
+    a, b = (x.item() if isinstance(x, np.generic) else x for x in (a, b))
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        if not (isinstance(a, np.ndarray) and isinstance(b, np.ndarray)) or a.shape != b.shape:
+            return False
+        try:
+            return bool(np.array_equal(a, b, equal_nan=True))
+        except TypeError:  # entries that cannot be NaN (strings, objects)
+            return bool(np.array_equal(a, b))
+    if isinstance(a, Mapping) and isinstance(b, Mapping):
+        return a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if isinstance(a, numbers.Number) and isinstance(b, numbers.Number):
+        return bool(a == b) or (_nan(a) and _nan(b))
+    if type(a) is not type(b):
+        return False
+    if isinstance(a, list | tuple):
+        return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b, strict=True))
+    if dataclasses.is_dataclass(a):
+        return all(
+            same(getattr(a, f.name), getattr(b, f.name))
+            for f in dataclasses.fields(a)
+            if f.compare
+        )
+    if callable(getattr(a, "as_dict", None)):
+        return same(a.as_dict(), b.as_dict())
+    return bool(a == b)
+
+
+class ValueEq:
+    """Mixin: ``==`` by value (:func:`same`) for a dataclass declared ``eq=False`` whose fields
+    hold numpy arrays or controllers (the generated ``__eq__`` compares arrays with ``==``,
+    which raises, and controllers by identity). Such objects are not hashable."""
+
+    __slots__ = ()
+
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        return same(self, other)
+
+    __hash__ = None  # type: ignore[assignment]
 
 
 class Record:
@@ -131,22 +191,3 @@ def system_tables(system: Any) -> dict[str, Any]:
         "system": {"kind": system.kind, "m": int(system.m), "n": int(system.n),
                    "v_star": float(system.v_star)},
     }  # fmt: skip
-
-
-def callable_module(module_name: str, fn: Any) -> None:
-    """Make the module ``module_name`` callable as ``fn``.
-
-    The flat API's ``lcc.metrics(...)`` and ``lcc.mpc(...)`` share their names with the
-    module ``lcc_synth.metrics`` and the package ``lcc_synth.mpc``, which Python binds on
-    ``lcc_synth`` as soon as they are imported: calling the module calls ``fn``, so the name
-    means the same thing whichever was bound first.
-    """
-    module = sys.modules[module_name]
-
-    class CallableModule(types.ModuleType):
-        __doc__ = module.__doc__
-
-        def __call__(self, *args: Any, **kwargs: Any) -> Any:
-            return fn(*args, **kwargs)
-
-    module.__class__ = CallableModule

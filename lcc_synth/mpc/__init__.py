@@ -10,7 +10,6 @@
 - :mod:`lcc_synth.mpc.report`: its step record and statistics, the safety summary of runs.
 """
 
-from lcc_synth.models.records import callable_module
 from lcc_synth.mpc.build import build_mpc, mpc_controller_from_table
 from lcc_synth.mpc.controller import STATUS_CODES, MPCController
 from lcc_synth.mpc.platoon import PlatoonMPCController
@@ -26,5 +25,3 @@ __all__ = [
     "paper_fallback_gains",
     "settings_from_table",
 ]
-
-callable_module(__name__, build_mpc)  # lcc.mpc(system, ...) builds an MPC

@@ -19,7 +19,7 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import IDM, MODELS, OVM
-from lcc_synth.models.records import Record
+from lcc_synth.models.records import Record, ValueEq
 from lcc_synth.schema import declared
 from lcc_synth.simulation.checks import check_draw_bounds
 from lcc_synth.simulation.perturbations import Perturbation
@@ -42,9 +42,12 @@ MODEL_PARAMS = {
 }
 
 
-@dataclass(frozen=True, repr=False)
-class Scenario(Record):
+@dataclass(frozen=True, eq=False, repr=False)
+class Scenario(ValueEq, Record):
     """A mixed-traffic scenario (or a batch of ``batch`` scenarios differing in random draws).
+
+    Two scenarios are equal (``==``) when every field is (:func:`~lcc_synth.models.records.same`:
+    explicit per-vehicle arrays by value).
 
     Parameters
     ----------

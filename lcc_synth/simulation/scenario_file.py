@@ -1,10 +1,11 @@
-"""The ``[scenario]`` table of a problem file: :func:`scenario_from` builds the
-:class:`~lcc_synth.simulation.scenario.Scenario` (a mixed platoon or ring takes its layout from
-the ``[system]`` table's platoon)."""
+"""The ``[scenario]`` table of a problem file: :func:`scenario_from` reads it and
+:func:`scenario_for` builds the :class:`~lcc_synth.simulation.scenario.Scenario` on the
+``[system]`` (a mixed platoon or ring takes its layout from the system's platoon); the flat
+API's :func:`lcc_synth.api.scenario` builds through :func:`scenario_for` too."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -14,11 +15,15 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.problem import System
 from lcc_synth.schema import declared
 from lcc_synth.simulation.checks import check_timing
-from lcc_synth.simulation.perturbations import perturbation_from_table
+from lcc_synth.simulation.perturbations import (
+    Perturbation,
+    perturbation_from_table,
+    vehicle_column,
+)
 from lcc_synth.simulation.scenario import MODEL_PARAMS, V2V, Scenario
 from lcc_synth.simulation.sumo_net import SumoSettings
 
-__all__ = ["nominal_scenario", "scenario_from"]
+__all__ = ["nominal_scenario", "scenario_from", "scenario_for"]
 
 
 def _platoon_layout(system: System) -> dict[str, Any]:
@@ -46,6 +51,53 @@ def _platoon_layout(system: System) -> dict[str, Any]:
     }  # fmt: skip
 
 
+def _check_platoon_keys(system: System, hdv_values: Any, spacing_reference: str | None) -> None:
+    """A platoon's or ring's per-vehicle values are its ``[system.hdv_values]``, and its
+    spacing errors are from each vehicle's own equilibrium: other values are errors."""
+    if hdv_values:
+        raise ConfigError(
+            "scenario.hdv_values",
+            f"kind = {system.kind!r} takes its per-vehicle parameters from "
+            "[system.hdv_values] (one value per position)",
+        )
+    if spacing_reference not in (None, "own_equilibrium"):
+        raise ConfigError(
+            "scenario.spacing_reference",
+            f'must be "own_equilibrium" for kind = {system.kind!r}: the platoon model '
+            "linearises every vehicle at its own equilibrium",
+        )
+
+
+def scenario_for(
+    system: System, perturbations: Sequence[Perturbation] = (), **fields: Any
+) -> Scenario:
+    """The :class:`Scenario` of ``fields`` (its keyword arguments) on ``system``.
+
+    The string comes from the system: ``m``, ``n``, the HDV model and ``v*``; for ``kind =
+    "platoon" | "ring"`` also the CAV columns, every vehicle's own parameters (then
+    ``hdv_values`` may not be given) and the ring, spacing errors from each vehicle's own
+    equilibrium (``spacing_reference = "own_equilibrium"``, the only one allowed). Every
+    perturbation's vehicle is checked on the layout (a paper index in ``[-m, n]`` or
+    ``"head"``; a platoon's or ring's position), and the meaning of the values in this run
+    (:func:`~lcc_synth.simulation.checks.check_timing`)."""
+    layout: dict[str, Any] = {"m": system.m, "n": system.n}
+    where = None
+    if system.platoon is not None:
+        _check_platoon_keys(system, fields.get("hdv_values"), fields.get("spacing_reference"))
+        layout = _platoon_layout(system)
+        fields = {**{k: v for k, v in fields.items() if k != "hdv_values"},
+                  "spacing_reference": "own_equilibrium"}  # fmt: skip
+        where = (system.platoon.size, bool(system.platoon.ring))
+    perturbations = tuple(perturbations)
+    for i, p in enumerate(perturbations):
+        vehicle_column(p.vehicle, layout["m"], layout["n"],
+                       f"scenario.perturbations[{i}].vehicle", where)  # fmt: skip
+    out = Scenario(hdv=system.hdv, v_star=system.v_star, perturbations=perturbations,
+                   **layout, **fields)  # fmt: skip
+    check_timing(out)
+    return out
+
+
 def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None = None):
     """Build the :class:`Scenario` of a problem's ``[scenario]`` table.
 
@@ -68,22 +120,9 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
     hdv_values = None
     layout: dict[str, Any] = {}
     if system.platoon is not None:
-        if hv_t:
-            raise ConfigError(
-                f"{f}.hdv_values",
-                f"kind = {system.kind!r} takes its per-vehicle parameters from "
-                "[system.hdv_values] (one value per position)",
-            )
-        if S.get(sc, "spacing_reference", f) != "own_equilibrium" and (
-            "spacing_reference" in sc
-        ):
-            raise ConfigError(
-                f"{f}.spacing_reference",
-                f'must be "own_equilibrium" for kind = {system.kind!r}: the platoon model '
-                "linearises every vehicle at its own equilibrium",
-            )
+        ref = S.get(sc, "spacing_reference", f) if "spacing_reference" in sc else None
+        _check_platoon_keys(system, hv_t, ref)
         layout = _platoon_layout(system)
-        hdv_values = layout.pop("hdv_values")
     elif hv_t:
         HV = declared("scenario.hdv_values")
         HV.check(hv_t, f"{f}.hdv_values", allowed=list(MODEL_PARAMS[system.hdv.name]))
@@ -130,14 +169,9 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
         perturbation_from_table(p, f"{f}.perturbations[{i}]", m, n, base_dir, where)
         for i, p in enumerate(perts)
     )
-    spacing_reference = S.get(sc, "spacing_reference", f)
-    if system.platoon is not None:
-        spacing_reference = "own_equilibrium"
-    out = Scenario(
-        m=m,
-        n=n,
-        hdv=system.hdv,
-        v_star=system.v_star,
+    return scenario_for(
+        system,
+        perturbations,
         dt=S.get(sc, "dt", f),
         duration=S.get(sc, "duration", f),
         t_start=S.get(sc, "t_start", f),
@@ -146,7 +180,6 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
         a_max=S.get(sc, "a_max", f),
         cav_aeb=S.get(sc, "cav_aeb", f),
         hdv_aeb=S.get(sc, "hdv_aeb", f),
-        perturbations=perturbations,
         hdv_values=hdv_values,
         heterogeneity=heterogeneity,
         delay=delay,
@@ -158,13 +191,11 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
         record_every=S.get(sc, "record_every", f),
         backend=S.get(sc, "backend", f),
         sumo=_sumo_from(S.get(sc, "sumo", f), f"{f}.sumo"),
-        spacing_reference=spacing_reference,
+        spacing_reference=(S.get(sc, "spacing_reference", f) if system.platoon is None
+                           else "own_equilibrium"),  # fmt: skip
         accel_noise_uniform=S.get(sc, "accel_noise_uniform", f),
         cav_lag=S.get(sc, "cav_lag", f),
-        **layout,
     )
-    check_timing(out)
-    return out
 
 
 def nominal_scenario(system: System):
