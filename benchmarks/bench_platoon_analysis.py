@@ -15,10 +15,7 @@ import time
 
 import numpy as np
 
-from lcc_synth.analysis.platoon_controllability import (
-    platoon_controllability,
-    platoon_observability,
-)
+from lcc_synth.analysis.controllability import controllability_report, observability_report
 from lcc_synth.analysis.platoon_string import (
     gamma_product,
     platoon_gamma,
@@ -46,7 +43,7 @@ def _timed(fn, repeat: int = 5):
 def main() -> None:
     hdv = tuple(OVM(alpha=a, beta=b, s_go=g) for a, b, g in zip(*DEEPLCC.values(), strict=True))
     model = platoon_model(Platoon(hdv, (3, 6), 15.0))
-    rep, t = _timed(lambda: platoon_controllability(model))
+    rep, t = _timed(lambda: controllability_report(model))
     print(
         f"DeeP-LCC platoon (16 states, CAVs 3, 6): {rep.verdict}, rank {rep.rank}/{rep.n_states}"
         f" (reachable {rep.reachable_states}: {rep.reachable_verdict}), margin "
@@ -54,7 +51,7 @@ def main() -> None:
         f"{rep.stabilizable}, closest (S) pair {rep.closest.zero_vehicle}->"
         f"{rep.closest.pole_vehicle} residual {rep.closest.residual:.3g}; {t * 1e3:.1f} ms"
     )
-    ob, t = _timed(lambda: platoon_observability(model))
+    ob, t = _timed(lambda: observability_report(model))
     print(f"  observability from {ob.outputs}: {ob.verdict}, rank {ob.rank}, margin "
           f"{ob.decision_margin:.3g}; {t * 1e3:.1f} ms")  # fmt: skip
     table = {"u_3": {"s_3": 0.5, "v_3": -1.2, "v_2": 0.9},
@@ -72,7 +69,7 @@ def main() -> None:
               f"{sr.gamma_peak_omega:.4f} rad/s, margin {sr.margin:+.3g}; {t * 1e3:.1f} ms")
     for N in (20, 40):
         ring = platoon_model(Platoon((OVM(),) * N, (N,), 15.0, ring=True))
-        rep, t = _timed(lambda ring=ring: platoon_controllability(ring), 3)
+        rep, t = _timed(lambda ring=ring: controllability_report(ring), 3)
         V = ring.invariant_basis()
         hh, t_hh = _timed(lambda V=V, ring=ring: kalman_decomposition(
             V.T @ ring.A @ V, V.T @ ring.B), 3)  # fmt: skip
@@ -87,11 +84,11 @@ def main() -> None:
             f"{hh.decision_margin:.3g} ({t_hh * 1e3:.1f} ms); full state: rank {full.n_c}.."
             f"{full.n_c_upper} of {ring.nx}, margin {full.decision_margin:.3g}"
         )
-        ob, t = _timed(lambda ring=ring: platoon_observability(ring), 3)
+        ob, t = _timed(lambda ring=ring: observability_report(ring), 3)
         print(f"  observability from {ob.outputs}: {ob.verdict}, rank {ob.rank}/{ob.n_states}, "
               f"margin {ob.decision_margin:.3g}; {t * 1e3:.1f} ms")  # fmt: skip
         hdv_ring = platoon_model(Platoon((OVM(),) * N, (), 15.0, ring=True))
-        hr = platoon_controllability(hdv_ring)
+        hr = controllability_report(hdv_ring)
         print(f"  all-HDV ring: rank {hr.rank}, stabilizable {hr.stabilizable} (largest "
               f"uncontrollable Re {hr.uncontrollable_max_real:+.4f}: the wave)")
 

@@ -233,7 +233,7 @@ def run(args: argparse.Namespace) -> int:
     doc["written"] = written
     if args.json:
         print(json.dumps({**doc, "provenance": prov}))
-    elif "controllability" in doc and "reachable_verdict" in doc["controllability"]:
+    elif "size" in doc["system"]:  # kind = "platoon" | "ring"
         from lcc_synth.cli.analyze_platoon import print_platoon
 
         print_platoon(doc)

@@ -1,7 +1,7 @@
 """``lcc-synth analyze`` on ``[system] kind = "platoon" | "ring"`` (several CAVs, the ring).
 
-The report of :func:`lcc_synth.analysis.platoon_controllability.platoon_controllability` and
-:func:`~lcc_synth.analysis.platoon_controllability.platoon_observability` (the ring on its
+The report of :func:`lcc_synth.analysis.controllability.controllability_report` and
+:func:`~lcc_synth.analysis.controllability.observability_report` (the ring on its
 invariant hyperplane, the conserved total spacing named), each vehicle's eq. (8) coefficients
 and eq. (13), and for every ``[cases.NAME]`` (gains per CAV in ``[cases.NAME.gains.u_3]``):
 the closed-loop plant stability and, on an open platoon, the head-to-tail string verdict of
@@ -16,9 +16,9 @@ import math
 import numpy as np
 
 from lcc_synth.analysis.cases import AnalysisOptions, GainCase
-from lcc_synth.analysis.platoon_controllability import (
-    platoon_controllability,
-    platoon_observability,
+from lcc_synth.analysis.controllability import (
+    controllability_report,
+    observability_report,
     reduce_conserved,
 )
 from lcc_synth.analysis.platoon_string import platoon_gamma, platoon_string_stability
@@ -87,8 +87,8 @@ def platoon_document(
             "hdv_model": system.hdv.name,
         },
         "linear_coefficients": coefs,
-        "controllability": platoon_controllability(model).as_dict(),
-        "observability": platoon_observability(model, outputs).as_dict(),
+        "controllability": controllability_report(model).as_dict(),
+        "observability": observability_report(model, outputs).as_dict(),
         "cases": {},
     }
     reports = {}
