@@ -1,4 +1,4 @@
-"""Verdicts, decision margins and cost of the platoon / ring analysis (several CAVs).
+"""Verdicts, decision margins and cost of the analysis of platoons and rings (several CAVs).
 
 Prints, for the DeeP-LCC platoon (8 vehicles, CAVs 3 and 6) and OVM rings of 20 and 40 cars
 with one AV: the controllability verdict and margin (ring: on the invariant hyperplane, and in
@@ -16,12 +16,9 @@ import time
 import numpy as np
 
 from lcc_synth.analysis.controllability import controllability_report, observability_report
-from lcc_synth.analysis.platoon_string import (
-    gamma_product,
-    platoon_gamma,
-    platoon_string_stability,
-)
 from lcc_synth.analysis.staircase import kalman_decomposition
+from lcc_synth.analysis.string_stability import string_stability
+from lcc_synth.analysis.transfer import gamma_product, gamma_state_space
 from lcc_synth.models.hdv import OVM
 from lcc_synth.models.platoon import Platoon, PlatoonGains, platoon_model
 
@@ -56,15 +53,15 @@ def main() -> None:
           f"{ob.decision_margin:.3g}; {t * 1e3:.1f} ms")  # fmt: skip
     table = {"u_3": {"s_3": 0.5, "v_3": -1.2, "v_2": 0.9},
              "u_6": {"s_6": 0.4, "v_6": -1.5, "v_5": 1.1}}  # fmt: skip
-    gains = PlatoonGains.from_table(table, model)
+    K, kh = PlatoonGains.from_table(table, model).input_feedback(model)
     w = np.logspace(-3, 2, 400)
-    (ss, t_ss) = _timed(lambda: platoon_gamma(model, gains, w))
-    prod = gamma_product(model, gains, w)
+    (ss, t_ss) = _timed(lambda: gamma_state_space(model, K, kh, w))
+    prod = gamma_product(model, K, kh, w)
     print(f"  Gamma: state space vs product of vehicle TFs, max rel diff "
           f"{np.max(np.abs(ss - prod) / np.abs(prod)):.2g} on 400 frequencies "
           f"({t_ss * 1e3:.2f} ms)")  # fmt: skip
     for method in ("grid", "hamiltonian"):
-        sr, t = _timed(lambda method=method: platoon_string_stability(model, gains, method))
+        sr, t = _timed(lambda method=method: string_stability(model, K, kh, method))
         print(f"  string ({method}): {sr.verdict}, peak {sr.gamma_peak:.6f} at "
               f"{sr.gamma_peak_omega:.4f} rad/s, margin {sr.margin:+.3g}; {t * 1e3:.1f} ms")
     for N in (20, 40):

@@ -1,5 +1,6 @@
 """Controllability, observability and head-to-tail string stability of platoons with several
-CAVs and of the ring (lcc_synth.analysis.controllability / platoon_string), against
+CAVs and of the ring (lcc_synth.analysis.controllability / string_stability / transfer, the
+analyses of every layout), against
 independent truth: exact rational Kalman ranks (fractions.Fraction Gaussian elimination on
 dyadic coefficients, so the float model *is* the rational one), the theorem's condition (S)
 decided in rational arithmetic, invariance under units and similarity transforms, the product
@@ -21,13 +22,9 @@ from lcc_synth.analysis.controllability import (
     segment_cancellations,
     segments,
 )
-from lcc_synth.analysis.platoon_string import (
-    gamma_product,
-    local_cav_laws,
-    platoon_gamma,
-    platoon_string_stability,
-)
 from lcc_synth.analysis.staircase import kalman_decomposition
+from lcc_synth.analysis.string_stability import gains_string_stability
+from lcc_synth.analysis.transfer import gamma_product, gamma_state_space, local_cav_laws
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import OVM, LinearCoefficients
 from lcc_synth.models.platoon import (
@@ -284,19 +281,20 @@ def test_gamma_state_space_equals_product_of_vehicle_transfer_functions(semantic
     model = _deeplcc()
     table = LOCAL if semantics == "replace" else {"u_3": {"s_3": 0.2, "v_3": -0.3},
                                                   "u_6": {"v_5": 0.1}}  # fmt: skip
-    gains = PlatoonGains.from_table(table, model, semantics)
-    ss = platoon_gamma(model, gains, OMEGA)
-    prod = gamma_product(model, gains, OMEGA)
+    K, kh = PlatoonGains.from_table(table, model, semantics).input_feedback(model)
+    ss = gamma_state_space(model, K, kh, OMEGA)
+    prod = gamma_product(model, K, kh, OMEGA)
     assert np.max(np.abs(ss - prod) / np.abs(prod)) < 1e-10
     # by hand for the "replace" CAVs: T_c = (k_p s + k_s) / (s^2 - k_v s + k_s)
     if semantics == "replace":
-        assert local_cav_laws(model, gains) == {3: (0.5, -1.2, 0.9), 6: (0.4, -1.5, 1.1)}
+        assert local_cav_laws(model, K, kh) == {3: (0.5, -1.2, 0.9), 6: (0.4, -1.5, 1.1)}
     # all-HDV limit: "added" with zero gains is the product of the eight HDVs
     zero = PlatoonGains(np.zeros((2, 16)), (3, 6), "added")
     s = 1j * OMEGA
     hdv = np.prod([(c.alpha3 * s + c.alpha1) / (s * s + c.alpha2 * s + c.alpha1)
                    for c in model.coefficients], axis=0)  # fmt: skip
-    assert np.max(np.abs(platoon_gamma(model, zero, OMEGA) / hdv - 1)) < 1e-10
+    zero_gamma = gamma_state_space(model, *zero.input_feedback(model), OMEGA)
+    assert np.max(np.abs(zero_gamma / hdv - 1)) < 1e-10
 
 
 def test_gamma_agrees_with_python_control_for_nonlocal_gains():
@@ -306,17 +304,17 @@ def test_gamma_agrees_with_python_control_for_nonlocal_gains():
     table = {"u_3": {"s_3": 0.5, "v_3": -1.2, "v_2": 0.9, "v_5": 0.3, "s_8": -0.1},
              "u_6": {"s_6": 0.4, "v_6": -1.5, "v_1": 0.2, "v_8": 0.15}}  # fmt: skip
     gains = PlatoonGains.from_table(table, model)
-    with pytest.raises(ConfigError) as err:
-        local_cav_laws(model, gains)
-    assert err.value.field == "gains.u_3"
     Ku, kh = gains.input_feedback(model)
+    with pytest.raises(ConfigError) as err:
+        local_cav_laws(model, Ku, kh)
+    assert err.value.field == "gains.u_3"
     plant = model.to_statespace()
     law = ct.ss([], [], [], np.column_stack([Ku, kh]), inputs=[*model.state_names, "v_h"],
                 outputs=list(model.input_names), name="law")  # fmt: skip
     loop = ct.interconnect([plant, law], inplist=["v_h"], outlist=["v_8"])
     w = np.logspace(-2, 1, 60)
     theirs = np.array([complex(loop(1j * x)) for x in w])
-    assert np.allclose(platoon_gamma(model, gains, w), theirs, rtol=1e-9, atol=0)
+    assert np.allclose(gamma_state_space(model, Ku, kh, w), theirs, rtol=1e-9, atol=0)
 
 
 def test_string_verdicts_and_a_case_too_close_to_call():
@@ -333,16 +331,16 @@ def test_string_verdicts_and_a_case_too_close_to_call():
         g = PlatoonGains.from_table({f"u_{c}": {f"s_{c}": ks, f"v_{c}": kv + dk} for c in (3, 6)},
                                     model)  # fmt: skip
         for method in ("grid", "hamiltonian"):
-            rep = platoon_string_stability(model, g, method)
+            rep = gains_string_stability(model, g, method)
             assert rep.verdict == verdict and rep.plant_stable, (dk, method, rep)
-    hdv = platoon_string_stability(model, PlatoonGains(np.zeros((2, 16)), (3, 6), "added"))
+    hdv = gains_string_stability(model, PlatoonGains(np.zeros((2, 16)), (3, 6), "added"))
     assert hdv.verdict == "string_unstable" and hdv.gamma_peak > 1.2
 
 
 def test_ring_has_no_head_to_tail_transfer():
     ring = _deeplcc((8,), ring=True)
     with pytest.raises(ConfigError) as err:
-        platoon_string_stability(ring, PlatoonGains(np.zeros((1, 16)), (8,)))
+        gains_string_stability(ring, PlatoonGains(np.zeros((1, 16)), (8,)))
     assert err.value.field == "system.kind"
 
 
@@ -416,11 +414,11 @@ def test_cli_analyze_platoon_json(tmp_path, capsys):
     assert ct["vehicles_outside"] == [1, 2] and doc["system"]["cavs"] == [3, 6]
     assert doc["observability"]["verdict"] == "observable"
     model = _deeplcc()
-    direct = platoon_string_stability(model, PlatoonGains.from_table(LOCAL, model))
+    direct = gains_string_stability(model, PlatoonGains.from_table(LOCAL, model))
     assert doc["cases"]["local"]["verdict"] == direct.verdict == "string_unstable"
     assert doc["cases"]["local"]["gamma_peak"] == direct.gamma_peak
     assert doc["cases"]["local"]["gains"] == LOCAL
-    hdv = platoon_string_stability(model, PlatoonGains(np.zeros((2, 16)), (3, 6), "added"))
+    hdv = gains_string_stability(model, PlatoonGains(np.zeros((2, 16)), (3, 6), "added"))
     assert doc["cases"]["hdv"]["gamma_peak"] == hdv.gamma_peak
     code, out = _analyze(tmp_path, capsys, PLATOON_TOML)
     assert code == 0 and "reachable (first CAV and behind) 12: controllable" in out.out
@@ -467,7 +465,7 @@ def test_api_dispatches_platoon_models():
     model = _deeplcc()
     table = {"u_3": {"s_3": 0.2, "v_3": -0.3}, "u_6": {"v_5": 0.1}}
     ours = lcc.string_stability(model, table)
-    direct = platoon_string_stability(model, PlatoonGains.from_table(table, model, "added"))
+    direct = gains_string_stability(model, PlatoonGains.from_table(table, model, "added"))
     assert ours.as_dict() == direct.as_dict()
 
 
@@ -519,8 +517,8 @@ def test_ring_conserved_mode_is_found_by_the_staircase_on_the_full_state():
 def test_string_verdicts_do_not_depend_on_the_realisation():
     """The loop in random dense coordinates (cond <= 10): the same verdict on both sides of the
     boundary and at it, the same peak to 1e-9 (loop_string_stability on T^-1 A T)."""
-    from lcc_synth.analysis.platoon_string import platoon_loop
     from lcc_synth.analysis.string_stability import loop_string_stability
+    from lcc_synth.analysis.transfer import head_to_tail_loop
 
     model = _deeplcc()
     hdv_c = sum((c.alpha3**2 - c.alpha2**2 + 2 * c.alpha1) / c.alpha1**2
@@ -530,7 +528,7 @@ def test_string_verdicts_do_not_depend_on_the_realisation():
     for dk in (0.0, 1e-3, -1e-3):
         g = PlatoonGains.from_table({f"u_{c}": {f"s_{c}": 0.5, f"v_{c}": kv + dk} for c in (3, 6)},
                                     model)  # fmt: skip
-        A, h, c = platoon_loop(model, g)
+        A, h, c = head_to_tail_loop(model, *g.input_feedback(model))
         base = loop_string_stability(A, h, c)
         for _ in range(3):
             Q = np.linalg.qr(rng.standard_normal((16, 16)))[0]

@@ -5,7 +5,7 @@ The report of :func:`lcc_synth.analysis.controllability.controllability_report` 
 invariant hyperplane, the conserved total spacing named), each vehicle's eq. (8) coefficients
 and eq. (13), and for every ``[cases.NAME]`` (gains per CAV in ``[cases.NAME.gains.u_3]``):
 the closed-loop plant stability and, on an open platoon, the head-to-tail string verdict of
-:func:`~lcc_synth.analysis.platoon_string.platoon_string_stability`. A ring has no head
+:func:`~lcc_synth.analysis.string_stability.gains_string_stability`. A ring has no head
 vehicle: its cases report the plant stability on the hyperplane only.
 """
 
@@ -21,9 +21,8 @@ from lcc_synth.analysis.controllability import (
     observability_report,
     reduce_conserved,
 )
-from lcc_synth.analysis.platoon_string import platoon_gamma, platoon_string_stability
-from lcc_synth.analysis.string_stability import string_band
-from lcc_synth.analysis.transfer import closed_loop_eigenvalues
+from lcc_synth.analysis.string_stability import gains_string_stability, string_band
+from lcc_synth.analysis.transfer import closed_loop_eigenvalues, gamma_state_space
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.platoon import PlatoonModel
 
@@ -97,9 +96,10 @@ def platoon_document(
         if platoon.ring:
             entry.update(_ring_case(model, case))
         else:
-            rep = platoon_string_stability(model, case.gains, method=opts.method)
+            rep = gains_string_stability(model, case.gains, method=opts.method)
             entry.update(rep.as_dict())
-            reports[name] = (lambda w, g=case.gains: platoon_gamma(model, g, w), rep, case.label)
+            fb = case.gains.input_feedback(model)
+            reports[name] = (lambda w, fb=fb: gamma_state_space(model, *fb, w), rep, case.label)
         doc["cases"][name] = entry
     return doc, reports
 
