@@ -1,4 +1,4 @@
-"""Verdicts, decision margins and cost of the platoon / ring analysis (several CAVs).
+"""Verdicts, decision margins and cost of the analysis of platoons and rings (several CAVs).
 
 Prints, for the DeeP-LCC platoon (8 vehicles, CAVs 3 and 6) and OVM rings of 20 and 40 cars
 with one AV: the controllability verdict and margin (ring: on the invariant hyperplane, and in
@@ -15,16 +15,10 @@ import time
 
 import numpy as np
 
-from lcc_synth.analysis.platoon_controllability import (
-    platoon_controllability,
-    platoon_observability,
-)
-from lcc_synth.analysis.platoon_string import (
-    gamma_product,
-    platoon_gamma,
-    platoon_string_stability,
-)
+from lcc_synth.analysis.controllability import controllability_report, observability_report
 from lcc_synth.analysis.staircase import kalman_decomposition
+from lcc_synth.analysis.string_stability import string_stability
+from lcc_synth.analysis.transfer import gamma_product, gamma_state_space
 from lcc_synth.models.hdv import OVM
 from lcc_synth.models.platoon import Platoon, PlatoonGains, platoon_model
 
@@ -46,7 +40,7 @@ def _timed(fn, repeat: int = 5):
 def main() -> None:
     hdv = tuple(OVM(alpha=a, beta=b, s_go=g) for a, b, g in zip(*DEEPLCC.values(), strict=True))
     model = platoon_model(Platoon(hdv, (3, 6), 15.0))
-    rep, t = _timed(lambda: platoon_controllability(model))
+    rep, t = _timed(lambda: controllability_report(model))
     print(
         f"DeeP-LCC platoon (16 states, CAVs 3, 6): {rep.verdict}, rank {rep.rank}/{rep.n_states}"
         f" (reachable {rep.reachable_states}: {rep.reachable_verdict}), margin "
@@ -54,25 +48,25 @@ def main() -> None:
         f"{rep.stabilizable}, closest (S) pair {rep.closest.zero_vehicle}->"
         f"{rep.closest.pole_vehicle} residual {rep.closest.residual:.3g}; {t * 1e3:.1f} ms"
     )
-    ob, t = _timed(lambda: platoon_observability(model))
+    ob, t = _timed(lambda: observability_report(model))
     print(f"  observability from {ob.outputs}: {ob.verdict}, rank {ob.rank}, margin "
           f"{ob.decision_margin:.3g}; {t * 1e3:.1f} ms")  # fmt: skip
     table = {"u_3": {"s_3": 0.5, "v_3": -1.2, "v_2": 0.9},
              "u_6": {"s_6": 0.4, "v_6": -1.5, "v_5": 1.1}}  # fmt: skip
-    gains = PlatoonGains.from_table(table, model)
+    K, kh = PlatoonGains.from_table(table, model).input_feedback(model)
     w = np.logspace(-3, 2, 400)
-    (ss, t_ss) = _timed(lambda: platoon_gamma(model, gains, w))
-    prod = gamma_product(model, gains, w)
+    (ss, t_ss) = _timed(lambda: gamma_state_space(model, K, kh, w))
+    prod = gamma_product(model, K, kh, w)
     print(f"  Gamma: state space vs product of vehicle TFs, max rel diff "
           f"{np.max(np.abs(ss - prod) / np.abs(prod)):.2g} on 400 frequencies "
           f"({t_ss * 1e3:.2f} ms)")  # fmt: skip
     for method in ("grid", "hamiltonian"):
-        sr, t = _timed(lambda method=method: platoon_string_stability(model, gains, method))
+        sr, t = _timed(lambda method=method: string_stability(model, K, kh, method))
         print(f"  string ({method}): {sr.verdict}, peak {sr.gamma_peak:.6f} at "
               f"{sr.gamma_peak_omega:.4f} rad/s, margin {sr.margin:+.3g}; {t * 1e3:.1f} ms")
     for N in (20, 40):
         ring = platoon_model(Platoon((OVM(),) * N, (N,), 15.0, ring=True))
-        rep, t = _timed(lambda ring=ring: platoon_controllability(ring), 3)
+        rep, t = _timed(lambda ring=ring: controllability_report(ring), 3)
         V = ring.invariant_basis()
         hh, t_hh = _timed(lambda V=V, ring=ring: kalman_decomposition(
             V.T @ ring.A @ V, V.T @ ring.B), 3)  # fmt: skip
@@ -87,11 +81,11 @@ def main() -> None:
             f"{hh.decision_margin:.3g} ({t_hh * 1e3:.1f} ms); full state: rank {full.n_c}.."
             f"{full.n_c_upper} of {ring.nx}, margin {full.decision_margin:.3g}"
         )
-        ob, t = _timed(lambda ring=ring: platoon_observability(ring), 3)
+        ob, t = _timed(lambda ring=ring: observability_report(ring), 3)
         print(f"  observability from {ob.outputs}: {ob.verdict}, rank {ob.rank}/{ob.n_states}, "
               f"margin {ob.decision_margin:.3g}; {t * 1e3:.1f} ms")  # fmt: skip
         hdv_ring = platoon_model(Platoon((OVM(),) * N, (), 15.0, ring=True))
-        hr = platoon_controllability(hdv_ring)
+        hr = controllability_report(hdv_ring)
         print(f"  all-HDV ring: rank {hr.rank}, stabilizable {hr.stabilizable} (largest "
               f"uncontrollable Re {hr.uncontrollable_max_real:+.4f}: the wave)")
 

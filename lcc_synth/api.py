@@ -229,10 +229,9 @@ def _linear(model: Any) -> LCCModel | PlatoonModel:
 def controllability(model: System | LCCModel | PlatoonModel, tol: float | None = None):
     """Controllability of ``(A, B)`` (Sec. III, Theorems 1-3): a
     :class:`~lcc_synth.analysis.controllability.ControllabilityReport` (rank, verdict,
-    uncontrollable modes). :func:`lcc_synth.analysis.controllability.controllability_report`;
-    a platoon or ring (several CAVs; the ring on its invariant hyperplane, the conserved
-    total spacing named):
-    :func:`lcc_synth.analysis.platoon_controllability.platoon_controllability`.
+    uncontrollable modes) of any layout (a platoon or ring: several CAVs; the ring on its
+    invariant hyperplane, the conserved total spacing named).
+    :func:`lcc_synth.analysis.controllability.controllability_report`.
 
     ``model``: a :class:`System` (its :meth:`~lcc_synth.problem.System.linear_model`) or a
     linear model (:func:`model`).
@@ -246,14 +245,9 @@ def controllability(model: System | LCCModel | PlatoonModel, tol: float | None =
     >>> rep.controllable, rep.rank, rep.n_states
     (False, 6, 10)
     """
-    model = _linear(model)
-    if isinstance(model, PlatoonModel):
-        from lcc_synth.analysis.platoon_controllability import platoon_controllability
-
-        return platoon_controllability(model, tol)
     from lcc_synth.analysis.controllability import controllability_report
 
-    return controllability_report(model, tol)
+    return controllability_report(_linear(model), tol)
 
 
 def observability(
@@ -264,17 +258,12 @@ def observability(
     """Observability from the measured ``outputs`` (state names; default the paper's set, eq.
     19 / 21: the tail HDV's velocity ``v_n``, plus the CAV's ``s_0, v_0`` for LCC and CCC;
     :func:`~lcc_synth.analysis.controllability.default_outputs`; a platoon or ring: every
-    CAV's own states plus the tail's velocity,
-    :func:`lcc_synth.analysis.platoon_controllability.platoon_observability`). ``model``: a
+    CAV's own states plus the tail's velocity).
+    :func:`lcc_synth.analysis.controllability.observability_report`. ``model``: a
     :class:`System` or its linear model."""
-    model = _linear(model)
-    if isinstance(model, PlatoonModel):
-        from lcc_synth.analysis.platoon_controllability import platoon_observability
+    from lcc_synth.analysis.controllability import observability_report
 
-        return platoon_observability(model, outputs, tol)
-    from lcc_synth.analysis.controllability import default_outputs, observability_report
-
-    return observability_report(model, outputs or default_outputs(model), tol)
+    return observability_report(_linear(model), outputs, tol)
 
 
 def control_energy(model: System | LCCModel | PlatoonModel, horizon: float):
@@ -371,8 +360,7 @@ def string_stability(
     states the semantics (a plain mapping is refused: the paper's ``"added"`` and
     ``"replace"`` gains give opposite verdicts for the same numbers). On an open platoon
     (several CAVs) a :class:`~lcc_synth.models.platoon.PlatoonGains` (``lcc.gains({"u_3":
-    {...}}, semantics=..., model=...)``):
-    :func:`lcc_synth.analysis.platoon_string.platoon_string_stability`.
+    {...}}, semantics=..., model=...)``).
 
     Examples
     --------
@@ -388,15 +376,10 @@ def string_stability(
     >>> added.string_stable, round(added.gamma_peak, 3)
     (False, 1.136)
     """
-    model = _linear(model)
-    gain = _stated(gain, model)
-    if isinstance(model, PlatoonModel):
-        from lcc_synth.analysis.platoon_string import platoon_string_stability
-
-        return platoon_string_stability(model, gain, method=method)
     from lcc_synth.analysis.string_stability import gains_string_stability
 
-    return gains_string_stability(model, gain, method=method)
+    model = _linear(model)
+    return gains_string_stability(model, _stated(gain, model), method=method)
 
 
 def region_map(

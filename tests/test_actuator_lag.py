@@ -382,17 +382,15 @@ def test_platoon_lag_against_the_cascade_product():
     """An open platoon (DeeP-LCC layout, CAVs 3 and 6 with local laws, lags 0.3 / 0.6 s) is a
     cascade: with the lag a CAV's T_c = (k_p s + k_s) / (tau s^3 + s^2 - k_v s + k_s), HDVs as
     eq. (8); the state space of the lagged loop must equal the product."""
-    from lcc_synth.analysis.lag_string import platoon_gamma_lag, platoon_lag_string_stability
-    from lcc_synth.analysis.platoon_string import local_cav_laws, platoon_string_stability
-    from lcc_synth.analysis.transfer import phi_gamma
+    from lcc_synth.analysis.transfer import local_cav_laws, phi_gamma
     from lcc_synth.experiments.spec import load_spec
     from lcc_synth.models.platoon import PlatoonGains
 
     model = load_spec(PROBLEMS / "platoon_deeplcc_brake.toml").system.linear_model(warn=False)
     table = {"u_3": {"s_3": 0.5, "v_3": -1.2, "v_2": 0.9}, "u_6": {"s_6": 0.4, "v_6": -1.5,
              "v_5": 1.1}}  # fmt: skip
-    gains = PlatoonGains.from_table(table, model, "replace")
-    laws, taus = local_cav_laws(model, gains), {3: 0.3, 6: 0.6}
+    K, kh = PlatoonGains.from_table(table, model, "replace").input_feedback(model)
+    laws, taus = local_cav_laws(model, K, kh), {3: 0.3, 6: 0.6}
     w = np.logspace(-3, 2, 300)
     s = 1j * w
     prod = np.ones_like(s)
@@ -403,8 +401,8 @@ def test_platoon_lag_against_the_cascade_product():
         else:
             num, den = phi_gamma(model.coefficients[i - 1])
             prod *= np.polyval(num, s) / np.polyval(den, s)
-    ss = platoon_gamma_lag(model, gains, (0.3, 0.6), w)
+    ss = gamma_lag(model, K, kh, (0.3, 0.6), w)
     assert np.max(np.abs(ss / prod - 1)) < 1e-10
-    r = platoon_lag_string_stability(model, gains, (0.3, 0.6))
-    r0 = platoon_string_stability(model, gains)
+    r = lag_string_stability(model, K, kh, (0.3, 0.6))
+    r0 = string_stability(model, K, kh)
     assert r.gamma_peak > r0.gamma_peak  # the lag amplifies more

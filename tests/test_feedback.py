@@ -126,3 +126,28 @@ def test_from_mu_k_and_vehicles():
     g = StaticGains.from_mu_k({-1: 0.5, 2: 0.0}, {1: -1.0})
     assert g.gains == {"s_-1": 0.5, "s_2": 0.0, "v_1": -1.0}
     assert g.vehicles() == [-1, 1]
+
+
+def test_closed_loop_of_several_cavs_and_of_gains_objects():
+    """``closed_loop`` takes one row and one head gain per CAV (several CAVs) and is
+    ``PlatoonGains.closed_loop``; both gains types give their input feedback by one method."""
+    from lcc_synth.models.platoon import Platoon, PlatoonGains, platoon_model
+
+    model = platoon_model(Platoon((OVM(),) * 4, (1, 3), 15.0), warn=False)
+    gains = PlatoonGains(np.arange(16.0).reshape(2, 8) / 10, (1, 3), "added", kh=[0.5, 0.0])
+    Ku, kh = gains.input_feedback(model)
+    A, H = closed_loop(model, Ku, kh)
+    Ag, Hg = gains.closed_loop(model)
+    assert np.array_equal(A, Ag) and np.array_equal(H, Hg)
+    assert np.array_equal(H[:, 0], model.H[:, 0] + model.B @ kh)  # v_h enters through the CAVs
+    one = general_lcc(2, 2, HET)
+    g = StaticGains.from_mu_k(MU, K, "added")
+    assert all(np.array_equal(a, b) for a, b in zip(g.input_feedback(one), input_feedback(one, g),
+                                                   strict=True))  # fmt: skip
+    with pytest.raises(ConfigError, match="10 entries"):
+        closed_loop(one, np.zeros(3))
+    with pytest.raises(ConfigError, match=r"shape \(2, 8\)"):
+        closed_loop(model, np.zeros((1, 8)))
+    with pytest.raises(ConfigError, match="2 head-velocity"):
+        closed_loop(model, np.zeros((2, 8)), [0.0, 0.0, 0.0])
+

@@ -30,6 +30,27 @@ def test_one_cav_platoon_is_the_papers_general_lcc_bit_for_bit(m, n):
     args = (m, coefs[:m]) if n == 0 else (m, n, coefs[:m] + coefs[m + 1 :])
     G = build(*args, coefs[m])
     assert np.array_equal(P.A, G.A) and np.array_equal(P.B, G.B) and np.array_equal(P.H, G.H)
+    # the same layout attributes: vehicle i of the paper's string is position i + m + 1
+    assert G.cavs == (0,) and P.cavs == (m + 1,) and G.ring is False and P.ring is False
+    assert [i + m + 1 for i in G.vehicles] == list(P.vehicles) and P.kind == "platoon"
+    assert G.vehicle_coefficients == P.vehicle_coefficients == tuple(coefs)
+    assert G.conserved is None is P.conserved and G.conserved_mode is None is P.conserved_mode
+    for i in G.vehicles:
+        assert G.block(i) == P.block(i + m + 1)
+    # m, n as the [system] tables say them: a platoon's n counts the first CAV
+    assert (G.m, G.n) == (m, n) and (P.m, P.n) == (m, n + 1)
+
+
+@pytest.mark.parametrize(("cavs", "ring", "m", "n"),
+                         [((3, 6), False, 2, 6), ((8,), True, 7, 1), ((), True, 8, 0)])
+def test_platoon_layout_attributes_match_the_system_table(cavs, ring, m, n):
+    """``kind``, ``m``, ``n`` of the model are those of the problem file's ``[system]``."""
+    table = {"system": {"kind": "ring" if ring else "platoon", "size": 8, "cavs": list(cavs)}}
+    system = system_from(table)
+    model = system.linear_model(warn=False)
+    assert (model.kind, model.m, model.n) == (system.kind, system.m, system.n) == (
+        "ring" if ring else "platoon", m, n)
+    assert model.vehicles == tuple(range(1, 9)) and model.vehicle_coefficients == model.coefficients
 
 
 def test_two_cav_rows_are_eq_9_and_hdv_rows_eq_8_at_their_own_equilibrium():

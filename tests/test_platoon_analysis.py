@@ -1,5 +1,6 @@
 """Controllability, observability and head-to-tail string stability of platoons with several
-CAVs and of the ring (lcc_synth.analysis.platoon_controllability / platoon_string), against
+CAVs and of the ring (lcc_synth.analysis.controllability / string_stability / transfer, the
+analyses of every layout), against
 independent truth: exact rational Kalman ranks (fractions.Fraction Gaussian elimination on
 dyadic coefficients, so the float model *is* the rational one), the theorem's condition (S)
 decided in rational arithmetic, invariance under units and similarity transforms, the product
@@ -9,25 +10,21 @@ low-frequency curvature identity of a cascade (a gain built to sit on the bounda
 from __future__ import annotations
 
 import json
-from fractions import Fraction
 
 import numpy as np
 import pytest
+from exact_rank import kalman_rank
 
-from lcc_synth.analysis.platoon_controllability import (
-    platoon_controllability,
-    platoon_observability,
+from lcc_synth.analysis.controllability import (
+    controllability_report,
+    observability_report,
     reduce_conserved,
     segment_cancellations,
     segments,
 )
-from lcc_synth.analysis.platoon_string import (
-    gamma_product,
-    local_cav_laws,
-    platoon_gamma,
-    platoon_string_stability,
-)
 from lcc_synth.analysis.staircase import kalman_decomposition
+from lcc_synth.analysis.string_stability import gains_string_stability
+from lcc_synth.analysis.transfer import gamma_product, gamma_state_space, local_cav_laws
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import OVM, LinearCoefficients
 from lcc_synth.models.platoon import (
@@ -70,39 +67,6 @@ def _chain(coefs, cavs, ring=False) -> PlatoonModel:
     return PlatoonModel(platoon, A, B, H, tuple(coefs))
 
 
-def _rank(M: list[list[Fraction]]) -> int:
-    """Exact rank by Gauss-Jordan elimination over the rationals."""
-    M = [row[:] for row in M]
-    rank = 0
-    for col in range(len(M[0]) if M else 0):
-        piv = next((r for r in range(rank, len(M)) if M[r][col] != 0), None)
-        if piv is None:
-            continue
-        M[rank], M[piv] = M[piv], M[rank]
-        for r in range(len(M)):
-            if r != rank and M[r][col] != 0:
-                f = M[r][col] / M[rank][col]
-                M[r] = [a - f * b for a, b in zip(M[r], M[rank], strict=True)]
-        rank += 1
-    return rank
-
-
-def _exact(X) -> list[list[Fraction]]:
-    return [[Fraction(float(x)) for x in row] for row in np.atleast_2d(X)]
-
-
-def _kalman_rank(A, B) -> int:
-    """Exact rank of [B, AB, ..., A^(n-1) B] (entries of A, B converted exactly)."""
-    A, B = _exact(A), _exact(np.asarray(B).reshape(len(A), -1))
-    n = len(A)
-    cols = [[row[j] for row in B] for j in range(len(B[0]))]
-    K = []
-    for _ in range(n):
-        K += cols
-        cols = [[sum(a * x for a, x in zip(row, v, strict=True)) for row in A] for v in cols]
-    return _rank(K) if K else 0
-
-
 # --------------------------------------------------------------------------------------------
 # Controllability against exact rational ranks and the theorem
 # --------------------------------------------------------------------------------------------
@@ -128,15 +92,15 @@ def _coefs(spec):
 def test_controllability_matches_exact_rational_rank_and_the_theorem(name):
     spec, cavs, ring, exact = CASES[name]
     model = _chain(_coefs(spec), cavs, ring)
-    rep = platoon_controllability(model)
+    rep = controllability_report(model)
     n_an = model.nx - (1 if ring else 0)
     if ring:  # the full pair: the conserved direction is never reached
-        assert _kalman_rank(model.A, model.B) == exact
+        assert kalman_rank(model.A, model.B) == exact
         Az, Bz, W = reduce_conserved(model.A, model.B, model.conserved)
         assert np.abs(model.A @ W - W @ Az).max() == 0  # exactly invariant
-        assert _kalman_rank(Az, Bz) == exact
+        assert kalman_rank(Az, Bz) == exact
     else:
-        assert _kalman_rank(model.A, model.B) == exact
+        assert kalman_rank(model.A, model.B) == exact
     assert rep.n_states == n_an and rep.model_states == model.nx
     assert not rep.undecided and rep.rank == exact, rep.as_dict()
     bound = n_an if ring or not cavs else 2 * (model.platoon.size - cavs[0] + 1)
@@ -156,7 +120,7 @@ def test_controllability_matches_exact_rational_rank_and_the_theorem(name):
 
 def test_eq13_segment_loses_one_mode_per_hdv_at_minus_a1_over_a3():
     spec, cavs, ring, _ = CASES["segment_on_eq13"]
-    rep = platoon_controllability(_chain(_coefs(spec), cavs, ring))
+    rep = controllability_report(_chain(_coefs(spec), cavs, ring))
     assert {(c.zero_vehicle, c.pole_vehicle) for c in rep.cancellations} == {(5, 5), (5, 6), (6, 6)}
     ev = np.sort_complex(rep.uncontrollable_eigenvalues)
     # vehicle 1 ahead (GEN[0]: s^2 + 1.5 s + 0.75) and the two cancelled modes at -1
@@ -180,7 +144,7 @@ def test_theorem_condition_is_decided_exactly_and_depends_on_the_order():
 
 def test_deeplcc_platoon_report():
     model = _deeplcc()
-    rep = platoon_controllability(model)
+    rep = controllability_report(model)
     assert rep.verdict == "uncontrollable" and rep.rank == 12 and not rep.undecided
     assert rep.vehicles_outside == [1, 2] and rep.vehicles_in_subspace == [3, 4, 5, 6, 7, 8]
     assert rep.stabilizable and rep.condition_s and rep.theory_rank == 12
@@ -204,7 +168,7 @@ def test_verdict_does_not_depend_on_units(ring):
     model = _deeplcc((3, 6) if not ring else (8,), ring=ring)
     D = np.tile([1e-3, 3.6], model.platoon.size)
     km = _scaled(model, np.diag(1.0 / D), np.diag(D))
-    a, b = platoon_controllability(model), platoon_controllability(km)
+    a, b = controllability_report(model), controllability_report(km)
     assert (a.rank, a.rank_upper, a.verdict) == (b.rank, b.rank_upper, b.verdict)
     assert a.vehicles_in_subspace == b.vehicles_in_subspace
     assert a.vehicles_outside == b.vehicles_outside
@@ -234,7 +198,7 @@ def test_verdict_survives_random_similarity_transforms():
 @pytest.mark.parametrize("N", [20, 40])
 def test_ring_with_one_av_is_controllable_on_the_invariant_hyperplane(N):
     ring = platoon_model(Platoon((OVM(),) * N, (N,), 15.0, ring=True))
-    rep = platoon_controllability(ring)
+    rep = controllability_report(ring)
     assert rep.verdict == "controllable" and rep.controllable and rep.stabilizable
     assert rep.rank == rep.n_states == 2 * N - 1 and not rep.undecided
     assert rep.conserved_mode.startswith("total spacing") and rep.conserved_residual == 0.0
@@ -250,7 +214,7 @@ def test_ring_with_one_av_is_controllable_on_the_invariant_hyperplane(N):
     # all HDVs: nothing is controllable; this ring is unstable (the stop-and-go wave), so
     # not stabilisable -- because of its wave, not of the conserved mode
     all_hdv = platoon_model(Platoon((OVM(),) * N, (), 15.0, ring=True))
-    hdv = platoon_controllability(all_hdv)
+    hdv = controllability_report(all_hdv)
     assert hdv.rank == 0 and hdv.verdict == "uncontrollable" and hdv.theory_rank == 0
     Vh = all_hdv.invariant_basis()
     wave = np.linalg.eigvals(Vh.T @ all_hdv.A @ Vh)
@@ -266,7 +230,7 @@ def test_undecided_when_a_segment_is_within_round_off_of_eq13():
 
     def report(delta):
         near = LinearCoefficients(a2 * a3 - a3 * a3 + delta, a2, a3)
-        return platoon_controllability(_chain(_coefs([GEN[0], None, GEN[1], None, near]),
+        return controllability_report(_chain(_coefs([GEN[0], None, GEN[1], None, near]),
                                               (2, 4)))  # fmt: skip
 
     rep = report(6e-13)
@@ -287,20 +251,20 @@ def test_undecided_when_a_segment_is_within_round_off_of_eq13():
 
 def test_observability_exact_ranks_open_and_ring():
     model = _chain(_coefs(CASES["two_cavs"][0]), (2, 4))
-    rep = platoon_observability(model, ["s_2", "v_2", "s_4", "v_4"])
+    rep = observability_report(model, ["s_2", "v_2", "s_4", "v_4"])
     C = model.output_matrix(["s_2", "v_2", "s_4", "v_4"])
-    assert _kalman_rank(model.A.T, C.T) == 8 == rep.rank  # v_4 measured: vehicles 1..4
+    assert kalman_rank(model.A.T, C.T) == 8 == rep.rank  # v_4 measured: vehicles 1..4
     assert rep.verdict == "unobservable" and rep.vehicles_outside == [5, 6]
     assert rep.vehicles_in_subspace == [1, 2, 3, 4]
-    full = platoon_observability(model)  # default: the CAVs' own states and v_6
+    full = observability_report(model)  # default: the CAVs' own states and v_6
     assert full.outputs == ["s_2", "v_2", "s_4", "v_4", "v_6"] and full.verdict == "observable"
     ring = _chain(_coefs(CASES["ring_one_cav"][0]), (5,), ring=True)
-    rr = platoon_observability(ring)
+    rr = observability_report(ring)
     Az, _, W = reduce_conserved(ring.A, ring.B, ring.conserved)
     Cz = ring.output_matrix(rr.outputs) @ W
-    assert _kalman_rank(Az.T, Cz.T) == rr.rank == 9 and rr.verdict == "observable"
+    assert kalman_rank(Az.T, Cz.T) == rr.rank == 9 and rr.verdict == "observable"
     assert rr.n_states == 9 and rr.vehicles_in_subspace == [1, 2, 3, 4, 5]
-    assert platoon_observability(_deeplcc()).verdict == "observable"
+    assert observability_report(_deeplcc()).verdict == "observable"
 
 
 # --------------------------------------------------------------------------------------------
@@ -317,19 +281,20 @@ def test_gamma_state_space_equals_product_of_vehicle_transfer_functions(semantic
     model = _deeplcc()
     table = LOCAL if semantics == "replace" else {"u_3": {"s_3": 0.2, "v_3": -0.3},
                                                   "u_6": {"v_5": 0.1}}  # fmt: skip
-    gains = PlatoonGains.from_table(table, model, semantics)
-    ss = platoon_gamma(model, gains, OMEGA)
-    prod = gamma_product(model, gains, OMEGA)
+    K, kh = PlatoonGains.from_table(table, model, semantics).input_feedback(model)
+    ss = gamma_state_space(model, K, kh, OMEGA)
+    prod = gamma_product(model, K, kh, OMEGA)
     assert np.max(np.abs(ss - prod) / np.abs(prod)) < 1e-10
     # by hand for the "replace" CAVs: T_c = (k_p s + k_s) / (s^2 - k_v s + k_s)
     if semantics == "replace":
-        assert local_cav_laws(model, gains) == {3: (0.5, -1.2, 0.9), 6: (0.4, -1.5, 1.1)}
+        assert local_cav_laws(model, K, kh) == {3: (0.5, -1.2, 0.9), 6: (0.4, -1.5, 1.1)}
     # all-HDV limit: "added" with zero gains is the product of the eight HDVs
     zero = PlatoonGains(np.zeros((2, 16)), (3, 6), "added")
     s = 1j * OMEGA
     hdv = np.prod([(c.alpha3 * s + c.alpha1) / (s * s + c.alpha2 * s + c.alpha1)
                    for c in model.coefficients], axis=0)  # fmt: skip
-    assert np.max(np.abs(platoon_gamma(model, zero, OMEGA) / hdv - 1)) < 1e-10
+    zero_gamma = gamma_state_space(model, *zero.input_feedback(model), OMEGA)
+    assert np.max(np.abs(zero_gamma / hdv - 1)) < 1e-10
 
 
 def test_gamma_agrees_with_python_control_for_nonlocal_gains():
@@ -339,17 +304,17 @@ def test_gamma_agrees_with_python_control_for_nonlocal_gains():
     table = {"u_3": {"s_3": 0.5, "v_3": -1.2, "v_2": 0.9, "v_5": 0.3, "s_8": -0.1},
              "u_6": {"s_6": 0.4, "v_6": -1.5, "v_1": 0.2, "v_8": 0.15}}  # fmt: skip
     gains = PlatoonGains.from_table(table, model)
-    with pytest.raises(ConfigError) as err:
-        local_cav_laws(model, gains)
-    assert err.value.field == "gains.u_3"
     Ku, kh = gains.input_feedback(model)
+    with pytest.raises(ConfigError) as err:
+        local_cav_laws(model, Ku, kh)
+    assert err.value.field == "gains.u_3"
     plant = model.to_statespace()
     law = ct.ss([], [], [], np.column_stack([Ku, kh]), inputs=[*model.state_names, "v_h"],
                 outputs=list(model.input_names), name="law")  # fmt: skip
     loop = ct.interconnect([plant, law], inplist=["v_h"], outlist=["v_8"])
     w = np.logspace(-2, 1, 60)
     theirs = np.array([complex(loop(1j * x)) for x in w])
-    assert np.allclose(platoon_gamma(model, gains, w), theirs, rtol=1e-9, atol=0)
+    assert np.allclose(gamma_state_space(model, Ku, kh, w), theirs, rtol=1e-9, atol=0)
 
 
 def test_string_verdicts_and_a_case_too_close_to_call():
@@ -366,16 +331,16 @@ def test_string_verdicts_and_a_case_too_close_to_call():
         g = PlatoonGains.from_table({f"u_{c}": {f"s_{c}": ks, f"v_{c}": kv + dk} for c in (3, 6)},
                                     model)  # fmt: skip
         for method in ("grid", "hamiltonian"):
-            rep = platoon_string_stability(model, g, method)
+            rep = gains_string_stability(model, g, method)
             assert rep.verdict == verdict and rep.plant_stable, (dk, method, rep)
-    hdv = platoon_string_stability(model, PlatoonGains(np.zeros((2, 16)), (3, 6), "added"))
+    hdv = gains_string_stability(model, PlatoonGains(np.zeros((2, 16)), (3, 6), "added"))
     assert hdv.verdict == "string_unstable" and hdv.gamma_peak > 1.2
 
 
 def test_ring_has_no_head_to_tail_transfer():
     ring = _deeplcc((8,), ring=True)
     with pytest.raises(ConfigError) as err:
-        platoon_string_stability(ring, PlatoonGains(np.zeros((1, 16)), (8,)))
+        gains_string_stability(ring, PlatoonGains(np.zeros((1, 16)), (8,)))
     assert err.value.field == "system.kind"
 
 
@@ -449,11 +414,11 @@ def test_cli_analyze_platoon_json(tmp_path, capsys):
     assert ct["vehicles_outside"] == [1, 2] and doc["system"]["cavs"] == [3, 6]
     assert doc["observability"]["verdict"] == "observable"
     model = _deeplcc()
-    direct = platoon_string_stability(model, PlatoonGains.from_table(LOCAL, model))
+    direct = gains_string_stability(model, PlatoonGains.from_table(LOCAL, model))
     assert doc["cases"]["local"]["verdict"] == direct.verdict == "string_unstable"
     assert doc["cases"]["local"]["gamma_peak"] == direct.gamma_peak
     assert doc["cases"]["local"]["gains"] == LOCAL
-    hdv = platoon_string_stability(model, PlatoonGains(np.zeros((2, 16)), (3, 6), "added"))
+    hdv = gains_string_stability(model, PlatoonGains(np.zeros((2, 16)), (3, 6), "added"))
     assert doc["cases"]["hdv"]["gamma_peak"] == hdv.gamma_peak
     code, out = _analyze(tmp_path, capsys, PLATOON_TOML)
     assert code == 0 and "reachable (first CAV and behind) 12: controllable" in out.out
@@ -469,7 +434,7 @@ def test_cli_analyze_ring_json(tmp_path, capsys):
     damp, as_hdv = doc["cases"]["damp"], doc["cases"]["as_hdv"]
     assert damp["plant_verdict"] == "plant_stable" and damp["verdict"] is None
     # zero added gain: the all-HDV ring, whose stop-and-go mode grows
-    hdv = platoon_controllability(platoon_model(Platoon((OVM(),) * 20, (), 15.0, ring=True)))
+    hdv = controllability_report(platoon_model(Platoon((OVM(),) * 20, (), 15.0, ring=True)))
     assert as_hdv["plant_verdict"] == "plant_unstable"
     assert as_hdv["max_real_eig"] == pytest.approx(hdv.uncontrollable_max_real, rel=1e-9)
     code, out = _analyze(tmp_path, capsys, RING_TOML, "--png", str(tmp_path / "g.png"))
@@ -500,7 +465,7 @@ def test_api_dispatches_platoon_models():
     model = _deeplcc()
     table = {"u_3": {"s_3": 0.2, "v_3": -0.3}, "u_6": {"v_5": 0.1}}
     ours = lcc.string_stability(model, lcc.gains(table, semantics="added", model=model))
-    direct = platoon_string_stability(model, PlatoonGains.from_table(table, model, "added"))
+    direct = gains_string_stability(model, PlatoonGains.from_table(table, model, "added"))
     assert ours.as_dict() == direct.as_dict()
 
 
@@ -518,12 +483,12 @@ def test_seeded_sweep_numerics_equal_exact_rational_ranks():
         cavs = tuple(sorted(int(c) for c in rng.choice(np.arange(1, N + 1), ncav, replace=False)))
         coefs = [pool[int(rng.integers(len(pool)))] for _ in range(N)]
         model = _chain(coefs, cavs, ring)
-        rep = platoon_controllability(model)
+        rep = controllability_report(model)
         if ring:
             Az, Bz, _ = reduce_conserved(model.A, model.B, model.conserved)
-            exact = _kalman_rank(Az, Bz)
+            exact = kalman_rank(Az, Bz)
         else:
-            exact = _kalman_rank(model.A, model.B)
+            exact = kalman_rank(model.A, model.B)
         assert not rep.undecided and rep.rank == exact, (trial, N, cavs, ring)
         if rep.condition_s:
             assert rep.theory_rank == exact, (trial, cavs)
@@ -552,8 +517,8 @@ def test_ring_conserved_mode_is_found_by_the_staircase_on_the_full_state():
 def test_string_verdicts_do_not_depend_on_the_realisation():
     """The loop in random dense coordinates (cond <= 10): the same verdict on both sides of the
     boundary and at it, the same peak to 1e-9 (loop_string_stability on T^-1 A T)."""
-    from lcc_synth.analysis.platoon_string import platoon_loop
     from lcc_synth.analysis.string_stability import loop_string_stability
+    from lcc_synth.analysis.transfer import head_to_tail_loop
 
     model = _deeplcc()
     hdv_c = sum((c.alpha3**2 - c.alpha2**2 + 2 * c.alpha1) / c.alpha1**2
@@ -563,7 +528,7 @@ def test_string_verdicts_do_not_depend_on_the_realisation():
     for dk in (0.0, 1e-3, -1e-3):
         g = PlatoonGains.from_table({f"u_{c}": {f"s_{c}": 0.5, f"v_{c}": kv + dk} for c in (3, 6)},
                                     model)  # fmt: skip
-        A, h, c = platoon_loop(model, g)
+        A, h, c = head_to_tail_loop(model, *g.input_feedback(model))
         base = loop_string_stability(A, h, c)
         for _ in range(3):
             Q = np.linalg.qr(rng.standard_normal((16, 16)))[0]

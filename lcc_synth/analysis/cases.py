@@ -15,7 +15,7 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.linear import LCCModel
-from lcc_synth.models.platoon import PlatoonGains, PlatoonModel
+from lcc_synth.models.platoon import PLATOON_KINDS, PlatoonGains, PlatoonModel
 from lcc_synth.models.records import Record
 
 __all__ = ["AnalysisOptions", "analysis_options_from", "GainCase", "cases_from"]
@@ -72,7 +72,7 @@ class GainCase(Record):
     """One ``[cases.NAME]`` table: a named static gain (eq. 23) to analyse."""
 
     name: str
-    gains: object  # StaticGains, or PlatoonGains on a platoon / ring
+    gains: object  # StaticGains, or PlatoonGains on a platoon / ring: both have input_feedback
     label: str
     table: dict | None = None  # platoon / ring: the per-CAV gains table as read
 
@@ -111,7 +111,7 @@ def cases_from(
             raw = C.get(table, "gains", field)
             warn_large_gains(raw, f"{field}.gains")
             label = C.get(table, "label", field, default=name)
-            if isinstance(model, PlatoonModel):
+            if model.kind in PLATOON_KINDS:  # the platoon vocabulary: a table per CAV input
                 for u, row in raw.items():
                     if isinstance(row, dict):
                         warn_large_gains(row, f"{field}.gains.{u}")

@@ -1,13 +1,14 @@
-"""Head-to-tail string stability with the CAV's actuator lag, and the critical lag of a gain.
+"""Head-to-tail string stability with the CAVs' actuator lag, and the critical lag of a gain.
 
-The lagged loop (:func:`lcc_synth.models.lag.with_actuator_lag` on an
-:class:`~lcc_synth.models.linear.LCCModel`, the lag fed by the CAV's velocity row ``v_0``) is
-a SISO loop ``Gamma(s) = c (sI - A_cl)^-1 h`` like the lag-free one, so the verdict is the
-exact one of :func:`lcc_synth.analysis.string_stability.loop_string_stability` (decision
-function without the double zero at ``w = 0``, band from the closed-loop eigenvalues). The
-lag multiplies the CAV's command path by ``1 / (tau s + 1)``: ``Gamma(0) = 1`` stays, the
-phase lag grows with ``w tau``, and a gain that is string stable without lag loses it at a
-large enough ``tau`` (the known effect of CACC work: the lag eats the time gap's margin).
+The lagged loop (:func:`lcc_synth.models.lag.with_actuator_lag` on any layout with a head
+vehicle: the paper's one-CAV models, the lag fed by the CAV's velocity row ``v_0``, or an open
+platoon, one lag state per CAV fed by its ``v_c``) is a SISO loop ``Gamma(s) = c (sI -
+A_cl)^-1 h`` like the lag-free one, so the verdict is the exact one of
+:func:`lcc_synth.analysis.string_stability.loop_string_stability` (decision function without
+the double zero at ``w = 0``, band from the closed-loop eigenvalues). The lag multiplies the
+CAV's command path by ``1 / (tau s + 1)``: ``Gamma(0) = 1`` stays, the phase lag grows with
+``w tau``, and a gain that is string stable without lag loses it at a large enough ``tau``
+(the known effect of CACC work: the lag eats the time gap's margin).
 
 :func:`critical_lag` finds the smallest lag at which a gain stops being string stable: a scan
 of ``tau`` over a geometric grid (``SCAN`` points from ``tau_lo`` to ``tau_max``) for the first
@@ -22,7 +23,9 @@ at 1.84 rad/s, the plant itself unstable by 0.6 s); the showcase's structured H2
 the lag-free ``string_stable`` design of ``problems/synth_string_stable_m2n2.toml`` 1.071 s.
 Checked against a direct per-frequency solution of the lag-free loop with the factor
 ``1 / (tau s + 1)`` on the CAV's velocity row (agreement 1e-10) and a dense ``|Gamma|`` grid on
-both sides of each critical lag.
+both sides of each critical lag. An open platoon whose CAVs have local laws is a cascade: with
+the lag a CAV's ``T_c = (k_p s + k_s) / (tau s^3 + s^2 - k_v s + k_s)``, and the lagged loop's
+``Gamma`` equals that product to 1e-10 (DeeP-LCC platoon, lags 0.3 / 0.6 s).
 """
 
 from __future__ import annotations
@@ -32,11 +35,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from lcc_synth.analysis.string_stability import StringStabilityReport, loop_string_stability
-from lcc_synth.analysis.transfer import check_head, tail_output, transfer_response
+from lcc_synth.analysis.transfer import head_to_tail_loop, transfer_response
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.lag import LaggedModel, check_lag, with_actuator_lag
-from lcc_synth.models.linear import LCCModel
-from lcc_synth.models.platoon import PlatoonGains, PlatoonModel
 from lcc_synth.models.records import Record
 
 __all__ = [
@@ -45,8 +46,6 @@ __all__ = [
     "gamma_lag",
     "CriticalLag",
     "critical_lag",
-    "platoon_lag_string_stability",
-    "platoon_gamma_lag",
     "SCAN",
 ]
 
@@ -54,45 +53,47 @@ __all__ = [
 SCAN = 40
 
 
-def lagged_lcc(model: LCCModel, tau: float) -> LaggedModel:
-    """``model`` with the lag ``tau`` (> 0) on the CAV's acceleration (state ``a_0``)."""
-    return with_actuator_lag(
-        model.A, model.B, model.H, [model.index("v_0")], tau, model.state_names
-    )
+def lagged_lcc(model, tau) -> LaggedModel:
+    """``model`` with the lag ``tau`` (> 0; one value, or one per CAV) on every CAV's
+    acceleration (states ``a_<c>``, fed by each CAV's velocity row ``v_<c>``)."""
+    rows = [model.index(f"v_{c}") for c in model.cavs]
+    return with_actuator_lag(model.A, model.B, model.H, rows, tau, model.state_names)
 
 
-def _loop(model: LCCModel, K, kh: float, tau: float, k_a: float):
-    check_head(model)
-    tau = check_lag(tau)
-    c = tail_output(model)
-    K = np.asarray(K, dtype=float).reshape(1, -1)
-    if K.shape[1] != model.nx:
-        raise ConfigError("gain", f"needs {model.nx} entries for this model, got {K.shape[1]}")
-    if tau == 0.0:
-        if k_a != 0.0:
+def _loop(model, K, kh, tau, k_a):
+    """``(A, h, c)`` of the head-to-tail loop with the lag (``tau = 0``: without)."""
+    A, h, c = head_to_tail_loop(model, K, kh)  # checks the head, K and kh
+    if np.ndim(tau) == 0:
+        tau = check_lag(tau)
+    if np.ndim(tau) == 0 and tau == 0.0:
+        if np.any(np.asarray(k_a, dtype=float) != 0.0):
             raise ConfigError("k_a", "an acceleration feedback needs a lag tau > 0")
-        return model.A + model.B @ K, (model.H + model.B * kh).ravel(), c
+        return A, h, c
     lag = lagged_lcc(model, tau)
-    Acl, Hcl = lag.closed_loop(np.hstack([K, [[float(k_a)]]]), kh)
-    return Acl, Hcl.ravel(), np.concatenate([c, [0.0]])
+    nu = model.B.shape[1]
+    K = np.asarray(K, dtype=float).reshape(nu, -1)
+    k_a = np.broadcast_to(np.asarray(k_a, dtype=float), (nu,))
+    Acl, Hcl = lag.closed_loop(np.hstack([K, np.diag(k_a)]), kh)
+    return Acl, Hcl.ravel(), np.concatenate([c, np.zeros(nu)])
 
 
 def lag_string_stability(
-    model: LCCModel, K, kh: float = 0.0, tau: float = 0.0, k_a: float = 0.0,
-    method: str = "grid",
+    model, K, kh=0.0, tau=0.0, k_a=0.0, method: str = "grid",
 ) -> StringStabilityReport:  # fmt: skip
-    """String stability of ``u = K x + kh v_h (+ k_a a_0)`` with the actuator lag ``tau``.
+    """String stability of ``input = K x + kh v_h (+ k_a a_c)`` with the actuator lag ``tau``.
 
     Parameters
     ----------
-    model : LCCModel
-        Any kind with a head vehicle.
+    model : LCCModel or PlatoonModel
+        Any layout with a head vehicle (one CAV or several).
     K, kh : array_like, float
-        Feedback on the model's input (:func:`lcc_synth.models.feedback.input_feedback`).
-    tau : float
-        Actuator lag (s, >= 0); 0 is :func:`~lcc_synth.analysis.string_stability.string_stability`.
-    k_a : float
-        Feedback of the CAV's own (measured) acceleration ``a_0`` (needs ``tau > 0``).
+        Feedback on the model's input, as for
+        :func:`~lcc_synth.analysis.string_stability.string_stability`.
+    tau : float or sequence of float
+        Actuator lag (s, >= 0), one for every CAV or one per CAV (each > 0); 0 is
+        :func:`~lcc_synth.analysis.string_stability.string_stability`.
+    k_a : float or sequence of float
+        Feedback of each CAV's own (measured) acceleration ``a_c`` (needs ``tau > 0``).
     method : {"grid", "hamiltonian"}
         See :func:`~lcc_synth.analysis.string_stability.loop_string_stability`.
     """
@@ -100,8 +101,9 @@ def lag_string_stability(
     return loop_string_stability(A, h, c, method=method)
 
 
-def gamma_lag(model: LCCModel, K, kh: float, tau: float, omega, k_a: float = 0.0) -> np.ndarray:
-    """``Gamma(j omega)`` (head velocity to tail velocity) of the lagged loop."""
+def gamma_lag(model, K, kh, tau, omega, k_a=0.0) -> np.ndarray:
+    """``Gamma(j omega)`` (head velocity to tail velocity) of the lagged loop (any layout with a
+    head vehicle; arguments as :func:`lag_string_stability`)."""
     A, h, c = _loop(model, K, kh, tau, k_a)
     return transfer_response(A, h, c, 1j * np.asarray(omega, dtype=float))
 
@@ -135,14 +137,15 @@ class CriticalLag(Record):
 
 
 def critical_lag(
-    model: LCCModel, K, kh: float = 0.0, tau_max: float = 5.0, tau_lo: float = 1e-3,
+    model, K, kh=0.0, tau_max: float = 5.0, tau_lo: float = 1e-3,
     rtol: float = 1e-6, k_a: float = 0.0,
 ) -> CriticalLag:  # fmt: skip
     """Scan and bisect the lag at which ``u = K x + kh v_h`` loses string stability.
 
     Parameters
     ----------
-    model : LCCModel
+    model : LCCModel or PlatoonModel
+        Any layout with a head vehicle; every CAV gets the same lag.
     K, kh : array_like, float
         Feedback on the model's input.
     tau_max, tau_lo : float
@@ -187,29 +190,3 @@ def critical_lag(
         else:
             hi, r_hi = mid, r
     return CriticalLag(0.5 * (lo + hi), lo, hi, r_lo.verdict, r_hi.verdict, r_lo.margin, n)
-
-
-def _platoon_loop(model: PlatoonModel, gains: PlatoonGains, tau):
-    from lcc_synth.analysis.platoon_string import platoon_loop
-
-    _, _, c = platoon_loop(model, gains)  # checks: an open platoon
-    rows = [model.index(f"v_{i}") for i in model.cavs]
-    lag = with_actuator_lag(model.A, model.B, model.H, rows, tau, model.state_names)
-    Ku, kh = gains.input_feedback(model)
-    Acl, Hcl = lag.closed_loop(Ku, kh)
-    return Acl, Hcl.ravel(), np.concatenate([c, np.zeros(len(rows))])
-
-
-def platoon_lag_string_stability(
-    model: PlatoonModel, gains: PlatoonGains, tau, method: str = "grid"
-) -> StringStabilityReport:
-    """String stability of an open platoon whose CAVs have the actuator lag ``tau`` (one
-    value, or one per CAV; > 0): the exact verdict of the lagged loop (a lag state per CAV)."""
-    A, h, c = _platoon_loop(model, gains, tau)
-    return loop_string_stability(A, h, c, method=method)
-
-
-def platoon_gamma_lag(model: PlatoonModel, gains: PlatoonGains, tau, omega) -> np.ndarray:
-    """``Gamma(j omega)`` of the lagged platoon loop."""
-    A, h, c = _platoon_loop(model, gains, tau)
-    return transfer_response(A, h, c, 1j * np.asarray(omega, dtype=float))

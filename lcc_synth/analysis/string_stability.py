@@ -86,19 +86,18 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import scipy.linalg as sla
 
+from lcc_synth.analysis.controllability import reduce_conserved
 from lcc_synth.analysis.transfer import (
-    check_head,
     closed_loop_eigenvalues,
     golden_max,
     hamiltonian_matrix,
+    head_to_tail_loop,
     hessenberg_solver,
     hinf_norm_hamiltonian,
     merge_frequencies,
-    tail_output,
 )
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import closed_loop
-from lcc_synth.models.linear import LCCModel
 from lcc_synth.models.records import Record
 
 __all__ = [
@@ -107,6 +106,8 @@ __all__ = [
     "GRID_PER_DECADE",
     "BAND_FACTOR",
     "string_band",
+    "plant_verdict",
+    "plant_stability",
     "decision_function",
     "deflated_hamiltonian_eigenvalues",
     "loop_string_stability",
@@ -211,6 +212,31 @@ def string_band(eigs: np.ndarray) -> float:
     if lo == 0.0:
         return float("inf")
     return BAND_FACTOR * _EPS * max(1.0, float(mags.max()) / lo)
+
+
+def plant_verdict(eigs: np.ndarray) -> tuple[str, float]:
+    """``(verdict, max Re lambda)`` of a loop with eigenvalues ``eigs``: ``"plant_stable"`` /
+    ``"plant_unstable"`` when the largest real part is below / above ``-+ tau max|lambda|``
+    (:func:`string_band`), ``"boundary"`` in between or when an eigenvalue is 0 (``tau``
+    infinite): too close to call at this precision."""
+    eigs = np.asarray(eigs, dtype=complex)
+    max_re = float(eigs.real.max())
+    band = string_band(eigs)
+    scale = float(np.abs(eigs).max()) if eigs.size else 1.0
+    if not np.isfinite(band) or abs(max_re) <= band * scale:
+        return "boundary", max_re
+    return ("plant_stable" if max_re < 0.0 else "plant_unstable"), max_re
+
+
+def plant_stability(model, K, kh=0.0) -> tuple[str, float]:
+    """:func:`plant_verdict` of the closed loop ``input = K x + kh v_h`` on the space that
+    matters: the whole state of an open layout, the invariant hyperplane of a ring (its
+    conserved total spacing left out, :func:`~lcc_synth.analysis.controllability.
+    reduce_conserved`). Any layout, a head vehicle or not."""
+    Acl, _ = closed_loop(model, K, kh)
+    if model.ring:
+        Acl = reduce_conserved(Acl, model.B, model.conserved)[0]
+    return plant_verdict(closed_loop_eigenvalues(Acl))
 
 
 @dataclass(frozen=True)
@@ -429,11 +455,10 @@ def loop_string_stability(
     A, (scale, _) = sla.matrix_balance(A, permute=False, separate=True)
     h, c = h / scale, c * scale
     eigs = closed_loop_eigenvalues(A)
-    max_re = float(eigs.real.max())
     band = string_band(eigs)
-    scale = float(np.abs(eigs).max()) if eigs.size else 1.0
-    plant_boundary = bool(abs(max_re) <= band * scale) if np.isfinite(band) else True
-    plant_stable = bool(max_re < 0.0 and not plant_boundary)
+    plant, max_re = plant_verdict(eigs)
+    plant_boundary = plant == "boundary"
+    plant_stable = plant == "plant_stable"
     nan = float("nan")
 
     dec = None
@@ -512,25 +537,35 @@ def loop_string_stability(
     )
 
 
-def string_stability(
-    model: LCCModel, K: np.ndarray, kh: float = 0.0, method: str = "grid"
-) -> StringStabilityReport:
+def string_stability(model, K, kh=0.0, method: str = "grid") -> StringStabilityReport:
     """Plant and head-to-tail string stability of the closed loop ``input = K x + kh v_h``.
+
+    Definition 1 and eq. (25) on any layout with a head vehicle: the paper's one-CAV models
+    (eqs. 9, 11, 14) and open platoons with several CAVs (``Gamma = V_N / V_h``, the last
+    vehicle's velocity error over the head's). FD-LCC (eq. 12) and the ring have no head
+    vehicle: ConfigError naming ``system.kind``.
 
     Parameters
     ----------
-    model : LCCModel
-        Any kind with a head vehicle (not ``fd_lcc``).
+    model : LCCModel or PlatoonModel
+        Any layout with a head vehicle.
     K, kh : array_like, float
-        Feedback on the model's input, as :func:`lcc_synth.models.feedback.input_feedback` returns.
+        Feedback on the model's input: one CAV, ``nx`` entries and a number
+        (:func:`lcc_synth.models.feedback.input_feedback`); several CAVs, one row and one
+        entry per CAV (:meth:`lcc_synth.models.platoon.PlatoonGains.input_feedback`).
     method : {"grid", "hamiltonian"}
         See :func:`loop_string_stability`.
+
+    Returns
+    -------
+    StringStabilityReport
+        The exact verdict of :func:`loop_string_stability` (``"boundary"`` when too close to
+        call at this precision).
     """
-    check_head(model)
     if method not in ("grid", "hamiltonian"):
         raise ConfigError("method", f"must be 'grid' or 'hamiltonian', got {method!r}")
-    Acl, Hcl = closed_loop(model, K, kh)
-    return loop_string_stability(Acl, Hcl.reshape(-1), tail_output(model), method=method)
+    Acl, h, c = head_to_tail_loop(model, K, kh)
+    return loop_string_stability(Acl, h, c, method=method)
 
 
 _VERDICT_TEXT = {
@@ -547,9 +582,9 @@ def verdict_text(verdict: str | None) -> str:
     return _VERDICT_TEXT.get(verdict, "n/a") if verdict is not None else "n/a"
 
 
-def gains_string_stability(model: LCCModel, gains, method: str = "grid") -> StringStabilityReport:
-    """:func:`string_stability` of :class:`~lcc_synth.models.feedback.StaticGains` on ``model``."""
-    from lcc_synth.models.feedback import input_feedback
-
-    K, kh = input_feedback(model, gains)
+def gains_string_stability(model, gains, method: str = "grid") -> StringStabilityReport:
+    """:func:`string_stability` of a gains object on ``model``: anything with
+    ``input_feedback(model) -> (K, kh)``, i.e. :class:`~lcc_synth.models.feedback.StaticGains`
+    on a one-CAV model or :class:`~lcc_synth.models.platoon.PlatoonGains` on a platoon."""
+    K, kh = gains.input_feedback(model)
     return string_stability(model, K, kh, method=method)

@@ -573,8 +573,8 @@ def gamma_curves(
 def gamma_settings(suite: Suite) -> dict[str, list[tuple[str, float, float, list[str]]]]:
     """Per single-CAV layout with a head vehicle (not ``fd_lcc``; a ring has no head and a
     platoon's head-to-tail Γ is ``lcc-synth analyze``'s,
-    :mod:`lcc_synth.analysis.platoon_string`), the distinct ``(dt, V2V latency)`` of its
-    scenarios:
+    :func:`lcc_synth.analysis.string_stability.string_stability`), the distinct ``(dt, V2V
+    latency)`` of its scenarios:
     ``{layout: [(label suffix, dt, latency, scenario names)]}``; the suffix is ``""`` for the
     first (ideal links first), else e.g. ``" @ 0.1 s latency"``."""
     out: dict[str, list[tuple[str, float, float, list[str]]]] = {}

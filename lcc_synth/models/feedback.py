@@ -96,6 +96,11 @@ class StaticGains(Record):
                 "use 'replace'",
             )
 
+    def input_feedback(self, model: LCCModel) -> tuple[np.ndarray, float]:
+        """:func:`input_feedback` of these gains on ``model`` (the method
+        :class:`~lcc_synth.models.platoon.PlatoonGains` has too)."""
+        return input_feedback(model, self)
+
     def vector(self, model: LCCModel) -> np.ndarray:
         """The gains as a row vector ``(nx,)`` on the model's states (no HDV law)."""
         self.check(model)
@@ -137,9 +142,20 @@ def input_feedback(model: LCCModel, gains: StaticGains) -> tuple[np.ndarray, flo
     return K, kh
 
 
-def closed_loop(model: LCCModel, K: np.ndarray, kh: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """Closed loop ``dx = (A + B K) x + (H + B kh) v_h`` for ``input = K x + kh v_h``."""
-    K = np.asarray(K, dtype=float).reshape(1, -1)
-    if K.shape[1] != model.nx:
-        raise ConfigError("gain", f"needs {model.nx} entries for this model, got {K.shape[1]}")
-    return model.A + model.B @ K, model.H + model.B * kh
+def closed_loop(model, K: np.ndarray, kh=0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Closed loop ``dx = (A + B K) x + (H + B kh) v_h`` for ``input = K x + kh v_h``.
+
+    ``model`` is any linear model with ``A, B, H`` (one CAV: ``K`` of ``nx`` entries, ``kh`` a
+    number; several CAVs: ``K`` one row per input column of ``B``, ``kh`` one entry each).
+    """
+    nu = model.B.shape[1]
+    K = np.asarray(K, dtype=float)
+    K = K.reshape(1, -1) if nu == 1 else np.atleast_2d(K)
+    if K.shape != (nu, model.nx):
+        want = f"{model.nx} entries" if nu == 1 else f"shape ({nu}, {model.nx})"
+        got = K.shape[1] if nu == 1 else K.shape
+        raise ConfigError("gain", f"needs {want} for this model, got {got}")
+    kh = np.asarray(kh, dtype=float).reshape(-1, 1)
+    if kh.shape[0] != nu:
+        raise ConfigError("gain", f"needs {nu} head-velocity gain(s), got {kh.shape[0]}")
+    return model.A + model.B @ K, model.H + model.B @ kh

@@ -89,6 +89,34 @@ class LCCModel(Record):
         """Number of states."""
         return self.A.shape[0]
 
+    # The layout, with the same attributes as :class:`~lcc_synth.models.platoon.PlatoonModel`:
+    # one CAV, vehicle 0, on an open string.
+
+    @property
+    def cavs(self) -> tuple[int, ...]:
+        """CAV vehicle indices, ``(0,)``; input column ``k`` is CAV ``cavs[k]``."""
+        return (0,)
+
+    @property
+    def ring(self) -> bool:
+        """``False``: the string is open (a head vehicle ahead, or none for FD-LCC)."""
+        return False
+
+    @property
+    def conserved(self) -> None:
+        """No conserved direction (a ring's total spacing): ``None``."""
+        return None
+
+    @property
+    def conserved_mode(self) -> None:
+        """No conserved mode: ``None``."""
+        return None
+
+    @property
+    def vehicle_coefficients(self) -> tuple[LinearCoefficients, ...]:
+        """:attr:`coefficients` in the order of :attr:`vehicles`."""
+        return tuple(self.coefficients[i] for i in self.vehicles)
+
     @cached_property
     def state_names(self) -> tuple[str, ...]:
         """``s_-2, v_-2, ..., s_0, v_0, ...`` (FD-LCC: ``-p_0, v_0, ...``)."""

@@ -336,6 +336,37 @@ class PlatoonModel(Record):
         """CAV positions; input column ``k`` is CAV ``cavs[k]``."""
         return self.platoon.cavs
 
+    # The layout, with the same attributes as the paper's one-CAV
+    # :class:`~lcc_synth.models.linear.LCCModel`.
+
+    @property
+    def kind(self) -> str:
+        """``"ring"`` or ``"platoon"`` (the ``[system] kind``)."""
+        return "ring" if self.ring else "platoon"
+
+    @property
+    def vehicles(self) -> tuple[int, ...]:
+        """Vehicle index of each two-state block, ``1, ..., N``."""
+        return tuple(range(1, self.platoon.size + 1))
+
+    @property
+    def m(self) -> int:
+        """Vehicles ahead of the first CAV (``N`` without a CAV), as the ``[system]`` table's
+        ``m`` of a platoon."""
+        return self.cavs[0] - 1 if self.cavs else self.platoon.size
+
+    @property
+    def n(self) -> int:
+        """Vehicles from the first CAV to the tail, *the CAV counted* (0 without a CAV), as the
+        ``[system]`` table's ``n`` of a platoon; :attr:`LCCModel.n
+        <lcc_synth.models.linear.LCCModel>` counts the HDVs behind the CAV only."""
+        return self.platoon.size - self.m
+
+    @property
+    def vehicle_coefficients(self) -> tuple[LinearCoefficients, ...]:
+        """:attr:`coefficients` in the order of :attr:`vehicles` (the same tuple)."""
+        return self.coefficients
+
     @cached_property
     def state_names(self) -> tuple[str, ...]:
         """``s_1, v_1, ..., s_N, v_N``."""
