@@ -40,8 +40,9 @@ class SimulationSpec(ValueEq, Record):
     #: controllers that could not be built (``{name: why}``, e.g. a failed synthesis): the
     #: others run, and ``simulate`` reports these and exits 1
     failed: dict[str, str] = field(default_factory=dict)
-    #: the problem file's ``description`` (free text; the recording's context document)
-    description: str = ""
+    #: the problem file's ``description`` (free text for the recording's context document;
+    #: not compared: the same run with other words is the same run)
+    description: str = field(default="", compare=False)
 
     def toml_tables(self) -> dict[str, Any]:
         """``name``, ``[hdv]``, ``[system]``, ``[scenario]``, ``[controllers.*]`` and
