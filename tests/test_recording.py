@@ -149,7 +149,8 @@ def test_recorded_values_equal_simulator_arrays(table):
             road[..., 0], (res.position[0] - res.position[0, :, cav : cav + 1]).astype(np.float32)
         )
         np.testing.assert_array_equal(
-            road[..., 1], (R.ROAD_Y_SCALE * (res.velocity[0] - 15.0)).astype(np.float32)
+            road[..., 1],  # up (a negative screen y: the viewer's y points down) is faster
+            (-R.ROAD_Y_SCALE * (res.velocity[0] - 15.0)).astype(np.float32)
         )
     # the braking vehicle really braked, so the data are not trivially constant
     assert np.ptp(results["all_hdv"].velocity[0, :, M + 2]) > 3.0
@@ -316,7 +317,7 @@ def test_analysis_and_synthesis_records(tmp_path):
     chunks = _chunks(path)
     strip = np.array(_static(chunks, "/analysis/gamma/case_A", "LineStrips2D:strips")[0])
     np.testing.assert_allclose(strip[:, 0], np.log10(omega), rtol=1e-6)
-    np.testing.assert_allclose(strip[:, 1], mag, rtol=1e-6)
+    np.testing.assert_allclose(-strip[:, 1], mag, rtol=1e-6)  # y up: stored as -|Gamma|
     rep = _static(chunks, "/analysis/gamma/case_A/report", "TextDocument:text")
     assert "string_stable" in rep and "True" in rep
     buf = _static(chunks, "/analysis/regions/mu_k", "SegmentationImage:buffer")
@@ -365,9 +366,9 @@ def test_mpc_history_is_recorded(tmp_path):
     k = 3  # the plan recorded at controller step 6
     got = np.array(strips[k])  # (V, N + 1, 2)
     np.testing.assert_allclose(got[..., 0], np.tile(hist["pred_time"], (V, 1)), rtol=1e-6)
-    np.testing.assert_allclose(got[..., 1], hist["predicted_velocity"][1, 6].T, rtol=1e-6)
+    np.testing.assert_allclose(-got[..., 1], hist["predicted_velocity"][1, 6].T, rtol=1e-6)
     _, u = _temporal(chunks, "/m/mpc_ctrl/mpc/predicted/u", "LineStrips2D:strips")
-    np.testing.assert_allclose(np.array(u[k])[0, :, 1], hist["plan"][1, 6], rtol=1e-6)
+    np.testing.assert_allclose(-np.array(u[k])[0, :, 1], hist["plan"][1, 6], rtol=1e-6)
 
 
 def test_simulation_recorder_records_as_results_arrive(tmp_path):
@@ -426,7 +427,7 @@ def test_mpc_controller_history_reaches_the_recording(tmp_path):
     np.testing.assert_allclose(np.array(st)[:, 0], 1e3 * hist["step_time"][0])
     _, plans = _temporal(chunks, "/mpc_demo/mpc/mpc/predicted/u", "LineStrips2D:strips")
     assert len(plans) == len(hist["t"])
-    np.testing.assert_allclose(np.array(plans[5])[0, :, 1], hist["plan"][0, 5], rtol=1e-6)
+    np.testing.assert_allclose(-np.array(plans[5])[0, :, 1], hist["plan"][0, 5], rtol=1e-6)
     origins = {v["space_origin"] for v in R.summarize_recording(path).views}
     assert {"/mpc_demo/mpc/mpc", "/mpc_demo/mpc/mpc/predicted/velocity"} <= origins
 
@@ -521,10 +522,10 @@ def test_synthesize_command_records_gains_and_gamma(tmp_path, capsys):
     np.testing.assert_allclose(
         curve[:, 0], np.log10(R.gamma_grid(doc["gamma_peak_omega"])), rtol=1e-6
     )
-    assert curve[:, 1].max() <= doc["gamma_peak"] * (1 + 1e-6)
-    assert curve[0, 1] == pytest.approx(1.0, abs=1e-3)
+    assert (-curve[:, 1]).max() <= doc["gamma_peak"] * (1 + 1e-6)  # y up: stored as -|Gamma|
+    assert -curve[0, 1] == pytest.approx(1.0, abs=1e-3)
     if doc["gamma_peak_omega"] > 0:
-        assert curve[:, 1].max() == pytest.approx(doc["gamma_peak"], rel=1e-5)
+        assert (-curve[:, 1]).max() == pytest.approx(doc["gamma_peak"], rel=1e-5)
     assert name in gamma or "/analysis/gamma/" in gamma
     assert str(path) in capsys.readouterr().err
 
@@ -562,7 +563,7 @@ def test_region_maps_and_gamma_curves_of_the_analysis_commands(tmp_path):
     rep = _static(chunks, "/analysis/regions/a/report", "TextDocument:text")
     assert f"| fraction string stable | {_fmt_frac(labels)} |" in rep and "| vehicle | -1 |" in rep
     curve = np.array(_static(chunks, "/analysis/gamma/hdv_only", "LineStrips2D:strips")[0])
-    np.testing.assert_allclose(curve[:, 1], mag, rtol=1e-6)
+    np.testing.assert_allclose(-curve[:, 1], mag, rtol=1e-6)
     assert mag.max() > 1.0  # the paper's OVM setup is string unstable with HDVs only
     assert "gamma_peak" in _static(chunks, "/analysis/report", "TextDocument:text")
     assert R.summarize_recording(path).has_blueprint
@@ -590,7 +591,8 @@ def test_analyze_and_regions_commands_record(tmp_path, capsys):
         if case.get("gamma_peak") is None:
             continue
         curve = np.array(_static(chunks, f"/analysis/gamma/{name}", "LineStrips2D:strips")[0])
-        assert curve[:, 1].max() <= case["gamma_peak"] * (1 + 1e-6)  # grid max <= global sup
+        assert (-curve[:, 1]).max() <= case["gamma_peak"] * (1 + 1e-6)  # grid max <= global sup
+        assert (-curve[:, 1]).min() > 0  # |Gamma| stored as -|Gamma| (y up)
     r = tmp_path / "r.rrd"
     assert main(["regions", str(regions), "--json", "--step", "1.0", "--rrd", str(r)]) == 0
     doc = json.loads(capsys.readouterr().out)

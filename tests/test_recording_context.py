@@ -68,3 +68,56 @@ def test_the_context_document_says_what_was_run(head_brake):
     assert again["controllers"]["mpc"]["horizon"] == problem["controllers"]["mpc"]["horizon"]
     assert again["scenario"]["perturbations"] == [
         {**p, "vehicle": p.get("vehicle", "head")} for p in problem["scenario"]["perturbations"]]
+
+
+def _series_colors(path):
+    """``{entity: [0xRRGGBBAA, ...]}`` of every coloured entity of a recording."""
+    out = {}
+    for ch in RrdReader(path).stream():
+        rb = ch.to_record_batch()
+        entity = (rb.schema.metadata or {}).get(b"rerun:entity_path", b"").decode()
+        for name in rb.schema.names:
+            if name.endswith(":colors"):
+                out.setdefault(entity, rb.column(name).to_pylist()[0])
+    return out
+
+
+def test_colours_never_share_meaning(head_brake):
+    """The alarm red is AEB flags and "fallback used" only; each controller's command has its
+    own colour, none of them the alarm red, the CAV blue, the head yellow or the HDV grey."""
+    from lcc_synth.recording.core import COLOR_ALARM, COLOR_CAV, COLOR_HDV, COLOR_HEAD
+
+    def packed(rgb):
+        return (rgb[0] << 24) | (rgb[1] << 16) | (rgb[2] << 8) | 0xFF
+
+    colors = _series_colors(head_brake)
+    red = packed(COLOR_ALARM)
+    alarms = {e for e, cs in colors.items() if red in cs}
+    assert alarms == {e for e in colors if e.endswith("/cav/aeb_active")} | {
+        "/mpc_head_brake/mpc/mpc/status"}  # fmt: skip
+    assert colors["/mpc_head_brake/mpc/mpc/status"][-1] == red  # "fallback used", last series
+    commands = {e: cs[0] for e, cs in colors.items() if e.endswith("/cav/u_cmd")}
+    assert len(commands) == 4 and len(set(commands.values())) == 4
+    fixed = {packed(c) for c in (COLOR_ALARM, COLOR_CAV, COLOR_HDV, COLOR_HEAD)}
+    assert not fixed & set(commands.values())
+    times = colors["/mpc_head_brake/mpc/mpc/solve_time_ms"]
+    assert red not in times and len(set(times)) == len(times)
+
+
+def test_the_blueprint_has_the_key_and_the_context_first(head_brake):
+    reader = RrdReader(head_brake)
+    names, origins = [], []
+    for bp in reader.blueprints():
+        for ch in reader.stream(store=bp):
+            rb = ch.to_record_batch()
+            if "ViewBlueprint:space_origin" in rb.schema.names:
+                origins.append(rb.column("ViewBlueprint:space_origin").to_pylist()[-1][-1])
+                has = "ViewBlueprint:display_name" in rb.schema.names
+                names.append(rb.column("ViewBlueprint:display_name").to_pylist()[-1][-1]
+                             if has else "")  # fmt: skip
+    assert "/mpc_head_brake/key" in origins and "/mpc_head_brake/context" in origins
+    text = summarize_recording(head_brake).texts["/mpc_head_brake/key"]
+    assert "t (s)" in text and "up = faster" in text and "AEB** red" in text
+    # titles short enough to fit a quarter of the screen: controller and quantity with its unit
+    plots = [n for n in names if n and n.split(": ")[-1] in ("v (m/s)", "s (m)", "a (m/s²)")]
+    assert len(set(plots)) == 12 and max(map(len, plots)) <= 24  # (sent twice: opened, final)

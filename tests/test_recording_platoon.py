@@ -67,7 +67,7 @@ def test_ring_road_view_is_the_circle_of_the_positions(tmp_path):
     assert road.shape == (len(res.t), 20, 2)
     p, v = res.position[0], res.velocity[0]
     # angle 2 pi p / C (positions are not wrapped by the simulator)
-    ang = np.angle(road[..., 0] + 1j * road[..., 1])
+    ang = np.angle(road[..., 0] - 1j * road[..., 1])  # y up: the screen y is negated
     want = 2 * np.pi * np.mod(p, C) / C
     assert np.abs(np.angle(np.exp(1j * (ang - want)))).max() < 1e-5
     radius = np.hypot(road[..., 0], road[..., 1])
@@ -80,7 +80,7 @@ def test_ring_road_view_is_the_circle_of_the_positions(tmp_path):
     sp = np.array(_temporal(chunks, f"/{name}/all_hdv/spacing", "Scalars:scalars"))
     np.testing.assert_array_equal(sp, res.spacing[0])
     np.testing.assert_allclose(ring_view(np.array([0.0, -C / 4]), 15.0, 15.0, C),
-                               [[R0, 0.0], [0.0, -R0]], atol=1e-9)  # fmt: skip
+                               [[R0, 0.0], [0.0, R0]], atol=1e-9)  # fmt: skip (y negated)
 
 
 def test_platoon_recording_has_one_command_per_cav_and_coloured_cavs(tmp_path):

@@ -14,6 +14,10 @@ Every recording command writes one file, by default ``logs/<problem>-<UTC timest
 (see :func:`recording_path`), with a default blueprint so that opening it in the Rerun viewer
 (``lcc-synth review PATH.rrd``) immediately shows what matters.
 
+Every 2-D entity (road views, MPC plans, |Gamma| curves, Pareto fronts) stores its y
+multiplied by ``SCREEN_UP`` = -1: Rerun's 2-D views draw y downward (rerun-io/rerun#1387), and
+up must mean more (faster, larger) as in a figure of a paper.
+
 Entity layout (stable: tests and users rely on these names)
 -----------------------------------------------------------
 Timeline ``time``: simulated time in seconds (a Rerun *duration* timeline, stored in ns).

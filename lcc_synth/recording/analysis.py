@@ -15,6 +15,7 @@ from lcc_synth.recording.core import (
     _REGION_LABELS,
     COLOR_CAV,
     COLOR_HDV,
+    SCREEN_UP,
     _flush_started,
     _fmt,
     _jsonable,
@@ -53,7 +54,7 @@ def record_gamma(
     if omega.shape != mag.shape or omega.size < 2 or np.any(omega <= 0):
         raise ConfigError("omega", "needs >= 2 positive frequencies matching the magnitudes")
     c = entity_name(case)
-    xy = np.column_stack([np.log10(omega), mag]).astype(np.float32)
+    xy = np.column_stack([np.log10(omega), SCREEN_UP * mag]).astype(np.float32)  # up is more
     col = color if color is not None else _state(rec).color(f"gamma/{c}")
     rec.log(
         f"/analysis/gamma/{c}",
@@ -64,7 +65,8 @@ def record_gamma(
     rec.log(
         "/analysis/gamma/unit",
         rr.LineStrips2D(
-            [[[lo, 1.0], [hi, 1.0]]], colors=[(120, 120, 120)], labels=["|Γ| = 1"], radii=0.005
+            [[[lo, SCREEN_UP], [hi, SCREEN_UP]]], colors=[(120, 120, 120)], labels=["|Γ| = 1"],
+            radii=0.005,
         ),
         static=True,
     )
@@ -159,7 +161,7 @@ def record_synthesis(rec: Any, rep: Any, system: Any = None) -> None:
     record_gains(rec, name, doc)
     if rep.pareto:
         n = entity_name(name)
-        pts = np.array([[p["count"], p["h2"]] for p in rep.pareto], dtype=np.float32)
+        pts = np.array([[p["count"], SCREEN_UP * p["h2"]] for p in rep.pareto], dtype=np.float32)
         labels = [
             ", ".join(str(v) for v in p.get("vehicles", [])) or "CAV only" for p in rep.pareto
         ]
@@ -170,7 +172,7 @@ def record_synthesis(rec: Any, rep: Any, system: Any = None) -> None:
         )
         front = sorted((p for p in rep.pareto if p.get("on_front")), key=lambda p: p["count"])
         if front:
-            xy = np.array([[p["count"], p["h2"]] for p in front], dtype=np.float32)
+            xy = np.array([[p["count"], SCREEN_UP * p["h2"]] for p in front], dtype=np.float32)
             rec.log(
                 f"/synthesis/{n}/pareto/front",
                 rr.LineStrips2D([xy], colors=[COLOR_CAV], labels=["Pareto front"], radii=0.02),

@@ -25,10 +25,20 @@ ROAD_Y_SCALE = 10.0
 COLOR_CAV = (31, 119, 180)
 COLOR_HDV = (150, 150, 150)
 COLOR_HEAD = (230, 180, 0)
-#: Colors of controllers in overlay views (u_cmd of all controllers in one plot).
+#: Rerun's 2-D views draw y downward and ignore view coordinates (rerun-io/rerun#1387, open in
+#: 0.41), so a plotted value would rise as it falls. Every 2-D view of a recording logs
+#: ``y * SCREEN_UP``: up means more (faster, larger |Gamma|, higher H2 cost) as in a paper's
+#: figure; a hovered point's y reads with the opposite sign.
+SCREEN_UP = -1.0
+#: The alarm colour, and nothing else is drawn in it: emergency braking (AEB) flags, an MPC's
+#: "fallback used" (issue 33: a controller's curve in the AEB red read as an alarm).
+COLOR_ALARM = (214, 39, 40)
+#: Colors of controllers in overlay views (u_cmd of all controllers in one plot), and of the
+#: series of one view (an MPC's step / OSQP / solve times): never the alarm red, the CAV blue,
+#: the head yellow or the HDV grey, whose meanings are fixed.
 _PALETTE = [
-    (31, 119, 180), (214, 39, 40), (44, 160, 44), (148, 103, 189),
-    (255, 127, 14), (140, 86, 75), (227, 119, 194), (23, 190, 207),
+    (44, 160, 44), (148, 103, 189), (255, 127, 14), (23, 190, 207),
+    (140, 86, 75), (227, 119, 194), (188, 189, 34), (0, 0, 0),
 ]  # fmt: skip
 _REGION_COLORS = {0: (235, 235, 235), 1: (170, 170, 170), 2: (31, 119, 180)}
 _REGION_LABELS = {0: "plant unstable", 1: "stable, not string stable", 2: "string stable"}

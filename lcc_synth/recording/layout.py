@@ -8,14 +8,11 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.recording.core import ROAD_Y_SCALE, _rrb, entity_name
+from lcc_synth.recording.core import _rrb, entity_name
 
 #: Quantities of the time-series rows of :func:`simulation_blueprint` (and ``"u_cmd"``).
 PLOT_QUANTITIES = ("velocity", "spacing", "acceleration")
 
-#: What the colours of the per-vehicle plots mean (their legends are hidden: 12 series would
-#: cover the curves; hovering a curve names it).
-COLOR_KEY = "head yellow, CAV blue (thick), HDVs grey"
 
 
 def _span(lo: float, hi: float, pad: float = 0.08, min_span: float = 1.0) -> tuple[float, float]:
@@ -133,7 +130,9 @@ def simulation_blueprint(
     Every time-series view opens on the whole run (x axes linked). ``ranges``
     (:func:`plot_ranges`) fixes the opening time span and y ranges; without it the x axis spans
     the recording and y fits the data. The per-vehicle plots hide their legends (12 series
-    would cover the curves; hovering names a curve) and say the colours in their titles.
+    would cover the curves; hovering names a curve); a one-line key above them
+    (``/<scenario>/key``, :data:`~lcc_synth.recording.simulation.KEY_TEXT`) says the colours
+    and the axes. The time panel opens paused on the first event (:func:`time_panel`).
     """
     rrb = _rrb()
     s = entity_name(scenario)
@@ -144,11 +143,12 @@ def simulation_blueprint(
     tkw = _time_views(rrb, ranges)
 
     def row(quantity: str, title: str):
+        short = {"velocity": "v (m/s)", "spacing": "s (m)", "acceleration": "a (m/s²)"}
         return rrb.Horizontal(
             *[
                 rrb.TimeSeriesView(
                     origin=f"/{s}/{c}/{quantity}",
-                    name=f"{c}: {title}",
+                    name=f"{c}: {short[quantity]}",  # fits a quarter of the screen
                     axis_y=_y_axis(rrb, ranges, quantity),
                     plot_legend=rrb.PlotLegend(visible=False),
                     **tkw,
@@ -159,17 +159,18 @@ def simulation_blueprint(
         )
 
     plots = rrb.Vertical(
-        row("velocity", f"velocity (m/s): {COLOR_KEY}"),
+        rrb.TextDocumentView(origin=f"/{s}/key", name="key"),
+        row("velocity", "velocity (m/s)"),
         row("spacing", "spacing (m)"),
         row("acceleration", "acceleration (m/s²)"),
+        row_shares=[0.3, 3, 3, 3],
         name="time series",
     )
     road = rrb.Vertical(
         *[
             rrb.Spatial2DView(
                 origin=f"/{s}/{c}/road",
-                name=f"{c}: road (x: m from CAV, y: {ROAD_Y_SCALE:g}·velocity error; ring: a "
-                "circle, radius raised with the velocity error)",
+                name=f"{c}: road (x m from CAV; up: faster)",
             )
             for c in ctrls
         ],

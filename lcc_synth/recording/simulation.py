@@ -19,9 +19,11 @@ import numpy as np
 from lcc_synth.errors import ConfigError
 from lcc_synth.recording.core import (
     _PALETTE,
+    COLOR_ALARM,
     COLOR_HDV,
     COLOR_HEAD,
     ROAD_Y_SCALE,
+    SCREEN_UP,
     _comparison_markdown,
     _flush_started,
     _fmt,
@@ -54,8 +56,15 @@ from lcc_synth.recording.decimate import (
 )
 
 #: Colours of the CAVs of a platoon or ring, in order (the first is the single CAV's blue).
-CAV_COLORS = ((31, 119, 180), (148, 103, 189), (44, 160, 44), (214, 39, 40), (23, 190, 207),
-              (255, 127, 14))  # fmt: skip
+#: Never the alarm red (:data:`~lcc_synth.recording.core.COLOR_ALARM`), the head's yellow or the
+#: HDVs' grey.
+CAV_COLORS = ((31, 119, 180), (148, 103, 189), (44, 160, 44), (23, 190, 207), (255, 127, 14),
+              (140, 86, 75))  # fmt: skip
+#: The colour key and axes of a simulation's plots (``/<scenario>/key``, above the plots): the
+#: per-vehicle plots hide their legends (a dozen series would cover the curves).
+KEY_TEXT = ("**head** yellow · **CAV** blue, thick (more CAVs: purple, green, cyan) · **HDVs** "
+            "grey · **AEB** red, nothing else · v velocity, s spacing, a acceleration · x axes: "
+            "simulated time t (s) · road: x m from the CAV, up = faster")  # fmt: skip
 #: Ring road view: radial offset per m/s of velocity error, as a fraction of the radius.
 RING_V_SCALE = 0.02
 
@@ -91,7 +100,7 @@ def ring_view(position: np.ndarray, velocity: np.ndarray, v_star: float, circumf
     R = circumference / (2.0 * np.pi)
     theta = 2.0 * np.pi * np.mod(position, circumference) / circumference
     r = R * (1.0 + RING_V_SCALE * (velocity - v_star))
-    return np.stack([r * np.cos(theta), r * np.sin(theta)], axis=-1)
+    return np.stack([r * np.cos(theta), SCREEN_UP * r * np.sin(theta)], axis=-1)
 
 
 def _record_events(rec, entity, t, aeb_on, collided, ctime, names, limit: int = 1000) -> None:
@@ -238,7 +247,7 @@ def record_simulation(
                  [2.0] * len(cavs))  # fmt: skip
     aeb = aeb_cav.astype(np.float64)
     idx, tcol = rows(aeb, "flag")
-    red = [(214, 39, 40)] * len(cavs)
+    red = [COLOR_ALARM] * len(cavs)
     _send_series(rec, f"{base}/cav/aeb_active", tcol, aeb[idx], aeb_names, red)
 
     # Road view (Fig. 11): x = position relative to the CAV, y = scaled velocity error.
@@ -249,7 +258,7 @@ def record_simulation(
         xy_all[:] = ring_view(pos, vel_all, v_star, float(result.circumference))
     else:
         xy_all[..., 0] = pos - pos[:, cav : cav + 1]
-        xy_all[..., 1] = ROAD_Y_SCALE * (vel_all - v_star)
+        xy_all[..., 1] = SCREEN_UP * ROAD_Y_SCALE * (vel_all - v_star)  # faster is up
     idx, tcol = rows(xy_all.reshape(T, -1), "frames")  # scrubbing / playback: 5 frames/s
     xy = xy_all[idx]
     rec.log(
@@ -300,6 +309,7 @@ def record_simulation(
         + "\n"
         + _mapping_markdown("run statistics", stats),
     )
+    record_text(rec, f"/{s}/key", KEY_TEXT)  # the legend of every plot of the scenario
     crash = [f"{names[i]} at t = {_fmt(float(ctime[i]))} s" for i in np.flatnonzero(collided)]
     episodes = int(np.count_nonzero(aeb_on[1:] & ~aeb_on[:-1]) + bool(aeb_on[0])) if T else 0
     _record_events(rec, f"{base}/events", t_all, aeb_on, collided, ctime, names)
@@ -444,7 +454,7 @@ def record_mpc_history(
         colors = [_PALETTE[j % len(_PALETTE)] for j in range(code.shape[1])] if joint else [
             (90, 90, 90)]
         idx, tcol = rows(vals, flag=True)
-        _send_series(rec, f"{base}/mpc/status", tcol, vals[idx], names, [*colors, (214, 39, 40)])
+        _send_series(rec, f"{base}/mpc/status", tcol, vals[idx], names, [*colors, COLOR_ALARM])
     if joint:
         X = member("predicted_states", 2)
         history = {k: v for k, v in history.items() if k not in ("predicted_velocity",
@@ -485,7 +495,7 @@ def record_mpc_history(
         keep = strip_points(x, ys) if minmax else np.ones((K * V, H), dtype=bool)
         xy = np.empty((int(keep.sum()), 2), dtype=np.float32)
         xy[:, 0] = np.broadcast_to(x, ys.shape)[keep]
-        xy[:, 1] = ys[keep]
+        xy[:, 1] = SCREEN_UP * ys[keep]  # up is more
         pts = pa.FixedSizeListArray.from_arrays(pa.array(xy.reshape(-1)), type=item)
         strip_off = np.concatenate([[0], np.cumsum(keep.sum(axis=1))]).astype(np.int32)
         strips = pa.ListArray.from_arrays(pa.array(strip_off), pts, type=strip_type)
