@@ -160,3 +160,52 @@ def test_module_size(path):
 def test_few_plain_modules_at_the_top():
     top = sorted(p.name for p in PACKAGE.glob("*.py") if p.name != "__init__.py")
     assert len(top) <= MAX_TOP_MODULES, top
+
+
+#: The layers of docs/guide/architecture.md, bottom up: a module imports only its own layer and
+#: the layers below (lazy imports included).
+LAYERS = (
+    ("lcc_synth.errors",),
+    ("lcc_synth.models", "lcc_synth.resources", "lcc_synth.interrupts"),
+    ("lcc_synth.schema", "lcc_synth.outputs"),
+    ("lcc_synth.problem", "lcc_synth.provenance"),
+    ("lcc_synth.analysis",),
+    ("lcc_synth.synthesis",),
+    ("lcc_synth.controllers",),
+    ("lcc_synth.simulation",),
+    ("lcc_synth.metrics",),
+    ("lcc_synth.mpc", "lcc_synth.deeplcc"),
+    ("lcc_synth.recording",),
+    ("lcc_synth.experiments", "lcc_synth.figures"),
+    ("lcc_synth.api",),
+    ("lcc_synth.cli",),
+)
+#: Known exceptions, each with its reason: the schema declares the baselines' keys from the
+#: baselines' own default values (one place for them).
+LAYER_EXCEPTIONS = {("lcc_synth.schema.controllers", "lcc_synth.controllers.baselines"),
+                    ("lcc_synth.schema.controllers", "lcc_synth.controllers")}  # fmt: skip
+
+
+def layer_of(module: str) -> int | None:
+    for i, packages in enumerate(LAYERS):
+        if any(_inside(module, p) for p in packages):
+            return i
+    return None
+
+
+def test_layers_point_down():
+    graph = import_graph()
+    unlayered = sorted(m for m in graph if m != "lcc_synth" and layer_of(m) is None)
+    assert not unlayered, f"modules in no layer of docs/guide/architecture.md: {unlayered}"
+    # ``lcc_synth`` itself (its __init__: __version__, and the flat API loaded on first use)
+    # is outside the layers: everything may read its version, and it may load the API
+    upward = sorted(f"{m} -> {d}" for m, deps in graph.items() if m != "lcc_synth" for d in deps
+                    if (layer_of(m) or 0) < (layer_of(d) or 0)
+                    and (m, d) not in LAYER_EXCEPTIONS)  # fmt: skip
+    assert not upward, upward
+
+
+def test_layers_see_an_upward_import():
+    graph = {"lcc_synth.models.hdv": {"lcc_synth.metrics"}, "lcc_synth.metrics": set()}
+    assert layer_of("lcc_synth.models.hdv") < layer_of("lcc_synth.metrics")
+    assert [m for m, deps in graph.items() for d in deps if layer_of(m) < layer_of(d)]
