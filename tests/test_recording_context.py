@@ -121,3 +121,50 @@ def test_the_blueprint_has_the_key_and_the_context_first(head_brake):
     # titles short enough to fit a quarter of the screen: controller and quantity with its unit
     plots = [n for n in names if n and n.split(": ")[-1] in ("v (m/s)", "s (m)", "a (m/s²)")]
     assert len(set(plots)) == 12 and max(map(len, plots)) <= 24  # (sent twice: opened, final)
+
+
+def test_mpc_predictions_on_axes_next_to_what_happened(head_brake):
+    """The MPC's velocity predicted 1 s ahead, recorded at the time it predicts, equals the
+    history's plan value (independent: the controller's own history, re-run here), and the
+    MPC's views come first in its reports."""
+    from lcc_synth.experiments.spec import load_spec
+    from lcc_synth.simulation.engine import simulate
+
+    spec = load_spec(PROBLEMS / "mpc_head_brake.toml")
+    mpc = spec.controllers["mpc"]
+    simulate(spec.scenario, mpc)
+    hist = mpc.history()
+    cav = [str(n) for n in hist["state_names"][1::2]].index("v_0")
+    j = round(1.0 / (hist["pred_time"][1] - hist["pred_time"][0]))
+    want_t = hist["t"] + hist["pred_time"][j]
+    want = hist["predicted_velocity"][0, :, j, cav][want_t <= hist["t"][-1]]
+    got_t, got = _series(head_brake, "/mpc_head_brake/mpc/mpc/lookahead/velocity/ahead_1s")
+    assert len(got) == len(want)
+    np_t = [round(x * 1e9) for x in want_t[want_t <= hist["t"][-1]]]
+    assert got_t == np_t
+    assert all(abs(a - b) <= 1e-12 * abs(b) for a, b in zip(got, want, strict=True))
+
+
+def _series(path, entity):
+    times, values = [], []
+    for ch in RrdReader(path).stream():
+        rb = ch.to_record_batch()
+        if (rb.schema.metadata or {}).get(b"rerun:entity_path", b"").decode() != entity:
+            continue
+        if "Scalars:scalars" in rb.schema.names:
+            times += [int(x.value) if hasattr(x, "value") else int(x) for x in
+                      rb.column("time").cast("int64").to_pylist()]  # fmt: skip
+            values += [v[0] for v in rb.column("Scalars:scalars").to_pylist()]
+    return times, values
+
+
+def test_a_reader_that_stops_early_ends_quietly(head_brake):
+    import subprocess
+
+    from cli_subprocess import cli_command, cli_env
+
+    cmd = [*cli_command(), "review", str(head_brake), "--summary", "--full"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=cli_env())
+    proc.stdout.close()  # the reader is gone before the first line (as `| head -0`)
+    err = proc.stderr.read().decode()
+    assert proc.wait(60) == 141 and "Traceback" not in err, err

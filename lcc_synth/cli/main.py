@@ -94,7 +94,9 @@ def main(argv: list[str] | None = None) -> int:
 def entry() -> None:
     """The ``lcc-synth`` console script: :func:`main` with SIGINT and SIGTERM handled
     (:func:`lcc_synth.interrupts.handling`) and Rerun's own log lines off (every recording
-    error is reported by the package as one line; a ``RUST_LOG`` you set is kept).
+    error is reported by the package as one line; a ``RUST_LOG`` you set is kept). Output
+    piped into a reader that stops early (``lcc-synth review X.rrd --summary | head``) ends
+    quietly with the shell's code for SIGPIPE, 141.
 
     After a signal the process exits at once when :func:`main` returns (``os._exit``):
     threads still inside native code (a simulation kernel on the thread pool) would otherwise
@@ -108,6 +110,9 @@ def entry() -> None:
             code = main()
     except Interrupted as err:  # a signal between main's return and the end of the block
         code = 128 + err.signum
+    except BrokenPipeError:  # the reader of stdout went away (``| head``): as a shell tool
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no flush error
+        sys.exit(141)  # 128 + SIGPIPE, what the shell reports for a command killed by it
     signum = interrupted()
     if signum is not None:  # the command's own code: 128 + signum, or 0 when a signal is its
         sys.stdout.flush()  # normal end (Ctrl-C closes the viewer of ``review``)

@@ -196,8 +196,19 @@ def simulation_blueprint(
             origin=f"/{s}", contents=[f"+ /{s}/{c}/events" for c in ctrls], name="events"
         ),
     ]
+    first = []  # an MPC run opens on its predictions and solver (issue 33: the first screen)
     for c in (entity_name(x) for x in mpc):
-        tabs += [
+        look = [
+            rrb.TimeSeriesView(
+                origin=f"/{s}/{c}/mpc/lookahead/{q}",
+                name=f"{c}: CAV {label}, predicted vs measured",
+                plot_legend=rrb.PlotLegend(rrb.Corner2D.LeftBottom),
+                **tkw,
+            )
+            for q, label in (("velocity", "v (m/s)"), ("spacing", "s (m)"), ("u", "u (m/s²)"))
+        ]
+        first += [
+            rrb.Vertical(*look, name=f"{c}: predictions"),
             rrb.TimeSeriesView(
                 origin=f"/{s}/{c}/mpc",
                 contents=[f"+ /{s}/{c}/mpc/solve_time_ms", f"+ /{s}/{c}/mpc/status"],
@@ -207,9 +218,10 @@ def simulation_blueprint(
             ),
             rrb.Spatial2DView(
                 origin=f"/{s}/{c}/mpc/predicted/velocity",
-                name=f"{c}: predicted velocity (x: s ahead, y: m/s)",
+                name=f"{c}: plans (x s ahead; up: faster)",
             ),
         ]
+    tabs = [*first, *tabs]
     texts = rrb.Tabs(*tabs, name="reports")
     right = rrb.Vertical(road, u_cmd, texts, row_shares=[2, 1, 2])
     return rrb.Blueprint(

@@ -20,6 +20,7 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.recording.core import (
     _PALETTE,
     COLOR_ALARM,
+    COLOR_CAV,
     COLOR_HDV,
     COLOR_HEAD,
     ROAD_Y_SCALE,
@@ -455,6 +456,8 @@ def record_mpc_history(
             (90, 90, 90)]
         idx, tcol = rows(vals, flag=True)
         _send_series(rec, f"{base}/mpc/status", tcol, vals[idx], names, [*colors, COLOR_ALARM])
+    if not joint:
+        _record_lookahead(rec, base, t, history, member)
     if joint:
         X = member("predicted_states", 2)
         history = {k: v for k, v in history.items() if k not in ("predicted_velocity",
@@ -505,3 +508,53 @@ def record_mpc_history(
             columns=[_rows(rr, rr.LineStrips2D.descriptor_strips(), strips, K, V)],
         )
     _flush_started(rec)
+
+
+#: Look-ahead times (s) of the MPC's predictions drawn against what happened
+#: (``mpc/lookahead/*``).
+LOOKAHEAD_S = (1.0, 3.0)
+
+
+def _record_lookahead(rec: Any, base: str, t: np.ndarray, history: Mapping[str, Any],
+                     member: Any) -> None:  # fmt: skip
+    """The one-CAV MPC's predictions of its CAV on axes, against what happened: at the time
+    ``t_k + L`` the value step ``k`` predicted ``L`` s ahead (``L`` in :data:`LOOKAHEAD_S`),
+    next to the value the MPC measured at its steps, for the CAV's velocity
+    (``mpc/lookahead/velocity``), its own spacing (``.../spacing``) and the model input
+    (``.../u``: the planned input against the one applied). A prediction that keeps missing
+    what follows shows as a gap between the curves. The joint MPC of several CAVs records its
+    plans as strips only (no ``v_0`` among its state names)."""
+    names = history.get("state_names")
+    offsets = history.get("pred_time")
+    pv, ps = member("predicted_velocity", 2), member("predicted_spacing", 2)
+    if names is None or offsets is None or pv is None:
+        return
+    vel_names = [str(n) for n in np.asarray(names).reshape(-1)[1::2]]
+    if "v_0" not in vel_names:
+        return
+    cav = vel_names.index("v_0")
+    offsets = np.asarray(offsets, dtype=np.float64).reshape(-1)
+    dt = float(offsets[1] - offsets[0]) if offsets.size > 1 else 0.0
+    steps = [(L, int(round(L / dt))) for L in LOOKAHEAD_S if dt > 0]
+    plan, applied = member("plan", 1), member("u_model", 0)
+
+    def floats(x: Any) -> np.ndarray | None:
+        return None if x is None else np.asarray(x, dtype=np.float64)
+
+    series = {"velocity": (pv[:, :, cav], None),
+              "spacing": (None if ps is None else ps[:, :, cav], None),
+              "u": (floats(plan), floats(applied))}  # fmt: skip
+    for quantity, (pred, now) in series.items():
+        if pred is None or not np.isfinite(pred).any():
+            continue
+        measured = pred[:, 0] if now is None else now
+        entity = f"{base}/mpc/lookahead/{quantity}"
+        label = "applied" if quantity == "u" else "measured"
+        _send_series(rec, f"{entity}/measured", t, measured[:, None], [label], [COLOR_CAV], [2.0])
+        for k, (L, j) in enumerate(steps):
+            if j >= pred.shape[1]:
+                continue
+            keep = t + offsets[j] <= t[-1]  # predictions of times the run reached
+            _send_series(rec, f"{entity}/ahead_{L:g}s", (t + offsets[j])[keep],
+                         pred[keep, j, None], [f"predicted {L:g} s before"],
+                         [_PALETTE[k % len(_PALETTE)]])  # fmt: skip
