@@ -1,5 +1,5 @@
 """The context document of a simulation recording: what was run, as a reader of the recording
-needs it without the problem file at hand (issue 33).
+needs it without the problem file at hand.
 
 A recording of ``lcc-synth simulate`` holds, at ``/<scenario>/context``, one markdown document
 (:func:`context_markdown`):

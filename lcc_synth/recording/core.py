@@ -31,7 +31,7 @@ COLOR_HEAD = (230, 180, 0)
 #: figure; a hovered point's y reads with the opposite sign.
 SCREEN_UP = -1.0
 #: The alarm colour, and nothing else is drawn in it: emergency braking (AEB) flags, an MPC's
-#: "fallback used" (issue 33: a controller's curve in the AEB red read as an alarm).
+#: "fallback used" (a controller's curve in the AEB red would read as an alarm).
 COLOR_ALARM = (214, 39, 40)
 #: Colors of controllers in overlay views (u_cmd of all controllers in one plot), and of the
 #: series of one view (an MPC's step / OSQP / solve times): never the alarm red, the CAV blue,

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.recording.core import _rrb, entity_name
+from lcc_synth.recording.core import ROAD_Y_SCALE, _rrb, entity_name
 
 #: Quantities of the time-series rows of :func:`simulation_blueprint` (and ``"u_cmd"``).
 PLOT_QUANTITIES = ("velocity", "spacing", "acceleration")
@@ -53,7 +53,38 @@ def plot_ranges(result: Any) -> dict[str, Any]:
             if key == "spacing":
                 lo = max(lo, -5.0)
             out[key] = _span(lo, hi)
+    out.update(_road_bounds(result))
     return out
+
+
+def _road_bounds(result: Any) -> dict[str, Any]:
+    """``road_x``, ``road_y``: the bounds of every vehicle's point in the road view over the
+    whole run (:func:`lcc_synth.recording.simulation.record_simulation`: x m from the CAV, y
+    the scaled velocity error, up = faster; a ring: the circle with its radial offsets), so
+    that the view opens with every vehicle inside it at every time, not shrunk to dots."""
+    from lcc_synth.recording.core import SCREEN_UP
+
+    pos = np.asarray(getattr(result, "position", np.empty(0)), dtype=np.float64)
+    vel = np.asarray(result.velocity, dtype=np.float64)
+    if pos.shape != vel.shape or pos.ndim != 3 or not pos.size:
+        return {}
+    v_star = np.asarray(result.v_star, dtype=np.float64).reshape(-1, 1, 1)
+    if getattr(result, "ring", False):
+        from lcc_synth.recording.simulation import RING_V_SCALE
+
+        radius = float(result.circumference) / (2.0 * np.pi)
+        dv = vel - v_star
+        r = radius * (1.0 + RING_V_SCALE * dv[np.isfinite(dv)])
+        big = float(np.abs(r).max()) if r.size else radius
+        return {"road_x": _span(-big, big), "road_y": _span(-big, big)}
+    cav = int(result.cav)  # the road view's origin (as record_simulation draws it)
+    x = pos - pos[:, :, cav : cav + 1]
+    y = SCREEN_UP * ROAD_Y_SCALE * (vel - v_star)
+    x, y = x[np.isfinite(x)], y[np.isfinite(y)]
+    if not x.size or not y.size:
+        return {}
+    return {"road_x": _span(float(x.min()) - 5.0, float(x.max()) + 5.0),
+            "road_y": _span(float(y.min()), float(y.max()), min_span=20.0)}  # fmt: skip
 
 
 def merge_ranges(*ranges: Mapping[str, Any]) -> dict[str, Any]:
@@ -163,14 +194,17 @@ def simulation_blueprint(
         row("velocity", "velocity (m/s)"),
         row("spacing", "spacing (m)"),
         row("acceleration", "acceleration (m/s²)"),
-        row_shares=[0.3, 3, 3, 3],
+        row_shares=[1, 3, 3, 3],
         name="time series",
     )
+    road_bounds = (rrb.VisualBounds2D(x_range=ranges["road_x"], y_range=ranges["road_y"])
+                   if "road_x" in ranges and "road_y" in ranges else None)  # fmt: skip
     road = rrb.Vertical(
         *[
             rrb.Spatial2DView(
                 origin=f"/{s}/{c}/road",
                 name=f"{c}: road (x m from CAV; up: faster)",
+                visual_bounds=road_bounds,
             )
             for c in ctrls
         ],
@@ -196,7 +230,7 @@ def simulation_blueprint(
             origin=f"/{s}", contents=[f"+ /{s}/{c}/events" for c in ctrls], name="events"
         ),
     ]
-    first = []  # an MPC run opens on its predictions and solver (issue 33: the first screen)
+    first = []  # an MPC run opens on its predictions and solver: its first screen
     for c in (entity_name(x) for x in mpc):
         look = [
             rrb.TimeSeriesView(
