@@ -8,10 +8,12 @@ waits for the WebAssembly viewer to load the recording and its blueprint, and sa
 Needs the Debian package ``chromium`` (``apt-get install -y chromium``) and the optional extra
 ``screenshot`` (``pip install -e .[screenshot]``: websocket-client)::
 
-    python benchmarks/screenshot_review.py logs/showcase-*.rrd -o review.png [--wait 60]
+    python benchmarks/screenshot_review.py logs/showcase-*.rrd -o review.png [--timeout 300]
 
 ``chromium --headless --screenshot`` alone returns before the viewer has started (the PNG
-shows "Loading Application Bundle"): this script waits instead.
+shows "Loading Application Bundle"): this script waits for the data instead, not for a fixed
+time: it captures every 5 s until three captures in a row are identical and far larger than
+the loading page (with the software rasterizer here: 60-120 s).
 """
 
 from __future__ import annotations
@@ -116,9 +118,25 @@ class _DevTools:
                 return msg.get("result", {})
 
 
-def screenshot(rrd: Path, out: Path, wait: float = 60.0, size=(1920, 1080)) -> Path:
-    """Serve ``rrd``, screenshot the web viewer after ``wait`` seconds, save ``out`` (PNG)."""
+def _settled(shots: list[bytes], settle: int) -> bool:
+    """The view has its data: the last ``settle`` captures are identical (nothing loads or
+    moves any more: the recording opens paused) and far larger than the first capture, taken
+    while the viewer was still loading (a blank page or "Loading Application Bundle")."""
+    if len(shots) < settle + 1:
+        return False
+    last = shots[-settle:]
+    return all(x == last[0] for x in last) and len(last[0]) >= 3 * len(shots[0])
+
+
+def screenshot(rrd: Path, out: Path, timeout: float = 300.0, size=(1920, 1080),
+               poll: float = 5.0, settle: int = 3) -> tuple[Path, float]:  # fmt: skip
+    """Serve ``rrd`` and screenshot the web viewer once it shows the data: captures every
+    ``poll`` seconds until ``settle`` of them in a row are identical (:func:`_settled`), at
+    most ``timeout`` seconds (then the last capture, and a warning). Returns the PNG written
+    and the seconds it took to settle."""
     viewer = browser = None
+    shots: list[bytes] = []
+    t0 = time.monotonic()
     with tempfile.TemporaryDirectory() as profile, open(Path(profile) / "log", "w") as log:
         try:
             viewer, url = _serve(rrd, log)
@@ -129,28 +147,42 @@ def screenshot(rrd: Path, out: Path, wait: float = 60.0, size=(1920, 1080)) -> P
                        deviceScaleFactor=1, mobile=False)  # fmt: skip
             tools.call("Page.enable")
             tools.call("Page.navigate", url=url)
-            time.sleep(wait)
-            png = base64.b64decode(tools.call("Page.captureScreenshot", format="png")["data"])
+            t0 = time.monotonic()
+            while True:
+                try:
+                    data = tools.call("Page.captureScreenshot", format="png")["data"]
+                except RuntimeError:  # the page is still navigating: not attached yet
+                    data = None
+                if data is not None:
+                    shots.append(base64.b64decode(data))
+                if shots and _settled(shots, settle):
+                    break
+                if time.monotonic() - t0 > timeout and shots:
+                    print(f"warning: the view did not settle within {timeout:g} s",
+                          file=sys.stderr)  # fmt: skip
+                    break
+                time.sleep(poll)
             tools.ws.close()
         finally:
             _stop(browser)
             _stop(viewer)
+    took = time.monotonic() - t0
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_bytes(png)
-    return out
+    out.write_bytes(shots[-1])
+    return out, took
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("rrd", type=Path, help="the recording (.rrd)")
     p.add_argument("-o", "--out", type=Path, default=Path("review.png"), help="PNG to write")
-    p.add_argument(
-        "--wait", type=float, default=60.0, help="seconds to let the viewer load (default 60)"
-    )
+    p.add_argument("--timeout", type=float, default=300.0,
+                   help="seconds to wait at most for the view to settle (default 300)")  # fmt: skip
     p.add_argument("--size", default="1920x1080", help="window size WIDTHxHEIGHT")
     a = p.parse_args(argv)
     w, h = (int(x) for x in a.size.lower().split("x"))
-    print(screenshot(a.rrd, a.out, a.wait, (w, h)))
+    path, took = screenshot(a.rrd, a.out, a.timeout, (w, h))
+    print(f"{path} (the view settled after {took:.0f} s)")
     return 0
 
 

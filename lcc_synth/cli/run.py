@@ -61,10 +61,12 @@ def _blueprint(suite, controllers, gamma_cases, design_names):
     import rerun.blueprint as rrb
 
     from lcc_synth.recording import analysis_blueprint, simulation_blueprint, synthesis_blueprint
+    from lcc_synth.recording.layout import time_panel
 
+    mpc = [c for c in controllers if suite.controllers[c].get("type") == "mpc"]
     tabs = []
     for sname, ss in suite.scenarios.items():
-        box = simulation_blueprint(sname, controllers).root_container
+        box = simulation_blueprint(sname, controllers, mpc).root_container
         box.name = ss.title or sname
         tabs.append(box)
     if gamma_cases:
@@ -75,7 +77,8 @@ def _blueprint(suite, controllers, gamma_cases, design_names):
         box = synthesis_blueprint(design_names).root_container
         box.name = "synthesised gains"
         tabs.append(box)
-    return rrb.Blueprint(rrb.Tabs(*tabs), collapse_panels=False)
+    # one time panel for every scenario: paused on the simulated time, expanded
+    return rrb.Blueprint(rrb.Tabs(*tabs), time_panel(rrb), collapse_panels=False)
 
 
 def run(args: argparse.Namespace) -> int:
