@@ -168,3 +168,38 @@ def test_a_reader_that_stops_early_ends_quietly(head_brake):
     proc.stdout.close()  # the reader is gone before the first line (as `| head -0`)
     err = proc.stderr.read().decode()
     assert proc.wait(60) == 141 and "Traceback" not in err, err
+
+
+def test_two_recordings_side_by_side(head_brake, tmp_path):
+    """``review A.rrd B.rrd``: one file holding both under their labels, every common run's
+    plots A left and B right; the data are the recordings' own (the same samples)."""
+    import shutil
+
+    from lcc_synth.errors import ConfigError
+    from lcc_synth.recording import rerun_binary
+    from lcc_synth.recording.compare import comparison_labels, side_by_side
+
+    other = tmp_path / "hb.rrd"  # the same name in another directory
+    shutil.copy(head_brake, other)
+    labels = comparison_labels(head_brake, other)
+    assert labels == ("A_hb", "B_hb")
+    out = side_by_side(head_brake, other, tmp_path / "both.rrd", rerun_binary())
+    s = summarize_recording(out)
+    for lab in labels:
+        assert f"/{lab}/mpc_head_brake/mpc/velocity" in s.entities
+    a = _series(head_brake, "/mpc_head_brake/mpc/mpc/lookahead/velocity/measured")
+    b = _series(out, "/B_hb/mpc_head_brake/mpc/mpc/lookahead/velocity/measured")
+    assert a == b and a[0]
+    origins = {v["space_origin"] for v in s.views}
+    for c in ("all_hdv", "cf_lcc_paper", "cf_lcc_added", "mpc"):
+        for lab in labels:
+            assert f"/{lab}/mpc_head_brake/{c}/velocity" in origins
+    proc = run_cli(["review", head_brake, other, "--summary"], cwd=tmp_path)
+    assert proc.returncode == 2 and "--summary" in proc.stderr
+    proc = run_cli(["review", head_brake, other, other], cwd=tmp_path)
+    assert proc.returncode == 2 and "two side by side" in proc.stderr
+    table2 = tmp_path / "t2.rrd"
+    assert run_cli(["simulate", PROBLEMS / "paper_table2.toml", "--rrd", table2],
+                   cwd=tmp_path).returncode == 0  # fmt: skip
+    with pytest.raises(ConfigError, match="no simulation run in common"):
+        side_by_side(head_brake, table2, tmp_path / "none.rrd", rerun_binary())

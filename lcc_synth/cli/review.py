@@ -36,7 +36,11 @@ HELP = "open a Rerun recording (.rrd) in the viewer, or print a summary of it"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("path", metavar="PATH.rrd", help="the recording to open")
+    parser.add_argument(
+        "path", metavar="PATH.rrd", nargs="+",
+        help="the recording to open; two recordings (A.rrd B.rrd) open side by side: every run "
+        "they have in common, A left and B right",
+    )  # fmt: skip
     parser.add_argument(
         "--summary", action="store_true", help="print what the recording holds; no viewer"
     )
@@ -233,7 +237,12 @@ def _serve_until_stopped(
 def run(args: argparse.Namespace) -> int:
     from lcc_synth.recording import rerun_binary, summarize_recording, viewer_environment
 
-    path = Path(args.path)
+    paths = [Path(p) for p in args.path]
+    if len(paths) > 2:
+        raise ConfigError("PATH.rrd", f"one recording, or two side by side; got {len(paths)}")
+    if len(paths) == 2 and args.summary:
+        raise ConfigError("--summary", "applies to one recording (run it once per file)")
+    path = paths[0]
     if args.json and not args.summary:
         raise ConfigError("--json", "only applies with --summary")
     if args.full and not args.summary:
@@ -243,6 +252,15 @@ def run(args: argparse.Namespace) -> int:
                             ("--port", args.port)):
             if given:
                 raise ConfigError(flag, "opens the viewer; it does not apply with --summary")
+    if len(paths) == 2:  # one file holding both, removed when the viewer ends
+        import tempfile
+
+        from lcc_synth.recording.compare import side_by_side
+
+        with tempfile.TemporaryDirectory(prefix="lcc-review-") as tmp:
+            both = side_by_side(paths[0], paths[1], Path(tmp) / "side_by_side.rrd",
+                                rerun_binary())  # fmt: skip
+            return _serve(rerun_binary(), both, args, viewer_environment())
     summary = summarize_recording(path)  # validates: ConfigError for a missing/invalid file
     if args.summary:
         _print_summary(summary, args.json, args.full)
