@@ -19,10 +19,9 @@ from lcc_synth.models.hdv import OVM
 from lcc_synth.models.linear import model_from_hdv
 from lcc_synth.models.platoon import Platoon, platoon_model
 from lcc_synth.problem import Problem
-from lcc_synth.synthesis.config import spec_from_problem
+from lcc_synth.synthesis.config import comm_range_pattern, robust_members, spec_from_problem
 from lcc_synth.synthesis.gains_file import read_platoon_gains
 from lcc_synth.synthesis.h2 import Weights, h2_norm, make_plant, riccati_gain
-from lcc_synth.synthesis.platoon_config import comm_range_pattern, robust_members
 from lcc_synth.synthesis.platoon_design import synthesize_platoon
 from lcc_synth.synthesis.platoon_h2 import (
     make_platoon_plant,

@@ -38,10 +38,9 @@ def run(args: argparse.Namespace) -> int:
         record_synthesis_file,
         recording_path,
     )
-    from lcc_synth.synthesis.config import spec_from_problem
+    from lcc_synth.synthesis.config import PlatoonSynthesisSpec, spec_from_problem
     from lcc_synth.synthesis.design import synthesize
     from lcc_synth.synthesis.gains_file import write_gains
-    from lcc_synth.synthesis.platoon_config import PlatoonSynthesisSpec
     from lcc_synth.synthesis.platoon_design import synthesize_platoon
     from lcc_synth.synthesis.platoon_report import format_platoon_report
     from lcc_synth.synthesis.report import format_report

@@ -10,7 +10,7 @@ import numpy as np
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import input_feedback
 from lcc_synth.resources import format_bytes, progress, require_memory
-from lcc_synth.synthesis.config import SynthesisSpec
+from lcc_synth.synthesis.config import PlatoonSynthesisSpec, SynthesisSpec
 from lcc_synth.synthesis.h2 import (
     H2Plant,
     SynthesisError,
@@ -21,7 +21,6 @@ from lcc_synth.synthesis.h2 import (
     single_thread_blas,
 )
 from lcc_synth.synthesis.lag_design import lag_note
-from lcc_synth.synthesis.platoon_config import PlatoonSynthesisSpec
 from lcc_synth.synthesis.platoon_design import synthesize_platoon
 from lcc_synth.synthesis.report import SynthesisReport, check_gain, evaluate_gain
 from lcc_synth.synthesis.sparsity import sparsity_sweep

@@ -22,8 +22,8 @@ import time
 import numpy as np
 
 from lcc_synth.resources import progress
+from lcc_synth.synthesis.config import PlatoonSynthesisSpec, robust_members
 from lcc_synth.synthesis.h2 import SynthesisError, single_thread_blas
-from lcc_synth.synthesis.platoon_config import PlatoonSynthesisSpec, robust_members
 from lcc_synth.synthesis.platoon_h2 import (
     PlatoonPlant,
     make_platoon_plant,

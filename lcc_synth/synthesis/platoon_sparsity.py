@@ -36,7 +36,7 @@ def full_range(plant: PlatoonPlant, cav: int) -> int:
 
 def range_patterns(plant: PlatoonPlant, ranges: dict[int, int]) -> dict[int, tuple[int, ...]]:
     """Each CAV's heard positions for its own range (as
-    :func:`~lcc_synth.synthesis.platoon_config.comm_range_pattern`, per CAV)."""
+    :func:`~lcc_synth.synthesis.config.comm_range_pattern`, per CAV)."""
     p = plant.model.platoon
     N = p.size
     out = {}
