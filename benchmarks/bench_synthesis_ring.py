@@ -74,8 +74,7 @@ def time_lmi(N: int) -> tuple[float, float]:
 
     from lcc_synth.models.hdv import OVM
     from lcc_synth.models.platoon import Platoon, platoon_model
-    from lcc_synth.synthesis.h2 import Weights, lmi_full_state
-    from lcc_synth.synthesis.platoon_h2 import make_platoon_plant, platoon_h2
+    from lcc_synth.synthesis.h2 import Weights, lmi_full_state, make_platoon_plant, platoon_h2
 
     M = platoon_model(Platoon((OVM(),) * N, (N,), 15.0, ring=True), warn=False)
     p = make_platoon_plant(M, "replace", Weights(q_s=0.03, q_v=0.15, r=1.0, accel=1.0))

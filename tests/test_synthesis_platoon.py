@@ -22,8 +22,10 @@ from lcc_synth.problem import Problem
 from lcc_synth.synthesis.config import comm_range_pattern, robust_members, spec_from_problem
 from lcc_synth.synthesis.design import synthesize
 from lcc_synth.synthesis.gains_file import read_platoon_gains
-from lcc_synth.synthesis.h2 import Weights, h2_norm, make_plant, riccati_gain
-from lcc_synth.synthesis.platoon_h2 import (
+from lcc_synth.synthesis.h2 import (
+    Weights,
+    h2_norm,
+    make_plant,
     make_platoon_plant,
     pattern_rows,
     platoon_cost,
@@ -31,6 +33,7 @@ from lcc_synth.synthesis.platoon_h2 import (
     platoon_h2,
     platoon_hessian,
     platoon_riccati,
+    riccati_gain,
 )
 from lcc_synth.synthesis.structured import structured_h2
 
@@ -192,7 +195,7 @@ def test_every_per_cav_pattern_is_respected_exactly():
 def test_decentralised_two_cav_ring_is_stable_and_between_the_bounds():
     M = ring_model(10, (5, 10))
     plant = make_platoon_plant(M, "replace", RING_W)
-    from lcc_synth.synthesis.platoon_polish import descend, h2_objective, initial_gain
+    from lcc_synth.synthesis.structured import descend, h2_objective, initial_gain
 
     mask = pattern_rows(plant, comm_range_pattern(M.platoon, 1))
     K0, _ = initial_gain(plant, mask)
@@ -204,7 +207,7 @@ def test_decentralised_two_cav_ring_is_stable_and_between_the_bounds():
 
 
 def test_penalty_continuation_stabilises_where_the_truncated_riccati_gain_does_not():
-    from lcc_synth.synthesis.platoon_polish import descend, h2_objective, initial_gain
+    from lcc_synth.synthesis.structured import descend, h2_objective, initial_gain
 
     alpha = [0.87, 0.9, 1.15, 0.78, 0.61, 1.0, 0.41]
     beta = [0.38, 0.62, 0.89, 0.73, 0.31, 0.85, 0.24]
@@ -227,13 +230,13 @@ def test_penalty_continuation_stabilises_where_the_truncated_riccati_gain_does_n
 
 
 def test_bfgs_reaches_the_newton_optimum(monkeypatch):
-    import lcc_synth.synthesis.platoon_polish as pp
+    import lcc_synth.synthesis.structured as pp
 
     plant = make_platoon_plant(deeplcc_model(), "replace", Weights(q_s=0.5, head=1.0))
     mask = pattern_rows(plant, {3: (2, 3, 4), 6: (5, 6, 7)})
     K0, _ = pp.initial_gain(plant, mask)
     newton = pp.descend(pp.h2_objective(plant), K0, mask, tol=1e-9)
-    monkeypatch.setattr(pp, "NEWTON_MAX_FREE", 0)
+    monkeypatch.setattr(pp, "DESCENT_NEWTON_MAX_FREE", 0)
     bfgs = pp.descend(pp.h2_objective(plant), K0, mask, tol=1e-9, max_iter=2000)
     assert newton.method == "newton" and bfgs.method == "bfgs"
     assert bfgs.iterations > newton.iterations
@@ -243,7 +246,7 @@ def test_bfgs_reaches_the_newton_optimum(monkeypatch):
 
 def test_ring_is_stabilisable_on_the_invariant_subspace_only():
     from lcc_synth.analysis.staircase import uncontrollable_modes
-    from lcc_synth.synthesis.platoon_h2 import check_platoon_stabilisable
+    from lcc_synth.synthesis.h2 import check_platoon_stabilisable
 
     plant = make_platoon_plant(ring_model(8), "replace", RING_W)
     full = uncontrollable_modes(plant.A, plant.B)
@@ -307,7 +310,7 @@ def test_sparsity_range_front_per_cav():
 
 @pytest.mark.parametrize(("objective", "t"), [("mean", 0.0), ("worst", 0.05)])
 def test_robust_objective_derivatives_match_central_differences(objective, t):
-    from lcc_synth.synthesis.platoon_polish import robust_objective
+    from lcc_synth.synthesis.structured import robust_objective
 
     rng = np.random.default_rng(0)
     plants = []

@@ -12,7 +12,7 @@ and wall time):
 * ``riccati`` -- the full-information optimum (CARE on the reduced plant); ``design =
   "full_state"`` returns it, checked against the Lyapunov evaluation of the same gain;
 * ``start`` -- a stabilising gain with the patterns (truncated Riccati modulo ``c``, or the
-  penalty continuation: :func:`~lcc_synth.synthesis.platoon_polish.initial_gain`);
+  penalty continuation: :func:`~lcc_synth.synthesis.structured.initial_gain`);
 * ``polish`` -- Newton / BFGS descent on the true H2 with the patterns' mask;
 * ``sparsity`` -- ``design = "sparsity"``: the greedy per-CAV range front
   (:func:`~lcc_synth.synthesis.sparsity.range_pareto`) and its chosen point;
@@ -33,29 +33,20 @@ from lcc_synth.resources import format_bytes, progress, require_memory
 from lcc_synth.synthesis.config import PlatoonSynthesisSpec, SynthesisSpec, robust_members
 from lcc_synth.synthesis.h2 import (
     H2Plant,
+    PlatoonPlant,
     SynthesisError,
     h2_norm,
     lmi_full_state,
     make_plant,
-    riccati_gain,
-    single_thread_blas,
-)
-from lcc_synth.synthesis.lag_design import lag_note
-from lcc_synth.synthesis.platoon_h2 import (
-    PlatoonPlant,
     make_platoon_plant,
     pattern_rows,
     platoon_cost,
     platoon_h2,
     platoon_riccati,
+    riccati_gain,
+    single_thread_blas,
 )
-from lcc_synth.synthesis.platoon_polish import (
-    ROBUST_TEMPERATURES,
-    descend,
-    h2_objective,
-    initial_gain,
-    robust_objective,
-)
+from lcc_synth.synthesis.lag_design import lag_note
 from lcc_synth.synthesis.report import (
     PlatoonReport,
     SynthesisReport,
@@ -65,7 +56,16 @@ from lcc_synth.synthesis.report import (
 )
 from lcc_synth.synthesis.sparsity import range_pareto, sparsity_sweep
 from lcc_synth.synthesis.string_lmi import string_aware_h2
-from lcc_synth.synthesis.structured import pattern_mask, pattern_vehicles, structured_h2
+from lcc_synth.synthesis.structured import (
+    ROBUST_TEMPERATURES,
+    descend,
+    h2_objective,
+    initial_gain,
+    pattern_mask,
+    pattern_vehicles,
+    robust_objective,
+    structured_h2,
+)
 
 __all__ = [
     "synthesize",

@@ -30,12 +30,13 @@ from lcc_synth.models.records import Record
 from lcc_synth.synthesis.h2 import (
     STABILITY_TOL,
     H2Plant,
+    PlatoonPlant,
     SynthesisError,
     closed_loop_matrix,
     h2_norm,
     max_real_eig,
+    platoon_cost,
 )
-from lcc_synth.synthesis.platoon_h2 import PlatoonPlant, platoon_cost
 
 __all__ = [
     "GainCheck",

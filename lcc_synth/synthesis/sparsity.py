@@ -1,7 +1,10 @@
-"""Sparsity-promoting H2 design: which vehicles should the CAV listen to?
+"""Sparsity-promoting H2 design: which vehicles should each CAV listen to?
 
-Method: the ADMM of Lin, Fardad & Jovanovic (IEEE TAC 2013) with a *group* penalty, one group
-per vehicle other than the CAV (its two gains), for
+One CAV: the group-sparsity ADMM Pareto sweep (:func:`sparsity_sweep`); a platoon or ring: the
+greedy per-CAV communication-range front (:func:`range_pareto`, below).
+
+One CAV, method: the ADMM of Lin, Fardad & Jovanovic (IEEE TAC 2013) with a *group* penalty,
+one group per vehicle other than the CAV (its two gains), for
 
     minimise  J(F) + gamma * sum_i w_i ||F_i||_2        (J = true squared H2 cost)
 
@@ -18,13 +21,10 @@ truncated Riccati gain and the polished gain of any pattern it contains (so a la
 never scores worse than one of its subsets). The Pareto front is the set of non-dominated
 ``(vehicles heard, H2)`` points.
 
-Platoons and rings: how far must each CAV hear? (:func:`range_pareto`)
-
-Sparsity Pareto per CAV for platoons and the ring: how far must each CAV hear?
-
-Method: greedy forward selection of every CAV's own communication range. All CAVs start at
+Platoons and rings, how far must each CAV hear? (:func:`range_pareto`). Method: greedy
+forward selection of every CAV's own communication range. All CAVs start at
 range 0 (decentralised: each CAV hears itself only; the start of
-:func:`~lcc_synth.synthesis.platoon_polish.initial_gain`, then polished). Each step tries
+:func:`~lcc_synth.synthesis.structured.initial_gain`, then polished). Each step tries
 widening one CAV's range by one vehicle on each side, polishes every candidate on the true H2
 from the current gain (feasible: the pattern only grows, so the start is stabilising and the
 true H2 never increases), and keeps the candidate with the lowest H2. It stops when every CAV
@@ -49,14 +49,14 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.resources import progress
 from lcc_synth.synthesis.h2 import (
     H2Plant,
+    PlatoonPlant,
     SynthesisError,
     h2_cost,
+    pattern_rows,
     riccati_gain,
     single_thread_blas,
 )
-from lcc_synth.synthesis.platoon_h2 import PlatoonPlant, pattern_rows
-from lcc_synth.synthesis.platoon_polish import descend, h2_objective, initial_gain
-from lcc_synth.synthesis.structured import pattern_mask, polish
+from lcc_synth.synthesis.structured import descend, h2_objective, initial_gain, pattern_mask, polish
 
 __all__ = [
     "ParetoPoint",
