@@ -572,18 +572,25 @@ def robust_members(system: System, robust: RobustSettings) -> list[Platoon]:
     return out
 
 
+def _single_cav_only(field: str, what: str, kind: str) -> ConfigError:
+    """The one error of a single-CAV feature asked of a platoon or ring (``field`` named)."""
+    return ConfigError(field, f"{what} is a single-CAV feature, not available for kind = "
+                       f"{kind!r} (its designs: {', '.join(PLATOON_DESIGNS)}; method "
+                       "riccati / direct)")  # fmt: skip
+
+
 def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> PlatoonSynthesisSpec:
     """Parse ``[synthesis]`` (already key-checked) for a platoon or ring ``system``."""
     T = declared("synthesis")
     for key in _NOT_FOR_PLATOONS:
         if key in t:
-            raise ConfigError(f"synthesis.{key}", f"does not apply to kind = "
-                              f"{system.kind!r} (single-CAV designs only)")  # fmt: skip
+            raise _single_cav_only(f"synthesis.{key}", f"[synthesis] {key}", system.kind)
     design = T.get(t, "design", "synthesis")
     if design not in PLATOON_DESIGNS:
-        raise ConfigError("synthesis.design", f"must be one of {list(PLATOON_DESIGNS)} for "
-                          f"kind = {system.kind!r}, got {design!r}")  # fmt: skip
+        raise _single_cav_only("synthesis.design", f"design = {design!r}", system.kind)
     semantics = T.get(t, "semantics", "synthesis", default="replace")
+    if t.get("method") == "lmi":
+        raise _single_cav_only("synthesis.method", "method = 'lmi'", system.kind)
     T.get(t, "method", "synthesis", default="riccati" if design == "full_state" else "direct",
           choices=("riccati",) if design == "full_state" else ("direct",))  # fmt: skip
     if not system.platoon.cavs:
