@@ -105,6 +105,7 @@ __all__ = [
     "SynthesisError",
     "Weights",
     "H2Plant",
+    "disturbances",
     "make_plant",
     "check_stabilisable",
     "closed_loop_matrix",
@@ -318,6 +319,30 @@ class H2Plant:
         return self.to_model_gain(g) + self.K0, self.kh0
 
 
+def disturbances(
+    head: np.ndarray, names: list[str], nd: int, weights: Weights
+) -> tuple[np.ndarray | None, tuple[str, ...]]:
+    """The disturbance matrix ``B_w`` of every layout and the names of its columns.
+
+    ``head`` times the head-velocity column ``head`` (when it reaches a state) and one
+    ``accel`` column on every velocity state ``v_*`` of ``names`` (the design states, the CAVs'
+    included; ``nd`` rows, more than ``len(names)`` with an actuator-lag state). ``None`` when
+    both weights leave no column: the caller names its error.
+    """
+    cols, w_names = [], []
+    if weights.head > 0 and np.any(head != 0):
+        cols.append(weights.head * head)
+        w_names.append("v_h")
+    if weights.accel > 0:
+        for j, nm in enumerate(names):
+            if nm.startswith("v_"):
+                col = np.zeros(nd)
+                col[j] = weights.accel
+                cols.append(col)
+                w_names.append(f"a_{nm[2:]}")
+    return (np.column_stack(cols) if cols else None), tuple(w_names)
+
+
 def make_plant(
     model: LCCModel, semantics: str = "replace", weights: Weights | None = None, lag: float = 0.0
 ):
@@ -351,24 +376,13 @@ def make_plant(
 
         aug = with_actuator_lag(A, B, H_d, [list(keep).index(model.index("v_0"))], lag)
         A, B, H_d, nd = aug.A, aug.B, aug.H.ravel(), aug.nx
-    cols, w_names = [], []
-    if weights.head > 0 and np.any(H_d != 0):
-        cols.append(weights.head * H_d)
-        w_names.append("v_h")
-    if weights.accel > 0:
-        for j, i in enumerate(keep):
-            if names[i].startswith("v_"):
-                col = np.zeros(nd)
-                col[j] = weights.accel
-                cols.append(col)
-                w_names.append(f"a_{names[i][2:]}")
-    if not cols:
+    Bw, w_names = disturbances(H_d, [names[i] for i in keep], nd, weights)
+    if Bw is None:
         raise ConfigError(
             "weights.head",
             f"{model.kind} has no head vehicle: the head disturbance alone leaves nothing to "
             "design for; set weights.accel > 0",
         )
-    Bw = np.column_stack(cols)
     def state_weight(nm: str) -> float:
         if nm == "-p_0":
             return weights.q_p
@@ -696,21 +710,10 @@ def make_platoon_plant(
     A = model.A + model.B @ K0
     H_eff = (model.H + model.B @ kh0[:, None]).ravel()
     names = model.state_names
-    cols, w_names = [], []
-    if weights.head > 0 and np.any(H_eff != 0):
-        cols.append(weights.head * H_eff)
-        w_names.append("v_h")
-    if weights.accel > 0:
-        for j, nm in enumerate(names):
-            if nm.startswith("v_"):
-                col = np.zeros(model.nx)
-                col[j] = weights.accel
-                cols.append(col)
-                w_names.append(f"a_{nm[2:]}")
-    if not cols:
+    Bw, w_names = disturbances(H_eff, names, model.nx, weights)
+    if Bw is None:
         raise ConfigError("synthesis.weights", "head and accel disturbance weights are both 0 "
                           "(or the head disturbance reaches no state): nothing to design for")
-    Bw = np.column_stack(cols)
     cav_states = {f"s_{i}" for i in model.cavs}
     q = np.array([weights.cav_spacing if nm in cav_states
                   else (weights.q_s if nm.startswith("s_") else weights.q_v) for nm in names])
