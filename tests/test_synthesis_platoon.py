@@ -246,13 +246,13 @@ def test_bfgs_reaches_the_newton_optimum(monkeypatch):
 
 def test_ring_is_stabilisable_on_the_invariant_subspace_only():
     from lcc_synth.analysis.staircase import uncontrollable_modes
-    from lcc_synth.synthesis.h2 import check_platoon_stabilisable
+    from lcc_synth.synthesis.h2 import check_stabilisable
 
     plant = make_platoon_plant(ring_model(8), "replace", RING_W)
     full = uncontrollable_modes(plant.A, plant.B)
     assert len(full) >= 1 and min(abs(lam) for lam in full) < 1e-9  # the conserved mode
     assert all(lam.real < -1e-9 for lam in uncontrollable_modes(plant.Ar, plant.Br))
-    check_platoon_stabilisable(plant)  # no error: the conserved mode is not in the plant
+    check_stabilisable(plant)  # no error: the conserved mode is not in the plant
 
 
 # --------------------------------------------------------------------------------------------

@@ -126,7 +126,6 @@ __all__ = [
     "platoon_hessian",
     "platoon_h2",
     "platoon_riccati",
-    "check_platoon_stabilisable",
     "pattern_rows",
 ]
 
@@ -292,6 +291,17 @@ class H2Plant:
     def nx(self) -> int:
         return self.A.shape[0]
 
+    @property
+    def Ar(self) -> np.ndarray:
+        """The state matrix stability is judged on: one CAV's design plant is never reduced
+        (a platoon's :attr:`PlatoonPlant.Ar` is, on a ring)."""
+        return self.A
+
+    @property
+    def Br(self) -> np.ndarray:
+        """The input matrix beside :attr:`Ar` (``B``)."""
+        return self.B
+
     def vehicle_of_state(self) -> np.ndarray:
         """Vehicle index (-m..n) of each design state (the lag state ``a_0``: ``n + 1``, a
         vehicle no pattern names)."""
@@ -416,17 +426,22 @@ def make_plant(
     )
 
 
-def check_stabilisable(plant: H2Plant, tol: float = 1e-9) -> None:
+def check_stabilisable(plant: H2Plant | PlatoonPlant, tol: float = 1e-9) -> None:
     """Every uncontrollable mode (Kalman decomposition,
-    :mod:`lcc_synth.analysis.controllability`) must have Re < -tol; else :class:`SynthesisError`."""
+    :mod:`lcc_synth.analysis.controllability`) of the design plant -- one CAV: ``(A_d, B)``; a
+    platoon or ring: the reduced ``(A_r, B_r)``, so that the ring's conserved total-spacing mode
+    is not part of it and never counts -- must have Re < -tol; else :class:`SynthesisError`
+    naming the mode."""
     from lcc_synth.analysis.staircase import uncontrollable_modes
 
-    for lam in uncontrollable_modes(plant.A, plant.B):
+    where = " on the ring's invariant subspace (c x = 0)" if plant.model.ring else ""
+    who = "the CAV" if len(plant.model.cavs) == 1 else "the CAVs"
+    for lam in uncontrollable_modes(plant.Ar, plant.Br):
         if lam.real >= -tol:
             raise SynthesisError(
-                f"the plant is not stabilisable: mode {lam:.4g} is not controllable from the CAV",
-                {"mode": [lam.real, lam.imag]},
-            )
+                f"the plant is not stabilisable{where}: mode {lam:.4g} is not controllable "
+                f"from {who}", {"mode": [lam.real, lam.imag]},
+            )  # fmt: skip
 
 
 def closed_loop_matrix(plant: H2Plant, g: np.ndarray) -> np.ndarray:
@@ -816,21 +831,6 @@ def platoon_hessian(plant: PlatoonPlant, ev: H2Eval, free: np.ndarray) -> np.nda
     return 0.5 * (Hs + Hs.T)
 
 
-def check_platoon_stabilisable(plant: PlatoonPlant, tol: float = 1e-9) -> None:
-    """Every uncontrollable mode of the reduced ``(A_r, B_r)`` (Kalman decomposition) must have
-    ``Re < -tol``; else :class:`SynthesisError` naming the mode (on the ring the conserved
-    total-spacing mode is not part of the reduced plant and never counts)."""
-    from lcc_synth.analysis.staircase import uncontrollable_modes
-
-    where = " on the ring's invariant subspace (c x = 0)" if plant.ring else ""
-    for lam in uncontrollable_modes(plant.Ar, plant.Br):
-        if lam.real >= -tol:
-            raise SynthesisError(
-                f"the plant is not stabilisable{where}: mode {lam:.4g} is not controllable "
-                "from the CAVs", {"mode": [lam.real, lam.imag]},
-            )  # fmt: skip
-
-
 @single_thread_blas
 def platoon_riccati(plant: PlatoonPlant) -> tuple[np.ndarray, float, np.ndarray]:
     """Full-information H2 optimum from the CARE on the reduced plant.
@@ -854,12 +854,12 @@ def platoon_riccati(plant: PlatoonPlant) -> tuple[np.ndarray, float, np.ndarray]
     try:
         P = sla.solve_continuous_are(plant.Ar, plant.Br, plant.Qr, R)
     except (np.linalg.LinAlgError, ValueError) as err:
-        check_platoon_stabilisable(plant)
+        check_stabilisable(plant)
         raise SynthesisError(f"Riccati solver failed: {err}") from None
     Kr = -(plant.Br.T @ P) / plant.r
     mre = float(np.max(np.linalg.eigvals(plant.Ar + plant.Br @ Kr).real))
     if not (np.all(np.isfinite(Kr)) and mre < -STABILITY_TOL):
-        check_platoon_stabilisable(plant)
+        check_stabilisable(plant)
         raise SynthesisError("Riccati gain does not stabilise the plant", {"max_real_eig": mre})
     J = float(np.trace(plant.Bwr.T @ P @ plant.Bwr))
     return Kr @ plant.V.T, J, P
