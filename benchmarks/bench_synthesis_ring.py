@@ -8,7 +8,7 @@ thread as ``synthesize`` runs):
 * ``riccati``  full-information optimum (CARE on the 2N - 1 reduced states);
 * ``start``    truncated Riccati gain modulo c (or the penalty continuation), stability check;
 * ``polish``   Newton descent on the true H2 with the pattern's mask;
-* ``total``    :func:`~lcc_synth.synthesis.platoon_design.synthesize_platoon` end to end
+* ``total``    :func:`~lcc_synth.synthesis.design.synthesize` end to end
                (model, plant, every stage, checks, report);
 
 with the true H2 norm after each stage. ``--lmi`` also times the plain full-state H2 LMI
@@ -55,13 +55,13 @@ def _spec(N: int, R: int, robust: str = "", design: str | None = None):
 
 
 def run_case(N: int, R: int, repeat: int) -> dict:
-    from lcc_synth.synthesis.platoon_design import synthesize_platoon
+    from lcc_synth.synthesis.design import synthesize
 
     best, rep = math.inf, None
     for _ in range(repeat):
         spec = _spec(N, R)
         t0 = time.perf_counter()
-        rep = synthesize_platoon(spec)
+        rep = synthesize(spec)
         best = min(best, time.perf_counter() - t0)
     stages = {s["stage"].split()[0]: s for s in rep.stages}
     return {"N": N, "R": "full" if R < 0 else R, "states": 2 * N - 1, "total": best,
@@ -74,8 +74,7 @@ def time_lmi(N: int) -> tuple[float, float]:
 
     from lcc_synth.models.hdv import OVM
     from lcc_synth.models.platoon import Platoon, platoon_model
-    from lcc_synth.synthesis.h2 import Weights, lmi_full_state
-    from lcc_synth.synthesis.platoon_h2 import make_platoon_plant, platoon_h2
+    from lcc_synth.synthesis.h2 import Weights, lmi_full_state, make_platoon_plant, platoon_h2
 
     M = platoon_model(Platoon((OVM(),) * N, (N,), 15.0, ring=True), warn=False)
     p = make_platoon_plant(M, "replace", Weights(q_s=0.03, q_v=0.15, r=1.0, accel=1.0))
@@ -119,24 +118,24 @@ def main() -> None:
             print(f"full-state H2 LMI (Clarabel, dense) N = {N}: {dt:.2f} s, its gain's H2 "
                   f"{hl:.6f}")
     if args.sparsity:
-        from lcc_synth.synthesis.platoon_design import synthesize_platoon
+        from lcc_synth.synthesis.design import synthesize
 
         for N in args.sizes:
             spec = _spec(N, 0, design='design = "sparsity"')
             t0 = time.perf_counter()
-            rep = synthesize_platoon(spec)
+            rep = synthesize(spec)
             dt = time.perf_counter() - t0
             front = ", ".join(f"{p['ranges'][f'u_{N}']}:{p['h2']:.4f}" for p in rep.pareto)
             pick = next(p for p in rep.pareto if p["chosen"])
             print(f"sparsity front N = {N} ({len(rep.pareto)} points, {dt:.2f} s): R:H2 {front}; "
                   f"chosen R = {pick['ranges'][f'u_{N}']} (loss {100 * pick['loss']:.3f}%)")
     if args.robust:
-        from lcc_synth.synthesis.platoon_design import synthesize_platoon
+        from lcc_synth.synthesis.design import synthesize
 
         spec = _spec(20, 5, "[synthesis.robust]\nsamples = 20\nseed = 0\n"
                      "alpha = [0.45, 0.75]\nbeta = [0.7, 1.1]\ns_go = [32.0, 38.0]\n")
         t0 = time.perf_counter()
-        rep = synthesize_platoon(spec)
+        rep = synthesize(spec)
         dt = time.perf_counter() - t0
         rb = rep.robust
         print(f"robust mean design, ring N = 20, R = 5, 20 members ({dt:.2f} s, "

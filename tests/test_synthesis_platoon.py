@@ -19,12 +19,13 @@ from lcc_synth.models.hdv import OVM
 from lcc_synth.models.linear import model_from_hdv
 from lcc_synth.models.platoon import Platoon, platoon_model
 from lcc_synth.problem import Problem
-from lcc_synth.synthesis.config import spec_from_problem
+from lcc_synth.synthesis.config import comm_range_pattern, robust_members, spec_from_problem
+from lcc_synth.synthesis.design import synthesize
 from lcc_synth.synthesis.gains_file import read_platoon_gains
-from lcc_synth.synthesis.h2 import Weights, h2_norm, make_plant, riccati_gain
-from lcc_synth.synthesis.platoon_config import comm_range_pattern, robust_members
-from lcc_synth.synthesis.platoon_design import synthesize_platoon
-from lcc_synth.synthesis.platoon_h2 import (
+from lcc_synth.synthesis.h2 import (
+    Weights,
+    h2_norm,
+    make_plant,
     make_platoon_plant,
     pattern_rows,
     platoon_cost,
@@ -32,6 +33,7 @@ from lcc_synth.synthesis.platoon_h2 import (
     platoon_h2,
     platoon_hessian,
     platoon_riccati,
+    riccati_gain,
 )
 from lcc_synth.synthesis.structured import structured_h2
 
@@ -150,7 +152,7 @@ def test_ring_gain_is_defined_modulo_the_conserved_direction():
 
 def test_ring_is_never_unstabilisable_for_the_conserved_mode():
     spec = spec_from_problem(Problem(PROBLEMS / "ring_n20_full.toml", _toml("ring_n20_full")))
-    rep = synthesize_platoon(spec)
+    rep = synthesize(spec)
     assert rep.check.stable and rep.check.max_real_eig < 0
     assert abs(rep.check.max_real_eig_full) < 1e-12  # the full state keeps the mode at 0
     assert "modulo c" in " ".join(rep.notes) and rep.check.conserved_mode.startswith("total")
@@ -176,7 +178,7 @@ def test_comm_range_pattern_is_the_hand_written_list():
 def test_every_per_cav_pattern_is_respected_exactly():
     text = _deeplcc_toml('[synthesis.patterns]\nu_3 = [2, 4]\nu_6 = [5, 7, 8]\n')
     spec = spec_from_problem(Problem(Path("p.toml"), _parse(text)))
-    rep = synthesize_platoon(spec)
+    rep = synthesize(spec)
     K = np.array(rep.K)
     allowed = {0: {2, 3, 4}, 1: {5, 6, 7, 8}}
     for k, heard in allowed.items():
@@ -193,7 +195,7 @@ def test_every_per_cav_pattern_is_respected_exactly():
 def test_decentralised_two_cav_ring_is_stable_and_between_the_bounds():
     M = ring_model(10, (5, 10))
     plant = make_platoon_plant(M, "replace", RING_W)
-    from lcc_synth.synthesis.platoon_polish import descend, h2_objective, initial_gain
+    from lcc_synth.synthesis.structured import descend, h2_objective, initial_gain
 
     mask = pattern_rows(plant, comm_range_pattern(M.platoon, 1))
     K0, _ = initial_gain(plant, mask)
@@ -205,7 +207,7 @@ def test_decentralised_two_cav_ring_is_stable_and_between_the_bounds():
 
 
 def test_penalty_continuation_stabilises_where_the_truncated_riccati_gain_does_not():
-    from lcc_synth.synthesis.platoon_polish import descend, h2_objective, initial_gain
+    from lcc_synth.synthesis.structured import descend, h2_objective, initial_gain
 
     alpha = [0.87, 0.9, 1.15, 0.78, 0.61, 1.0, 0.41]
     beta = [0.38, 0.62, 0.89, 0.73, 0.31, 0.85, 0.24]
@@ -228,13 +230,13 @@ def test_penalty_continuation_stabilises_where_the_truncated_riccati_gain_does_n
 
 
 def test_bfgs_reaches_the_newton_optimum(monkeypatch):
-    import lcc_synth.synthesis.platoon_polish as pp
+    import lcc_synth.synthesis.structured as pp
 
     plant = make_platoon_plant(deeplcc_model(), "replace", Weights(q_s=0.5, head=1.0))
     mask = pattern_rows(plant, {3: (2, 3, 4), 6: (5, 6, 7)})
     K0, _ = pp.initial_gain(plant, mask)
     newton = pp.descend(pp.h2_objective(plant), K0, mask, tol=1e-9)
-    monkeypatch.setattr(pp, "NEWTON_MAX_FREE", 0)
+    monkeypatch.setattr(pp, "DESCENT_NEWTON_MAX_FREE", 0)
     bfgs = pp.descend(pp.h2_objective(plant), K0, mask, tol=1e-9, max_iter=2000)
     assert newton.method == "newton" and bfgs.method == "bfgs"
     assert bfgs.iterations > newton.iterations
@@ -244,13 +246,13 @@ def test_bfgs_reaches_the_newton_optimum(monkeypatch):
 
 def test_ring_is_stabilisable_on_the_invariant_subspace_only():
     from lcc_synth.analysis.staircase import uncontrollable_modes
-    from lcc_synth.synthesis.platoon_h2 import check_platoon_stabilisable
+    from lcc_synth.synthesis.h2 import check_stabilisable
 
     plant = make_platoon_plant(ring_model(8), "replace", RING_W)
     full = uncontrollable_modes(plant.A, plant.B)
     assert len(full) >= 1 and min(abs(lam) for lam in full) < 1e-9  # the conserved mode
     assert all(lam.real < -1e-9 for lam in uncontrollable_modes(plant.Ar, plant.Br))
-    check_platoon_stabilisable(plant)  # no error: the conserved mode is not in the plant
+    check_stabilisable(plant)  # no error: the conserved mode is not in the plant
 
 
 # --------------------------------------------------------------------------------------------
@@ -272,12 +274,12 @@ def test_one_cav_platoon_matches_the_single_cav_lcc_design(semantics):
     assert np.sqrt(platoon_riccati(plant)[1]) == pytest.approx(h2_norm(lcc, g_ric), rel=1e-9)
     res = structured_h2(lcc, [-1, 1], "direct", tol=1e-9)
     t = _lcc_toml(m, n, semantics, w, "[synthesis.patterns]\nu_3 = [2, 4]\n")
-    rep = synthesize_platoon(spec_from_problem(Problem(Path("p.toml"), _parse(t))))
+    rep = synthesize(spec_from_problem(Problem(Path("p.toml"), _parse(t))))
     assert rep.check.h2 == pytest.approx(res.h2, rel=1e-9)
 
 
 def test_sparsity_range_front_per_cav():
-    from lcc_synth.synthesis.platoon_sparsity import range_pareto
+    from lcc_synth.synthesis.sparsity import range_pareto
 
     M = ring_model(10)
     plant = make_platoon_plant(M, "replace", RING_W)
@@ -292,7 +294,7 @@ def test_sparsity_range_front_per_cav():
         text = (PROBLEMS / "ring_n20_cr5.toml").read_text().replace("size = 20", "size = 10")
         text = text.replace("cavs = [20]", "cavs = [10]").replace("comm_range = 5",
                                                                      f"comm_range = {R}")
-        rep = synthesize_platoon(spec_from_problem(Problem(Path("r.toml"), _parse(text))))
+        rep = synthesize(spec_from_problem(Problem(Path("r.toml"), _parse(text))))
         assert p["h2"] == pytest.approx(rep.check.h2, rel=1e-9)
     pick = next(p for p in points if p["h2"] <= 1.003 * h_star)
     assert pick["chosen"] and sum(p["chosen"] for p in points) == 1
@@ -308,7 +310,7 @@ def test_sparsity_range_front_per_cav():
 
 @pytest.mark.parametrize(("objective", "t"), [("mean", 0.0), ("worst", 0.05)])
 def test_robust_objective_derivatives_match_central_differences(objective, t):
-    from lcc_synth.synthesis.platoon_polish import robust_objective
+    from lcc_synth.synthesis.structured import robust_objective
 
     rng = np.random.default_rng(0)
     plants = []
@@ -342,9 +344,9 @@ def test_robust_gain_is_stable_on_every_member_and_beats_the_nominal_on_its_obje
               "alpha = [0.4, 0.8]\nbeta = [0.7, 1.1]\ns_go = [31.0, 39.0]\n")  # fmt: skip
     text = _deeplcc_toml("", comm_range=2) + robust
     spec = spec_from_problem(Problem(Path("p.toml"), _parse(text)))
-    rep = synthesize_platoon(spec)
+    rep = synthesize(spec)
     K = np.array(rep.K)
-    nominal = synthesize_platoon(spec_from_problem(
+    nominal = synthesize(spec_from_problem(
         Problem(Path("p.toml"), _parse(_deeplcc_toml("", comm_range=2)))))  # fmt: skip
     Kn = np.array(nominal.K)
     members = robust_members(spec.system, spec.robust)
@@ -455,7 +457,7 @@ def test_platoon_gains_file_is_validated(tmp_path):
     from lcc_synth.synthesis.gains_file import platoon_gains_document, read_gains
 
     spec = spec_from_problem(Problem(Path("p.toml"), _parse(_deeplcc_toml("", comm_range=1))))
-    rep = synthesize_platoon(spec)
+    rep = synthesize(spec)
     doc = platoon_gains_document(rep)
     assert len(doc["K"]) == 2 and set(doc["gains"]) == {"u_3", "u_6"}
     p = tmp_path / "g.json"

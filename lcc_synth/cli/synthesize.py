@@ -38,12 +38,9 @@ def run(args: argparse.Namespace) -> int:
         record_synthesis_file,
         recording_path,
     )
-    from lcc_synth.synthesis.config import spec_from_problem
+    from lcc_synth.synthesis.config import PlatoonSynthesisSpec, spec_from_problem
     from lcc_synth.synthesis.design import synthesize
     from lcc_synth.synthesis.gains_file import write_gains
-    from lcc_synth.synthesis.platoon_config import PlatoonSynthesisSpec
-    from lcc_synth.synthesis.platoon_design import synthesize_platoon
-    from lcc_synth.synthesis.platoon_report import format_platoon_report
     from lcc_synth.synthesis.report import format_report
 
     problem = load_problem(args.problem)
@@ -69,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
             check_file(value, flag, overwrite=args.overwrite)
     rrd = recording_path(args, spec.name)
     prov = provenance(problem.path, backend=None, controllers={spec.name: {"type": "h2"}})
-    rep = _design(args, synthesize_platoon if platoon else synthesize, spec)
+    rep = _design(args, synthesize, spec)
     if rep is None:
         return 1
     written, error = [], None
@@ -93,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps({"ok": error is None, **rep.as_dict(), "written": written,
                           "provenance": prov}))  # fmt: skip
     else:
-        print(format_platoon_report(rep) if platoon else format_report(rep))
+        print(format_report(rep))
         for w in written:
             print(f"wrote {w}")
     if error is not None:

@@ -23,7 +23,7 @@ A *suite* problem file (``lcc-synth run``, e.g. ``problems/showcase.toml``) desc
 
 A layout may be a mixed platoon or a ring (``kind = "platoon" | "ring"``, ``size``, ``cavs``,
 ``circumference``, ``[layouts.NAME.hdv_values]``): its ``h2`` controllers are platoon designs
-(:mod:`lcc_synth.synthesis.platoon_design`, a gain row per CAV), its MPCs the joint MPC of
+(:mod:`lcc_synth.synthesis.design`, a gain row per CAV), its MPCs the joint MPC of
 every CAV, an MPC's ``fallback`` the platoon gain table.
 
 Every controller runs on every scenario with the same random draws (``simulate(..., draws)``);

@@ -62,7 +62,7 @@ def synthesize_table(
         ``(static_table, report)``: a ``type = "static"`` controller table holding the
         synthesised gain (plain data) and the
         :class:`~lcc_synth.synthesis.report.SynthesisReport` (platoon / ring:
-        :class:`~lcc_synth.synthesis.platoon_report.PlatoonReport`).
+        :class:`~lcc_synth.synthesis.report.PlatoonReport`).
 
     Raises
     ------

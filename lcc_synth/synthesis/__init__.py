@@ -1,9 +1,12 @@
-"""H2 structured and sparse gain synthesis for LCC.
+"""H2 structured and sparse gain synthesis for LCC, one CAV or several (platoons, rings).
 
-Modules: :mod:`.h2` (design plant, true H2 norm, Riccati, full-state LMI), :mod:`.structured`
-(sparsity-invariance convex restriction + polishing on the true H2 cost), :mod:`.sparsity`
-(group-sparsity ADMM Pareto sweep), :mod:`.string_lmi` (bounded-real lemma, string-stable
-designs), :mod:`.config` (``[synthesis]`` problem table), :mod:`.design` (run a problem),
+Modules, each for every layout: :mod:`.h2` (design plant, true H2 norm, Riccati, full-state
+LMI; a gain row per CAV, the ring on its invariant hyperplane), :mod:`.structured`
+(sparsity-invariance convex restriction + polishing on the true H2 cost; per-CAV row patterns,
+robust multi-model descent), :mod:`.sparsity` (group-sparsity ADMM Pareto sweep; per-CAV range
+front), :mod:`.string_lmi` (bounded-real lemma, string-stable designs, one CAV),
+:mod:`.as_run` (the loop as it runs, one CAV), :mod:`.config` (``[synthesis]`` problem table,
+both vocabularies), :mod:`.design` (:func:`~.design.synthesize`, the one entry point),
 :mod:`.report` (checks and report), :mod:`.gains_file` (the gains JSON file).
 
 cvxpy is imported only inside the functions that solve LMIs.

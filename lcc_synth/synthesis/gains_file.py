@@ -37,8 +37,7 @@ from lcc_synth.models.linear import KINDS, model_from_hdv
 from lcc_synth.models.platoon import PlatoonGains
 from lcc_synth.problem import warn_large_gains
 from lcc_synth.schema.readers import read_json
-from lcc_synth.synthesis.platoon_report import PlatoonReport
-from lcc_synth.synthesis.report import SynthesisReport, _jsonable
+from lcc_synth.synthesis.report import PlatoonReport, SynthesisReport, _jsonable
 
 __all__ = ["gains_document", "write_gains", "read_gains", "REQUIRED_KEYS",
            "PLATOON_REQUIRED_KEYS", "platoon_gains_document", "read_platoon_gains"]

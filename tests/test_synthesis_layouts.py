@@ -1,0 +1,124 @@
+"""One synthesis entry point for every layout: a one-CAV string, a two-CAV platoon and a ring.
+
+Each layout goes through the same calls (``spec_from_problem`` -> ``synthesize`` ->
+``format_report`` / ``as_dict``), and each result is judged against truth computed here from
+the model matrices alone with scipy: the Riccati optimum (CARE) for ``design = "full_state"``
+and the Lyapunov H2 norm of the reported whole-input gain for every design (the ring on its
+invariant hyperplane ``c x = 0``, whose basis is scipy's null space of ``c``). The features that
+exist only for one CAV raise one ConfigError naming the key and the layout.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.linalg as sla
+
+from lcc_synth.errors import ConfigError
+from lcc_synth.problem import Problem
+from lcc_synth.synthesis.config import spec_from_problem
+from lcc_synth.synthesis.design import synthesize
+from lcc_synth.synthesis.report import format_report
+
+HDV = '[hdv]\nmodel = "ovm"\nalpha = 0.6\nbeta = 0.9\ns_st = 5.0\ns_go = 35.0\nv_max = 30.0\n'
+Q_S, Q_V, R = 0.5, 1.0, 0.7
+
+#: layout name -> (the [system] table, the structured pattern keys of its vocabulary)
+LAYOUTS = {
+    "one_cav_string": ('kind = "cf_lcc"\nn = 4\nv_star = 15.0', "pattern = [1, 2]"),
+    "two_cav_platoon": ('kind = "platoon"\nsize = 6\ncavs = [2, 5]\nv_star = 15.0',
+                        "comm_range = 1"),
+    "ring": ('kind = "ring"\nsize = 6\ncavs = [1, 4]\nv_star = 15.0', "comm_range = 1"),
+}  # fmt: skip
+
+
+def _problem(layout: str, design: str, extra: str = "") -> Problem:
+    system, pattern = LAYOUTS[layout]
+    text = (f'name = "{layout}"\n{HDV}[system]\n{system}\n[synthesis]\ndesign = "{design}"\n'
+            f'semantics = "replace"\n{pattern if design == "structured" else ""}\n{extra}\n'
+            f"[synthesis.weights]\nq_s = {Q_S}\nq_v = {Q_V}\nr = {R}\nhead = 0.0\naccel = 1.0\n")
+    return Problem(Path(f"{layout}.toml"), tomllib.loads(text))  # fmt: skip
+
+
+def _truth(spec):
+    """The design plant under "replace" (each CAV's acceleration is its input alone: its rows
+    of ``A`` removed, ``A_d = A - B B^+ A``), weights and the invariant-subspace basis, built
+    here from the model matrices."""
+    model = spec.system.linear_model(warn=False)
+    nx = np.asarray(model.A).shape[0]
+    B = np.asarray(model.B, float).reshape(nx, -1)
+    A = np.asarray(model.A, float) - B @ np.linalg.pinv(B) @ np.asarray(model.A, float)
+    names = list(model.state_names)
+    q = np.array([Q_S if nm.startswith("s_") else Q_V for nm in names])
+    vel = [j for j, nm in enumerate(names) if nm.startswith("v_")]
+    Bw = np.eye(nx)[:, vel]  # unit acceleration noise on every velocity (the CAVs' included)
+    c = getattr(model, "conserved", None)
+    V = np.eye(nx) if c is None else sla.null_space(np.asarray(c, float)[None, :])
+    return A, B, np.diag(q), Bw, V, names
+
+
+def _lyapunov_h2(A, B, Q, Bw, V, K) -> float:
+    Acl = V.T @ (A + B @ K) @ V
+    Cz = np.vstack([sla.sqrtm(Q).real @ V, np.sqrt(R) * K @ V])
+    L = sla.solve_continuous_lyapunov(Acl, -(V.T @ Bw) @ (V.T @ Bw).T)
+    return float(np.sqrt(np.trace(Cz @ L @ Cz.T)))
+
+
+@pytest.mark.parametrize("layout", list(LAYOUTS))
+def test_full_state_is_the_riccati_optimum_on_every_layout(layout):
+    spec = spec_from_problem(_problem(layout, "full_state"))
+    rep = synthesize(spec)
+    A, B, Q, Bw, V, names = _truth(spec)
+    K = np.atleast_2d(np.asarray(rep.K, float))
+    assert rep.state_names == names
+    assert K.shape == (B.shape[1], A.shape[0])  # one gain row per CAV
+    model = spec.system.linear_model(warn=False)  # replace: the whole input cancels the CAV rows
+    K0 = -np.linalg.pinv(B) @ np.asarray(model.A, float)
+    np.testing.assert_allclose(np.atleast_2d(rep.input_K), K + K0, rtol=0, atol=1e-12)
+    P = sla.solve_continuous_are(V.T @ A @ V, V.T @ B, V.T @ Q @ V, R * np.eye(B.shape[1]))
+    h2_star = float(np.sqrt(np.trace((V.T @ Bw).T @ P @ (V.T @ Bw))))
+    assert rep.h2_unstructured == pytest.approx(h2_star, rel=1e-8)
+    assert rep.check.h2 == pytest.approx(h2_star, rel=1e-8)
+    assert _lyapunov_h2(A, B, Q, Bw, V, K) == pytest.approx(h2_star, rel=1e-8)
+    assert rep.as_dict()["problem"] == layout
+    assert layout in format_report(rep)
+
+
+@pytest.mark.parametrize("layout", list(LAYOUTS))
+def test_structured_keeps_the_pattern_and_reports_its_true_h2_on_every_layout(layout):
+    spec = spec_from_problem(_problem(layout, "structured"))
+    rep = synthesize(spec)
+    A, B, Q, Bw, V, names = _truth(spec)
+    K = np.atleast_2d(np.asarray(rep.K, float))
+    vehicle = np.array([int(nm.split("_")[1]) for nm in names])
+    heard = {  # written by hand: one CAV + HDVs 1, 2; comm_range 1 (the ring wraps around)
+        "one_cav_string": [(0, 1, 2)],
+        "two_cav_platoon": [(1, 2, 3), (4, 5, 6)],
+        "ring": [(6, 1, 2), (3, 4, 5)],
+    }[layout]
+    heard = [np.isin(vehicle, h) for h in heard]
+    for row, h in zip(K, heard, strict=True):
+        assert np.all(row[~h] == 0.0)  # exact zeros off the pattern
+        assert np.any(row[h] != 0.0)
+    h2 = _lyapunov_h2(A, B, Q, Bw, V, K)
+    assert rep.check.h2 == pytest.approx(h2, rel=1e-9)
+    assert h2 >= rep.h2_unstructured * (1 - 1e-9)  # a pattern never beats full information
+
+
+@pytest.mark.parametrize("layout", ["two_cav_platoon", "ring"])
+@pytest.mark.parametrize(("extra", "field", "design"), [
+    ("as_run = true", "synthesis.as_run", "structured"),
+    ("[synthesis.string]\ngamma = 1.0", "synthesis.string", "structured"),
+    ("", "synthesis.design", "string_stable"),
+    ('method = "lmi"', "synthesis.method", "structured"),
+    ("cav_lag = 0.2", "synthesis.cav_lag", "structured"),
+])  # fmt: skip
+def test_single_cav_features_name_the_key_and_the_layout(layout, extra, field, design):
+    kind = "platoon" if layout == "two_cav_platoon" else "ring"
+    with pytest.raises(ConfigError) as err:
+        spec_from_problem(_problem(layout, design, extra))
+    assert err.value.field == field
+    assert f"kind = {kind!r}" in err.value.message
