@@ -114,7 +114,7 @@ class LCCModel(Record):
 
     @property
     def vehicle_coefficients(self) -> tuple[LinearCoefficients, ...]:
-        """:attr:`coefficients` in the order of :attr:`vehicles`."""
+        """The ``coefficients`` in the order of :attr:`vehicles`."""
         return tuple(self.coefficients[i] for i in self.vehicles)
 
     @cached_property

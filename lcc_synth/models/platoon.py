@@ -364,7 +364,7 @@ class PlatoonModel(Record):
 
     @property
     def vehicle_coefficients(self) -> tuple[LinearCoefficients, ...]:
-        """:attr:`coefficients` in the order of :attr:`vehicles` (the same tuple)."""
+        """The ``coefficients`` in the order of :attr:`vehicles` (the same tuple)."""
         return self.coefficients
 
     @cached_property
