@@ -25,7 +25,8 @@ Safety before efficiency: unsafe and failed runs rank last, in every form
   no metrics (``n/a``), is marked ``NAME (not run)`` (the commands print why) and comes last.
 
 CSV has the columns ``collided``, ``unsafe`` (the reasons, separated by semicolons),
-``failed_steps`` and ``not_run`` for them; JSON rows carry ``"unsafe": [reasons]`` (empty when safe).
+``failed_steps`` and ``not_run`` for them; JSON rows carry ``"unsafe": [reasons]`` (empty
+when safe).
 """
 
 from __future__ import annotations
@@ -218,8 +219,8 @@ def write_csv(
     precision; ``inf`` for a time to collision that never occurs, empty for NaN) and
     ``collided`` (``true`` / ``false``), ``failed_steps``, ``not_run`` (the reason, empty
     when it ran) and ``unsafe`` (:func:`~lcc_synth.metrics.unsafe_reasons`, separated by
-    semicolons; empty when safe): unsafe and failed rows last in their scenario. Written atomically (as
-    :func:`write_markdown`)."""
+    semicolons; empty when safe): unsafe and failed rows last in their scenario. Written
+    atomically (as :func:`write_markdown`)."""
     import csv
     import io
 
