@@ -60,13 +60,15 @@ def _blueprint(suite, controllers, gamma_cases, design_names):
     """One tab per scenario (the recording module's simulation layout), plus analysis."""
     import rerun.blueprint as rrb
 
+    from lcc_synth.experiments.comparison import applies
     from lcc_synth.recording import analysis_blueprint, simulation_blueprint, synthesis_blueprint
     from lcc_synth.recording.layout import time_panel
 
-    mpc = [c for c in controllers if suite.controllers[c].get("type") == "mpc"]
     tabs = []
-    for sname, ss in suite.scenarios.items():
-        box = simulation_blueprint(sname, controllers, mpc).root_container
+    for sname, ss in suite.scenarios.items():  # the controllers that run in this scenario
+        ctrls = [c for c in controllers if applies(suite.controllers[c], ss.layout, sname)]
+        mpc = [c for c in ctrls if suite.controllers[c].get("type") == "mpc"]
+        box = simulation_blueprint(sname, ctrls or controllers, mpc).root_container
         box.name = ss.title or sname
         tabs.append(box)
     if gamma_cases:
@@ -78,7 +80,8 @@ def _blueprint(suite, controllers, gamma_cases, design_names):
         box.name = "synthesised gains"
         tabs.append(box)
     # one time panel for every scenario: paused on the simulated time, expanded
-    return rrb.Blueprint(rrb.Tabs(*tabs), time_panel(rrb), collapse_panels=False)
+    return rrb.Blueprint(rrb.Tabs(*tabs), rrb.BlueprintPanel(state="collapsed"),
+                         rrb.SelectionPanel(state="collapsed"), time_panel(rrb))  # fmt: skip
 
 
 def run(args: argparse.Namespace) -> int:
