@@ -137,12 +137,14 @@ def test_mpc_predictions_on_axes_next_to_what_happened(head_brake):
     cav = [str(n) for n in hist["state_names"][1::2]].index("v_0")
     j = round(1.0 / (hist["pred_time"][1] - hist["pred_time"][0]))
     want_t = hist["t"] + hist["pred_time"][j]
-    want = hist["predicted_velocity"][0, :, j, cav][want_t <= hist["t"][-1]]
+    reached = want_t <= hist["t"][-1]
+    want = dict(zip((round(x * 1e9) for x in want_t[reached]),
+                    hist["predicted_velocity"][0, :, j, cav][reached], strict=True))  # fmt: skip
     got_t, got = _series(head_brake, "/mpc_head_brake/mpc/mpc/lookahead/velocity/ahead_1s")
-    assert len(got) == len(want)
-    np_t = [round(x * 1e9) for x in want_t[want_t <= hist["t"][-1]]]
-    assert got_t == np_t
-    assert all(abs(a - b) <= 1e-12 * abs(b) for a, b in zip(got, want, strict=True))
+    # decimated (drawn within 0.2 % of the span): simulated rows, their values, the extremes
+    assert 10 < len(got) < len(want) and set(got_t) <= set(want)
+    assert all(abs(v - want[k]) <= 1e-12 * abs(want[k]) for k, v in zip(got_t, got, strict=True))
+    assert min(got) == min(want.values()) and max(got) == max(want.values())
 
 
 def _series(path, entity):

@@ -457,7 +457,7 @@ def record_mpc_history(
         idx, tcol = rows(vals, flag=True)
         _send_series(rec, f"{base}/mpc/status", tcol, vals[idx], names, [*colors, COLOR_ALARM])
     if not joint:
-        _record_lookahead(rec, base, t, history, member)
+        _record_lookahead(rec, base, t, history, member, minmax)
     if joint:
         X = member("predicted_states", 2)
         history = {k: v for k, v in history.items() if k not in ("predicted_velocity",
@@ -516,14 +516,21 @@ LOOKAHEAD_S = (1.0, 3.0)
 
 
 def _record_lookahead(rec: Any, base: str, t: np.ndarray, history: Mapping[str, Any],
-                     member: Any) -> None:  # fmt: skip
+                     member: Any, minmax: bool = True) -> None:  # fmt: skip
     """The one-CAV MPC's predictions of its CAV on axes, against what happened: at the time
     ``t_k + L`` the value step ``k`` predicted ``L`` s ahead (``L`` in :data:`LOOKAHEAD_S`),
     next to the value the MPC measured at its steps, for the CAV's velocity
     (``mpc/lookahead/velocity``), its own spacing (``.../spacing``) and the model input
     (``.../u``: the planned input against the one applied). A prediction that keeps missing
     what follows shows as a gap between the curves. The joint MPC of several CAVs records its
-    plans as strips only (no ``v_0`` among its state names)."""
+    plans as strips only (no ``v_0`` among its state names). With ``minmax`` each series
+    keeps the rows that draw it within 0.2 % of its span
+    (:func:`~lcc_synth.recording.decimate.linear_rows`: smooth, a few hundred rows)."""
+
+    def thin(values: np.ndarray) -> np.ndarray:
+        if not minmax or values.size < 3:
+            return np.arange(values.shape[0])
+        return linear_rows(np.where(np.isfinite(values), values, np.nan))
     names = history.get("state_names")
     offsets = history.get("pred_time")
     pv, ps = member("predicted_velocity", 2), member("predicted_spacing", 2)
@@ -550,11 +557,14 @@ def _record_lookahead(rec: Any, base: str, t: np.ndarray, history: Mapping[str, 
         measured = pred[:, 0] if now is None else now
         entity = f"{base}/mpc/lookahead/{quantity}"
         label = "applied" if quantity == "u" else "measured"
-        _send_series(rec, f"{entity}/measured", t, measured[:, None], [label], [COLOR_CAV], [2.0])
+        idx = thin(measured)
+        _send_series(rec, f"{entity}/measured", t[idx], measured[idx, None], [label],
+                     [COLOR_CAV], [2.0])  # fmt: skip
         for k, (L, j) in enumerate(steps):
             if j >= pred.shape[1]:
                 continue
-            keep = t + offsets[j] <= t[-1]  # predictions of times the run reached
-            _send_series(rec, f"{entity}/ahead_{L:g}s", (t + offsets[j])[keep],
-                         pred[keep, j, None], [f"predicted {L:g} s before"],
+            reached = np.flatnonzero(t + offsets[j] <= t[-1])  # times the run reached
+            idx = reached[thin(pred[reached, j])] if reached.size else reached
+            _send_series(rec, f"{entity}/ahead_{L:g}s", (t + offsets[j])[idx],
+                         pred[idx, j, None], [f"predicted {L:g} s before"],
                          [_PALETTE[k % len(_PALETTE)]])  # fmt: skip
