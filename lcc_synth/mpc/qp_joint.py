@@ -36,7 +36,7 @@ equation unsolvable, so ``P`` is solved on the invariant hyperplane ``c x = 0``
 (``V = PlatoonModel.invariant_basis()``: ``P = V P_r V'``, ``P_r`` from ``(V'Ad V, V'Bd,
 V'QV)``); the controller projects the measured error state onto the hyperplane, where the
 prediction stays (``c x_k = c x_0 = 0`` for every input), so the QP never sees the conserved
-coordinate (see :mod:`lcc_synth.mpc.platoon`). Measured: the ring Riccati residual on the
+coordinate (see :mod:`lcc_synth.mpc.joint`). Measured: the ring Riccati residual on the
 hyperplane is at round-off (2e-13), ``|P c| <= 1e-14``.
 
 Measured (``benchmarks/bench_mpc_platoon.py``, N = 50, 2 shared cores): building the
@@ -57,17 +57,17 @@ from lcc_synth.mpc.formulation import Family, QPMatrices, _single_thread_blas, _
 from lcc_synth.mpc.settings import MPCSettings
 
 __all__ = [
-    "PlatoonLinearization",
-    "PlatoonFormulation",
-    "platoon_state_weights",
-    "platoon_terminal_cost",
-    "platoon_steady_direction",
-    "linearize_platoon",
+    "JointLinearization",
+    "JointFormulation",
+    "joint_state_weights",
+    "joint_terminal_cost",
+    "joint_steady_direction",
+    "linearize_joint",
 ]
 
 
 @dataclass(frozen=True, eq=False)
-class PlatoonLinearization:
+class JointLinearization:
     """The discrete prediction model of a platoon at one equilibrium velocity ``v_lin``.
 
     ``Bd`` is ``(nx, nu)`` (one column per CAV), ``Hd`` ``(nx,)`` (zero on a ring).
@@ -91,7 +91,7 @@ class PlatoonLinearization:
         return X
 
 
-def platoon_state_weights(model: PlatoonModel, settings: MPCSettings) -> np.ndarray:
+def joint_state_weights(model: PlatoonModel, settings: MPCSettings) -> np.ndarray:
     """Diagonal of ``Q``: ``velocity`` on every ``v_i``, ``spacing`` on every HDV's ``s_i`` and
     ``spacing_cav`` on every CAV's."""
     w = settings.weights
@@ -103,7 +103,7 @@ def platoon_state_weights(model: PlatoonModel, settings: MPCSettings) -> np.ndar
     return q
 
 
-def platoon_steady_direction(model: PlatoonModel) -> np.ndarray:
+def joint_steady_direction(model: PlatoonModel) -> np.ndarray:
     """``x_dir``: the platoon's equilibrium error state per unit head-velocity error (each
     vehicle's own ``(alpha2 - alpha3) / alpha1``; zero on a ring, which has no head)."""
     x = np.zeros(model.nx)
@@ -115,7 +115,7 @@ def platoon_steady_direction(model: PlatoonModel) -> np.ndarray:
     return x
 
 
-def platoon_terminal_cost(model: PlatoonModel, Ad: np.ndarray, Bd: np.ndarray, q: np.ndarray,
+def joint_terminal_cost(model: PlatoonModel, Ad: np.ndarray, Bd: np.ndarray, q: np.ndarray,
                           r: float) -> np.ndarray:
     """Terminal weight ``P`` of the stage cost ``x'diag(q)x + r |u|^2`` (discrete Riccati).
 
@@ -146,8 +146,8 @@ def platoon_terminal_cost(model: PlatoonModel, Ad: np.ndarray, Bd: np.ndarray, q
     return 0.5 * (P + P.T)
 
 
-def linearize_platoon(platoon: Platoon, v_lin: float, settings: MPCSettings
-                      ) -> PlatoonLinearization:
+def linearize_joint(platoon: Platoon, v_lin: float, settings: MPCSettings
+                      ) -> JointLinearization:
     """The platoon linearised at ``v_lin`` (every vehicle at its own equilibrium spacing) and
     its discrete prediction model and terminal cost."""
     with _single_thread_blas():
@@ -155,13 +155,13 @@ def linearize_platoon(platoon: Platoon, v_lin: float, settings: MPCSettings
             platoon = replace(platoon, v_star=float(v_lin), circumference=None)
         model = platoon_model(platoon, warn=False)
         Ad, Bd, Hd = model.discretize(settings.sample_time)
-        q = platoon_state_weights(model, settings)
-        P = platoon_terminal_cost(model, Ad, Bd, q, settings.weights.input)
-    return PlatoonLinearization(float(v_lin), model, Ad, Bd, Hd[:, 0].copy(), P,
-                                platoon_steady_direction(model))
+        q = joint_state_weights(model, settings)
+        P = joint_terminal_cost(model, Ad, Bd, q, settings.weights.input)
+    return JointLinearization(float(v_lin), model, Ad, Bd, Hd[:, 0].copy(), P,
+                                joint_steady_direction(model))
 
 
-class PlatoonFormulation:
+class JointFormulation:
     """The symbolic joint QP of ``nu`` CAVs (built once; :meth:`matrices` per linearisation).
 
     Parameters
@@ -258,10 +258,10 @@ class PlatoonFormulation:
                 rows_p.append(ca.MX(rp))
         A = ca.vertcat(*rows_u)
         Gp = ca.vertcat(*rows_p)
-        self._fun = ca.Function("mpc_platoon_qp", [Ad, Bd, Hd, P, xdir],
+        self._fun = ca.Function("mpc_joint_qp", [Ad, Bd, Hd, P, xdir],
                                 [ca.triu(H), A, Qp, Gp, ca.MX(q0)])
 
-    def matrices(self, lin: PlatoonLinearization) -> QPMatrices:
+    def matrices(self, lin: JointLinearization) -> QPMatrices:
         """Evaluate the QP data at ``lin`` (fixed sparsity pattern)."""
         H, A, Qp, Gp, q0 = self._fun(lin.Ad, lin.Bd, lin.Hd, lin.P, lin.x_dir)
         return QPMatrices(_to_csc(H), _to_csc(A), np.array(Qp), np.array(Gp),
