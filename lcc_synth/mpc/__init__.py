@@ -10,6 +10,34 @@
   a platoon or ring road (``[system] kind = "platoon" | "ring"``).
 - :mod:`lcc_synth.mpc.build`: the controller of a ``[controllers.NAME]`` table.
 - :mod:`lcc_synth.mpc.report`: its step record and statistics, the safety summary of runs.
+
+One entry point builds the MPC of any layout (:func:`~lcc_synth.mpc.build.build_mpc`, or a
+``type = "mpc"`` table): the single-CAV MPC for the paper's kinds, the joint MPC of every CAV
+for ``kind = "platoon" | "ring"``; both run on :mod:`lcc_synth.mpc.scaffold`.
+
+Feature matrix (``tests/test_mpc_layouts.py`` runs every "yes" on each layout through
+:func:`~lcc_synth.mpc.build.build_mpc` and checks every refusal)::
+
+    option                         one CAV (cf/fd/lcc/ccc)  platoon              ring
+    prediction.delay (HDV delays)  yes                      ConfigError          ConfigError
+    prediction.cav_lag             yes                      yes (each CAV)       yes (each CAV)
+    cav_lag with delay             ConfigError (cav_lag)    ConfigError (delay)  ConfigError (delay)
+    constraints.jerk_scale         yes                      yes (each CAV)       yes (each CAV)
+    solver.method osqp / daqp      yes                      yes                  yes
+    prediction.relinearize         yes                      yes                  yes
+    prediction.head = "accel"      yes                      yes                  no head: no effect
+    prediction.equilibrium         yes                      yes                  yes (mean speed)
+    n_model                        yes                      ConfigError          ConfigError
+    constraints.behind             yes                      ConfigError          ConfigError
+    weights.position               used by fd_lcc           ConfigError          ConfigError
+
+A refusal is one :class:`~lcc_synth.errors.ConfigError` whose field is the key
+(``controllers.NAME.prediction.delay``) and whose message names the layout ("... for a
+platoon or ring"). Why the three keys stay single-CAV: the joint MPC models every vehicle of
+the platoon (``n_model`` has nothing to cut) and constrains every CAV's own spacing ahead
+(``behind`` names HDVs of the paper's one-CAV index); ``weights.position`` weighs FD-LCC's
+``-p_0``, a state the platoon model has not. HDV delays on a platoon (the delay register of
+:mod:`lcc_synth.mpc.delay` over the platoon's rows and a per-CAV history) are not written yet.
 """
 
 from lcc_synth.mpc.build import build_mpc, mpc_controller_from_table

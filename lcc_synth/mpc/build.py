@@ -7,8 +7,6 @@ platoon form ``{u_i: {state: gain}}`` (default: each CAV's HDV law)."""
 
 from __future__ import annotations
 
-import numpy as np
-
 from lcc_synth.controllers.gains_files import read_fallback_file
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains
@@ -89,13 +87,6 @@ def _platoon_mpc(name, settings, system, named, source, field_name, table):
     """The joint MPC of every CAV of a platoon or ring (:mod:`lcc_synth.mpc.joint`); its
     fallback rows from ``fallback = "NAME"`` or ``fallback_gains_file`` (platoon gain form),
     else each CAV's HDV law."""
-    if np.any(np.asarray(settings.prediction.delay, dtype=float) != 0.0):
-        raise ConfigError(f"{field_name}.prediction.delay", "HDV delays in the prediction are "
-                          "implemented for the single-CAV MPC only; give 0 for a platoon or "
-                          "ring")  # fmt: skip
-    if settings.prediction.cav_lag:
-        raise ConfigError(f"{field_name}.prediction.cav_lag", "the actuator lag in the "
-                          "prediction is implemented for the single-CAV MPC only")  # fmt: skip
     model = system.linear_model(warn=False)
     fallback, fb_source = None, "hdv_law"
     if named is not None:

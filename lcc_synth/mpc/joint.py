@@ -38,9 +38,15 @@ single-CAV MPC (:mod:`lcc_synth.mpc.solver`). Per sample:
    CAV holds its last command. Each CAV's outcome and the failure reason are counted
    (:meth:`JointMPCController.stats`, ``per_cav``).
 
-Not supported for platoons (a ConfigError naming the key): ``n_model`` (the joint MPC models
-every vehicle), ``constraints.behind`` (every CAV's own spacing is constrained),
-``weights.position`` (FD-LCC only). The controller returns ``(batch,)`` with one CAV and
+**Actuator lag** (``prediction.cav_lag``): each CAV's acceleration ``a_i`` is a state of
+the prediction (:mod:`lcc_synth.mpc.qp_joint`), measured at each sample
+(``Observation.cav_acceleration``; without lag in the plant: the CAV's last command), as in
+the single-CAV MPC (:mod:`lcc_synth.mpc.lag`).
+
+Not supported for platoons and rings (a ConfigError naming the key; the feature matrix is in
+:mod:`lcc_synth.mpc`): ``prediction.delay``, ``n_model`` (the joint MPC models every
+vehicle), ``constraints.behind`` (every CAV's own spacing is constrained), ``weights.position``
+(FD-LCC only). The controller returns ``(batch,)`` with one CAV and
 ``(batch, n_cav)`` with several (CAV order of the platoon).
 
 Measured (``benchmarks/bench_mpc_platoon.py``, N = 50, Ts = 0.1 s, 2 shared cores): the
@@ -62,6 +68,7 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import free_speed
 from lcc_synth.models.platoon import PlatoonGains
 from lcc_synth.mpc.comfort import jerk_bound
+from lcc_synth.mpc.delay import pad
 from lcc_synth.mpc.formulation import Family, check_horizon
 from lcc_synth.mpc.qp_joint import JointFormulation, joint_state_weights, linearize_joint
 from lcc_synth.mpc.report import new_step_record, step_statistics
@@ -125,6 +132,10 @@ class JointMPCController(MPCScaffold):
                               "CAV's own spacing ahead is constrained")  # fmt: skip
         if settings.weights.position != 0.0:
             raise ConfigError("weights.position", "applies to fd_lcc only; must be 0 here")
+        if np.any(np.asarray(settings.prediction.delay, dtype=float) != 0.0):
+            raise ConfigError("prediction.delay", "HDV delays in the prediction are "
+                              "implemented for the single-CAV MPC only; give 0 for a platoon "
+                              "or ring")  # fmt: skip
         self.kind = system.kind
         self.ring = pl.ring
         self.positions = tuple(pl.cavs)
@@ -143,9 +154,10 @@ class JointMPCController(MPCScaffold):
         self._families = [
             Family(i, 2 * i - 2, 2 * i - 1, c.t_gap, c.s_min) for i in self.positions
         ] if c.spacing_ahead else []
-        check_horizon(settings.horizon, model.nx, len(self._families))
+        nz = self._lin0.Ad.shape[0]  # model.nx, plus nu with prediction.cav_lag
+        check_horizon(settings.horizon, nz, len(self._families))
         self.formulation = JointFormulation(
-            model.nx, self.nu, settings, joint_state_weights(model, settings), self._families
+            nz, self.nu, settings, pad(joint_state_weights(model, settings), nz), self._families
         )
         self._shift_z, self._shift_y = self.formulation.shift_indices()
         if fallback is None:
@@ -257,6 +269,10 @@ class JointMPCController(MPCScaffold):
         if not self.ring:
             _, d = head_prediction(mem, v_ref, N, self.sample_time, pred,
                                    float(self._a_min.min()), float(self._a_max.max()))
+        if pred.cav_lag:  # each CAV's acceleration: measured, else its last command (no lag)
+            acc = getattr(obs, "cav_acceleration", None)
+            a = mem.past[0] if acc is None else np.asarray(acc, float)[b].reshape(-1)[: self.nu]
+            x = np.concatenate([x, a])
         return x, d, s_ref, v, s
 
     def _step(self, b: int, mem: _Member, obs) -> np.ndarray:
@@ -314,7 +330,7 @@ class JointMPCController(MPCScaffold):
             for k in range(self.nu):
                 row = mem.fb_K[k]
                 used = row != 0.0
-                u = float(row[used] @ x0[used]) + float(mem.fb_kh[k]) * d0
+                u = float(row[used] @ x0[: row.size][used]) + float(mem.fb_kh[k]) * d0
                 if math.isfinite(u):
                     cmd[k] = float(np.clip(u, self._a_min[k], self._a_max[k]))
                     code[k] = 2
@@ -383,7 +399,9 @@ class JointMPCController(MPCScaffold):
                 U = mem.hist["plan"][k]
                 if np.all(np.isfinite(U)):
                     X[b, k] = mem.hist["lin"][k].predict(mem.hist["x0"][k], mem.hist["d"][k], U)
-        out["predicted_states"] = X
+        nxm = self._lin0.model.nx  # the lag states (prediction.cav_lag) are left out
+        out["x0"] = out["x0"][..., :nxm]
+        out["predicted_states"] = X[..., :nxm]
         out["state_names"] = np.array(self._lin0.model.state_names)
         return out
 

@@ -5,9 +5,16 @@ CAV, each HDV linearised at its own equilibrium) discretised exactly (ZOH) at ``
 
     x_{k+1} = Ad x_k + Bd u_k + Hd d_k,       u_k = (u_{1,k} .. u_{nu,k}),  k = 0 .. N-1
 
-(ring: ``Hd = 0``, no head). Each CAV's input is its whole acceleration (eq. 9), so the input
-constraint is on ``u`` itself. The QP is condensed, with the same structure as the single-CAV
-QP of :mod:`lcc_synth.mpc.formulation` (one CAV: the same variables, rows and order):
+(ring: ``Hd = 0``, no head). With ``prediction.cav_lag = tau > 0`` the state is
+``[x; a_1 .. a_nu]``, each CAV's acceleration lagging its command (``da_i/dt = (u_i - a_i) /
+tau``, :func:`lcc_synth.models.lag.with_actuator_lag`), discretised exactly the same way; the
+``a_i`` carry no weight and no steady-state offset, and on the ring the terminal cost's
+invariant hyperplane is extended by them (they do not change the total spacing). Checked
+against the lagged ODE integrated by scipy and against the single-CAV lag-aware MPC on a
+platoon with one CAV (``tests/test_mpc_layouts.py``). Each CAV's input is its whole
+acceleration (eq. 9), so the input constraint is on ``u`` itself. The QP is condensed, with
+the same structure as the single-CAV QP of :mod:`lcc_synth.mpc.formulation` (one CAV: the
+same variables, rows and order):
 ``z = [u_0 .. u_{N-1}, e_1 .. e_{F N}]`` (``u_k`` the ``nu`` CAV inputs of step ``k``, one
 spacing slack per CAV and step, family-major), and
 
@@ -52,7 +59,9 @@ import numpy as np
 import scipy.linalg as sla
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.platoon import Platoon, PlatoonModel, platoon_model
+from lcc_synth.models.lag import with_actuator_lag
+from lcc_synth.models.platoon import Platoon, PlatoonModel, discretize, platoon_model
+from lcc_synth.mpc.delay import pad
 from lcc_synth.mpc.formulation import Family, QPMatrices, _single_thread_blas, _to_csc
 from lcc_synth.mpc.settings import MPCSettings
 
@@ -80,6 +89,7 @@ class JointLinearization:
     Hd: np.ndarray
     P: np.ndarray
     x_dir: np.ndarray
+    cav_lag: float = 0.0  # > 0: the last nu states are the CAVs' accelerations
 
     def predict(self, x0: np.ndarray, d: np.ndarray, U: np.ndarray) -> np.ndarray:
         """Predicted states ``(N+1, nx)`` for inputs ``U`` ``(N, nu)`` and head errors ``d``."""
@@ -128,6 +138,8 @@ def joint_terminal_cost(model: PlatoonModel, Ad: np.ndarray, Bd: np.ndarray, q: 
         When the Riccati equation has no stabilising solution.
     """
     V = model.invariant_basis()
+    if Ad.shape[0] > V.shape[0]:  # the lag states a_i: unconstrained by the conservation
+        V = sla.block_diag(V, np.eye(Ad.shape[0] - V.shape[0]))
     A_r = V.T @ Ad @ V
     B_r = V.T @ Bd
     Q_r = V.T @ np.diag(q) @ V
@@ -154,11 +166,19 @@ def linearize_joint(platoon: Platoon, v_lin: float, settings: MPCSettings
         if float(v_lin) != float(platoon.v_star):
             platoon = replace(platoon, v_star=float(v_lin), circumference=None)
         model = platoon_model(platoon, warn=False)
-        Ad, Bd, Hd = model.discretize(settings.sample_time)
-        q = joint_state_weights(model, settings)
+        q, x_dir = joint_state_weights(model, settings), joint_steady_direction(model)
+        tau = float(settings.prediction.cav_lag)
+        if tau == 0.0:
+            Ad, Bd, Hd = model.discretize(settings.sample_time)
+        else:  # each CAV's acceleration a_i appended to the state (module docstring)
+            lag = with_actuator_lag(model.A, model.B, model.H,
+                                    [model.index(f"v_{i}") for i in model.cavs], tau,
+                                    model.state_names)  # fmt: skip
+            Ad, BH = discretize(lag.A, np.hstack([lag.B, lag.H]), settings.sample_time)
+            Bd, Hd = BH[:, : lag.B.shape[1]], BH[:, lag.B.shape[1]:]
+            q, x_dir = pad(q, Ad.shape[0]), pad(x_dir, Ad.shape[0])
         P = joint_terminal_cost(model, Ad, Bd, q, settings.weights.input)
-    return JointLinearization(float(v_lin), model, Ad, Bd, Hd[:, 0].copy(), P,
-                                joint_steady_direction(model))
+    return JointLinearization(float(v_lin), model, Ad, Bd, Hd[:, 0].copy(), P, x_dir, tau)
 
 
 class JointFormulation:
