@@ -18,7 +18,7 @@ from lcc_synth.experiments.spec import load_spec
 from lcc_synth.models.hdv import OVM, linear_coefficients
 from lcc_synth.models.platoon import Platoon
 from lcc_synth.mpc import JointMPCController, MPCController, build_mpc
-from lcc_synth.mpc.qp_joint import linearize_joint
+from lcc_synth.mpc.joint_prediction import linearize_joint
 from lcc_synth.mpc.settings import MPCSettings, Prediction
 from lcc_synth.problem import System
 from lcc_synth.simulation.engine import simulate

@@ -19,7 +19,7 @@ from lcc_synth.models.hdv import OVM, linear_coefficients
 from lcc_synth.models.platoon import Platoon, PlatoonGains, platoon_model
 from lcc_synth.mpc import MPCController
 from lcc_synth.mpc.joint import JointMPCController
-from lcc_synth.mpc.qp_joint import joint_state_weights
+from lcc_synth.mpc.joint_prediction import joint_state_weights
 from lcc_synth.mpc.settings import Constraints, MPCSettings, Prediction, SolverSettings, Weights
 from lcc_synth.problem import System, system_from
 

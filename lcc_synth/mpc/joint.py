@@ -1,7 +1,9 @@
 """One MPC for every CAV of a mixed platoon or a ring road (``[system] kind = "platoon" |
 "ring"``, a ``type = "mpc"`` controller).
 
-The joint QP is :mod:`lcc_synth.mpc.qp_joint` (CasADi, built once); one OSQP workspace per
+The joint QP is the one condensed QP of :class:`lcc_synth.mpc.formulation.Formulation` with
+one input per CAV, on the prediction model of :mod:`lcc_synth.mpc.joint_prediction` (CasADi,
+built once); one OSQP workspace per
 batch member is set up once and each sample only updates vectors (initial state, equilibrium,
 bounds), warm-started from the shifted previous solution, with the status checked as in the
 single-CAV MPC (:mod:`lcc_synth.mpc.solver`). Per sample:
@@ -21,7 +23,7 @@ single-CAV MPC (:mod:`lcc_synth.mpc.solver`). Per sample:
    to ``C`` but the ``s_eq,i(v_eq)`` do not (unless ``v_eq`` is the ring velocity), and this
    constant offset lies in the conserved direction ``c`` (total spacing) that no input
    changes. Projected out, the prediction stays on the hyperplane ``c x = 0`` where the
-   terminal cost is defined (:func:`~lcc_synth.mpc.qp_joint.joint_terminal_cost`) and the
+   terminal cost is defined (:func:`~lcc_synth.mpc.joint_prediction.joint_terminal_cost`) and the
    offset cannot bias the solution. Equivalently the reference spacings are ``s_eq,i + delta``
    with ``delta = (C - sum s_eq) / N``; the absolute safe-spacing bounds use the same
    reference, so they stay exact.
@@ -39,7 +41,7 @@ single-CAV MPC (:mod:`lcc_synth.mpc.solver`). Per sample:
    (:meth:`JointMPCController.stats`, ``per_cav``).
 
 **Actuator lag** (``prediction.cav_lag``): each CAV's acceleration ``a_i`` is a state of
-the prediction (:mod:`lcc_synth.mpc.qp_joint`), measured at each sample
+the prediction (:mod:`lcc_synth.mpc.joint_prediction`), measured at each sample
 (``Observation.cav_acceleration``; without lag in the plant: the CAV's last command), as in
 the single-CAV MPC (:mod:`lcc_synth.mpc.lag`).
 
@@ -69,8 +71,8 @@ from lcc_synth.models.hdv import free_speed
 from lcc_synth.models.platoon import PlatoonGains
 from lcc_synth.mpc.comfort import jerk_bound
 from lcc_synth.mpc.delay import pad
-from lcc_synth.mpc.formulation import Family, check_horizon
-from lcc_synth.mpc.qp_joint import JointFormulation, joint_state_weights, linearize_joint
+from lcc_synth.mpc.formulation import Family, Formulation, check_horizon
+from lcc_synth.mpc.joint_prediction import joint_state_weights, linearize_joint
 from lcc_synth.mpc.report import new_step_record, step_statistics
 from lcc_synth.mpc.scaffold import (
     STATUS_CODES,
@@ -156,8 +158,9 @@ class JointMPCController(MPCScaffold):
         ] if c.spacing_ahead else []
         nz = self._lin0.Ad.shape[0]  # model.nx, plus nu with prediction.cav_lag
         check_horizon(settings.horizon, nz, len(self._families))
-        self.formulation = JointFormulation(
-            nz, self.nu, settings, pad(joint_state_weights(model, settings), nz), self._families
+        self.formulation = Formulation(
+            self.kind, nz, settings, pad(joint_state_weights(model, settings), nz),
+            self._families, nu=self.nu,
         )
         self._shift_z, self._shift_y = self.formulation.shift_indices()
         if fallback is None:

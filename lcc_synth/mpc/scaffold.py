@@ -5,9 +5,10 @@ statistics, the status codes and the pickling rule.
 :class:`MPCScaffold` is the base of the single-CAV MPC (:class:`~lcc_synth.mpc.controller.
 MPCController`, one input and the paper's error state of ``-m..n_model``) and of the joint MPC
 (:class:`~lcc_synth.mpc.joint.JointMPCController`, one input per CAV of a platoon or ring).
-A layout supplies its QP (:mod:`lcc_synth.mpc.formulation` or :mod:`lcc_synth.mpc.qp_joint`:
-both expose ``param``, ``bounds``, ``matrices``, ``shift_indices``), its state, its fallback
-chain and its history; the loop here runs each batch member's step, never raises inside it
+Both use the one condensed QP of :class:`~lcc_synth.mpc.formulation.Formulation` (``nu``
+inputs); a layout supplies its prediction model (:func:`~lcc_synth.mpc.formulation.linearize`
+or :func:`~lcc_synth.mpc.joint_prediction.linearize_joint`), its state, its fallback chain and
+its history; the loop here runs each batch member's step, never raises inside it
 (an exception is counted and the member holds its last command), and keeps the step record of
 :mod:`lcc_synth.mpc.report`. Moving this code here from the two controllers changed no
 operation, so every pinned number is bit for bit the same (``tests/test_mpc*.py``).

@@ -1,4 +1,8 @@
-"""The joint MPC QP of every CAV of a platoon or ring, formulated once with CasADi.
+"""The joint MPC's prediction model of every CAV of a platoon or ring, and the shape of its QP.
+
+The QP itself is :class:`lcc_synth.mpc.formulation.Formulation` with one input per CAV (the
+one condensed formulation for any number of CAVs); this module gives it the platoon's
+discrete model, stage weights, steady direction and terminal cost.
 
 Prediction model: the platoon model of :mod:`lcc_synth.models.platoon` (one input column per
 CAV, each HDV linearised at its own equilibrium) discretised exactly (ZOH) at ``Ts``::
@@ -62,12 +66,11 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.models.lag import with_actuator_lag
 from lcc_synth.models.platoon import Platoon, PlatoonModel, discretize, platoon_model
 from lcc_synth.mpc.delay import pad
-from lcc_synth.mpc.formulation import Family, QPMatrices, _single_thread_blas, _to_csc
+from lcc_synth.mpc.formulation import _single_thread_blas
 from lcc_synth.mpc.settings import MPCSettings
 
 __all__ = [
     "JointLinearization",
-    "JointFormulation",
     "joint_state_weights",
     "joint_terminal_cost",
     "joint_steady_direction",
@@ -179,160 +182,3 @@ def linearize_joint(platoon: Platoon, v_lin: float, settings: MPCSettings
             q, x_dir = pad(q, Ad.shape[0]), pad(x_dir, Ad.shape[0])
         P = joint_terminal_cost(model, Ad, Bd, q, settings.weights.input)
     return JointLinearization(float(v_lin), model, Ad, Bd, Hd[:, 0].copy(), P, x_dir, tau)
-
-
-class JointFormulation:
-    """The symbolic joint QP of ``nu`` CAVs (built once; :meth:`matrices` per linearisation).
-
-    Parameters
-    ----------
-    nx, nu : int
-        Number of states and of CAVs (inputs).
-    settings : MPCSettings
-    q : numpy.ndarray
-        Diagonal of the stage weight ``Q``.
-    families : list of Family
-        Soft spacing constraints (one per CAV with ``spacing_ahead``).
-    """
-
-    def __init__(self, nx: int, nu: int, settings: MPCSettings, q, families: list[Family]):
-        import casadi as ca
-
-        self.nx, self.nu = nx, nu
-        self.N = N = settings.horizon
-        self.n_input = NU = N * nu
-        self.families = list(families)
-        F = len(self.families)
-        FN = F * N
-        self.nz = NU + FN
-        c = settings.constraints
-        self.W = W = max(1, int(round(c.jerk_window / settings.sample_time))) \
-            if c.jerk_scale > 0 else 0
-        self.window = W * settings.sample_time
-        self.nc = NU + 2 * FN + (NU if W else 0)
-        self.n_param = npar = nx + N + nu + W * nu
-        w = settings.weights
-        o_prev = nx + N  # u_{-1} block; c_{-j} block at o_prev + j nu
-
-        Ad = ca.MX.sym("Ad", nx, nx)
-        Bd = ca.MX.sym("Bd", nx, nu)
-        Hd = ca.MX.sym("Hd", nx, 1)
-        P = ca.MX.sym("P", nx, nx)
-        xdir = ca.MX.sym("xdir", nx, 1)
-        Qd = ca.DM(np.diag(np.asarray(q, dtype=float)))
-
-        def sel(rows: int, cols: int, start: int):
-            """``rows x cols`` selector of the ``rows`` entries from ``start``."""
-            return ca.DM(ca.Sparsity.triplet(rows, cols, list(range(rows)),
-                                             list(range(start, start + rows))), 1.0)
-
-        Xu = [ca.MX(nx, NU)]
-        Xp = [ca.MX(ca.horzcat(ca.DM.eye(nx), ca.DM(nx, npar - nx)))]
-        for k in range(N):
-            Xu.append(Ad @ Xu[k] + Bd @ sel(nu, NU, k * nu))
-            Xp.append(Ad @ Xp[k] + Hd @ sel(1, npar, nx + k))
-
-        Huu = ca.MX(NU, NU)
-        Qp_u = ca.MX(NU, npar)
-
-        def add(Ru, Rp, Wt):
-            nonlocal Huu, Qp_u
-            WRu = Wt @ Ru
-            Huu += 2 * (Ru.T @ WRu)
-            Qp_u += 2 * (WRu.T @ Rp)
-
-        for k in range(1, N + 1):
-            i = min(k, N - 1)
-            add(Xu[k], Xp[k] - xdir @ sel(1, npar, nx + i), Qd if k < N else P)
-        Wu, Wp = ca.MX(ca.DM.eye(NU)), ca.MX(NU, npar)
-        add(Wu, Wp, ca.DM(w.input))
-        if w.jerk > 0:
-            prev_u = ca.vertcat(ca.MX(nu, NU), Wu[: NU - nu, :])
-            prev_p = ca.vertcat(ca.MX(sel(nu, npar, o_prev)), Wp[: NU - nu, :])
-            add(Wu - prev_u, Wp - prev_p, ca.DM(w.jerk))
-
-        H = ca.blockcat([[Huu, ca.MX(NU, FN)],
-                         [ca.MX(FN, NU), ca.MX(2 * w.slack_quadratic * ca.DM.eye(FN))]])
-        Qp = ca.vertcat(Qp_u, ca.MX(FN, npar))
-        q0 = ca.vertcat(ca.DM(NU, 1), ca.DM.ones(FN, 1) * w.slack)
-        rows_u = [ca.MX(ca.DM.eye(self.nz)[:NU, :])]
-        rows_p = [ca.MX(NU, npar)]
-        for f, fam in enumerate(self.families):
-            cf = ca.DM(ca.Sparsity.triplet(1, nx, [0, 0], [fam.s_index, fam.v_index]),
-                       [1.0, -fam.t_gap])  # fmt: skip
-            slack = ca.DM(ca.Sparsity.triplet(N, FN, list(range(N)),
-                                              [f * N + k for k in range(N)]), 1.0)  # fmt: skip
-            rows_u.append(ca.horzcat(ca.vertcat(*[cf @ Xu[k] for k in range(1, N + 1)]), slack))
-            rows_p.append(ca.vertcat(*[cf @ Xp[k] for k in range(1, N + 1)]))
-        rows_u.append(ca.horzcat(ca.MX(FN, NU), ca.MX(ca.DM.eye(FN))))
-        rows_p.append(ca.MX(FN, npar))
-        if W:  # comfort rows u_{i,k} - u_{i,k-W}; for k < W the past command c_{-(W-k)}
-            for k in range(N):
-                ru = sel(nu, self.nz, k * nu)
-                rp = ca.DM(nu, npar)
-                if k >= W:
-                    ru = ru - sel(nu, self.nz, (k - W) * nu)
-                else:
-                    rp = rp - sel(nu, npar, o_prev + (W - k) * nu)
-                rows_u.append(ca.MX(ru))
-                rows_p.append(ca.MX(rp))
-        A = ca.vertcat(*rows_u)
-        Gp = ca.vertcat(*rows_p)
-        self._fun = ca.Function("mpc_joint_qp", [Ad, Bd, Hd, P, xdir],
-                                [ca.triu(H), A, Qp, Gp, ca.MX(q0)])
-
-    def matrices(self, lin: JointLinearization) -> QPMatrices:
-        """Evaluate the QP data at ``lin`` (fixed sparsity pattern)."""
-        H, A, Qp, Gp, q0 = self._fun(lin.Ad, lin.Bd, lin.Hd, lin.P, lin.x_dir)
-        return QPMatrices(_to_csc(H), _to_csc(A), np.array(Qp), np.array(Gp),
-                          np.array(q0).reshape(-1), np.zeros(self.nc))
-
-    @property
-    def jerk_rows(self) -> slice:
-        """Rows of the comfort constraints (empty without them)."""
-        return slice(self.nc - (self.n_input if self.W else 0), self.nc)
-
-    def param(self, x0: np.ndarray, d: np.ndarray, u_prev: np.ndarray,
-              past: np.ndarray | None = None) -> np.ndarray:
-        """``p = [x0, d, u_prev, c_{-1} .. c_{-W}]``; ``past`` is ``(>= W, nu)``, newest first
-        (default: every past command equal to ``u_prev``)."""
-        u_prev = np.asarray(u_prev, float).reshape(self.nu)
-        if past is None:
-            c = np.tile(u_prev, self.W)
-        else:
-            c = np.asarray(past, float)[: self.W].reshape(-1)
-        return np.concatenate([x0, d, u_prev, c])
-
-    def bounds(self, qp: QPMatrices, p: np.ndarray, a_min, a_max, fam_bounds: np.ndarray,
-               jerk=np.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(q, l, u)`` of OSQP: ``a_min``, ``a_max``, ``jerk`` per CAV (scalars broadcast),
-        ``fam_bounds`` ``(F, N)`` right-hand sides of the spacing rows (``-inf``: off)."""
-        NU, FN = self.n_input, len(self.families) * self.N
-        off = qp.Gp @ p + qp.g0
-        lo = np.empty(self.nc)
-        hi = np.empty(self.nc)
-        lo[:NU] = np.tile(np.broadcast_to(np.asarray(a_min, float), self.nu), self.N)
-        hi[:NU] = np.tile(np.broadcast_to(np.asarray(a_max, float), self.nu), self.N)
-        lo[NU:NU + FN] = np.asarray(fam_bounds, float).reshape(-1)
-        hi[NU:NU + FN] = np.inf
-        lo[NU + FN:] = 0.0
-        hi[NU + FN:] = np.inf
-        if self.W:
-            J = np.tile(np.broadcast_to(np.asarray(jerk, float), self.nu), self.N) * self.window
-            lo[self.jerk_rows] = -J
-            hi[self.jerk_rows] = J
-        return qp.Qp @ p + qp.q0, lo - off, hi - off
-
-    def shift_indices(self) -> tuple[np.ndarray, np.ndarray]:
-        """Index arrays that shift a primal / dual solution by one step (warm start)."""
-        N, nu = self.N, self.nu
-        step = np.minimum(np.arange(N) + 1, N - 1)
-        blk_u = (step[:, None] * nu + np.arange(nu)[None, :]).reshape(-1)
-        FN = len(self.families) * N
-        fam = np.concatenate([step + f * N for f in range(len(self.families))]) \
-            if FN else np.zeros(0, int)
-        zi = np.concatenate([blk_u, self.n_input + fam]).astype(int)
-        parts = [blk_u, self.n_input + fam, self.n_input + FN + fam]
-        if self.W:
-            parts.append(self.n_input + 2 * FN + blk_u)
-        return zi, np.concatenate(parts).astype(int)
