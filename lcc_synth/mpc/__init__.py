@@ -20,9 +20,9 @@ Feature matrix (``tests/test_mpc_layouts.py`` runs every "yes" on each layout th
 :func:`~lcc_synth.mpc.build.build_mpc` and checks every refusal)::
 
     option                         one CAV (cf/fd/lcc/ccc)  platoon              ring
-    prediction.delay (HDV delays)  yes                      ConfigError          ConfigError
+    prediction.delay (HDV delays)  yes                      yes                  yes
     prediction.cav_lag             yes                      yes (each CAV)       yes (each CAV)
-    cav_lag with delay             ConfigError (cav_lag)    ConfigError (delay)  ConfigError (delay)
+    cav_lag with delay             ConfigError (cav_lag)    ConfigError (cav_lag)  (cav_lag)
     constraints.jerk_scale         yes                      yes (each CAV)       yes (each CAV)
     solver.method osqp / daqp      yes                      yes                  yes
     prediction.relinearize         yes                      yes                  yes
@@ -33,12 +33,13 @@ Feature matrix (``tests/test_mpc_layouts.py`` runs every "yes" on each layout th
     weights.position               used by fd_lcc           ConfigError          ConfigError
 
 A refusal is one :class:`~lcc_synth.errors.ConfigError` whose field is the key
-(``controllers.NAME.prediction.delay``) and whose message names the layout ("... for a
-platoon or ring"). Why the three keys stay single-CAV: the joint MPC models every vehicle of
+(``controllers.NAME.n_model``) and whose message names the layout ("... for a platoon or
+ring"). Why the three keys stay single-CAV: the joint MPC models every vehicle of
 the platoon (``n_model`` has nothing to cut) and constrains every CAV's own spacing ahead
 (``behind`` names HDVs of the paper's one-CAV index); ``weights.position`` weighs FD-LCC's
-``-p_0``, a state the platoon model has not. HDV delays on a platoon (the delay register of
-:mod:`lcc_synth.mpc.delay` over the platoon's rows and a per-CAV history) are not written yet.
+``-p_0``, a state the platoon model has not. The actuator lag and HDV delays in one
+prediction are not written for any layout (the lag state and the delay register would have
+to share the augmented state).
 """
 
 from lcc_synth.mpc.build import build_mpc, mpc_controller_from_table

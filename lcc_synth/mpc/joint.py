@@ -45,11 +45,16 @@ the prediction (:mod:`lcc_synth.mpc.joint_prediction`), measured at each sample
 (``Observation.cav_acceleration``; without lag in the plant: the CAV's last command), as in
 the single-CAV MPC (:mod:`lcc_synth.mpc.lag`).
 
+**HDV delays** (``prediction.delay``, one delay or one per HDV front to tail): the delay
+register of :mod:`lcc_synth.mpc.delay` over the platoon's HDV rows
+(:func:`~lcc_synth.mpc.joint_prediction.joint_delay_model`), filled with the observed past as
+errors from the current reference spacings (ring: the projected ones).
+
 Not supported for platoons and rings (a ConfigError naming the key; the feature matrix is in
-:mod:`lcc_synth.mpc`): ``prediction.delay``, ``n_model`` (the joint MPC models every
-vehicle), ``constraints.behind`` (every CAV's own spacing is constrained), ``weights.position``
-(FD-LCC only). The controller returns ``(batch,)`` with one CAV and
-``(batch, n_cav)`` with several (CAV order of the platoon).
+:mod:`lcc_synth.mpc`): ``n_model`` (the joint MPC models every vehicle), ``constraints.behind``
+(every CAV's own spacing is constrained), ``weights.position`` (FD-LCC only). The controller
+returns ``(batch,)`` with one CAV and ``(batch, n_cav)`` with several (CAV order of the
+platoon).
 
 Measured (``benchmarks/bench_mpc_platoon.py``, N = 50, Ts = 0.1 s, 2 shared cores): the
 two-CAV DeeP-LCC platoon in its brake scenario takes 1.5 ms per step (median; OSQP 1.3 ms)
@@ -93,6 +98,7 @@ class _Member(LoopState):
     """Loop state of one batch member: the shared fields plus each CAV's previous input."""
 
     u_prev: np.ndarray | None = None
+    delay: Any = None  # delay.StateHistory (past observed states) with prediction.delay
 
 
 class JointMPCController(MPCScaffold):
@@ -134,10 +140,6 @@ class JointMPCController(MPCScaffold):
                               "CAV's own spacing ahead is constrained")  # fmt: skip
         if settings.weights.position != 0.0:
             raise ConfigError("weights.position", "applies to fd_lcc only; must be 0 here")
-        if np.any(np.asarray(settings.prediction.delay, dtype=float) != 0.0):
-            raise ConfigError("prediction.delay", "HDV delays in the prediction are "
-                              "implemented for the single-CAV MPC only; give 0 for a platoon "
-                              "or ring")  # fmt: skip
         self.kind = system.kind
         self.ring = pl.ring
         self.positions = tuple(pl.cavs)
@@ -150,7 +152,8 @@ class JointMPCController(MPCScaffold):
         try:
             self._lin0 = linearize_joint(pl, self._clip_v(pl.v_star), settings)
         except ConfigError as err:
-            raise ConfigError(f"weights ({err.field})", err.message) from None
+            where = err.field if err.field.startswith("prediction.") else f"weights ({err.field})"
+            raise ConfigError(where, err.message) from None
         model = self._lin0.model
         c = settings.constraints
         self._families = [
@@ -228,7 +231,8 @@ class JointMPCController(MPCScaffold):
             self._members.append(_Member(
                 solver, lin, qp, K, kh, np.zeros(W), v_eq=v0, u_prev=np.zeros(self.nu),
                 past=np.zeros((max(1, self.formulation.W), self.nu)),
-                hist={k: [] for k in _HIST_KEYS}))  # fmt: skip
+                hist={k: [] for k in _HIST_KEYS},
+                delay=None if lin.delay is None else lin.delay.history()))  # fmt: skip
 
     def __call__(self, obs) -> np.ndarray:
         """The commands of one sample: ``(batch,)`` with one CAV, ``(batch, n_cav)`` with
@@ -270,12 +274,17 @@ class JointMPCController(MPCScaffold):
         N = self.settings.horizon
         d = np.zeros(N)
         if not self.ring:
-            _, d = head_prediction(mem, v_ref, N, self.sample_time, pred,
-                                   float(self._a_min.min()), float(self._a_max.max()))
+            d0, d = head_prediction(mem, v_ref, N, self.sample_time, pred,
+                                    float(self._a_min.min()), float(self._a_max.max()))
+        else:
+            d0 = 0.0
         if pred.cav_lag:  # each CAV's acceleration: measured, else its last command (no lag)
             acc = getattr(obs, "cav_acceleration", None)
             a = mem.past[0] if acc is None else np.asarray(acc, float)[b].reshape(-1)[: self.nu]
             x = np.concatenate([x, a])
+        if mem.delay is not None:  # past observations as errors from the current equilibrium
+            col = np.minimum(mem.delay.columns, s.size * 2 - 1) // 2
+            x = mem.delay.push(x, d0, s_ref[col], v_eq)
         return x, d, s_ref, v, s
 
     def _step(self, b: int, mem: _Member, obs) -> np.ndarray:
