@@ -82,6 +82,7 @@ __all__ = [
     "Formulation",
     "state_weights",
     "terminal_cost",
+    "riccati",
     "linearize",
     "steady_direction",
 ]
@@ -183,19 +184,32 @@ def terminal_cost(
         k = np.asarray(K_law, float)[keep].reshape(-1, 1)
         Q_r = Q_r + r * (k @ k.T)
         S_r = r * k
+    P = np.zeros((nz, nz))
+    P[np.ix_(keep, keep)] = riccati(A_r, B_r, Q_r, np.array([[r]]), S_r)
+    return P
+
+
+def riccati(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray,
+            S: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+    """The symmetrised stabilising solution of the discrete Riccati equation (SciPy's
+    ``solve_discrete_are``) of every layout's terminal cost.
+
+    Raises
+    ------
+    ConfigError
+        ``weights`` when there is no stabilising or no finite solution.
+    """
     try:
-        P_r = sla.solve_discrete_are(A_r, B_r, Q_r, np.array([[r]]), s=S_r)
+        P = sla.solve_discrete_are(A, B, Q, R, s=S)
     except (np.linalg.LinAlgError, ValueError) as err:
         raise ConfigError(
             "weights",
             f"the terminal Riccati equation has no stabilising solution ({err}); "
             "give positive velocity and spacing weights",
         ) from None
-    if not np.all(np.isfinite(P_r)):
+    if not np.all(np.isfinite(P)):
         raise ConfigError("weights", "the terminal Riccati solution is not finite")
-    P = np.zeros((nz, nz))
-    P[np.ix_(keep, keep)] = 0.5 * (P_r + P_r.T)
-    return P
+    return 0.5 * (P + P.T)
 
 
 _BLAS_CONTROLLER = None

@@ -68,7 +68,7 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.models.lag import with_actuator_lag
 from lcc_synth.models.platoon import Platoon, PlatoonModel, discretize, platoon_model
 from lcc_synth.mpc.delay import DelayModel, delay_model, delay_samples, pad
-from lcc_synth.mpc.formulation import _single_thread_blas
+from lcc_synth.mpc.formulation import _single_thread_blas, riccati
 from lcc_synth.mpc.settings import MPCSettings
 
 __all__ = [
@@ -145,23 +145,13 @@ def joint_terminal_cost(model: PlatoonModel, Ad: np.ndarray, Bd: np.ndarray, q: 
         When the Riccati equation has no stabilising solution.
     """
     V = model.invariant_basis()
-    if Ad.shape[0] > V.shape[0]:  # the lag states a_i: unconstrained by the conservation
+    if Ad.shape[0] > V.shape[0]:  # lag states or delay register: untouched by the conservation
         V = sla.block_diag(V, np.eye(Ad.shape[0] - V.shape[0]))
     A_r = V.T @ Ad @ V
     B_r = V.T @ Bd
     Q_r = V.T @ np.diag(q) @ V
     Q_r = 0.5 * (Q_r + Q_r.T)
-    try:
-        P_r = sla.solve_discrete_are(A_r, B_r, Q_r, r * np.eye(Bd.shape[1]))
-    except (np.linalg.LinAlgError, ValueError) as err:
-        raise ConfigError(
-            "weights",
-            f"the terminal Riccati equation has no stabilising solution ({err}); "
-            "give positive velocity and spacing weights",
-        ) from None
-    if not np.all(np.isfinite(P_r)):
-        raise ConfigError("weights", "the terminal Riccati solution is not finite")
-    P = V @ (0.5 * (P_r + P_r.T)) @ V.T
+    P = V @ riccati(A_r, B_r, Q_r, r * np.eye(Bd.shape[1])) @ V.T
     return 0.5 * (P + P.T)
 
 
