@@ -1,4 +1,4 @@
-"""Per-step time of the joint platoon MPC (lcc_synth.mpc.platoon) on this machine.
+"""Per-step time of the joint platoon MPC (lcc_synth.mpc.joint) on this machine.
 
 Run:  python benchmarks/bench_mpc_platoon.py [--horizon 50] [--ring-time 60]
 
@@ -99,7 +99,7 @@ def main() -> None:
 
     from lcc_synth.models.hdv import OVM
     from lcc_synth.models.platoon import Platoon
-    from lcc_synth.mpc.platoon import PlatoonMPCController
+    from lcc_synth.mpc.joint import JointMPCController
     from lcc_synth.mpc.settings import MPCSettings
     from lcc_synth.problem import System
 
@@ -110,7 +110,7 @@ def main() -> None:
         pl = Platoon(hdv, (3, 6), 15.0)
         system = System("platoon", 2, 5, 15.0, OVM(), pl)
         t0 = time.perf_counter()
-        ctrl = PlatoonMPCController("mpc", settings, system)
+        ctrl = JointMPCController("mpc", settings, system)
         build = time.perf_counter() - t0
         gap = run(system, ctrl, pl.equilibrium_spacings, np.full(8, 15.0), 40.0)
         report(f"two-CAV DeeP-LCC platoon (8 vehicles, CAVs 3 and 6), N = {args.horizon}, "
@@ -119,7 +119,7 @@ def main() -> None:
         ring = Platoon(tuple([OVM()] * 20), (20,), 15.0, ring=True)
         rsys = System("ring", 19, 0, 15.0, OVM(), ring)
         t0 = time.perf_counter()
-        rctrl = PlatoonMPCController("mpc", settings, rsys)
+        rctrl = JointMPCController("mpc", settings, rsys)
         build = time.perf_counter() - t0
         v0 = np.full(20, 15.0)
         v0[4] -= 1.0

@@ -154,6 +154,7 @@ def test_closed_loop_safety_wins_over_a_strict_comfort_bound(monkeypatch):
     and keeps the absolute safe spacing without emergency braking. Kept hard instead, the same
     bound lets the CAV into the safety margin."""
     from lcc_synth.mpc import controller as ctl
+    from lcc_synth.mpc import scaffold
     from lcc_synth.mpc.report import bound_margin
 
     spec = load_spec(PROBLEMS / "mpc_head_brake.toml")
@@ -168,7 +169,7 @@ def test_closed_loop_safety_wins_over_a_strict_comfort_bound(monkeypatch):
     def hard(solver, form, q, lo, hi, wz, wy, record):
         return solver.solve(q, lo, hi, wz, wy)
 
-    monkeypatch.setattr(ctl, "solve_prioritised", hard)
+    monkeypatch.setattr(scaffold, "solve_prioritised", hard)
     c = ctl.MPCController("hard", strict, base.system)
     res = simulate(spec.scenario, c)
     assert res.aeb_active.any() or bound_margin(res).min() < 0.0

@@ -366,7 +366,9 @@ def test_bad_delays_are_config_errors_naming_the_field(delay, field):
     assert err.value.field == field
 
 
-def test_platoon_mpc_refuses_a_delay():
+def test_platoon_mpc_takes_a_delay_per_hdv():
+    """The joint MPC predicts the HDVs' delays too (its accuracy: ``tests/test_mpc_layouts.py``):
+    the register holds the 3 HDVs' rows; a list of the wrong length names the key."""
     import tomllib
 
     from lcc_synth.mpc.build import mpc_controller_from_table
@@ -374,11 +376,13 @@ def test_platoon_mpc_refuses_a_delay():
 
     system = system_from(tomllib.loads(
         '[system]\nkind = "platoon"\nsize = 5\ncavs = [2, 4]\nv_star = 15.0\n'))
-    table = {"type": "mpc", "horizon": 10, "prediction": {"delay": 0.4}}
+    table = {"type": "mpc", "horizon": 10, "prediction": {"delay": [0.4, 0.0, 0.3]}}
+    ctrl = mpc_controller_from_table("mpc", table, system)
+    assert ctrl._lin0.delay is not None and ctrl.formulation.nx > 10
+    table["prediction"]["delay"] = [0.4, 0.3]
     with pytest.raises(ConfigError) as err:
         mpc_controller_from_table("mpc", table, system)
     assert err.value.field == "controllers.mpc.prediction.delay"
-    assert "single-CAV" in err.value.message
 
 
 def test_controller_register_holds_the_simulated_past_states(tmp_path):

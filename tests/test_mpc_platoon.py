@@ -1,4 +1,4 @@
-"""The joint MPC of every CAV of a platoon or ring (lcc_synth.mpc.platoon) against independent
+"""The joint MPC of every CAV of a platoon or ring (lcc_synth.mpc.joint) against independent
 truth: the single-CAV MPC (one CAV), an independent dense QP solved by cvxpy + Clarabel
 (state variables, no condensation; the ring's on its invariant hyperplane), each CAV's limits
 and absolute spacing bound, the per-CAV fallback chain, and a closed ring loop that damps a
@@ -18,8 +18,8 @@ from lcc_synth.experiments.controller_tables import controller_from_table
 from lcc_synth.models.hdv import OVM, linear_coefficients
 from lcc_synth.models.platoon import Platoon, PlatoonGains, platoon_model
 from lcc_synth.mpc import MPCController
-from lcc_synth.mpc.platoon import PlatoonMPCController
-from lcc_synth.mpc.platoon_qp import platoon_state_weights
+from lcc_synth.mpc.joint import JointMPCController
+from lcc_synth.mpc.joint_prediction import joint_state_weights
 from lcc_synth.mpc.settings import Constraints, MPCSettings, Prediction, SolverSettings, Weights
 from lcc_synth.problem import System, system_from
 
@@ -132,7 +132,7 @@ def test_one_cav_joint_mpc_first_move_is_the_single_cav_mpcs(m, n):
     pl = Platoon(tuple([HDV] * size), (m + 1,), 15.0)
     sys_p = System("platoon", m, n, 15.0, HDV, pl)
     settings = MPCSettings(horizon=30)
-    joint = PlatoonMPCController("mpc", settings, sys_p)
+    joint = JointMPCController("mpc", settings, sys_p)
     single = MPCController("mpc", settings, System("lcc", m, n, 15.0, HDV))
     qj = joint.formulation.matrices(joint._lin0)
     qs = single.formulation.matrices(single._lin0)
@@ -212,7 +212,7 @@ def _dense_qp(settings, Ad, Bd, Hd, Q, P, x0, d, u_prev, past, fams, a_lo, a_hi,
 
 
 def _closing_in_run(system, settings, T=6.0):
-    ctrl = PlatoonMPCController("mpc", settings, system)
+    ctrl = JointMPCController("mpc", settings, system)
     ctrl.reset(_ctx(system))
     pl = system.platoon
     s0 = pl.equilibrium_spacings.copy()
@@ -229,7 +229,7 @@ def test_two_cav_first_moves_match_a_dense_clarabel_qp_on_constrained_steps():
     lin = ctrl._lin0
     model = lin.model
     pl = system.platoon
-    Q = np.diag(platoon_state_weights(model, settings))
+    Q = np.diag(joint_state_weights(model, settings))
     c = settings.constraints
     checked = 0
     for k in range(h["u"].shape[1]):
@@ -254,7 +254,7 @@ def test_comfort_rows_and_past_commands_match_the_dense_qp():
     limited by |u_k - u_{k-W}| <= J W Ts with past commands given."""
     system = _deeplcc()
     settings = MPCSettings(horizon=20, constraints=Constraints(jerk_scale=0.9))
-    ctrl = PlatoonMPCController("mpc", settings, system)
+    ctrl = JointMPCController("mpc", settings, system)
     lin = ctrl._lin0
     form = ctrl.formulation
     qp = form.matrices(lin)
@@ -270,7 +270,7 @@ def test_comfort_rows_and_past_commands_match_the_dense_qp():
 
     res = OSQPSolver(qp, qv, lo, hi, settings.solver).solve(qv, lo, hi)
     assert res.ok
-    Ud = _dense_qp(settings, lin.Ad, lin.Bd, lin.Hd, np.diag(platoon_state_weights(lin.model,
+    Ud = _dense_qp(settings, lin.Ad, lin.Bd, lin.Hd, np.diag(joint_state_weights(lin.model,
                    settings)), lin.P, x0, d, past[0], past, [], np.full(2, -5.0),
                    np.full(2, 2.0), jerk, lin.x_dir)  # fmt: skip
     Uo = res.z[: form.n_input].reshape(settings.horizon, 2)
@@ -309,7 +309,7 @@ def test_absolute_soft_spacing_bound_is_active_when_a_cav_closes_in():
     s0[5] = 9.0
     out = {}
     for name, st in (("on", on), ("off", off)):
-        ctrl = PlatoonMPCController("mpc", st, system)
+        ctrl = JointMPCController("mpc", st, system)
         ctrl.reset(_ctx(system))
         s = np.concatenate([[np.nan], s0])
         v = np.full(9, 15.0)
@@ -338,7 +338,7 @@ def test_fallback_per_cav_on_solver_failure():
     system = _deeplcc()
     pl = system.platoon
     settings = MPCSettings(horizon=20, solver=SolverSettings(max_iter=1))
-    ctrl = PlatoonMPCController("mpc", settings, system)
+    ctrl = JointMPCController("mpc", settings, system)
     ctrl.reset(_ctx(system))
     s = np.concatenate([[np.nan], pl.equilibrium_spacings + np.linspace(-2, 2, 8)])
     v = np.concatenate([[14.0], 15.0 + np.linspace(1, -1, 8)])
@@ -356,7 +356,7 @@ def test_fallback_per_cav_on_solver_failure():
                - c.alpha2 * (v[i] - v_eq) + c.alpha3 * (v[i - 1] - v_eq))
         assert u[k] == pytest.approx(np.clip(law, -5, 2), abs=1e-12)
     # after a solved step a failure applies the previous plan's shifted move, per CAV
-    ok = PlatoonMPCController("mpc", MPCSettings(horizon=20), system)
+    ok = JointMPCController("mpc", MPCSettings(horizon=20), system)
     ok.reset(_ctx(system))
     ok(_obs(0.0, s, v))
     plan = ok.history()["plan"][0, 0]
@@ -377,7 +377,7 @@ def test_each_cav_falls_back_on_its_own_row():
     K = np.zeros((2, model.nx))
     K[0, model.index("v_3")] = -0.4
     K[1, model.index("v_8")] = -0.3
-    ctrl = PlatoonMPCController("mpc", MPCSettings(horizon=20), system,
+    ctrl = JointMPCController("mpc", MPCSettings(horizon=20), system,
                                 PlatoonGains(K, pl.cavs, "replace"), "test")
     ctrl.reset(_ctx(system))
     s = np.concatenate([[np.nan], pl.equilibrium_spacings])
@@ -404,7 +404,7 @@ def test_ring_qp_equals_the_qp_on_the_invariant_hyperplane():
     pl = system.platoon
     settings = MPCSettings(horizon=30, weights=Weights(spacing_cav=2.0),
                            constraints=Constraints(jerk_scale=0.0))
-    ctrl = PlatoonMPCController("mpc", settings, system)
+    ctrl = JointMPCController("mpc", settings, system)
     ctrl.reset(_ctx(system))
     rng = np.random.default_rng(7)
     s = pl.equilibrium_spacings + rng.normal(0, 1.0, pl.size)
@@ -420,7 +420,7 @@ def test_ring_qp_equals_the_qp_on_the_invariant_hyperplane():
     x_raw[0::2], x_raw[1::2] = s - s_eq, v - v_eq
     lin = ctrl._lin0
     V = lin.model.invariant_basis()
-    Q = np.diag(platoon_state_weights(lin.model, settings))
+    Q = np.diag(joint_state_weights(lin.model, settings))
     P_r = V.T @ lin.P @ V
     c = settings.constraints
     delta = (pl.length - s_eq.sum()) / pl.size
@@ -458,7 +458,7 @@ def test_ring_mpc_damps_a_perturbation_that_grows_with_all_hdvs():
     v0[4] -= 1.0
     _, _, Vh, _ = _euler(System("ring", 19, 0, 15.0, HDV, Platoon(pl.hdv, (), 15.0, ring=True)),
                          None, s0, v0, None, 180.0, dt=0.05, linear=True)
-    ctrl = PlatoonMPCController("mpc", MPCSettings(horizon=40), system)
+    ctrl = JointMPCController("mpc", MPCSettings(horizon=40), system)
     ctrl.reset(_ctx(system))
     _, Sm, Vm, Um = _euler(system, ctrl, s0, v0, None, 120.0, dt=0.05, linear=True)
     spread = lambda V_: np.abs(V_ - V_.mean(axis=1, keepdims=True)).max(axis=1)  # noqa: E731
@@ -488,7 +488,7 @@ def _problem(kind, extra=""):
 def test_registry_builds_the_joint_mpc_for_platoon_kinds(kind):
     system = _problem(kind)
     ctrl = controller_from_table("mpc", {"type": "mpc", "horizon": 10}, system)
-    assert isinstance(ctrl, PlatoonMPCController)
+    assert isinstance(ctrl, JointMPCController)
     desc = ctrl.describe()
     assert desc["joint"] and desc["cavs"] == list(system.platoon.cavs)
     ctrl.reset(_ctx(system))
@@ -516,7 +516,7 @@ def test_bad_platoon_mpc_keys_are_config_errors(table, field):
 
 def test_scenario_layout_mismatch_is_a_config_error():
     system = _deeplcc()
-    ctrl = PlatoonMPCController("mpc", MPCSettings(horizon=10), system)
+    ctrl = JointMPCController("mpc", MPCSettings(horizon=10), system)
     with pytest.raises(ConfigError, match="CAV columns"):
         ctrl.reset(_ctx(_deeplcc(cavs=(3, 7))))
 
@@ -531,7 +531,7 @@ def test_batch_members_are_independent_and_relinearisation_runs():
     s0 = np.concatenate([[np.nan], pl.equilibrium_spacings])
     runs = []
     for shift in (0.0, 1.5):
-        ctrl = PlatoonMPCController("mpc", settings, system)
+        ctrl = JointMPCController("mpc", settings, system)
         ctrl.reset(_ctx(system))
         out = []
         for k in range(60):
@@ -539,7 +539,7 @@ def test_batch_members_are_independent_and_relinearisation_runs():
             out.append(ctrl(_obs(0.1 * k, s0, v))[0])
         runs.append(np.array(out))
         assert ctrl.stats()["relinearizations"] >= 1
-    both = PlatoonMPCController("mpc", settings, system)
+    both = JointMPCController("mpc", settings, system)
     both.reset(_ctx(system, batch=2))
     for k in range(60):
         v = np.stack([np.full(9, _brake(0.1 * k) + sh) for sh in (0.0, 1.5)])

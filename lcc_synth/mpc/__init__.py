@@ -1,24 +1,56 @@
 """Safety-constrained model predictive control of the CAV in LCC (CasADi formulation, OSQP).
 
 - :mod:`lcc_synth.mpc.settings`: settings and their problem-file table.
-- :mod:`lcc_synth.mpc.formulation`: the condensed QP built once with CasADi.
+- :mod:`lcc_synth.mpc.formulation`: the condensed QP of any number of CAVs, built once with
+  CasADi, and the single-CAV prediction model.
 - :mod:`lcc_synth.mpc.solver`: OSQP workspace (set up once), exact reference, naive rebuild.
+- :mod:`lcc_synth.mpc.scaffold`: what every layout's MPC shares (sample loop, equilibrium,
+  head prediction, linearisation cache, warm-started solve, statistics, status codes).
 - :mod:`lcc_synth.mpc.controller`: the controller of the common interface, fallback chain.
-- :mod:`lcc_synth.mpc.platoon_qp`, :mod:`lcc_synth.mpc.platoon`: the joint MPC of every CAV of
-  a platoon or ring road (``[system] kind = "platoon" | "ring"``).
+- :mod:`lcc_synth.mpc.joint_prediction`, :mod:`lcc_synth.mpc.joint`: the joint MPC of every
+  CAV of a platoon or ring road (``[system] kind = "platoon" | "ring"``).
 - :mod:`lcc_synth.mpc.build`: the controller of a ``[controllers.NAME]`` table.
 - :mod:`lcc_synth.mpc.report`: its step record and statistics, the safety summary of runs.
+
+One entry point builds the MPC of any layout (:func:`~lcc_synth.mpc.build.build_mpc`, or a
+``type = "mpc"`` table): the single-CAV MPC for the paper's kinds, the joint MPC of every CAV
+for ``kind = "platoon" | "ring"``; both run on :mod:`lcc_synth.mpc.scaffold`.
+
+Feature matrix (``tests/test_mpc_layouts.py`` runs every "yes" on each layout through
+:func:`~lcc_synth.mpc.build.build_mpc` and checks every refusal)::
+
+    option                         one CAV (cf/fd/lcc/ccc)  platoon              ring
+    prediction.delay (HDV delays)  yes                      yes                  yes
+    prediction.cav_lag             yes                      yes (each CAV)       yes (each CAV)
+    cav_lag with delay             ConfigError (cav_lag)    ConfigError (cav_lag)  (cav_lag)
+    constraints.jerk_scale         yes                      yes (each CAV)       yes (each CAV)
+    solver.method osqp / daqp      yes                      yes                  yes
+    prediction.relinearize         yes                      yes                  yes
+    prediction.head = "accel"      yes                      yes                  no head: no effect
+    prediction.equilibrium         yes                      yes                  yes (mean speed)
+    n_model                        yes                      ConfigError          ConfigError
+    constraints.behind             yes                      ConfigError          ConfigError
+    weights.position               used by fd_lcc           ConfigError          ConfigError
+
+A refusal is one :class:`~lcc_synth.errors.ConfigError` whose field is the key
+(``controllers.NAME.n_model``) and whose message names the layout ("... for a platoon or
+ring"). Why the three keys stay single-CAV: the joint MPC models every vehicle of
+the platoon (``n_model`` has nothing to cut) and constrains every CAV's own spacing ahead
+(``behind`` names HDVs of the paper's one-CAV index); ``weights.position`` weighs FD-LCC's
+``-p_0``, a state the platoon model has not. The actuator lag and HDV delays in one
+prediction are not written for any layout (the lag state and the delay register would have
+to share the augmented state).
 """
 
 from lcc_synth.mpc.build import build_mpc, mpc_controller_from_table
 from lcc_synth.mpc.controller import STATUS_CODES, MPCController
-from lcc_synth.mpc.platoon import PlatoonMPCController
+from lcc_synth.mpc.joint import JointMPCController
 from lcc_synth.mpc.settings import MPCSettings, paper_fallback_gains, settings_from_table
 
 __all__ = [
     "MPCController",
     "MPCSettings",
-    "PlatoonMPCController",
+    "JointMPCController",
     "build_mpc",
     "STATUS_CODES",
     "mpc_controller_from_table",

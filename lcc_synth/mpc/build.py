@@ -2,19 +2,17 @@
 (:mod:`lcc_synth.mpc.settings`) and its fallback gain: another controller of the file
 (``fallback = "NAME"``), a gains file (``fallback_gains_file``) or the paper's. On a
 ``kind = "platoon" | "ring"`` system it is the joint MPC of every CAV
-(:class:`~lcc_synth.mpc.platoon.PlatoonMPCController`), whose fallback gains are in the
+(:class:`~lcc_synth.mpc.joint.JointMPCController`), whose fallback gains are in the
 platoon form ``{u_i: {state: gain}}`` (default: each CAV's HDV law)."""
 
 from __future__ import annotations
-
-import numpy as np
 
 from lcc_synth.controllers.gains_files import read_fallback_file
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains
 from lcc_synth.models.platoon import PlatoonGains
 from lcc_synth.mpc.controller import MPCController
-from lcc_synth.mpc.platoon import PlatoonMPCController
+from lcc_synth.mpc.joint import JointMPCController
 from lcc_synth.mpc.settings import settings_from_table
 
 __all__ = ["mpc_controller_from_table", "build_mpc"]
@@ -86,16 +84,9 @@ def _platoon_gains(data, model, field_name: str) -> PlatoonGains:
 
 
 def _platoon_mpc(name, settings, system, named, source, field_name, table):
-    """The joint MPC of every CAV of a platoon or ring (:mod:`lcc_synth.mpc.platoon`); its
+    """The joint MPC of every CAV of a platoon or ring (:mod:`lcc_synth.mpc.joint`); its
     fallback rows from ``fallback = "NAME"`` or ``fallback_gains_file`` (platoon gain form),
     else each CAV's HDV law."""
-    if np.any(np.asarray(settings.prediction.delay, dtype=float) != 0.0):
-        raise ConfigError(f"{field_name}.prediction.delay", "HDV delays in the prediction are "
-                          "implemented for the single-CAV MPC only; give 0 for a platoon or "
-                          "ring")  # fmt: skip
-    if settings.prediction.cav_lag:
-        raise ConfigError(f"{field_name}.prediction.cav_lag", "the actuator lag in the "
-                          "prediction is implemented for the single-CAV MPC only")  # fmt: skip
     model = system.linear_model(warn=False)
     fallback, fb_source = None, "hdv_law"
     if named is not None:
@@ -105,7 +96,7 @@ def _platoon_mpc(name, settings, system, named, source, field_name, table):
         fallback, path = read_fallback_file(table, field_name, system, source)
         fb_source = str(path)
     try:
-        return PlatoonMPCController(name, settings, system, fallback, fb_source)
+        return JointMPCController(name, settings, system, fallback, fb_source)
     except ConfigError as err:
         if err.field.startswith(field_name):
             raise

@@ -47,7 +47,7 @@ def jerk_bound(scale: float, v: float) -> float:
 
 
 def _slack(form, z: np.ndarray) -> float:
-    n = getattr(form, "n_input", form.N)  # the joint platoon QP has N inputs per CAV
+    n = form.n_input  # N inputs per CAV
     return float(np.sum(z[n:])) if z.size > n else 0.0
 
 

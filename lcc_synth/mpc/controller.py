@@ -46,7 +46,6 @@ CAV's linear HDV law plus the MPC's added input) for CF-LCC.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -56,8 +55,7 @@ from lcc_synth.controllers.base import ControlContext, Observation
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import StaticGains, cav_feedback
 from lcc_synth.models.hdv import free_speed
-from lcc_synth.mpc.active_set import make_solver, solver_label
-from lcc_synth.mpc.comfort import jerk_bound, solve_prioritised
+from lcc_synth.mpc.comfort import jerk_bound
 from lcc_synth.mpc.delay import pad
 from lcc_synth.mpc.formulation import (
     Family,
@@ -68,45 +66,34 @@ from lcc_synth.mpc.formulation import (
     state_weights,
 )
 from lcc_synth.mpc.report import new_step_record, predicted_states, step_statistics
+from lcc_synth.mpc.scaffold import (
+    STATUS_CODES,
+    LoopState,
+    MPCScaffold,
+    head_prediction,
+    update_equilibrium,
+)
 from lcc_synth.mpc.settings import MPCSettings, paper_fallback_gains
-from lcc_synth.mpc.solver import POLISH_NAMES, OSQPSolver
 from lcc_synth.mpc.step_cache import LastValue, clip
 
 __all__ = ["MPCController", "STATUS_CODES"]
 
-#: Per-step outcome codes stored in ``history()["status"]``.
-STATUS_CODES = {0: "qp", 1: "shifted_plan", 2: "static_gain", 3: "hold"}
-
 
 @dataclass
-class _Member:
-    """Solver and loop state of one batch member."""
+class _Member(LoopState):
+    """Loop state of one batch member: the shared fields plus the single-CAV ones."""
 
-    solver: OSQPSolver
-    lin: Linearization
-    qp: Any
-    fb_K: np.ndarray
-    fb_kh: float
-    v_buf: np.ndarray
-    s_off: np.ndarray
-    v_buf_n: int = 0
-    v_buf_i: int = 0
-    v_eq: float = 0.0
-    v_ref_prev: float = math.nan
+    s_off: np.ndarray = field(default_factory=lambda: np.zeros(0))
     p_ref: float = math.nan
     u_prev: float = 0.0
     cmd_prev: float = 0.0
-    plan: np.ndarray | None = None
-    plan_age: int = 0
-    warm: tuple | None = None
-    past: np.ndarray = field(default_factory=lambda: np.zeros(1))  # commands, newest first
     delay: Any = None  # delay.StateHistory (past observed states) or lag.LagState (a_0)
     s_off_cols: np.ndarray | None = None  # s_off of the modelled vehicles (state order)
     s_eq: LastValue = field(default_factory=LastValue)
     hist: dict[str, list] = field(default_factory=dict)
 
 
-class MPCController:
+class MPCController(MPCScaffold):
     """Safety-constrained linear MPC of the CAV (see the module docstring).
 
     Parameters
@@ -184,17 +171,7 @@ class MPCController:
         self._ctx: ControlContext | None = None
         self._st = new_step_record()
 
-    def __getstate__(self) -> dict[str, Any]:
-        """Picklable without the run state (OSQP workspaces); call :meth:`reset` after."""
-        state = dict(self.__dict__)
-        state["_members"] = []
-        state["_ctx"] = None
-        return state
-
     # ---------------------------------------------------------------- setup helpers
-
-    def _clip_v(self, v: float) -> float:
-        return clip(v, 1.0, self._v_hi - 1.0)
 
     def _make_families(self, model) -> list[Family]:
         c = self.settings.constraints
@@ -212,22 +189,12 @@ class MPCController:
             fams.append(Family(i, b.start, b.start + 1, c.t_gap_behind, c.s_min_behind))
         return fams
 
-    def _linearization(self, v: float):
-        """Cached (lin, qp, fb_K, fb_kh) at ``v`` rounded to 0.01 m/s."""
-        key = round(self._clip_v(v), 2)
-        hit = self._cache.get(key)
-        if hit is None:
-            s = self.system
-            lin = self._lin0 if key == round(self._lin0.v_lin, 2) else linearize(
-                self.kind, self.m, self.n_model, s.hdv, key, self.settings
-            )
-            qp = self.formulation.matrices(lin)
-            K, kh = cav_feedback(lin.model, self.fallback)
-            hit = (lin, qp, np.asarray(K, float), float(kh))
-            if len(self._cache) > 256:
-                self._cache.clear()
-            self._cache[key] = hit
-        return hit
+    def _linearize_at(self, v: float) -> Linearization:
+        return linearize(self.kind, self.m, self.n_model, self.system.hdv, v, self.settings)
+
+    def _feedback(self, model) -> tuple[np.ndarray, float]:
+        K, kh = cav_feedback(model, self.fallback)
+        return np.asarray(K, float), float(kh)
 
     # ---------------------------------------------------------------- protocol
 
@@ -244,21 +211,16 @@ class MPCController:
         self._a_max = min(self.settings.constraints.a_max, ctx.a_max)
         self._st = new_step_record()
         self._t = []
-        N = self.settings.horizon
-        F = len(self._families)
-        W = max(1, int(round(self.settings.prediction.equilibrium_window / self.sample_time)))
+        W = self._window()
         self._members = []
         self._cols = np.arange(-self.m, self.n_model + 1) + self.m + 1
         for b in range(ctx.batch):
             lin, qp, K, kh = self._linearization(float(ctx.v_star[b]))
-            p = self.formulation.param(np.zeros(lin.Ad.shape[0]), np.zeros(N), 0.0)
-            q, lo, hi = self.formulation.bounds(
-                qp, p, self._a_min, self._a_max, np.full((F, N), -np.inf)
-            )
-            solver = make_solver(qp, q, lo, hi, self.settings.solver)
+            solver = self._new_solver(qp, 0.0, self._a_min, self._a_max)
             s_off = np.asarray(ctx.spacing_reference()[b], float) - float(ctx.s_star[b])
             s_off = np.nan_to_num(s_off, nan=0.0)
-            mem = _Member(solver, lin, qp, K, kh, np.zeros(W), s_off, v_eq=float(ctx.v_star[b]))
+            mem = _Member(solver, lin, qp, K, kh, np.zeros(W), s_off=s_off,
+                          v_eq=float(ctx.v_star[b]))
             mem.hist = {k: [] for k in _HIST_KEYS}
             mem.s_off_cols = s_off[self._cols]
             mem.past = np.zeros(max(1, self.formulation.W))
@@ -266,28 +228,15 @@ class MPCController:
             self._members.append(mem)
 
     def __call__(self, obs: Observation) -> np.ndarray:
-        ctx = self._ctx
-        if ctx is None:
-            raise RuntimeError("MPCController: call reset(ctx) before the first step")
-        B = ctx.batch
-        out = np.zeros(B)
-        self._t.append(float(obs.t))
-        for b in range(B):
-            t0 = time.perf_counter()
-            mem = self._members[b]
-            try:
-                out[b] = self._step(b, mem, obs)
-            except Exception as err:  # never raise inside the loop
-                self._st["errors"] += 1
-                if len(self._st["error_messages"]) < 5:
-                    self._st["error_messages"].append(f"t={obs.t:g}: {type(err).__name__}: {err}")
-                out[b] = self._hold(mem)
-                self._record_fail(mem, out[b])
-            mem.past[1:] = mem.past[:-1]
-            mem.past[0] = out[b]
-            self._st["step_time"].append(time.perf_counter() - t0)
-        self._st["steps"] += 1
+        """The commands ``(batch,)`` of one sample (the steps of the module docstring)."""
+        out = np.zeros(0 if self._ctx is None else self._ctx.batch)
+        self._run_members(obs, out)
         return out
+
+    def _on_error(self, mem: _Member) -> float:
+        cmd = self._hold(mem)
+        self._record_fail(mem, cmd)
+        return cmd
 
     # ---------------------------------------------------------------- one member, one step
 
@@ -298,18 +247,10 @@ class MPCController:
         m, cav = self.m, ctx.cav
         ref_col = 0 if m == 0 else 1
         v_ref = float(obs.velocity[b, ref_col])
-        mode = pred.equilibrium_mode(self.kind)
-        if mode == "fixed":
+        if pred.equilibrium_mode(self.kind) == "fixed":
             mem.v_eq = float(ctx.v_star[b])
-        elif math.isfinite(v_ref):
-            W = mem.v_buf.size
-            if mem.v_buf_n == 0:
-                mem.v_buf[:] = v_ref
-                mem.v_buf_n = W
-            else:
-                mem.v_buf[mem.v_buf_i] = v_ref
-            mem.v_buf_i = (mem.v_buf_i + 1) % W
-            mem.v_eq = float(mem.v_buf.mean())
+        else:
+            update_equilibrium(mem, v_ref)
         v_eq = mem.v_eq
         s_eq = mem.s_eq.get(self.system.hdv, self._clip_v(v_eq))
         cols = self._cols
@@ -324,15 +265,8 @@ class MPCController:
         mem.p_ref += v_eq * self.sample_time
         if self.kind == "fd_lcc":
             x[0] = xi if self.settings.weights.position > 0 else 0.0
-        # head prediction
-        N, Ts = self.settings.horizon, self.sample_time
-        d0 = (v_ref - v_eq) if math.isfinite(v_ref) else 0.0
-        d = np.full(N, d0)
-        if pred.head == "accel" and math.isfinite(mem.v_ref_prev) and math.isfinite(v_ref):
-            a = float(np.clip((v_ref - mem.v_ref_prev) / Ts, self._a_min, self._a_max))
-            d = d0 + a * np.minimum(np.arange(N) * Ts, pred.head_accel_hold)
-            d = np.maximum(d, -v_eq)
-        mem.v_ref_prev = v_ref
+        N = self.settings.horizon
+        d0, d = head_prediction(mem, v_ref, N, self.sample_time, pred, self._a_min, self._a_max)
         d_model = np.zeros(N) if self.kind == "fd_lcc" else d  # FD-LCC: no head input
         s0 = float(obs.spacing[b, cav])
         if mem.delay is not None:
@@ -356,26 +290,6 @@ class MPCController:
                 out[f] = base - s_eq - mem.s_off[fam.vehicle + self.m + 1]
         return out
 
-    def _relinearize(self, mem: _Member) -> None:
-        pred = self.settings.prediction
-        if not pred.relinearize:
-            return
-        if abs(mem.v_eq - mem.lin.v_lin) <= pred.relinearize_threshold:
-            return
-        t0 = time.perf_counter()
-        grid = pred.relinearize_threshold / 4.0
-        try:
-            lin, qp, K, kh = self._linearization(round(mem.v_eq / grid) * grid)
-            mem.solver.update_matrices(qp)
-        except Exception as err:
-            self._st["relinearize_failures"] += 1
-            if len(self._st["error_messages"]) < 5:
-                self._st["error_messages"].append(f"re-linearisation at {mem.v_eq:.2f}: {err}")
-            return
-        mem.lin, mem.qp, mem.fb_K, mem.fb_kh = lin, qp, K, kh
-        self._st["relinearizations"] += 1
-        self._st["relin_time"].append(time.perf_counter() - t0)
-
     def _step(self, b: int, mem: _Member, obs: Observation) -> float:
         st = self._st
         x0, xi, d, d_model, s_eq, s0 = self._observe(b, mem, obs)
@@ -395,27 +309,13 @@ class MPCController:
         fb = self._family_bounds(mem, x0, d, s_eq, s0)
         jb = jerk_bound(c.jerk_scale, v0)
         q, lo, hi = form.bounds(mem.qp, p, self._a_min, self._a_max, fb, jb)
-        warm = mem.warm
-        res = solve_prioritised(
-            mem.solver, form, q, lo, hi,
-            None if warm is None else warm[0][self._shift_z],
-            None if warm is None else warm[1][self._shift_y], st,
-        )  # fmt: skip
-        st["solves"] += 1
-        st["osqp_time"].append(res.run_time)
-        st["iterations"].append(res.iterations)
-        pname = POLISH_NAMES.get(res.polish, str(res.polish))
-        st["polish"][pname] = st["polish"].get(pname, 0) + 1
+        res = self._solve(mem, q, lo, hi)
         if not res.ok:
-            st["qp_failures"][res.status] = st["qp_failures"].get(res.status, 0) + 1
             return self._fallback(mem, x0, xi, d_model, res.status)
         z = res.z
-        mem.warm = (z, res.y)
         U = z[:N]
         slack = float(z[N:].max()) if z.size > N else 0.0
-        if slack > 1e-6:
-            st["slack_steps"] += 1
-            st["max_slack"] = max(st["max_slack"], slack)
+        self._note_slack(slack)
         mem.plan = U.copy()
         mem.plan_age = 0
         u_model = float(U[0])
@@ -545,37 +445,9 @@ class MPCController:
 
     def describe(self) -> dict[str, Any]:
         """Horizon, weights, constraints, prediction, solver and fallback settings."""
-        s = self.settings
-        d = s.as_dict()
-        d.update(
-            {
-                "type": "mpc",
-                "name": self.name,
-                "kind": self.kind,
-                "m": self.m,
-                "n_model": self.n_model,
-                "equilibrium": s.prediction.equilibrium_mode(self.kind),
-                "state_names": list(self._lin0.model.state_names),
-                "qp": {
-                    "formulation": "condensed, CasADi symbolic (built once)",
-                    "variables": self.formulation.nz,
-                    "constraints": self.formulation.nc,
-                    "spacing_families": [f.vehicle for f in self._families],
-                    "solver": solver_label(s.solver),
-                },
-                "fallback": {
-                    "source": self.fallback_source,
-                    "semantics": self.fallback.semantics,
-                    "gains": dict(self.fallback.gains),
-                },
-            }
-        )
-        d["solver"]["name"] = s.solver.method
-        return d
-
-    def toml_table(self) -> dict[str, Any]:
-        """The ``[controllers.NAME]`` table that builds this MPC."""
-        return self.settings.toml_table()
+        return self._describe({"m": self.m, "n_model": self.n_model}, {},
+                              "condensed, CasADi symbolic (built once)",
+                              dict(self.fallback.gains))  # fmt: skip
 
     def as_dict(self) -> dict[str, Any]:
         return {**self.describe(), "fallback": dict(self.fallback.gains)}

@@ -1,4 +1,4 @@
-"""The MPC's quadratic program, formulated once with CasADi.
+"""The MPC's quadratic program for any number of CAVs, formulated once with CasADi.
 
 Prediction model: the LCC error model of :mod:`lcc_synth.models.linear` discretised exactly (ZOH) at
 the controller's sample time ``Ts``::
@@ -82,6 +82,7 @@ __all__ = [
     "Formulation",
     "state_weights",
     "terminal_cost",
+    "riccati",
     "linearize",
     "steady_direction",
 ]
@@ -183,19 +184,32 @@ def terminal_cost(
         k = np.asarray(K_law, float)[keep].reshape(-1, 1)
         Q_r = Q_r + r * (k @ k.T)
         S_r = r * k
+    P = np.zeros((nz, nz))
+    P[np.ix_(keep, keep)] = riccati(A_r, B_r, Q_r, np.array([[r]]), S_r)
+    return P
+
+
+def riccati(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray,
+            S: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+    """The symmetrised stabilising solution of the discrete Riccati equation (SciPy's
+    ``solve_discrete_are``) of every layout's terminal cost.
+
+    Raises
+    ------
+    ConfigError
+        ``weights`` when there is no stabilising or no finite solution.
+    """
     try:
-        P_r = sla.solve_discrete_are(A_r, B_r, Q_r, np.array([[r]]), s=S_r)
+        P = sla.solve_discrete_are(A, B, Q, R, s=S)
     except (np.linalg.LinAlgError, ValueError) as err:
         raise ConfigError(
             "weights",
             f"the terminal Riccati equation has no stabilising solution ({err}); "
             "give positive velocity and spacing weights",
         ) from None
-    if not np.all(np.isfinite(P_r)):
+    if not np.all(np.isfinite(P)):
         raise ConfigError("weights", "the terminal Riccati solution is not finite")
-    P = np.zeros((nz, nz))
-    P[np.ix_(keep, keep)] = 0.5 * (P_r + P_r.T)
-    return P
+    return 0.5 * (P + P.T)
 
 
 _BLAS_CONTROLLER = None
@@ -300,15 +314,23 @@ def _to_csc(dm) -> sp.csc_matrix:
 
 
 class Formulation:
-    """The symbolic QP of one MPC layout (kind, sizes, weights, constraint families).
+    """The symbolic condensed QP of any number of CAVs (built once; :meth:`matrices` per
+    linearisation).
 
-    Built once per controller (about 0.15 s); :meth:`matrices` evaluates it at a linearisation
-    (about 10 ms for n = 10, N = 50).
+    One class serves the single-CAV MPC (``nu = 1``, the paper's error state; CF-LCC couples
+    the HDV law into the CAV's total acceleration) and the joint MPC of every CAV of a
+    platoon or ring (``nu`` inputs, :mod:`lcc_synth.mpc.joint_prediction`). Built once per
+    controller (about 0.15 s); :meth:`matrices` evaluates it at a linearisation (about 10 ms
+    for n = 10, N = 50). Measured when the two former classes became this one: with one
+    input it gives the single-CAV class's QP data and with several the joint class's, bit for
+    bit (values, CSC patterns, step parameters, bounds and warm-start shifts, on 160
+    combinations of kind, comfort rows, jerk weight, constraints behind, delay states,
+    ``input_on``, open and ring layouts).
 
     Parameters
     ----------
     kind : str
-        Model kind; ``"cf_lcc"`` adds the HDV law to the input constraint.
+        Model kind; ``"cf_lcc"`` adds the HDV law to the input constraint (``nu = 1`` only).
     nx : int
         Number of states.
     settings : MPCSettings
@@ -316,96 +338,104 @@ class Formulation:
         Diagonal of the stage weight ``Q``.
     families : list of Family
         Soft spacing constraints.
+    nu : int
+        Number of inputs (CAVs); ``z`` holds ``u_k`` step-major, ``nu`` entries per step.
     """
 
-    def __init__(self, kind: str, nx: int, settings: MPCSettings, q, families: list[Family]):
+    def __init__(self, kind: str, nx: int, settings: MPCSettings, q, families: list[Family],
+                 nu: int = 1):  # fmt: skip
         import casadi as ca
 
+        cf = kind == "cf_lcc"
+        if cf and nu != 1:
+            raise ConfigError("system.kind", "cf_lcc has one CAV (one input)")
         self.kind = kind
-        self.nx = nx
+        self.nx, self.nu = nx, nu
         self.N = N = settings.horizon
+        self.n_input = NU = N * nu
         self.families = list(families)
         F = len(self.families)
-        self.nz = N + F * N
+        FN = F * N
+        self.nz = NU + FN
         c = settings.constraints
         self.W = W = max(1, int(round(c.jerk_window / settings.sample_time))) \
             if c.jerk_scale > 0 else 0
         self.window = W * settings.sample_time
-        self.nc = N + 2 * F * N + (N if W else 0)
-        self.n_param = nx + N + 1 + W
+        self.nc = NU + 2 * FN + (NU if W else 0)
+        self.n_param = npar = nx + N + nu + W * nu
+        o_prev = nx + N  # u_{-1} block; c_{-j} block at o_prev + j nu
         w = settings.weights
 
         Ad = ca.MX.sym("Ad", nx, nx)
-        Bd = ca.MX.sym("Bd", nx, 1)
+        Bd = ca.MX.sym("Bd", nx, nu)
         Hd = ca.MX.sym("Hd", nx, 1)
         P = ca.MX.sym("P", nx, nx)
         xdir = ca.MX.sym("xdir", nx, 1)
         theta = [Ad, Bd, Hd, P, xdir]
-        cf = kind == "cf_lcc"
         if cf:
             K = ca.MX.sym("K", 1, nx)
             kh = ca.MX.sym("kh")
             theta += [K, kh]
-        npar = self.n_param
         Qd = ca.DM(np.diag(np.asarray(q, dtype=float)))
 
-        def unit(n: int, i: int):
-            return ca.DM(ca.Sparsity.triplet(1, n, [0], [i]), 1.0)
+        def sel(rows: int, cols: int, start: int):
+            """``rows x cols`` selector of the ``rows`` entries from ``start``."""
+            return ca.DM(ca.Sparsity.triplet(rows, cols, list(range(rows)),
+                                             list(range(start, start + rows))), 1.0)
 
-        # x_k = Xu[k] U + Xp[k] p, with p = [x0, d, u_prev] (structural zeros kept sparse)
-        Xu = [ca.MX(nx, N)]
-        Xp = [ca.MX(ca.horzcat(ca.DM.eye(nx), ca.DM(nx, N + 1 + W)))]
-        au, ap = [], []  # total CAV acceleration a_k = au[k] U + ap[k] p
+        # x_k = Xu[k] U + Xp[k] p (structural zeros kept sparse)
+        Xu = [ca.MX(nx, NU)]
+        Xp = [ca.MX(ca.horzcat(ca.DM.eye(nx), ca.DM(nx, npar - nx)))]
+        au, ap = [], []  # total CAV accelerations a_k = au[k] U + ap[k] p
         for k in range(N):
             if cf:
-                au.append(K @ Xu[k] + unit(N, k))
-                ap.append(K @ Xp[k] + kh * unit(npar, nx + k))
+                au.append(K @ Xu[k] + sel(1, NU, k))
+                ap.append(K @ Xp[k] + kh * sel(1, npar, nx + k))
             else:
-                au.append(ca.MX(unit(N, k)))
-                ap.append(ca.MX(1, npar))
-            Xu.append(Ad @ Xu[k] + Bd @ unit(N, k))
-            Xp.append(Ad @ Xp[k] + Hd @ unit(npar, nx + k))
+                au.append(ca.MX(sel(nu, NU, k * nu)))
+                ap.append(ca.MX(nu, npar))
+            Xu.append(Ad @ Xu[k] + Bd @ sel(nu, NU, k * nu))
+            Xp.append(Ad @ Xp[k] + Hd @ sel(1, npar, nx + k))
 
-        Huu = ca.MX(N, N)
-        Qp_u = ca.MX(N, npar)
+        Huu = ca.MX(NU, NU)
+        Qp_u = ca.MX(NU, npar)
 
-        def add(Ru, Rp, W):
+        def add(Ru, Rp, Wt):
             nonlocal Huu, Qp_u
-            WRu = W @ Ru
+            WRu = Wt @ Ru
             Huu += 2 * (Ru.T @ WRu)
             Qp_u += 2 * (WRu.T @ Rp)
 
         # stage and terminal cost on r_k = x_k - x_dir d_k (terminal: d_{N-1})
         for k in range(1, N + 1):
             i = min(k, N - 1)
-            add(Xu[k], Xp[k] - xdir @ unit(npar, nx + i), Qd if k < N else P)
+            add(Xu[k], Xp[k] - xdir @ sel(1, npar, nx + i), Qd if k < N else P)
         # input (total acceleration or model input) and jerk
         if w.input_on == "total" and cf:
             Wu, Wp = ca.vertcat(*au), ca.vertcat(*ap)
         else:
-            Wu, Wp = ca.MX(ca.DM.eye(N)), ca.MX(N, npar)
+            Wu, Wp = ca.MX(ca.DM.eye(NU)), ca.MX(NU, npar)
         add(Wu, Wp, ca.DM(w.input))
         if w.jerk > 0:
-            prev_u = ca.vertcat(ca.MX(1, N), Wu[: N - 1, :])
-            prev_p = ca.vertcat(ca.MX(unit(npar, nx + N)), Wp[: N - 1, :])
+            prev_u = ca.vertcat(ca.MX(nu, NU), Wu[: NU - nu, :])
+            prev_p = ca.vertcat(ca.MX(sel(nu, npar, o_prev)), Wp[: NU - nu, :])
             add(Wu - prev_u, Wp - prev_p, ca.DM(w.jerk))
 
         # Hessian, linear term, constraints
-        FN = F * N
-        H = ca.blockcat([[Huu, ca.MX(N, FN)], [ca.MX(FN, N), ca.MX(2 * w.slack_quadratic
-                                                                     * ca.DM.eye(FN))]])
+        H = ca.blockcat([[Huu, ca.MX(NU, FN)],
+                         [ca.MX(FN, NU), ca.MX(2 * w.slack_quadratic * ca.DM.eye(FN))]])
         Qp = ca.vertcat(Qp_u, ca.MX(FN, npar))
-        q0 = ca.vertcat(ca.DM(N, 1), ca.DM.ones(FN, 1) * w.slack)
-        rows_u = [ca.horzcat(ca.vertcat(*au), ca.MX(N, FN))]
+        q0 = ca.vertcat(ca.DM(NU, 1), ca.DM.ones(FN, 1) * w.slack)
+        rows_u = [ca.horzcat(ca.vertcat(*au), ca.MX(NU, FN))]
         rows_p = [ca.vertcat(*ap)]
         for f, fam in enumerate(self.families):
-            c = ca.DM(ca.Sparsity.triplet(1, nx, [0, 0], [fam.s_index, fam.v_index]),
-                      [1.0, -fam.t_gap])  # fmt: skip
+            cfam = ca.DM(ca.Sparsity.triplet(1, nx, [0, 0], [fam.s_index, fam.v_index]),
+                         [1.0, -fam.t_gap])  # fmt: skip
             slack = ca.DM(ca.Sparsity.triplet(N, FN, list(range(N)),
                                               [f * N + k for k in range(N)]), 1.0)  # fmt: skip
-            rows_u.append(ca.horzcat(ca.vertcat(*[c @ Xu[k] for k in range(1, N + 1)]), slack))
-            rows_p.append(ca.vertcat(*[c @ Xp[k] for k in range(1, N + 1)]))
-        rows_u.append(ca.horzcat(ca.MX(FN, N), ca.MX(ca.DM.eye(FN))))
+            rows_u.append(ca.horzcat(ca.vertcat(*[cfam @ Xu[k] for k in range(1, N + 1)]), slack))
+            rows_p.append(ca.vertcat(*[cfam @ Xp[k] for k in range(1, N + 1)]))
+        rows_u.append(ca.horzcat(ca.MX(FN, NU), ca.MX(ca.DM.eye(FN))))
         rows_p.append(ca.MX(FN, npar))
         if W:  # comfort rows a_k - a_{k-W}, a_{k-W} = c_{k-W} (parameter) for k < W
             for k in range(N):
@@ -413,8 +443,8 @@ class Formulation:
                 if k >= W:
                     ru, rp = ru - au[k - W], rp - ap[k - W]
                 else:
-                    rp = rp - unit(npar, nx + N + W - k)
-                rows_u.append(ca.horzcat(ru, ca.MX(1, FN)))
+                    rp = rp - sel(nu, npar, o_prev + (W - k) * nu)
+                rows_u.append(ca.horzcat(ru, ca.MX(nu, FN)))
                 rows_p.append(rp)
         A = ca.vertcat(*rows_u)
         Gp = ca.vertcat(*rows_p)
@@ -423,14 +453,14 @@ class Formulation:
             "mpc_qp", theta, [ca.triu(H), A, Qp, Gp, ca.MX(q0), ca.MX(g0)]
         )
 
-    def theta(self, lin: Linearization) -> list:
+    def theta(self, lin) -> list:
         """Numeric arguments of the CasADi function for ``lin``."""
         args = [lin.Ad, lin.Bd, lin.Hd, lin.P, lin.x_dir]
         if self.kind == "cf_lcc":
             args += [lin.K_law.reshape(1, -1), lin.k_h]
         return args
 
-    def matrices(self, lin: Linearization) -> QPMatrices:
+    def matrices(self, lin) -> QPMatrices:
         """Evaluate the QP data at ``lin`` (fixed sparsity pattern, see the module docstring)."""
         H, A, Qp, Gp, q0, g0 = self._fun(*self.theta(lin))
         return QPMatrices(
@@ -445,51 +475,69 @@ class Formulation:
     @property
     def jerk_rows(self) -> slice:
         """Rows of the comfort constraints (empty without them)."""
-        return slice(self.nc - (self.N if self.W else 0), self.nc)
+        return slice(self.nc - (self.n_input if self.W else 0), self.nc)
 
-    def param(self, x0: np.ndarray, d: np.ndarray, u_prev: float,
+    def param(self, x0: np.ndarray, d: np.ndarray, u_prev,
               past: np.ndarray | None = None) -> np.ndarray:
         """The step parameter ``p = [x0, d, u_prev, c_{-1}..c_{-W}]``.
 
-        ``past`` holds the last applied commands, newest first (at least ``W``; default: all
-        equal to ``u_prev``).
+        ``u_prev`` has ``nu`` entries (a float for one input); ``past`` holds the last applied
+        commands, newest first, ``(>= W,)`` or ``(>= W, nu)`` (default: all equal to
+        ``u_prev``).
         """
-        W = self.W
-        c = np.full(W, float(u_prev)) if past is None else np.asarray(past, float)[:W]
-        return np.concatenate([x0, d, [u_prev], c])
+        u_prev = np.asarray(u_prev, float).reshape(self.nu)
+        if past is None:
+            c = np.tile(u_prev, self.W)
+        else:
+            c = np.asarray(past, float)[: self.W].reshape(-1)
+        return np.concatenate([x0, d, u_prev, c])
 
-    def bounds(self, qp: QPMatrices, p: np.ndarray, a_min: float, a_max: float,
-               fam_bounds: np.ndarray, jerk: float = np.inf,
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def bounds(self, qp: QPMatrices, p: np.ndarray, a_min, a_max, fam_bounds: np.ndarray,
+               jerk=np.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(q, l, u)`` of OSQP for parameter ``p``.
 
-        ``fam_bounds`` is ``(F, N)``: the right-hand side ``b_{f,k}`` of every spacing row
-        (``-inf`` disables a row). ``jerk`` (m/s^3) bounds the average jerk over the comfort
-        window: ``|a_k - a_{k-W}| <= jerk * W * Ts`` (``inf`` disables the rows).
+        ``a_min``, ``a_max`` and ``jerk`` are per input (scalars broadcast). ``fam_bounds`` is
+        ``(F, N)``: the right-hand side ``b_{f,k}`` of every spacing row (``-inf`` disables a
+        row). ``jerk`` (m/s^3) bounds the average jerk over the comfort window: ``|a_k -
+        a_{k-W}| <= jerk * W * Ts`` (``inf`` disables the rows).
         """
-        N, F = self.N, len(self.families)
+        NU, FN = self.n_input, len(self.families) * self.N
         off = qp.Gp @ p + qp.g0
-        key = (a_min, a_max)
+        if np.ndim(a_min) or np.ndim(a_max):
+            key = (tuple(np.broadcast_to(a_min, self.nu)), tuple(np.broadcast_to(a_max, self.nu)))
+        else:
+            key = (a_min, a_max)
         if getattr(self, "_rows_key", None) != key:  # the rows that do not change per step
             lo_t, hi_t = np.empty(self.nc), np.empty(self.nc)
-            lo_t[:N], hi_t[:N] = a_min, a_max
-            hi_t[N:N + F * N] = np.inf
-            lo_t[N + F * N:], hi_t[N + F * N:] = 0.0, np.inf
+            lo_t[:NU] = np.tile(np.broadcast_to(np.asarray(a_min, float), self.nu), self.N)
+            hi_t[:NU] = np.tile(np.broadcast_to(np.asarray(a_max, float), self.nu), self.N)
+            hi_t[NU:NU + FN] = np.inf
+            lo_t[NU + FN:], hi_t[NU + FN:] = 0.0, np.inf
             self._rows, self._rows_key = (lo_t, hi_t), key
         lo, hi = self._rows[0].copy(), self._rows[1].copy()
-        lo[N:N + F * N] = np.asarray(fam_bounds, float).reshape(-1)
+        lo[NU:NU + FN] = np.asarray(fam_bounds, float).reshape(-1)
         if self.W:
             r = self.jerk_rows
-            lo[r] = -jerk * self.window
-            hi[r] = jerk * self.window
+            if np.ndim(jerk):
+                J = np.tile(np.asarray(jerk, float).reshape(self.nu), self.N) * self.window
+            else:
+                J = jerk * self.window
+            lo[r] = -J
+            hi[r] = J
         np.subtract(lo, off, out=lo)
         np.subtract(hi, off, out=hi)
         return qp.Qp @ p + qp.q0, lo, hi
 
     def shift_indices(self) -> tuple[np.ndarray, np.ndarray]:
         """Index arrays that shift a primal / dual solution by one step (warm start)."""
-        N = self.N
-        base = np.minimum(np.arange(N) + 1, N - 1)
-        zi = np.concatenate([base + b * N for b in range(self.nz // N)])
-        yi = np.concatenate([base + b * N for b in range(self.nc // N)])
-        return zi, yi
+        N, nu = self.N, self.nu
+        step = np.minimum(np.arange(N) + 1, N - 1)
+        blk_u = (step[:, None] * nu + np.arange(nu)[None, :]).reshape(-1)
+        FN = len(self.families) * N
+        fam = np.concatenate([step + f * N for f in range(len(self.families))]) \
+            if FN else np.zeros(0, int)
+        zi = np.concatenate([blk_u, self.n_input + fam]).astype(int)
+        parts = [blk_u, self.n_input + fam, self.n_input + FN + fam]
+        if self.W:
+            parts.append(self.n_input + 2 * FN + blk_u)
+        return zi, np.concatenate(parts).astype(int)

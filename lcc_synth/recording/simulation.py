@@ -442,7 +442,7 @@ def record_mpc_history(
             rec, f"{base}/mpc/solve_time_ms", tcol, vals[idx],
             [f"{k} time (ms)" for k, _ in times], _PALETTE[: len(times)],
         )  # fmt: skip
-    # the joint MPC of a platoon or ring (lcc_synth.mpc.platoon): a status per CAV, plans
+    # the joint MPC of a platoon or ring (lcc_synth.mpc.joint): a status per CAV, plans
     # (B, S, N, n_cav), predicted error states (B, S, N+1, nx) on s_1, v_1, ..., s_N, v_N
     joint = "predicted_states" in history and "predicted_velocity" not in history
     status = member("status", 1 if joint else 0)

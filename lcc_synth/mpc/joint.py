@@ -1,7 +1,9 @@
 """One MPC for every CAV of a mixed platoon or a ring road (``[system] kind = "platoon" |
 "ring"``, a ``type = "mpc"`` controller).
 
-The joint QP is :mod:`lcc_synth.mpc.platoon_qp` (CasADi, built once); one OSQP workspace per
+The joint QP is the one condensed QP of :class:`lcc_synth.mpc.formulation.Formulation` with
+one input per CAV, on the prediction model of :mod:`lcc_synth.mpc.joint_prediction` (CasADi,
+built once); one OSQP workspace per
 batch member is set up once and each sample only updates vectors (initial state, equilibrium,
 bounds), warm-started from the shifted previous solution, with the status checked as in the
 single-CAV MPC (:mod:`lcc_synth.mpc.solver`). Per sample:
@@ -21,7 +23,7 @@ single-CAV MPC (:mod:`lcc_synth.mpc.solver`). Per sample:
    to ``C`` but the ``s_eq,i(v_eq)`` do not (unless ``v_eq`` is the ring velocity), and this
    constant offset lies in the conserved direction ``c`` (total spacing) that no input
    changes. Projected out, the prediction stays on the hyperplane ``c x = 0`` where the
-   terminal cost is defined (:func:`~lcc_synth.mpc.platoon_qp.platoon_terminal_cost`) and the
+   terminal cost is defined (:func:`~lcc_synth.mpc.joint_prediction.joint_terminal_cost`) and the
    offset cannot bias the solution. Equivalently the reference spacings are ``s_eq,i + delta``
    with ``delta = (C - sum s_eq) / N``; the absolute safe-spacing bounds use the same
    reference, so they stay exact.
@@ -36,12 +38,23 @@ single-CAV MPC (:mod:`lcc_synth.mpc.solver`). Per sample:
    platoon.PlatoonGains` row; default: the CAV's own HDV law, ``"added"`` semantics with a
    zero gain), computed from the states that row reads only, clipped to the limits; else the
    CAV holds its last command. Each CAV's outcome and the failure reason are counted
-   (:meth:`PlatoonMPCController.stats`, ``per_cav``).
+   (:meth:`JointMPCController.stats`, ``per_cav``).
 
-Not supported for platoons (a ConfigError naming the key): ``n_model`` (the joint MPC models
-every vehicle), ``constraints.behind`` (every CAV's own spacing is constrained),
-``weights.position`` (FD-LCC only). The controller returns ``(batch,)`` with one CAV and
-``(batch, n_cav)`` with several (CAV order of the platoon).
+**Actuator lag** (``prediction.cav_lag``): each CAV's acceleration ``a_i`` is a state of
+the prediction (:mod:`lcc_synth.mpc.joint_prediction`), measured at each sample
+(``Observation.cav_acceleration``; without lag in the plant: the CAV's last command), as in
+the single-CAV MPC (:mod:`lcc_synth.mpc.lag`).
+
+**HDV delays** (``prediction.delay``, one delay or one per HDV front to tail): the delay
+register of :mod:`lcc_synth.mpc.delay` over the platoon's HDV rows
+(:func:`~lcc_synth.mpc.joint_prediction.joint_delay_model`), filled with the observed past as
+errors from the current reference spacings (ring: the projected ones).
+
+Not supported for platoons and rings (a ConfigError naming the key; the feature matrix is in
+:mod:`lcc_synth.mpc`): ``n_model`` (the joint MPC models every vehicle), ``constraints.behind``
+(every CAV's own spacing is constrained), ``weights.position`` (FD-LCC only). The controller
+returns ``(batch,)`` with one CAV and ``(batch, n_cav)`` with several (CAV order of the
+platoon).
 
 Measured (``benchmarks/bench_mpc_platoon.py``, N = 50, Ts = 0.1 s, 2 shared cores): the
 two-CAV DeeP-LCC platoon in its brake scenario takes 1.5 ms per step (median; OSQP 1.3 ms)
@@ -53,7 +66,7 @@ the 20-vehicle ring with one AV takes 0.6 ms (median) and 4.7 ms (p99).
 from __future__ import annotations
 
 import math
-import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -61,42 +74,34 @@ import numpy as np
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import free_speed
 from lcc_synth.models.platoon import PlatoonGains
-from lcc_synth.mpc.active_set import make_solver, solver_label
-from lcc_synth.mpc.comfort import jerk_bound, solve_prioritised
-from lcc_synth.mpc.formulation import Family, check_horizon
-from lcc_synth.mpc.platoon_qp import PlatoonFormulation, linearize_platoon, platoon_state_weights
+from lcc_synth.mpc.comfort import jerk_bound
+from lcc_synth.mpc.delay import pad
+from lcc_synth.mpc.formulation import Family, Formulation, check_horizon
+from lcc_synth.mpc.joint_prediction import joint_state_weights, linearize_joint
 from lcc_synth.mpc.report import new_step_record, step_statistics
+from lcc_synth.mpc.scaffold import (
+    STATUS_CODES,
+    LoopState,
+    MPCScaffold,
+    head_prediction,
+    update_equilibrium,
+)
 from lcc_synth.mpc.settings import MPCSettings
-from lcc_synth.mpc.solver import POLISH_NAMES, OSQPSolver
 
-__all__ = ["PlatoonMPCController", "PLATOON_STATUS_CODES"]
+__all__ = ["JointMPCController", "STATUS_CODES"]
 
-#: Per-step, per-CAV outcome codes in ``history()["status"]``.
-PLATOON_STATUS_CODES = {0: "qp", 1: "shifted_plan", 2: "static_gain", 3: "hold"}
 _OUTCOME = {1: "fallback_shifted", 2: "fallback_static", 3: "fallback_hold"}
 
 
-class _Member:
-    """Solver and loop state of one batch member."""
+@dataclass
+class _Member(LoopState):
+    """Loop state of one batch member: the shared fields plus each CAV's previous input."""
 
-    def __init__(self, solver: OSQPSolver, lin_entry, nu: int, W_avg: int, W_past: int,
-                 v_eq: float):
-        self.solver = solver
-        self.lin, self.qp, self.fb_K, self.fb_kh = lin_entry
-        self.v_buf = np.zeros(W_avg)
-        self.v_buf_n = 0
-        self.v_buf_i = 0
-        self.v_eq = v_eq
-        self.v_ref_prev = math.nan
-        self.u_prev = np.zeros(nu)
-        self.plan: np.ndarray | None = None
-        self.plan_age = 0
-        self.warm: tuple | None = None
-        self.past = np.zeros((max(1, W_past), nu))  # applied commands, newest first
-        self.hist: dict[str, list] = {k: [] for k in _HIST_KEYS}
+    u_prev: np.ndarray | None = None
+    delay: Any = None  # delay.StateHistory (past observed states) with prediction.delay
 
 
-class PlatoonMPCController:
+class JointMPCController(MPCScaffold):
     """Joint safety-constrained MPC of every CAV of a platoon or ring (module docstring).
 
     Parameters
@@ -145,17 +150,20 @@ class PlatoonMPCController:
         self.record = record
         self._v_hi = min(free_speed(h) for h in pl.hdv)
         try:
-            self._lin0 = linearize_platoon(pl, self._clip_v(pl.v_star), settings)
+            self._lin0 = linearize_joint(pl, self._clip_v(pl.v_star), settings)
         except ConfigError as err:
-            raise ConfigError(f"weights ({err.field})", err.message) from None
+            where = err.field if err.field.startswith("prediction.") else f"weights ({err.field})"
+            raise ConfigError(where, err.message) from None
         model = self._lin0.model
         c = settings.constraints
         self._families = [
             Family(i, 2 * i - 2, 2 * i - 1, c.t_gap, c.s_min) for i in self.positions
         ] if c.spacing_ahead else []
-        check_horizon(settings.horizon, model.nx, len(self._families))
-        self.formulation = PlatoonFormulation(
-            model.nx, self.nu, settings, platoon_state_weights(model, settings), self._families
+        nz = self._lin0.Ad.shape[0]  # model.nx, plus nu with prediction.cav_lag
+        check_horizon(settings.horizon, nz, len(self._families))
+        self.formulation = Formulation(
+            self.kind, nz, settings, pad(joint_state_weights(model, settings), nz),
+            self._families, nu=self.nu,
         )
         self._shift_z, self._shift_y = self.formulation.shift_indices()
         if fallback is None:
@@ -170,13 +178,6 @@ class PlatoonMPCController:
         self._members: list[_Member] = []
         self._ctx = None
         self._new_record()
-
-    def __getstate__(self) -> dict[str, Any]:
-        """Picklable without the run state (OSQP workspaces); call :meth:`reset` after."""
-        state = dict(self.__dict__)
-        state["_members"] = []
-        state["_ctx"] = None
-        return state
 
     @property
     def n_cav(self) -> int:
@@ -194,23 +195,11 @@ class PlatoonMPCController:
         ]  # fmt: skip
         self._t: list[float] = []
 
-    def _clip_v(self, v: float) -> float:
-        return float(np.clip(v, 1.0, self._v_hi - 1.0))
+    def _linearize_at(self, v: float):
+        return linearize_joint(self.platoon, v, self.settings)
 
-    def _linearization(self, v: float):
-        """Cached (lin, qp, fb_K, fb_kh) at ``v`` rounded to 0.01 m/s."""
-        key = round(self._clip_v(v), 2)
-        hit = self._cache.get(key)
-        if hit is None:
-            lin = self._lin0 if key == round(self._lin0.v_lin, 2) else linearize_platoon(
-                self.platoon, key, self.settings
-            )
-            K, kh = self.fallback.input_feedback(lin.model)
-            hit = (lin, self.formulation.matrices(lin), K, kh)
-            if len(self._cache) > 256:
-                self._cache.clear()
-            self._cache[key] = hit
-        return hit
+    def _feedback(self, model):
+        return self.fallback.input_feedback(model)
 
     def _check_context(self, ctx) -> None:
         cavs = tuple(int(c) for c in getattr(ctx, "cavs", (ctx.m + 1,)))
@@ -233,44 +222,30 @@ class PlatoonMPCController:
         self._a_min = np.full(self.nu, max(c.a_min, ctx.a_min))
         self._a_max = np.full(self.nu, min(c.a_max, ctx.a_max))
         self._new_record()
-        form = self.formulation
-        N = self.settings.horizon
-        F = len(self._families)
-        W = max(1, int(round(self.settings.prediction.equilibrium_window / self.sample_time)))
+        W = self._window()
         self._members = []
         for b in range(ctx.batch):
             v0 = float(np.asarray(ctx.v_star).reshape(-1)[b])
-            entry = self._linearization(v0)
-            p = form.param(np.zeros(form.nx), np.zeros(N), np.zeros(self.nu))
-            q, lo, hi = form.bounds(entry[1], p, self._a_min, self._a_max,
-                                    np.full((F, N), -np.inf))
-            solver = make_solver(entry[1], q, lo, hi, self.settings.solver)
-            self._members.append(_Member(solver, entry, self.nu, W, form.W, v0))
+            lin, qp, K, kh = self._linearization(v0)
+            solver = self._new_solver(qp, np.zeros(self.nu), self._a_min, self._a_max)
+            self._members.append(_Member(
+                solver, lin, qp, K, kh, np.zeros(W), v_eq=v0, u_prev=np.zeros(self.nu),
+                past=np.zeros((max(1, self.formulation.W), self.nu)),
+                hist={k: [] for k in _HIST_KEYS},
+                delay=None if lin.delay is None else lin.delay.history()))  # fmt: skip
 
     def __call__(self, obs) -> np.ndarray:
-        ctx = self._ctx
-        if ctx is None:
-            raise RuntimeError("PlatoonMPCController: call reset(ctx) before the first step")
-        B = ctx.batch
-        out = np.zeros((B, self.nu))
-        self._t.append(float(obs.t))
-        for b in range(B):
-            t0 = time.perf_counter()
-            mem = self._members[b]
-            try:
-                out[b] = self._step(b, mem, obs)
-            except Exception as err:  # never raise inside the loop
-                self._st["errors"] += 1
-                if len(self._st["error_messages"]) < 5:
-                    self._st["error_messages"].append(f"t={obs.t:g}: {type(err).__name__}: {err}")
-                out[b] = self._hold(mem, np.arange(self.nu), "error")
-                if self.record:
-                    self._record(mem, out[b], np.full(self.nu, 3), None, 0.0, None, None, None)
-            mem.past[1:] = mem.past[:-1]
-            mem.past[0] = out[b]
-            self._st["step_time"].append(time.perf_counter() - t0)
-        self._st["steps"] += 1
+        """The commands of one sample: ``(batch,)`` with one CAV, ``(batch, n_cav)`` with
+        several."""
+        out = np.zeros((0 if self._ctx is None else self._ctx.batch, self.nu))
+        self._run_members(obs, out)
         return out[:, 0].copy() if self.nu == 1 else out
+
+    def _on_error(self, mem: _Member) -> np.ndarray:
+        cmd = self._hold(mem, np.arange(self.nu), "error")
+        if self.record:
+            self._record(mem, cmd, np.full(self.nu, 3), None, 0.0, None, None, None)
+        return cmd
 
     # ---------------------------------------------------------------- one member, one step
 
@@ -286,15 +261,8 @@ class PlatoonMPCController:
             v_ref = float(obs.velocity[b, 0 if self.positions[0] == 1 else 1])
         if pred.equilibrium_mode(self.kind) == "fixed":
             mem.v_eq = float(np.asarray(self._ctx.v_star).reshape(-1)[b])
-        elif math.isfinite(v_ref):
-            Wb = mem.v_buf.size
-            if mem.v_buf_n == 0:
-                mem.v_buf[:] = v_ref
-                mem.v_buf_n = Wb
-            else:
-                mem.v_buf[mem.v_buf_i] = v_ref
-            mem.v_buf_i = (mem.v_buf_i + 1) % Wb
-            mem.v_eq = float(mem.v_buf.mean())
+        else:
+            update_equilibrium(mem, v_ref)
         v_eq = mem.v_eq
         ve = self._clip_v(v_eq)
         s_ref = np.array([float(h.equilibrium_spacing(ve)) for h in self.platoon.hdv])
@@ -306,34 +274,18 @@ class PlatoonMPCController:
         N = self.settings.horizon
         d = np.zeros(N)
         if not self.ring:
-            Ts = self.sample_time
-            d0 = (v_ref - v_eq) if math.isfinite(v_ref) else 0.0
-            d[:] = d0
-            if pred.head == "accel" and math.isfinite(mem.v_ref_prev) and math.isfinite(v_ref):
-                a = float(np.clip((v_ref - mem.v_ref_prev) / Ts, self._a_min.min(),
-                                  self._a_max.max()))
-                d = np.maximum(d0 + a * np.minimum(np.arange(N) * Ts, pred.head_accel_hold),
-                               -v_eq)
-            mem.v_ref_prev = v_ref
+            d0, d = head_prediction(mem, v_ref, N, self.sample_time, pred,
+                                    float(self._a_min.min()), float(self._a_max.max()))
+        else:
+            d0 = 0.0
+        if pred.cav_lag:  # each CAV's acceleration: measured, else its last command (no lag)
+            acc = getattr(obs, "cav_acceleration", None)
+            a = mem.past[0] if acc is None else np.asarray(acc, float)[b].reshape(-1)[: self.nu]
+            x = np.concatenate([x, a])
+        if mem.delay is not None:  # past observations as errors from the current equilibrium
+            col = np.minimum(mem.delay.columns, s.size * 2 - 1) // 2
+            x = mem.delay.push(x, d0, s_ref[col], v_eq)
         return x, d, s_ref, v, s
-
-    def _relinearize(self, mem: _Member) -> None:
-        pred = self.settings.prediction
-        if not pred.relinearize or abs(mem.v_eq - mem.lin.v_lin) <= pred.relinearize_threshold:
-            return
-        t0 = time.perf_counter()
-        grid = pred.relinearize_threshold / 4.0
-        try:
-            entry = self._linearization(round(mem.v_eq / grid) * grid)
-            mem.solver.update_matrices(entry[1])
-        except Exception as err:
-            self._st["relinearize_failures"] += 1
-            if len(self._st["error_messages"]) < 5:
-                self._st["error_messages"].append(f"re-linearisation at {mem.v_eq:.2f}: {err}")
-            return
-        mem.lin, mem.qp, mem.fb_K, mem.fb_kh = entry
-        self._st["relinearizations"] += 1
-        self._st["relin_time"].append(time.perf_counter() - t0)
 
     def _step(self, b: int, mem: _Member, obs) -> np.ndarray:
         st = self._st
@@ -360,27 +312,13 @@ class PlatoonMPCController:
             fb[f] = fam.s_min + c.margin + fam.t_gap * mem.v_eq - s_ref[fam.vehicle - 1]
         jb = np.array([jerk_bound(c.jerk_scale, float(v[i])) for i in pos])
         q, lo, hi = form.bounds(mem.qp, p, self._a_min, self._a_max, fb, jb)
-        warm = mem.warm
-        res = solve_prioritised(
-            mem.solver, form, q, lo, hi,
-            None if warm is None else warm[0][self._shift_z],
-            None if warm is None else warm[1][self._shift_y], st,
-        )  # fmt: skip
-        st["solves"] += 1
-        st["osqp_time"].append(res.run_time)
-        st["iterations"].append(res.iterations)
-        pname = POLISH_NAMES.get(res.polish, str(res.polish))
-        st["polish"][pname] = st["polish"].get(pname, 0) + 1
+        res = self._solve(mem, q, lo, hi)
         if not res.ok:
-            st["qp_failures"][res.status] = st["qp_failures"].get(res.status, 0) + 1
             return self._fallback(mem, x0, d, res.status)
         z = res.z
-        mem.warm = (z, res.y)
         U = z[: form.n_input].reshape(N, self.nu)
         slack = float(z[form.n_input:].max()) if z.size > form.n_input else 0.0
-        if slack > 1e-6:
-            st["slack_steps"] += 1
-            st["max_slack"] = max(st["max_slack"], slack)
+        self._note_slack(slack)
         mem.plan = U.copy()
         mem.plan_age = 0
         cmd = np.clip(U[0], self._a_min, self._a_max)
@@ -404,7 +342,7 @@ class PlatoonMPCController:
             for k in range(self.nu):
                 row = mem.fb_K[k]
                 used = row != 0.0
-                u = float(row[used] @ x0[used]) + float(mem.fb_kh[k]) * d0
+                u = float(row[used] @ x0[: row.size][used]) + float(mem.fb_kh[k]) * d0
                 if math.isfinite(u):
                     cmd[k] = float(np.clip(u, self._a_min[k], self._a_max[k]))
                     code[k] = 2
@@ -454,7 +392,7 @@ class PlatoonMPCController:
         """Per-sample record of the last run, leading axes ``(batch, samples)``.
 
         Keys: ``t (S,)``; ``u (B, S, n_cav)`` applied commands; ``status (B, S, n_cav)``
-        (:data:`PLATOON_STATUS_CODES`); ``osqp_time`` (s, NaN when not solved);
+        (:data:`STATUS_CODES`); ``osqp_time`` (s, NaN when not solved);
         ``iterations``; ``slack`` (largest spacing slack, m); ``v_eq``; ``x0 (B, S, nx)``
         error state (ring: projected); ``d (B, S, N)``; ``plan (B, S, N, n_cav)``;
         ``predicted_states (B, S, N+1, nx)``; ``state_names``.
@@ -473,45 +411,22 @@ class PlatoonMPCController:
                 U = mem.hist["plan"][k]
                 if np.all(np.isfinite(U)):
                     X[b, k] = mem.hist["lin"][k].predict(mem.hist["x0"][k], mem.hist["d"][k], U)
-        out["predicted_states"] = X
+        nxm = self._lin0.model.nx  # the lag states (prediction.cav_lag) are left out
+        out["x0"] = out["x0"][..., :nxm]
+        out["predicted_states"] = X[..., :nxm]
         out["state_names"] = np.array(self._lin0.model.state_names)
         return out
 
     def describe(self) -> dict[str, Any]:
         """Horizon, weights, constraints, prediction, solver, the CAVs and their fallbacks."""
-        s = self.settings
-        d = s.as_dict()
-        model = self._lin0.model
-        d.update({
-            "type": "mpc",
-            "name": self.name,
-            "kind": self.kind,
-            "joint": True,
-            "cavs": list(self.positions),
-            "ring": self.ring,
-            "equilibrium": s.prediction.equilibrium_mode(self.kind),
-            "equilibrium_reference": "mean speed of all vehicles" if self.ring else
-            ("head" if self.positions[0] == 1 else "first vehicle of the platoon"),
-            "state_names": list(model.state_names),
-            "qp": {
-                "formulation": "condensed joint QP, CasADi symbolic (built once)",
-                "variables": self.formulation.nz,
-                "constraints": self.formulation.nc,
-                "spacing_families": [f.vehicle for f in self._families],
-                "solver": solver_label(s.solver),
-            },
-            "fallback": {
-                "source": self.fallback_source,
-                "semantics": self.fallback.semantics,
-                "gains": self.fallback.as_table(model),
-            },
-        })  # fmt: skip
-        d["solver"]["name"] = s.solver.method
-        return d
-
-    def toml_table(self) -> dict[str, Any]:
-        """The ``[controllers.NAME]`` table that builds this MPC."""
-        return self.settings.toml_table()
+        ref = "mean speed of all vehicles" if self.ring else (
+            "head" if self.positions[0] == 1 else "first vehicle of the platoon")
+        return self._describe(
+            {"joint": True, "cavs": list(self.positions), "ring": self.ring},
+            {"equilibrium_reference": ref},
+            "condensed joint QP, CasADi symbolic (built once)",
+            self.fallback.as_table(self._lin0.model),
+        )
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-serialisable summary (:meth:`describe`)."""
