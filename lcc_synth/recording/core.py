@@ -491,14 +491,12 @@ def _comparison_markdown(scenario: str, rows: Mapping[str, Mapping[str, Any]]) -
         return {k: v for k, v in row.items()
                 if isinstance(v, int | float | np.number) and not isinstance(v, bool)}
 
-    def verdict(row: Mapping[str, Any]) -> tuple[bool, list[str]]:
-        return bool(numbers(row).get("collisions")), unsafe_reasons(numbers(row))
-
-    judged = any(k in numbers(r) for r in rows.values()
+    nums = {c: numbers(row) for c, row in rows.items()}
+    verdicts = {c: (bool(n.get("collisions")), unsafe_reasons(n)) for c, n in nums.items()}
+    judged = any(k in n for n in nums.values()
                  for k in ("min_spacing", "min_ttc", "aeb_activations"))  # fmt: skip
-    ctrls = sorted(rows, key=lambda c: (verdict(rows[c])[0], bool(verdict(rows[c])[1])))
-    if not judged:
-        ctrls = list(rows)
+    ctrls = (sorted(rows, key=lambda c: (verdicts[c][0], bool(verdicts[c][1]))) if judged
+             else list(rows))  # fmt: skip
     keys: list[str] = []
     for row in rows.values():
         keys += [k for k, v in row.items() if _is_scalar(v) and k not in keys]
@@ -509,7 +507,7 @@ def _comparison_markdown(scenario: str, rows: Mapping[str, Mapping[str, Any]]) -
     if judged:
         cells = []
         for c in ctrls:
-            hit, why = verdict(rows[c])
+            hit, why = verdicts[c]
             cells.append("collided" if hit else ("unsafe: " + ", ".join(why)) if why else "safe")
         lines.append("| safety | " + " | ".join(cells) + " |")
 

@@ -127,12 +127,12 @@ def time_panel(rrb, ranges: Mapping[str, Any] | None = None):
     if t is not None:
         event = (ranges or {}).get("event")
         lo = float(event) if event is not None and t[0] <= float(event) <= t[1] else float(t[0])
-        selection = rrb_time_range(lo, float(t[1]))
+        selection = _time_range(lo, float(t[1]))
     return rrb.TimePanel(state="expanded", timeline="time", play_state="paused",
                          time_selection=selection)  # fmt: skip
 
 
-def rrb_time_range(lo: float, hi: float):
+def _time_range(lo: float, hi: float):
     """A Rerun absolute time range ``[lo, hi]`` seconds of a duration timeline."""
     import rerun.encodings as enc
 
