@@ -12,7 +12,7 @@ A ``simulate`` problem file with one ``type = "h2"`` controller and one ``type =
   ``fallback``, ``gains`` or ``design`` key), the mapping of the controller tables, or a
   synthesis problem made from one (a mapping or :class:`~lcc_synth.problem.Problem` with a
   ``synthesis`` table and no ``controllers``);
-* an object made from one: gains (``StaticGains``, ``PlatoonGains``), a synthesis spec or
+* an object made from one: gains (``Gains``), a synthesis spec or
   report, MPC settings, a built controller (anything with ``reset`` and ``sample_time``), or
   the mapping of the built controllers.
 
@@ -57,7 +57,7 @@ window = [0.0, 1.0]
 """
 
 _TABLE_TYPES = ("h2", "static", "mpc")
-_OBJECTS = ("StaticGains", "PlatoonGains", "SynthesisSpec", "PlatoonSynthesisSpec",
+_OBJECTS = ("Gains", "SynthesisSpec", "PlatoonSynthesisSpec",
             "SynthesisReport", "PlatoonReport", "MPCSettings")  # fmt: skip
 
 

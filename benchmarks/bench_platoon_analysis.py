@@ -19,8 +19,9 @@ from lcc_synth.analysis.controllability import controllability_report, observabi
 from lcc_synth.analysis.staircase import kalman_decomposition
 from lcc_synth.analysis.string_stability import string_stability
 from lcc_synth.analysis.transfer import gamma_product, gamma_state_space
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.hdv import OVM
-from lcc_synth.models.platoon import Platoon, PlatoonGains, platoon_model
+from lcc_synth.models.platoon import Platoon, platoon_model
 
 DEEPLCC = {
     "alpha": [0.45, 0.75, 0.6, 0.70, 0.50, 0.6, 0.40, 0.80],
@@ -53,7 +54,7 @@ def main() -> None:
           f"{ob.decision_margin:.3g}; {t * 1e3:.1f} ms")  # fmt: skip
     table = {"u_3": {"s_3": 0.5, "v_3": -1.2, "v_2": 0.9},
              "u_6": {"s_6": 0.4, "v_6": -1.5, "v_5": 1.1}}  # fmt: skip
-    K, kh = PlatoonGains.from_table(table, model).input_feedback(model)
+    K, kh = Gains.from_table(table, model).input_feedback(model)
     w = np.logspace(-3, 2, 400)
     (ss, t_ss) = _timed(lambda: gamma_state_space(model, K, kh, w))
     prod = gamma_product(model, K, kh, w)

@@ -18,7 +18,7 @@ import numpy as np
 from lcc_synth.analysis.region_specs import grid_axis
 from lcc_synth.analysis.regions import region_frequency_grid, region_map
 from lcc_synth.analysis.string_stability import string_stability
-from lcc_synth.models.feedback import StaticGains, input_feedback
+from lcc_synth.models.feedback import Gains, input_feedback
 from lcc_synth.models.hdv import OVM
 from lcc_synth.models.linear import general_lcc
 
@@ -46,7 +46,7 @@ def main(argv: list[str]) -> int:
     pts = rng.uniform(-10, 10, size=(100, 2))
     t0 = time.perf_counter()
     for mu, k in pts:
-        K, kh = input_feedback(model, StaticGains({"s_1": mu, "v_1": k}))
+        K, kh = input_feedback(model, Gains.named({"s_1": mu, "v_1": k}))
         string_stability(model, K, kh)
     per = (time.perf_counter() - t0) / len(pts)
     print(

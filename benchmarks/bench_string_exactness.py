@@ -43,7 +43,7 @@ import scipy.linalg as sla
 
 import lcc_synth.analysis.string_stability as ss
 from lcc_synth.analysis.transfer import closed_loop_eigenvalues, tail_output
-from lcc_synth.models.feedback import StaticGains, closed_loop, input_feedback
+from lcc_synth.models.feedback import Gains, closed_loop, input_feedback
 from lcc_synth.models.hdv import OVM, LinearCoefficients
 from lcc_synth.models.linear import build_model, general_lcc, model_from_hdv
 
@@ -82,10 +82,10 @@ def random_model(rng, kind="lcc"):
     return build_model(kind, m, n, coefs, cav=random_coefs(rng))
 
 
-def random_gains(rng, model, scale=2.0) -> StaticGains:
+def random_gains(rng, model, scale=2.0) -> Gains:
     names = list(model.state_names)
     pick = rng.choice(names, size=int(rng.integers(1, len(names) + 1)), replace=False)
-    return StaticGains({str(p): float(rng.uniform(-scale, scale)) for p in pick})
+    return Gains.named({str(p): float(rng.uniform(-scale, scale)) for p in pick})
 
 
 NEW_API = hasattr(ss, "loop_string_stability")
@@ -143,7 +143,7 @@ def _table_cases(model):
     out = {}
     for name, g in TABLE_I.items():
         gg = {k: v for k, v in g.items() if k in model.state_names}
-        out[name] = input_feedback(model, StaticGains(gg))
+        out[name] = input_feedback(model, Gains.named(gg))
     return out
 
 
@@ -256,7 +256,7 @@ def build_core_sample(rng) -> list[dict]:
         big = general_lcc(m, n, PAPER)
         tb = _table_cases(big)
         _boundary_line("line", big, *tb["case_b"], *tb["case_c"], f"big{m},{n} b->c", rng, out)
-    K2, kh2 = input_feedback(paper, StaticGains({"v_-1": 1.9, "v_-2": 1.5, "v_2": -2.7}))
+    K2, kh2 = input_feedback(paper, Gains.named({"v_-1": 1.9, "v_-2": 1.5, "v_2": -2.7}))
     _boundary_line("line", paper, K2, kh2, *table["case_d"], "second_peak->case_d", rng, out)
     _boundary_line("line", paper, K2, kh2, *table["case_c"], "second_peak->case_c", rng, out)
     made, tries = 0, 0

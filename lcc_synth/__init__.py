@@ -31,7 +31,7 @@ from lcc_synth.errors import ConfigError
 __version__ = "0.1.0"
 
 _API = (
-    "OVM", "IDM", "System", "Scenario", "V2V", "StaticGains", "MetricsConfig",
+    "OVM", "IDM", "System", "Scenario", "V2V", "Gains", "MetricsConfig",
     "Brake", "Sine", "BrakeProfile", "Profile",
     "system", "ring", "model", "controllability", "observability", "control_energy", "gains",
     "string_stability", "region_map", "h2_problem", "synthesize_h2", "hdv_controller",

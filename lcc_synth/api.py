@@ -55,17 +55,17 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import MetricsConfig
-from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.hdv import IDM, OVM
 from lcc_synth.models.linear import LCCModel
-from lcc_synth.models.platoon import PlatoonGains, PlatoonModel
+from lcc_synth.models.platoon import PlatoonModel
 from lcc_synth.models.records import Record, ValueEq, plain, same, system_tables, toml_text
 from lcc_synth.problem import Problem, System, system_from
 from lcc_synth.simulation.perturbations import Brake, BrakeProfile, Profile, Sine
 from lcc_synth.simulation.scenario import V2V, Scenario
 
 __all__ = [
-    "OVM", "IDM", "System", "Scenario", "V2V", "StaticGains", "MetricsConfig",
+    "OVM", "IDM", "System", "Scenario", "V2V", "Gains", "MetricsConfig",
     "Brake", "Sine", "BrakeProfile", "Profile",
     "system", "ring", "model", "controllability", "observability", "control_energy", "gains",
     "string_stability", "region_map", "h2_problem", "synthesize_h2", "hdv_controller",
@@ -278,15 +278,15 @@ def control_energy(model: System | LCCModel | PlatoonModel, horizon: float):
 
 
 def gains(
-    values: Mapping[str, Any] | StaticGains | PlatoonGains,
+    values: Mapping[str, Any] | Gains,
     semantics: str | None = None,
     model: System | PlatoonModel | None = None,
-) -> StaticGains | PlatoonGains:
+) -> Gains:
     """Static CAV gains of eq. (23), with how they enter the command stated.
 
     Parameters
     ----------
-    values : mapping, StaticGains or PlatoonGains
+    values : mapping or Gains
         State name -> gain (``{"s_1": -1.0, "v_1": -1.0}``, missing states 0); on a platoon or
         ring one table per CAV input, ``{"u_3": {"s_3": ..., "v_2": ...}, ...}`` (then give
         ``model``). A gains object is returned as it is.
@@ -296,20 +296,21 @@ def gains(
         the gains are the whole command (Sec. V-B, Table II). With a gains object it must agree
         with the object's.
     model : System or PlatoonModel, optional
-        The platoon or ring whose per-CAV tables ``values`` holds (then the result is a
-        :class:`~lcc_synth.models.platoon.PlatoonGains`, else a :class:`StaticGains`).
+        The platoon or ring whose per-CAV tables ``values`` holds (then the gain is on its
+        CAVs and states; else it is the paper's single-CAV gain, vehicles indexed from the
+        CAV: :class:`~lcc_synth.models.feedback.Gains`).
 
     Examples
     --------
     >>> import lcc_synth as lcc
     >>> lcc.gains({"s_1": -1.0, "v_1": -1.0}, semantics="added")
-    StaticGains(gains={'s_1': -1, 'v_1': -1}, semantics='added')
+    Gains(cavs=(0,), gains={'s_1': -1, 'v_1': -1}, semantics='added')
     >>> lcc.gains({"s_1": -1.0})
     Traceback (most recent call last):
     ...
     lcc_synth.errors.ConfigError: semantics: must be given with gains: "added" (the CAV's ...
     """
-    if isinstance(values, StaticGains | PlatoonGains):
+    if isinstance(values, Gains):
         if semantics is not None and semantics != values.semantics:
             raise ConfigError(
                 "semantics", f"{semantics!r} contradicts the gains' {values.semantics!r}"
@@ -323,32 +324,34 @@ def gains(
                           'the gains, eq. 23) or "replace" (the gains are the whole command)')
     platoon = model.linear_model(warn=False) if isinstance(model, System) else model
     if isinstance(platoon, PlatoonModel):
-        return PlatoonGains.from_table(dict(values), platoon, semantics)
+        return Gains.from_table(dict(values), platoon, semantics)
     if any(isinstance(v, Mapping) for v in values.values()):
         raise ConfigError(
             "model", "per-CAV gain tables ({'u_3': {...}}) are for a platoon or ring: give "
             "model=lcc.system(size=..., cavs=[...]) (or lcc.ring(...))",
         )
-    return StaticGains(dict(values), semantics)
+    return Gains.named(dict(values), semantics)
 
 
-def _stated(gain: Any, model: LCCModel | PlatoonModel) -> StaticGains | PlatoonGains:
+def _stated(gain: Any, model: LCCModel | PlatoonModel) -> Gains:
     """``gain`` as given to an analysis of ``model``: a gains object (which states its
     semantics) of the model's layout."""
     if isinstance(gain, Mapping):
         raise ConfigError("gain", 'a plain mapping does not say how the gains enter the command: '
                           'write lcc.gains({...}, semantics="added"|"replace")')  # fmt: skip
-    platoon = isinstance(model, PlatoonModel)
-    if not isinstance(gain, PlatoonGains if platoon else StaticGains):
+    paper = tuple(model.cavs) == (0,)  # the paper's one-CAV model: vehicles from the CAV
+    if not isinstance(gain, Gains) or gain.cavs != tuple(model.cavs):
         raise ConfigError("gain", "must be lcc.gains({...}, semantics=...) for " + (
-            "a platoon or ring, one table per CAV ({'u_3': {...}}, model=...)" if platoon else
-            "one CAV ({'s_1': ..., 'v_1': ...})") + f", got {type(gain).__name__}")  # fmt: skip
+            "one CAV ({'s_1': ..., 'v_1': ...})" if paper else
+            "a platoon or ring, one table per CAV ({'u_3': {...}}, model=...)") + ", got " + (
+            f"gains for CAVs {list(gain.cavs)}" if isinstance(gain, Gains)
+            else type(gain).__name__))  # fmt: skip
     return gain
 
 
 def string_stability(
     model: System | LCCModel | PlatoonModel,
-    gain: StaticGains | PlatoonGains,
+    gain: Gains,
     method: str = "grid",
 ):
     """Head-to-tail string stability of the closed loop with static gains (Sec. IV, eq.
@@ -359,7 +362,7 @@ def string_stability(
     ``model``: a :class:`System` or its linear model. ``gain``: from :func:`gains`, which
     states the semantics (a plain mapping is refused: the paper's ``"added"`` and
     ``"replace"`` gains give opposite verdicts for the same numbers). On an open platoon
-    (several CAVs) a :class:`~lcc_synth.models.platoon.PlatoonGains` (``lcc.gains({"u_3":
+    (several CAVs) a :class:`~lcc_synth.models.feedback.Gains` (``lcc.gains({"u_3":
     {...}}, semantics=..., model=...)``).
 
     Examples
@@ -387,7 +390,7 @@ def region_map(
     vehicle: int,
     mu,
     k,
-    gain: StaticGains | None = None,
+    gain: Gains | None = None,
     omega=None,
     name: str = "",
 ):
@@ -493,7 +496,7 @@ def _controller(name: str, table: dict[str, Any], system: System):
 
 def static_controller(
     system: System,
-    gain: Mapping[str, Any] | StaticGains | PlatoonGains,
+    gain: Mapping[str, Any] | Gains,
     name: str = "static",
     semantics: str | None = None,
     kind: str | None = None,
@@ -508,10 +511,8 @@ def static_controller(
     in Table II); ``**run``: ``sample_time``, ``equilibrium``, ``equilibrium_tau``,
     ``measurement_filter``. :func:`lcc_synth.controllers.registry.build_controller`."""
     g = gains(gain, semantics, system if system.platoon is not None else None)
-    table_gains = (g.as_table(system.linear_model(warn=False)) if isinstance(g, PlatoonGains)
-                   else dict(g.gains))  # fmt: skip
     table = {"type": "static", "kind": kind or system.kind, "semantics": g.semantics,
-             "gains": table_gains, **run}  # fmt: skip
+             "gains": g.as_table(), **run}  # fmt: skip
     return _controller(name, table, system)
 
 

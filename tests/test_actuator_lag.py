@@ -22,7 +22,7 @@ from lcc_synth.analysis.string_stability import string_stability
 from lcc_synth.cli.main import main
 from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.string_as_run import measured_ratio
-from lcc_synth.models.feedback import StaticGains, closed_loop, input_feedback
+from lcc_synth.models.feedback import Gains, closed_loop, input_feedback
 from lcc_synth.models.lag import pad_gain, with_actuator_lag
 from lcc_synth.problem import load_problem
 from lcc_synth.simulation.engine import simulate
@@ -42,13 +42,13 @@ W = np.geomspace(1e-3, 20.0, 6000)
 
 def _table2():
     model = api.model("cf_lcc", 0, 10)
-    K, kh = input_feedback(model, StaticGains(TABLE2_CF, "replace"))
+    K, kh = input_feedback(model, Gains.named(TABLE2_CF, "replace"))
     return model, K, kh
 
 
 def _case_d():
     model = api.model("lcc", 2, 2)
-    K, kh = input_feedback(model, StaticGains(CASE_D, "added"))
+    K, kh = input_feedback(model, Gains.named(CASE_D, "added"))
     return model, K, kh
 
 
@@ -170,7 +170,7 @@ def test_simulator_small_signal_matches_the_lag_model():
     first order in dt: Richardson over dt = 2 ms and 1 ms) against |Gamma| of the lag model."""
     system = api.system("cf_lcc", 0, 10)
     model, K, kh = _table2()
-    ctrl = api.static_controller(system, StaticGains(TABLE2_CF, "replace"))
+    ctrl = api.static_controller(system, Gains.named(TABLE2_CF, "replace"))
     w = [0.1, 0.3, 1.0]
     for tau in (0.3, 2.5):
         r2 = measured_ratio(ctrl, system, w, dt=0.002, cav_lag=tau)
@@ -185,7 +185,7 @@ def test_simulator_small_signal_matches_the_lag_model():
 
 def _brake_run(tau, **kw):
     system = api.system("cf_lcc", 0, 10)
-    ctrl = api.static_controller(system, StaticGains(TABLE2_CF, "replace"))
+    ctrl = api.static_controller(system, Gains.named(TABLE2_CF, "replace"))
     sc = Scenario(m=0, n=10, v_star=15.0, duration=40.0, cav_lag=tau,
                   perturbations=(Brake(vehicle="head", start=10.0, duration=2.0, decel=-5.0),),
                   **kw)  # fmt: skip
@@ -384,12 +384,11 @@ def test_platoon_lag_against_the_cascade_product():
     eq. (8); the state space of the lagged loop must equal the product."""
     from lcc_synth.analysis.transfer import local_cav_laws, phi_gamma
     from lcc_synth.experiments.spec import load_spec
-    from lcc_synth.models.platoon import PlatoonGains
 
     model = load_spec(PROBLEMS / "platoon_deeplcc_brake.toml").system.linear_model(warn=False)
     table = {"u_3": {"s_3": 0.5, "v_3": -1.2, "v_2": 0.9}, "u_6": {"s_6": 0.4, "v_6": -1.5,
              "v_5": 1.1}}  # fmt: skip
-    K, kh = PlatoonGains.from_table(table, model, "replace").input_feedback(model)
+    K, kh = Gains.from_table(table, model, "replace").input_feedback(model)
     laws, taus = local_cav_laws(model, K, kh), {3: 0.3, 6: 0.6}
     w = np.logspace(-3, 2, 300)
     s = 1j * w

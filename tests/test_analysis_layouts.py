@@ -37,13 +37,12 @@ from lcc_synth.analysis.transfer import (
     local_cav_laws,
 )
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.feedback import StaticGains, closed_loop, input_feedback
+from lcc_synth.models.feedback import Gains, closed_loop, input_feedback
 from lcc_synth.models.hdv import OVM, LinearCoefficients
 from lcc_synth.models.linear import ccc, cf_lcc, fd_lcc, general_lcc, model_from_hdv
 from lcc_synth.models.platoon import (
     HEAD,
     Platoon,
-    PlatoonGains,
     PlatoonModel,
     chain_matrices,
     platoon_model,
@@ -113,10 +112,10 @@ def test_the_papers_string_is_a_platoon_with_one_cav(m, n):
     assert ob.outputs == [f"s_{shift}", f"v_{shift}", *(f"v_{i + shift}" for i in tail)]
     assert (oa.rank, oa.verdict) == (ob.rank, ob.verdict)
     # the same gain in both vocabularies: the same closed loop, the same verdict bit for bit
-    paper = StaticGains({"s_0": -0.25, "v_0": 0.5, f"v_{n}": -0.125}, "added")
+    paper = Gains.named({"s_0": -0.25, "v_0": 0.5, f"v_{n}": -0.125}, "added")
     table = {f"u_{shift}": {f"s_{shift}": -0.25, f"v_{shift}": 0.5, f"v_{n + shift}": -0.125}}
     K, kh = paper.input_feedback(lcc)
-    Kp, khp = PlatoonGains.from_table(table, one, "added").input_feedback(one)
+    Kp, khp = Gains.from_table(table, one, "added").input_feedback(one)
     assert np.array_equal(np.atleast_2d(K), Kp) and np.array_equal(np.atleast_1d(kh), khp)
     sa, sb = string_stability(lcc, K, kh), string_stability(one, Kp, khp)
     assert sa.as_dict() == sb.as_dict()
@@ -246,7 +245,7 @@ def test_plant_stability_of_fd_lcc_without_a_position_gain_is_the_boundary():
     """FD-LCC's -p_0 is an integrator: its column of A_cl is zero without a gain on it, so 0 is
     an exact eigenvalue and the verdict cannot be decided; with a gain on it, it can."""
     model = fd_lcc(3, GEN[0])
-    K, _ = input_feedback(model, StaticGains({"v_0": -0.5, "s_1": -0.2, "v_1": 0.05}, "replace"))
+    K, _ = input_feedback(model, Gains.named({"v_0": -0.5, "s_1": -0.2, "v_1": 0.05}, "replace"))
     assert not np.any(closed_loop(model, K)[0][:, 0])
     assert plant_stability(model, K)[0] == "boundary"
     K[0] = 0.1  # u = ... + 0.1 (-p_0)
@@ -259,7 +258,7 @@ def test_cascade_product_of_a_one_cav_string_is_the_papers_closed_form():
     the per-vehicle transfer functions read from the closed loop equals eq. (24)."""
     n, mu0, k0 = 3, 0.25, -0.5
     model = cf_lcc(n, GEN[:n], cav=GEN[3])
-    K, kh = input_feedback(model, StaticGains({"s_0": mu0, "v_0": k0}, "added"))
+    K, kh = input_feedback(model, Gains.named({"s_0": mu0, "v_0": k0}, "added"))
     c0 = GEN[3]
     assert local_cav_laws(model, K, kh) == {0: (c0.alpha1 + mu0, k0 - c0.alpha2, c0.alpha3)}
     w = np.logspace(-2, 1.5, 120)
@@ -268,7 +267,7 @@ def test_cascade_product_of_a_one_cav_string_is_the_papers_closed_form():
     assert np.max(np.abs(gamma_product(model, K, kh, w) / paper - 1)) < 1e-12
     assert np.max(np.abs(gamma_state_space(model, K, kh, w) / paper - 1)) < 1e-10
     # a gain on a vehicle behind breaks the cascade, named by the CAV's input
-    Kb, khb = input_feedback(model, StaticGains({"s_0": mu0, "v_2": 0.1}, "added"))
+    Kb, khb = input_feedback(model, Gains.named({"s_0": mu0, "v_2": 0.1}, "added"))
     with pytest.raises(ConfigError) as err:
         local_cav_laws(model, Kb, khb)
     assert err.value.field == "gains.u_0"
@@ -320,11 +319,11 @@ def test_no_head_to_tail_transfer_without_a_head_vehicle(model):
 def test_gains_of_either_vocabulary_give_the_same_string_report():
     """``gains_string_stability`` reads any gains object through its ``input_feedback``."""
     lay = _layouts()
-    gains = StaticGains({"s_0": 0.25, "v_0": -0.5}, "added")
+    gains = Gains.named({"s_0": 0.25, "v_0": -0.5}, "added")
     K, kh = input_feedback(lay["one_cav"], gains)
     ours = gains_string_stability(lay["one_cav"], gains)
     assert ours.as_dict() == string_stability(lay["one_cav"], K, kh).as_dict()
-    pg = PlatoonGains(np.zeros((2, 12)), (2, 4), "added")
+    pg = Gains.zero(lay["two_cav"], "added")
     ours = gains_string_stability(lay["two_cav"], pg)
     assert ours.as_dict() == string_stability(lay["two_cav"], *pg.input_feedback(lay["two_cav"])
                                               ).as_dict()  # fmt: skip

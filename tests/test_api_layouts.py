@@ -22,7 +22,8 @@ import tomli_w
 
 import lcc_synth as lcc
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.platoon import PlatoonGains, platoon_model
+from lcc_synth.models.feedback import Gains
+from lcc_synth.models.platoon import platoon_model
 from lcc_synth.problem import system_from
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -153,7 +154,7 @@ def test_platoon_gains_are_stated_and_checked():
     platoon = lcc.system(size=8, cavs=[3, 6])
     table = {"u_3": {"s_3": 0.2, "v_3": -0.3}, "u_6": {"v_5": 0.1}}
     g = lcc.gains(table, semantics="added", model=platoon)
-    direct = PlatoonGains.from_table(table, platoon.linear_model(), "added")
+    direct = Gains.from_table(table, platoon.linear_model(), "added")
     assert np.array_equal(g.K, direct.K) and g.semantics == "added"
     rep = lcc.string_stability(platoon, g)
     assert rep.as_dict() == lcc.string_stability(platoon.linear_model(), direct).as_dict()
@@ -163,7 +164,7 @@ def test_platoon_gains_are_stated_and_checked():
         lcc.gains({"u_4": {"s_4": 1.0}}, semantics="added", model=platoon)
     with pytest.raises(ConfigError, match=r"^gain: .* for a platoon or ring, one table per CAV"):
         lcc.string_stability(platoon, lcc.gains({"s_3": 1.0}, semantics="added"))
-    with pytest.raises(ConfigError, match=r"^gain: .* for one CAV .*, got PlatoonGains$"):
+    with pytest.raises(ConfigError, match=r"^gain: .* for one CAV .*, got gains for CAVs \[3, 6\]"):
         lcc.string_stability(lcc.model("lcc", 1, 1), g)
     with pytest.raises(ConfigError, match='^gain: a plain mapping does not say'):
         lcc.string_stability(platoon, table)

@@ -38,7 +38,7 @@ from lcc_synth.analysis.as_run_h2 import as_run_h2
 from lcc_synth.controllers.registry import build_controller
 from lcc_synth.controllers.static import LinearLaw
 from lcc_synth.experiments.string_as_run import controller_loop, gamma_curves, measured_ratio
-from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.hdv import OVM
 from lcc_synth.models.linear import cf_lcc, discretize, model_from_hdv
 from lcc_synth.problem import System
@@ -180,7 +180,7 @@ def _reference(model, law, T, latency, tau, tf, omega):
 def test_sampled_loop_equals_the_frequency_domain_reference(latency, tau, tf):
     system = _system(4)
     model = system.linear_model(warn=False)
-    law = law_of_gains(model, StaticGains(PAPER, "replace"))
+    law = law_of_gains(model, Gains.named(PAPER, "replace"))
     T = 0.1
     loop = as_run_loop(model, law, T, latency, tau, tf)
     omega = np.array([0.03, 0.2, 1.0, 5.0])
@@ -202,7 +202,7 @@ def test_measurement_filter_read_from_the_law():
     assert loop.settings["measurement_filter"] == 0.5
     assert any(s.startswith("f[") for s in loop.states)
     omega = np.array([0.05, 0.3, 1.0])
-    law = law_of_gains(model, StaticGains(PAPER, "replace"))
+    law = law_of_gains(model, Gains.named(PAPER, "replace"))
     ref = _reference(model, law, 0.01, 0.0, 1.0, 0.5, omega)
     assert np.allclose(loop.response(omega), ref, rtol=1e-8)
     assert not np.allclose(loop.response(omega), plain.response(omega), rtol=1e-3)
@@ -230,7 +230,7 @@ def test_continuous_limit_and_fixed_equilibrium_reduce_to_the_bare_gain():
     from lcc_synth.models.feedback import input_feedback
 
     model = cf_lcc(6, model_from_hdv("cf_lcc", 0, 6, OVM(), 15.0).coefficients[1])
-    gains = StaticGains(PAPER, "replace")
+    gains = Gains.named(PAPER, "replace")
     loop = as_run_loop(model, law_of_gains(model, gains))
     K, kh = input_feedback(model, gains)
     w = np.logspace(-2, 1, 30)
@@ -261,7 +261,7 @@ def test_tustin_image_preserves_the_frequency_response():
 def test_sampled_verdict_peak_is_the_discrete_supremum():
     system = _system(10)
     model = system.linear_model(warn=False)
-    loop = as_run_loop(model, law_of_gains(model, StaticGains(H2, "replace")), 0.1, 0.1, 1.0)
+    loop = as_run_loop(model, law_of_gains(model, Gains.named(H2, "replace")), 0.1, 0.1, 1.0)
     rep = as_run_report(loop)
     w = np.linspace(1e-3, math.pi / 0.1, 200001)
     mag = np.abs(loop.response(w))
@@ -269,14 +269,14 @@ def test_sampled_verdict_peak_is_the_discrete_supremum():
     assert math.isclose(rep.gamma_peak, mag.max(), rel_tol=1e-6)
     assert abs(rep.gamma_peak_omega - w[np.argmax(mag)]) < 1e-3
     # a gain pushing the CAV towards the vehicle ahead: unstable, also when sampled
-    bad = as_run_report(as_run_loop(model, law_of_gains(model, StaticGains(
+    bad = as_run_report(as_run_loop(model, law_of_gains(model, Gains.named(
         {**H2, "s_0": -0.5}, "replace")), 0.1, 0.1, 1.0))
     assert bad.verdict == "plant_unstable" and bad.string.max_real_eig > 0
 
 
 def test_fractional_latency_is_not_representable():
     model = _system(4).linear_model(warn=False)
-    law = law_of_gains(model, StaticGains(PAPER, "replace"))
+    law = law_of_gains(model, Gains.named(PAPER, "replace"))
     with pytest.raises(NotRepresentable, match="not a multiple"):
         as_run_loop(model, law, 0.1, 0.15)
     with pytest.raises(NotRepresentable, match="sample time"):
@@ -288,7 +288,7 @@ def test_as_run_h2_continuous_equals_the_design_h2_and_sampled_tends_to_it():
 
     model = _system(4).linear_model(warn=False)
     plant = make_plant(model, "replace", Weights(q_s=0.1, q_v=1.0, q_a=3.0, r=1.0))
-    gains = StaticGains(PAPER, "replace")
+    gains = Gains.named(PAPER, "replace")
     from lcc_synth.synthesis.design import design_gain_of
 
     g = design_gain_of(plant, gains)

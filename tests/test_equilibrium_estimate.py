@@ -22,7 +22,7 @@ from lcc_synth.controllers.registry import build_controller
 from lcc_synth.controllers.static import StaticGainController
 from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.spec import load_spec
-from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.hdv import IDM, OVM
 from lcc_synth.models.linear import model_from_hdv
 from lcc_synth.problem import System, load_problem
@@ -36,7 +36,7 @@ PAPER_CF = {"s_0": 0.1, "v_0": -0.5, "s_1": -0.2, "v_1": 0.05, "s_2": -0.1, "v_2
 
 def static(gains, kind="cf_lcc", m=0, n=10, semantics="replace", hdv=None, **kw):
     model = model_from_hdv(kind, m, n, hdv or OVM(), 15.0, warn=False)
-    return StaticGainController("g", StaticGains(gains, semantics), model, **kw)
+    return StaticGainController("g", Gains.named(gains, semantics), model, **kw)
 
 
 class Slow(StaticGainController):
@@ -55,7 +55,7 @@ def test_constant_head_gives_the_fixed_run_bit_for_bit():
     assert np.abs(fixed.u_cmd).max() > 0.5  # the brake behind the CAV does excite the gain
     # the Python path too (it sums in another order than the compiled loop: compared with
     # its own fixed run)
-    gains = StaticGains(PAPER_CF, "replace")
+    gains = Gains.named(PAPER_CF, "replace")
     slow_fixed = simulate(sc, Slow("g", gains, est_model()))
     slow = simulate(sc, Slow("g", gains, est_model(), equilibrium="estimated"))
     np.testing.assert_array_equal(slow.u_cmd, slow_fixed.u_cmd)

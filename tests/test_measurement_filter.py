@@ -20,7 +20,7 @@ from lcc_synth.controllers.static import StaticGainController
 from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.spec import load_spec
 from lcc_synth.metrics import max_jerk_1s, rms_jerk
-from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.hdv import OVM
 from lcc_synth.models.linear import model_from_hdv
 from lcc_synth.problem import System
@@ -34,7 +34,7 @@ H2_CF = {"s_0": 0.283, "v_0": -2.633, "s_1": -1.401, "v_1": -0.0096, "s_2": -1.2
 
 def static(gains, n=2, semantics="replace", cls=StaticGainController, **kw):
     model = model_from_hdv("cf_lcc", 0, n, OVM(), 15.0, warn=False)
-    return cls("g", StaticGains(gains, semantics), model, **kw)
+    return cls("g", Gains.named(gains, semantics), model, **kw)
 
 
 class Slow(StaticGainController):

@@ -11,7 +11,7 @@ import pytest
 from lcc_synth.controllers.base import ControlContext, Observation
 from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.controller_tables import controller_from_table
-from lcc_synth.models.feedback import StaticGains, cav_feedback
+from lcc_synth.models.feedback import Gains, cav_feedback
 from lcc_synth.models.hdv import OVM
 from lcc_synth.mpc import MPCController, mpc_controller_from_table
 from lcc_synth.mpc.formulation import linearize
@@ -200,7 +200,7 @@ def test_solver_failure_uses_the_static_gain_then_nothing_raises():
     ctrl.reset(_ctx(0, 3))
     rng = np.random.default_rng(0)
     lin = linearize("cf_lcc", 0, 3, HDV, 15.0, ctrl.settings)
-    K, kh = cav_feedback(lin.model, StaticGains(
+    K, kh = cav_feedback(lin.model, Gains.named(
         {"s_0": 0.1, "v_0": -0.5, "s_1": -0.2, "v_1": 0.05, "s_2": -0.1, "v_2": 0.05}, "replace"
     ))
     for k in range(5):

@@ -15,8 +15,9 @@ import pytest
 from lcc_synth.controllers.base import ControlContext, Observation
 from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.controller_tables import controller_from_table
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.hdv import OVM, linear_coefficients
-from lcc_synth.models.platoon import Platoon, PlatoonGains, platoon_model
+from lcc_synth.models.platoon import Platoon, platoon_model
 from lcc_synth.mpc import MPCController
 from lcc_synth.mpc.joint import JointMPCController
 from lcc_synth.mpc.joint_prediction import joint_state_weights
@@ -378,7 +379,7 @@ def test_each_cav_falls_back_on_its_own_row():
     K[0, model.index("v_3")] = -0.4
     K[1, model.index("v_8")] = -0.3
     ctrl = JointMPCController("mpc", MPCSettings(horizon=20), system,
-                                PlatoonGains(K, pl.cavs, "replace"), "test")
+                                Gains.on(model, K, "replace"), "test")
     ctrl.reset(_ctx(system))
     s = np.concatenate([[np.nan], pl.equilibrium_spacings])
     v = np.full(9, 15.0)

@@ -157,19 +157,19 @@ def test_bad_platoon_input_names_the_field(system, field):
 def test_added_semantics_with_zero_gain_is_the_all_hdv_platoon():
     """A CAV that keeps its HDV law and adds nothing is an HDV: the closed loop equals the
     all-HDV platoon's model, entry for entry (open and ring)."""
-    from lcc_synth.models.platoon import PlatoonGains
+    from lcc_synth.models.feedback import Gains
 
     hdv = tuple(OVM(alpha=a, beta=b, s_go=g) for a, b, g in zip(*DEEPLCC.values(), strict=True))
     for ring in (False, True):
         M = platoon_model(Platoon(hdv, (1, 3, 6), 15.0, ring=ring))
         H0 = platoon_model(Platoon(hdv, (), 15.0, ring=ring))
-        g = PlatoonGains(np.zeros((3, 16)), (1, 3, 6), "added")
+        g = Gains.zero(M, "added")
         A, Hc = g.closed_loop(M)
         assert np.allclose(A, H0.A, rtol=0, atol=1e-15) and np.allclose(Hc, H0.H, atol=1e-15)
-        back = PlatoonGains.from_table(PlatoonGains(np.eye(3, 16), (1, 3, 6)).as_table(M), M)
+        back = Gains.from_table(Gains.on(M, np.eye(3, 16)).as_table(), M)
         assert np.array_equal(back.K, np.eye(3, 16))
     with pytest.raises(ConfigError, match="u_4"):
-        PlatoonGains.from_table({"u_4": {"s_1": 1.0}}, M)
+        Gains.from_table({"u_4": {"s_1": 1.0}}, M)
 
 
 def _ring_roots(c, N: int) -> np.ndarray:

@@ -26,11 +26,11 @@ from lcc_synth.analysis.staircase import kalman_decomposition
 from lcc_synth.analysis.string_stability import gains_string_stability
 from lcc_synth.analysis.transfer import gamma_product, gamma_state_space, local_cav_laws
 from lcc_synth.errors import ConfigError
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.hdv import OVM, LinearCoefficients
 from lcc_synth.models.platoon import (
     HEAD,
     Platoon,
-    PlatoonGains,
     PlatoonModel,
     chain_matrices,
     platoon_model,
@@ -281,7 +281,7 @@ def test_gamma_state_space_equals_product_of_vehicle_transfer_functions(semantic
     model = _deeplcc()
     table = LOCAL if semantics == "replace" else {"u_3": {"s_3": 0.2, "v_3": -0.3},
                                                   "u_6": {"v_5": 0.1}}  # fmt: skip
-    K, kh = PlatoonGains.from_table(table, model, semantics).input_feedback(model)
+    K, kh = Gains.from_table(table, model, semantics).input_feedback(model)
     ss = gamma_state_space(model, K, kh, OMEGA)
     prod = gamma_product(model, K, kh, OMEGA)
     assert np.max(np.abs(ss - prod) / np.abs(prod)) < 1e-10
@@ -289,7 +289,7 @@ def test_gamma_state_space_equals_product_of_vehicle_transfer_functions(semantic
     if semantics == "replace":
         assert local_cav_laws(model, K, kh) == {3: (0.5, -1.2, 0.9), 6: (0.4, -1.5, 1.1)}
     # all-HDV limit: "added" with zero gains is the product of the eight HDVs
-    zero = PlatoonGains(np.zeros((2, 16)), (3, 6), "added")
+    zero = Gains.zero(model, "added")
     s = 1j * OMEGA
     hdv = np.prod([(c.alpha3 * s + c.alpha1) / (s * s + c.alpha2 * s + c.alpha1)
                    for c in model.coefficients], axis=0)  # fmt: skip
@@ -303,7 +303,7 @@ def test_gamma_agrees_with_python_control_for_nonlocal_gains():
     model = _deeplcc()
     table = {"u_3": {"s_3": 0.5, "v_3": -1.2, "v_2": 0.9, "v_5": 0.3, "s_8": -0.1},
              "u_6": {"s_6": 0.4, "v_6": -1.5, "v_1": 0.2, "v_8": 0.15}}  # fmt: skip
-    gains = PlatoonGains.from_table(table, model)
+    gains = Gains.from_table(table, model)
     Ku, kh = gains.input_feedback(model)
     with pytest.raises(ConfigError) as err:
         local_cav_laws(model, Ku, kh)
@@ -328,19 +328,19 @@ def test_string_verdicts_and_a_case_too_close_to_call():
     kv = -np.sqrt(2 * ks + hdv_c * ks * ks / 2)  # 2 (k_p^2 - k_v^2 + 2 k_s) / k_s^2 = -hdv_c
     expect = {0.0: "boundary", 1e-3: "string_unstable", -1e-3: "string_stable"}
     for dk, verdict in expect.items():
-        g = PlatoonGains.from_table({f"u_{c}": {f"s_{c}": ks, f"v_{c}": kv + dk} for c in (3, 6)},
+        g = Gains.from_table({f"u_{c}": {f"s_{c}": ks, f"v_{c}": kv + dk} for c in (3, 6)},
                                     model)  # fmt: skip
         for method in ("grid", "hamiltonian"):
             rep = gains_string_stability(model, g, method)
             assert rep.verdict == verdict and rep.plant_stable, (dk, method, rep)
-    hdv = gains_string_stability(model, PlatoonGains(np.zeros((2, 16)), (3, 6), "added"))
+    hdv = gains_string_stability(model, Gains.zero(model, "added"))
     assert hdv.verdict == "string_unstable" and hdv.gamma_peak > 1.2
 
 
 def test_ring_has_no_head_to_tail_transfer():
     ring = _deeplcc((8,), ring=True)
     with pytest.raises(ConfigError) as err:
-        gains_string_stability(ring, PlatoonGains(np.zeros((1, 16)), (8,)))
+        gains_string_stability(ring, Gains.zero(ring, "replace"))
     assert err.value.field == "system.kind"
 
 
@@ -414,11 +414,11 @@ def test_cli_analyze_platoon_json(tmp_path, capsys):
     assert ct["vehicles_outside"] == [1, 2] and doc["system"]["cavs"] == [3, 6]
     assert doc["observability"]["verdict"] == "observable"
     model = _deeplcc()
-    direct = gains_string_stability(model, PlatoonGains.from_table(LOCAL, model))
+    direct = gains_string_stability(model, Gains.from_table(LOCAL, model))
     assert doc["cases"]["local"]["verdict"] == direct.verdict == "string_unstable"
     assert doc["cases"]["local"]["gamma_peak"] == direct.gamma_peak
     assert doc["cases"]["local"]["gains"] == LOCAL
-    hdv = gains_string_stability(model, PlatoonGains(np.zeros((2, 16)), (3, 6), "added"))
+    hdv = gains_string_stability(model, Gains.zero(model, "added"))
     assert doc["cases"]["hdv"]["gamma_peak"] == hdv.gamma_peak
     code, out = _analyze(tmp_path, capsys, PLATOON_TOML)
     assert code == 0 and "reachable (first CAV and behind) 12: controllable" in out.out
@@ -465,7 +465,7 @@ def test_api_dispatches_platoon_models():
     model = _deeplcc()
     table = {"u_3": {"s_3": 0.2, "v_3": -0.3}, "u_6": {"v_5": 0.1}}
     ours = lcc.string_stability(model, lcc.gains(table, semantics="added", model=model))
-    direct = gains_string_stability(model, PlatoonGains.from_table(table, model, "added"))
+    direct = gains_string_stability(model, Gains.from_table(table, model, "added"))
     assert ours.as_dict() == direct.as_dict()
 
 
@@ -526,7 +526,7 @@ def test_string_verdicts_do_not_depend_on_the_realisation():
     kv = -np.sqrt(1.0 + hdv_c / 8)  # k_s = 0.5, k_p = 0: on the boundary
     rng = np.random.default_rng(3)
     for dk in (0.0, 1e-3, -1e-3):
-        g = PlatoonGains.from_table({f"u_{c}": {f"s_{c}": 0.5, f"v_{c}": kv + dk} for c in (3, 6)},
+        g = Gains.from_table({f"u_{c}": {f"s_{c}": 0.5, f"v_{c}": kv + dk} for c in (3, 6)},
                                     model)  # fmt: skip
         A, h, c = head_to_tail_loop(model, *g.input_feedback(model))
         base = loop_string_stability(A, h, c)

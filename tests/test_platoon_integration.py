@@ -65,7 +65,7 @@ def test_simulate_with_type_h2_equals_the_gains_file_that_synthesize_writes(tmp_
     (tmp_path / "ring.toml").write_text(text)
     other = load_spec(tmp_path / "ring.toml")
     assert np.array_equal(spec.controllers["av"].gains.K, other.controllers["av"].gains.K)
-    assert doc["gains"] == spec.controllers["av"].gains.as_table(spec.controllers["av"].model)
+    assert doc["gains"] == spec.controllers["av"].gains.as_table()
     sc = replace(spec.scenario, duration=20.0)
     a, b = simulate(sc, spec.controllers["av"]), simulate(sc, other.controllers["av"])
     assert np.array_equal(a.velocity, b.velocity) and np.array_equal(a.spacing, b.spacing)
@@ -110,10 +110,10 @@ def test_ring_time_step_is_judged_by_the_growth_rate_of_its_wave():
     spec = load_spec(RING)
     ctrl = {"all_hdv": spec.controllers["all_hdv"]}
     # the all-HDV ring's growing pair, from the platoon model on the invariant hyperplane
-    from lcc_synth.models.platoon import PlatoonGains
+    from lcc_synth.models.feedback import Gains
 
     M = spec.system.linear_model(warn=False)
-    A = PlatoonGains(np.zeros((1, M.nx)), M.cavs, "added").closed_loop(M)[0]
+    A = Gains.zero(M, "added").closed_loop(M)[0]
     V = M.invariant_basis()
     lam = np.linalg.eigvals(V.T @ A @ V)
     top = lam[np.argmax(lam.real)]

@@ -19,7 +19,7 @@ from lcc_synth.controllers.static import HDVController, StaticGainController  # 
 from lcc_synth.errors import ConfigError  # noqa: E402
 from lcc_synth.metrics import MetricsConfig  # noqa: E402
 from lcc_synth.metrics import summary as metrics_summary  # noqa: E402
-from lcc_synth.models.feedback import StaticGains  # noqa: E402
+from lcc_synth.models.feedback import Gains  # noqa: E402
 from lcc_synth.models.hdv import OVM  # noqa: E402
 from lcc_synth.models.linear import model_from_hdv  # noqa: E402
 from lcc_synth.simulation.engine import simulate  # noqa: E402
@@ -42,7 +42,7 @@ def _scenario(duration: float = 6.0, batch: int = 1) -> Scenario:
 
 def _controllers():
     model = model_from_hdv("lcc", M, N, OVM(), 15.0, warn=False)
-    gains = StaticGains({"v_0": -0.5, "s_1": -0.2, "v_1": 0.05}, "added")
+    gains = Gains.named({"v_0": -0.5, "s_1": -0.2, "v_1": 0.05}, "added")
     return [HDVController("all_hdv"), StaticGainController("lcc gains", gains, model)]
 
 
@@ -546,7 +546,7 @@ def test_region_maps_and_gamma_curves_of_the_analysis_commands(tmp_path):
     omega = R.gamma_grid()
     from lcc_synth.models.feedback import input_feedback
 
-    K, kh = input_feedback(model, StaticGains({}, "added"))  # the CAV drives like an HDV
+    K, kh = input_feedback(model, Gains.named({}, "added"))  # the CAV drives like an HDV
     mag = np.abs(gamma_state_space(model, K, kh, omega))
     path = R.record_analysis_file(
         tmp_path / "an.rrd",
@@ -615,7 +615,7 @@ def test_collisions_and_emergency_braking_are_events_on_the_timeline(tmp_path):
     sc = Scenario(
         m=1, n=2, duration=20.0, perturbations=(Brake(vehicle="head", start=1.0, duration=3.0),)
     )
-    res = simulate(sc, StaticGainController("blind", StaticGains({}, "replace"), model))
+    res = simulate(sc, StaticGainController("blind", Gains.named({}, "replace"), model))
     assert res.collided[0].any() and res.aeb_active[0].any()  # the scenario does what we need
     path = tmp_path / "crash.rrd"
     with R.open_recording(path, "crash", R.simulation_blueprint("crash", ["blind"])) as rec:

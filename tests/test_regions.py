@@ -25,7 +25,7 @@ from lcc_synth.analysis.regions import (
 from lcc_synth.analysis.string_stability import string_stability
 from lcc_synth.analysis.transfer import closed_form_gains, gamma_polynomials
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.feedback import StaticGains, input_feedback
+from lcc_synth.models.feedback import Gains, input_feedback
 from lcc_synth.models.hdv import OVM, LinearCoefficients
 from lcc_synth.models.linear import cf_lcc, general_lcc, model_from_hdv
 from lcc_synth.problem import load_problem, system_from
@@ -43,12 +43,12 @@ def exact_label(model, vehicle, mu, k, fixed=None) -> int | None:
     if isinstance(fixed, tuple):
         mus, kks, khx = _base_gains(model, fixed)
         mus[vehicle], kks[vehicle] = mu, k
-        K, kh = input_feedback(model, StaticGains.from_mu_k(mus, kks, "added"))
+        K, kh = input_feedback(model, Gains.from_paper(mus, kks, "added"))
         kh += khx
     else:
         g = dict(fixed or {})
         g[f"s_{vehicle}"], g[f"v_{vehicle}"] = mu, k
-        K, kh = input_feedback(model, StaticGains(g))
+        K, kh = input_feedback(model, Gains.named(g))
     rep = string_stability(model, K, kh)
     verdict = getattr(rep, "verdict", None)
     if verdict is None:  # a report without the verdict field
@@ -100,7 +100,7 @@ def test_map_matches_exact_per_point_check(vehicle):
 
 def test_map_with_fixed_gains_matches_exact():
     fixed = {"s_1": -1.0, "v_1": -1.0}
-    rm = region_map(MODEL, -1, AXIS, AXIS, gains=StaticGains(fixed))
+    rm = region_map(MODEL, -1, AXIS, AXIS, gains=Gains.named(fixed))
     assert rm.fixed == fixed
     check_against_exact(MODEL, rm, fixed, np.random.default_rng(4))
 
@@ -121,7 +121,7 @@ def test_heterogeneous_and_cf_lcc_maps_match_exact():
     model = general_lcc(1, 2, coefs, cav=LinearCoefficients(0.9, 1.5, 0.8))
     ax = grid_axis(-4.0, 4.0, 0.4)
     fixed = {"s_-1": 0.5, "v_-1": -0.5}
-    rm = region_map(model, 2, ax, ax, gains=StaticGains(fixed))
+    rm = region_map(model, 2, ax, ax, gains=Gains.named(fixed))
     check_against_exact(model, rm, fixed, rng)
     model = cf_lcc(2, PAPER)
     rm = region_map(model, 1, ax, ax)
@@ -130,13 +130,13 @@ def test_heterogeneous_and_cf_lcc_maps_match_exact():
 
 def test_affine_polynomials_are_exact():
     rng = np.random.default_rng(2)
-    fixed = StaticGains({"s_-2": 1.0, "v_-2": -1.0, "s_1": -0.5})
+    fixed = Gains.named({"s_-2": 1.0, "v_-2": -1.0, "s_1": -0.5})
     for vehicle in (-2, -1, 1, 2):
         n0, n1, n2, d0, d1, d2 = affine_polynomials(MODEL, vehicle, fixed)
         for mu, k in rng.uniform(-10, 10, size=(5, 2)):
             g = dict(fixed.gains)
             g[f"s_{vehicle}"], g[f"v_{vehicle}"] = mu, k
-            K, kh = input_feedback(MODEL, StaticGains(g))
+            K, kh = input_feedback(MODEL, Gains.named(g))
             m, kk, khx = closed_form_gains(MODEL, K, kh)
             num, den = gamma_polynomials(PAPER, m, kk, 2, 2, khx)
             got_n = (n0 + mu * n1 + k * n2)[: len(num)][::-1]
@@ -186,7 +186,7 @@ def test_paper_facts_looking_behind_beats_looking_ahead():
     assert all(m.labels[zero, zero] == STABLE for m in maps.values())
     for extra in ({"s_1": -1.0, "v_1": -1.0}, {"s_2": -1.0, "v_2": -1.0}):
         for v in (-1, -2):
-            grown = region_map(MODEL, v, ax, ax, gains=StaticGains(extra))
+            grown = region_map(MODEL, v, ax, ax, gains=Gains.named(extra))
             before = maps[v].labels == STRING_STABLE
             after = grown.labels == STRING_STABLE
             assert after.mean() > 3 * before.mean()
@@ -406,8 +406,8 @@ def test_decision_function_matches_exact_reference_within_the_band(string_aware_
     cases = [
         (MODEL, v, None, rng.uniform(-10, 10, size=(3, 2))) for v in (-2, -1, 1, 2)
     ] + [
-        (MODEL, -1, StaticGains({"s_2": -1.0, "v_2": -1.0}), rng.uniform(-10, 10, (3, 2))),
-        (hetero, 2, StaticGains({"s_-1": 0.5, "v_-1": -0.5}), rng.uniform(-4, 4, (3, 2))),
+        (MODEL, -1, Gains.named({"s_2": -1.0, "v_2": -1.0}), rng.uniform(-10, 10, (3, 2))),
+        (hetero, 2, Gains.named({"s_-1": 0.5, "v_-1": -0.5}), rng.uniform(-4, 4, (3, 2))),
         (cf_lcc(2, PAPER), 1, None, rng.uniform(-4, 4, (3, 2))),
         (dmodel, -1, dgains, [(0.347, -0.0836), (1.66, -2.0115807868359101)]),
         (MODEL, -1, None, [(1.66, -2.0115807868359101), (3.0, -3.8810620376209979)]),

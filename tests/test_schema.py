@@ -220,7 +220,7 @@ def test_every_key_a_loader_names_is_declared():
 _READ_ELSEWHERE = {
     "hdv": "lcc_synth.models.hdv.model_from_dict (declared from the model dataclasses, below)",
     "controllers.NAME.layouts.LAYOUT": "merged into the controller, then read as its type",
-    "controllers.NAME.gains": "state names checked by StaticGains against the model",
+    "controllers.NAME.gains": "state names checked by Gains against the model",
 }
 
 _COVERAGE_SIMULATE = """

@@ -13,7 +13,7 @@ from scipy.integrate import solve_ivp
 from lcc_synth.controllers.static import HDVController, StaticGainController
 from lcc_synth.experiments.spec import load_spec
 from lcc_synth.metrics import aave, fuel, max_abs_velocity_error
-from lcc_synth.models.feedback import StaticGains, cav_feedback, closed_loop
+from lcc_synth.models.feedback import Gains, cav_feedback, closed_loop
 from lcc_synth.models.hdv import IDM, OVM
 from lcc_synth.models.linear import model_from_hdv
 from lcc_synth.simulation.engine import simulate, simulate_many
@@ -32,7 +32,7 @@ def table2():
 
 def static(name, gains, kind, m, n, semantics="replace", sample_time=None):
     model = model_from_hdv(kind, m, n, OVM(), 15.0, warn=False)
-    return StaticGainController(name, StaticGains(gains, semantics), model, sample_time)
+    return StaticGainController(name, Gains.named(gains, semantics), model, sample_time)
 
 
 # --------------------------------------------------------------------------------------------
@@ -180,7 +180,7 @@ def test_simulator_matches_linear_model_for_small_perturbation():
     """Sec. V-A, case D, 2 % of the paper's sine: nonlinear Euler simulation vs the linear LCC
     closed loop (eq. 9 with eq. 23 gains) integrated by an adaptive ODE solver."""
     amp = 0.004
-    gains = StaticGains(
+    gains = Gains.named(
         {"s_-2": 1, "v_-2": -1, "s_-1": 1, "v_-1": -1, "s_1": -1, "v_1": -1, "s_2": -1, "v_2": -1},
         "added",
     )
@@ -267,7 +267,7 @@ def test_collision_in_one_scenario_does_not_stop_the_others():
                                obs.velocity[:, c])  # fmt: skip
             return np.array([0.0, follow[1]])
 
-    r = simulate(sc, Half("half", StaticGains({}, "replace"), model_from_hdv(
+    r = simulate(sc, Half("half", Gains.named({}, "replace"), model_from_hdv(
         "lcc", 0, 1, OVM(), 15.0)))  # fmt: skip
     assert r.collided[0].any() and not r.collided[1].any()
     assert np.isfinite(r.velocity[1]).all()
@@ -385,7 +385,7 @@ def test_compiled_law_equals_python_call_under_v2v_effects(equilibrium):
     sc = v2v_scenario(loss_rate=0.3, latency=0.2, spacing_noise=0.2, velocity_noise=0.05)
     tau = 0.7 if equilibrium == "estimated" else None
     model = model_from_hdv("lcc", 1, 2, OVM(), 15.0, warn=False)
-    fast = StaticGainController("g", StaticGains(gains, "added"), model, 0.05, equilibrium, tau)
+    fast = StaticGainController("g", Gains.named(gains, "added"), model, 0.05, equilibrium, tau)
 
     class Slow(StaticGainController):
         linear_law = None

@@ -5,7 +5,7 @@
   a small perturbation grows at the rate of the linear ring's most unstable mode (fitted from
   the velocity spread, which is exactly ``A e^{rt} / sqrt 2`` for a travelling Fourier mode);
 * a two-CAV platoon with static gains follows the Euler discretisation of
-  ``PlatoonGains.closed_loop`` up to the nonlinear terms, cubic in the size of the
+  ``Gains.closed_loop`` up to the nonlinear terms, cubic in the size of the
   perturbation at the OVM's inflection ``v* = v_max / 2`` (checked by doubling it);
 * emergency braking (eq. 29) and collisions per vehicle, checked on the recorded states;
 * bad layouts are named-field errors and exit code 2.
@@ -25,10 +25,10 @@ from lcc_synth.controllers.static import HDVController, PlatoonGainController, S
 from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.spec import load_spec
 from lcc_synth.metrics import aeb_activations, fuel, smooth_acceleration
-from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.hdv import OVM
 from lcc_synth.models.linear import model_from_hdv
-from lcc_synth.models.platoon import Platoon, PlatoonGains, platoon_model
+from lcc_synth.models.platoon import Platoon, platoon_model
 from lcc_synth.simulation.engine import simulate
 from lcc_synth.simulation.perturbations import Brake, Profile
 from lcc_synth.simulation.scenario import Scenario
@@ -68,12 +68,12 @@ def test_platoon_with_one_cav_is_the_single_cav_string_bit_for_bit():
     single = Scenario(m=2, n=3, duration=20.0, perturbations=(Brake(vehicle=-2, **brake),))
     model = model_from_hdv("lcc", 2, 3, OVM(), 15.0, warn=False)
     g_single = {"s_-2": 0.1, "v_-1": 0.2, "s_0": -0.3, "v_0": -0.5, "v_2": 0.1}
-    ctrl1 = StaticGainController("k", StaticGains(g_single, "added"), model)
+    ctrl1 = StaticGainController("k", Gains.named(g_single, "added"), model)
     sc, P = _platoon_scenario([OVM()] * 6, [3], duration=20.0, cav_aeb=True,
                               perturbations=(Brake(vehicle=1, **brake),))  # fmt: skip
     pm = platoon_model(P, warn=False)
     table = {"u_3": {"s_1": 0.1, "v_2": 0.2, "s_3": -0.3, "v_3": -0.5, "v_5": 0.1}}
-    ctrl2 = PlatoonGainController("k", PlatoonGains.from_table(table, pm, "added"), pm)
+    ctrl2 = PlatoonGainController("k", Gains.from_table(table, pm, "added"), pm)
     for a, b in ((HDVController(), HDVController()), (ctrl1, ctrl2)):
         r1, r2 = simulate(single, a), simulate(sc, b)
         assert r1.u_cmd.shape == r2.u_cmd.shape == (1, single.steps)
@@ -119,7 +119,7 @@ def test_ring_wave_grows_at_the_rate_of_the_linear_rings_unstable_mode(ring_spec
     r = simulate(sc, HDVController())
     P = Platoon(tuple([sc.hdv] * 20), (20,), 15.0, True)
     M = platoon_model(P, warn=False)
-    A = PlatoonGains(np.zeros((1, M.nx)), (20,), "added").closed_loop(M)[0]
+    A = Gains.zero(M, "added").closed_loop(M)[0]
     V = M.invariant_basis()
     lam = np.linalg.eigvals(V.T @ A @ V)
     lam = lam[np.argsort(-lam.real)]
@@ -142,7 +142,7 @@ def test_ring_collision_of_position_1_with_position_n():
                               perturbations=(Brake(vehicle=5, start=1.0, duration=3.0,
                                                    decel=-5.0),))  # fmt: skip
     pm = platoon_model(Platoon(tuple([OVM()] * 5), (1,), 15.0, True), warn=False)
-    cruise = PlatoonGainController("cruise", PlatoonGains(np.zeros((1, 10)), (1,)), pm)
+    cruise = PlatoonGainController("cruise", Gains.zero(pm, "replace"), pm)
     r = simulate(sc, cruise)  # position 1 (column 0) keeps 15 m/s: it hits position 5
     assert r.collided[0].tolist() == [True, False, False, False, False]
     k = int(np.flatnonzero(r.t == r.collision_time[0, 0])[0])
@@ -160,14 +160,14 @@ _HETERO = [OVM(alpha=a, beta=b, s_go=g) for a, b, g in
                (38.0, 35.0, 33.0, 37.0, 35.0, 34.0), strict=True)]  # fmt: skip
 
 
-def _lqr_gains(M) -> PlatoonGains:
+def _lqr_gains(M) -> Gains:
     import scipy.linalg as sla
 
     from lcc_synth.models.platoon import hdv_law_rows
 
     A = M.A + M.B @ hdv_law_rows(M)
     X = sla.solve_continuous_are(A, M.B, np.eye(M.nx), np.eye(M.B.shape[1]))
-    return PlatoonGains(-(M.B.T @ X), M.cavs, "added")
+    return Gains.on(M, -(M.B.T @ X), "added")
 
 
 def test_two_cav_platoon_follows_the_linear_closed_loop_to_second_order():
@@ -209,7 +209,7 @@ def test_two_cav_platoon_follows_the_linear_closed_loop_to_second_order():
 def test_emergency_braking_and_collisions_per_cav():
     head = Brake(vehicle="head", start=1.0, duration=2.5, decel=-5.0)
     pm = platoon_model(Platoon(tuple(_HETERO), (2, 5), 15.0), warn=False)
-    cruise = PlatoonGainController("cruise", PlatoonGains(np.zeros((2, pm.nx)), (2, 5)), pm)
+    cruise = PlatoonGainController("cruise", Gains.zero(pm, "replace"), pm)
     sc, _ = _platoon_scenario(_HETERO, [2, 5], dt=0.01, duration=20.0, cav_aeb=True,
                               perturbations=(head,))  # fmt: skip
     r = simulate(sc, cruise)  # the CAVs hold their speed: only eq. (29) brakes them
@@ -281,7 +281,7 @@ def test_ring_gains_file_matches_the_inline_gains(tmp_path, ring_spec):
     data = {
         "kind": "ring", "size": P.size, "cavs": list(P.cavs), "ring": True,
         "semantics": "replace", "state_names": list(av.model.state_names),
-        "K": av.gains.K.tolist(), "gains": av.gains.as_table(av.model), "h2_true": 1.0,
+        "K": av.gains.K.tolist(), "gains": av.gains.as_table(), "h2_true": 1.0,
     }  # fmt: skip
     (tmp_path / "gains.json").write_text(json.dumps(data))
     text = RING.read_text().split("[controllers.av]")[0]
@@ -349,8 +349,8 @@ def test_python_controller_path_with_several_cavs_equals_the_compiled_law(ring):
     cavs = (2, 5)
     P = Platoon(tuple(models), cavs, 15.0, ring)
     M = platoon_model(P, warn=False)
-    gains = _lqr_gains(M) if not ring else PlatoonGains(
-        np.tile([-0.1, -0.5] * 5, (2, 1)) * 0.3, cavs, "added"
+    gains = _lqr_gains(M) if not ring else Gains.on(
+        M, np.tile([-0.1, -0.5] * 5, (2, 1)) * 0.3, "added"
     )
     ctrl = PlatoonGainController("k", gains, M)
     pert = Brake(vehicle=1, start=1.0, duration=1.0, decel=-2.0)

@@ -17,7 +17,7 @@ from lcc_synth.analysis.transfer import (
     transfer_response,
 )
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.feedback import StaticGains, closed_loop, input_feedback
+from lcc_synth.models.feedback import Gains, closed_loop, input_feedback
 from lcc_synth.models.hdv import OVM, LinearCoefficients
 from lcc_synth.models.linear import build_model, fd_lcc, general_lcc
 
@@ -52,10 +52,10 @@ def random_model(rng, kind="lcc"):
     return build_model(kind, m, n, coefs, cav=random_coefs(rng))
 
 
-def random_gains(rng, model, scale=2.0) -> StaticGains:
+def random_gains(rng, model, scale=2.0) -> Gains:
     names = [s for s in model.state_names]
     pick = rng.choice(names, size=int(rng.integers(1, len(names) + 1)), replace=False)
-    return StaticGains({str(p): float(rng.uniform(-scale, scale)) for p in pick})
+    return Gains.named({str(p): float(rng.uniform(-scale, scale)) for p in pick})
 
 
 @pytest.mark.parametrize("kind", ["lcc", "cf_lcc", "ccc"])
@@ -78,7 +78,7 @@ def test_closed_form_matches_state_space_random(kind):
 def test_added_gains_are_the_papers_mu_k():
     """For 'added' semantics, the closed-form parameters are exactly the table's mu_i, k_i."""
     model = general_lcc(2, 2, PAPER)
-    K, kh = input_feedback(model, StaticGains(TABLE_I["case_d"]))
+    K, kh = input_feedback(model, Gains.named(TABLE_I["case_d"]))
     mu, k, khx = closed_form_gains(model, K, kh)
     assert mu == {-2: 1, -1: 1, 0: 0, 1: -1, 2: -1}
     assert k == {-2: -1, -1: -1, 0: 0, 1: -1, 2: -1}
@@ -121,7 +121,7 @@ def test_dc_gain_is_one_for_stabilising_gains():
 def test_hdv_only_is_platoon_of_hdvs(m, n):
     """Special case 1: Gamma_1 = (phi/gamma)^(n+m+1)."""
     model = general_lcc(m, n, PAPER)
-    K, kh = input_feedback(model, StaticGains({}))
+    K, kh = input_feedback(model, Gains.named({}))
     phi = PAPER.alpha3 * 1j * OMEGA + PAPER.alpha1
     gam = (1j * OMEGA) ** 2 + PAPER.alpha2 * 1j * OMEGA + PAPER.alpha1
     expected = (phi / gam) ** (n + m + 1)
@@ -156,11 +156,11 @@ def test_special_cases_ahead_and_behind():
         return mu * (gam / phi - 1) + k * s
 
     g_ahead = {"s_-2": 0.7, "v_-2": -0.4, "s_-1": -0.3, "v_-1": 0.5}
-    K, kh = input_feedback(model, StaticGains(g_ahead))
+    K, kh = input_feedback(model, Gains.named(g_ahead))
     gamma2 = (phi + H(0.7, -0.4) * T ** (-1) + H(-0.3, 0.5) * T**0) / gam * T**4
     assert np.allclose(gamma_state_space(model, K, kh, OMEGA), gamma2, rtol=1e-9, atol=0)
     g_behind = {"s_1": -1.0, "v_1": -0.5, "s_2": 0.4, "v_2": -0.8}
-    K, kh = input_feedback(model, StaticGains(g_behind))
+    K, kh = input_feedback(model, Gains.named(g_behind))
     gamma3 = phi / (gam - H(-1.0, -0.5) * T - H(0.4, -0.8) * T**2) * T**4
     assert np.allclose(gamma_state_space(model, K, kh, OMEGA), gamma3, rtol=1e-9, atol=0)
 
@@ -169,7 +169,7 @@ def test_python_control_agrees():
     import control as ct
 
     model = general_lcc(2, 2, PAPER)
-    gains = StaticGains(TABLE_I["case_c"])
+    gains = Gains.named(TABLE_I["case_c"])
     K, kh = input_feedback(model, gains)
     plant = model.to_statespace()
     law = ct.ss(
@@ -196,7 +196,7 @@ def test_table_i_frequency_response():
     w = np.logspace(-3, 0, 200)
     mags, reps = [], {}
     for name, g in TABLE_I.items():
-        K, kh = input_feedback(model, StaticGains(g))
+        K, kh = input_feedback(model, Gains.named(g))
         mags.append(np.abs(gamma_state_space(model, K, kh, w)))
         reps[name] = string_stability(model, K, kh)
     mags = np.array(mags)
@@ -236,7 +236,7 @@ def test_global_search_finds_second_peak_a_local_search_misses():
     from scipy.optimize import minimize
 
     model = general_lcc(2, 2, PAPER)
-    K, kh = input_feedback(model, StaticGains({"v_-1": 1.9, "v_-2": 1.5, "v_2": -2.7}))
+    K, kh = input_feedback(model, Gains.named({"v_-1": 1.9, "v_-2": 1.5, "v_2": -2.7}))
     rep = string_stability(model, K, kh)
     assert rep.plant_stable and not rep.string_stable
     assert rep.gamma_peak == pytest.approx(1.0392157, abs=1e-6)
@@ -261,7 +261,7 @@ def test_low_frequency_curvature_decides_near_zero():
     """|Gamma|^2 = 1 + c w^2 + ...: the report's c matches a finite difference."""
     model = general_lcc(2, 2, PAPER)
     for g in TABLE_I.values():
-        K, kh = input_feedback(model, StaticGains(g))
+        K, kh = input_feedback(model, Gains.named(g))
         rep = string_stability(model, K, kh)
         w = 1e-3
         fd = (np.abs(gamma_state_space(model, K, kh, [w]))[0] ** 2 - 1.0) / w**2
@@ -272,7 +272,7 @@ def test_low_frequency_curvature_decides_near_zero():
 
 def test_unstable_plant_is_not_string_stable():
     model = general_lcc(2, 2, PAPER)
-    K, kh = input_feedback(model, StaticGains({"s_1": 5.0, "v_1": 5.0}))
+    K, kh = input_feedback(model, Gains.named({"s_1": 5.0, "v_1": 5.0}))
     rep = string_stability(model, K, kh)
     assert not rep.plant_stable and not rep.string_stable and rep.max_real_eig > 0
     assert rep.as_dict()["plant_stable"] is False
@@ -280,7 +280,7 @@ def test_unstable_plant_is_not_string_stable():
 
 def test_eigenvalues_by_blocks_are_exact_for_long_strings():
     model = general_lcc(5, 15, PAPER)
-    K, kh = input_feedback(model, StaticGains({"s_-3": 1.0, "v_-1": -0.5}))
+    K, kh = input_feedback(model, Gains.named({"s_-3": 1.0, "v_-1": -0.5}))
     Acl, _ = closed_loop(model, K, kh)
     ev = closed_loop_eigenvalues(Acl)
     assert ev.size == model.nx

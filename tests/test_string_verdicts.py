@@ -20,7 +20,7 @@ from lcc_synth.analysis.string_stability import (
     string_stability,
 )
 from lcc_synth.analysis.transfer import tail_output
-from lcc_synth.models.feedback import StaticGains, closed_loop, input_feedback
+from lcc_synth.models.feedback import Gains, closed_loop, input_feedback
 from lcc_synth.models.hdv import OVM, LinearCoefficients
 from lcc_synth.models.linear import build_model, general_lcc, model_from_hdv
 from lcc_synth.synthesis.h2 import Weights, make_plant, riccati_gain
@@ -41,7 +41,7 @@ def _coefs(rng) -> LinearCoefficients:
 
 
 def _loop(model, gains):
-    K, kh = input_feedback(model, gains) if isinstance(gains, StaticGains) else gains
+    K, kh = input_feedback(model, gains) if isinstance(gains, Gains) else gains
     A, H = closed_loop(model, K, kh)
     return A, H.reshape(-1), tail_output(model)
 
@@ -57,13 +57,13 @@ def _sample_loops() -> list[tuple[str, tuple]]:
         model = build_model(kind, m, n, [_coefs(rng) for _ in range(m + n)], cav=_coefs(rng))
         names = list(model.state_names)
         pick = rng.choice(names, size=int(rng.integers(1, len(names) + 1)), replace=False)
-        gains = StaticGains({str(p): float(rng.uniform(-2, 2)) for p in pick})
+        gains = Gains.named({str(p): float(rng.uniform(-2, 2)) for p in pick})
         out.append((f"random-{kind}-{i}", _loop(model, gains)))
     model = general_lcc(2, 2, PAPER)
     for i in range(40):  # near Table I's cases C and D
         base = CASE_C if i % 2 else CASE_D
         gains = {k: v * (1 + 0.3 * rng.normal()) for k, v in base.items()}
-        out.append((f"table1-{i}", _loop(model, StaticGains(gains))))
+        out.append((f"table1-{i}", _loop(model, Gains.named(gains))))
     hdv = OVM(alpha=0.6, beta=0.9, s_st=5.0, s_go=35.0, v_max=30.0)
     sizes = [("lcc", 2, 2), ("cf_lcc", 0, 4), ("lcc", 1, 6), ("cf_lcc", 0, 10)]
     for i, (kind, m, n) in enumerate(sizes):
@@ -91,14 +91,14 @@ def _boundary_line_loops(rng, model, label, lines, offsets):
             for sgn in (-1, 1):
                 s = t * (1 + sgn * d)
                 g = {k: (1 - s) * a[k] + s * b[k] for k in a}
-                out.append((f"{label}-{i}-{sgn * d:g}", _loop(model, StaticGains(g))))
+                out.append((f"{label}-{i}-{sgn * d:g}", _loop(model, Gains.named(g))))
     return out
 
 
 def _bisect_curvature(model, a, b):
     def curv(t):
         g = {k: (1 - t) * a[k] + t * b[k] for k in a}
-        A, h, c = _loop(model, StaticGains(g))
+        A, h, c = _loop(model, Gains.named(g))
         if np.linalg.eigvals(A).real.max() >= 0:
             return None
         return decision_function(A, h, c)[2]

@@ -42,10 +42,10 @@ import scipy.linalg as sla
 from lcc_synth.cli.main import main
 from lcc_synth.controllers.static import HDVController, PlatoonGainController
 from lcc_synth.metrics import MetricsConfig, per_scenario
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.hdv import IDM
 from lcc_synth.models.platoon import (
     Platoon,
-    PlatoonGains,
     hdv_law_rows,
     platoon_model,
     ring_velocity,
@@ -214,7 +214,7 @@ def _platoon_case(dt: float = 0.01, duration: float = 40.0):
         A = model.A + (model.B @ hdv_law_rows(model) if semantics == "added" else 0.0)
         R = r * np.eye(2)
         P = sla.solve_continuous_are(A, model.B, np.diag([0.5, 1.0] * 8), R)
-        gains = PlatoonGains(-np.linalg.solve(R, model.B.T @ P), (3, 6), semantics)
+        gains = Gains.on(model, -np.linalg.solve(R, model.B.T @ P), semantics)
         return PlatoonGainController(name, gains, model)
 
     values = {k: np.array([getattr(idm, k)] + [getattr(h, k) for h in models])

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import scipy.linalg as sla
 
-from lcc_synth.models.feedback import StaticGains, closed_loop, input_feedback
+from lcc_synth.models.feedback import Gains, closed_loop, input_feedback
 from lcc_synth.models.hdv import OVM, LinearCoefficients
 from lcc_synth.models.linear import build_model, model_from_hdv
 from lcc_synth.synthesis.h2 import (
@@ -82,7 +82,7 @@ def test_riccati_gain_is_a_local_minimum_of_the_true_cost():
 
 
 def test_design_gain_is_the_semantic_gain_vector():
-    """g designed on the plant, written as StaticGains, gives back the same closed loop."""
+    """g designed on the plant, written as Gains, gives back the same closed loop."""
     for kind, sem in (("cf_lcc", "replace"), ("cf_lcc", "added"), ("lcc", "added")):
         mdl = model(kind, 1 if kind == "lcc" else 0, 3)
         p = make_plant(mdl, sem, Weights(head=1.0))
@@ -153,8 +153,8 @@ def test_bad_weights_are_config_errors():
 def test_unstable_gain_has_infinite_h2():
     p = make_plant(model("fd_lcc", 0, 2), "replace", Weights())
     assert h2_norm(p, np.zeros(p.nx)) == math.inf  # v_0 integrator with no feedback
-    g = StaticGains({"v_0": -0.5}, "replace")
-    assert math.isfinite(h2_norm(p, g.vector(p.model)[p.keep]))
+    g = Gains.named({"v_0": -0.5}, "replace")
+    assert math.isfinite(h2_norm(p, g.matrix(p.model)[0][p.keep]))
 
 
 def test_head_disturbance_alone_makes_the_cost_flat_in_some_gain_directions():

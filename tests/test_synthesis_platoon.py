@@ -21,7 +21,7 @@ from lcc_synth.models.platoon import Platoon, platoon_model
 from lcc_synth.problem import Problem
 from lcc_synth.synthesis.config import comm_range_pattern, robust_members, spec_from_problem
 from lcc_synth.synthesis.design import synthesize
-from lcc_synth.synthesis.gains_file import read_platoon_gains
+from lcc_synth.synthesis.gains_file import read_gains
 from lcc_synth.synthesis.h2 import (
     Weights,
     h2_norm,
@@ -428,7 +428,7 @@ def test_cli_json_reports_check_h2_and_writes_the_platoon_gains_file(tmp_path, c
     assert doc["h2_unstructured"] < doc["check"]["h2"] < 1.01 * doc["h2_unstructured"]
     assert "invariant" in doc["check"]["subspace"] and doc["conserved"] is not None
     model = ring_model(20)
-    gains, fdoc = read_platoon_gains(out, model)
+    gains, fdoc = read_gains(out, model=model)
     assert fdoc["h2_true"] == doc["check"]["h2"] and fdoc["ring"] and fdoc["cavs"] == [20]
     plant = make_platoon_plant(model, "replace", RING_W)
     assert platoon_h2(plant, gains.K) == pytest.approx(doc["check"]["h2"], rel=1e-12)
@@ -454,7 +454,9 @@ def test_api_synthesize_h2_runs_a_ring_problem():
 
 
 def test_platoon_gains_file_is_validated(tmp_path):
-    from lcc_synth.synthesis.gains_file import platoon_gains_document, read_gains
+    from lcc_synth.models.hdv import OVM
+    from lcc_synth.problem import System
+    from lcc_synth.synthesis.gains_file import platoon_gains_document
 
     spec = spec_from_problem(Problem(Path("p.toml"), _parse(_deeplcc_toml("", comm_range=1))))
     rep = synthesize(spec)
@@ -462,11 +464,11 @@ def test_platoon_gains_file_is_validated(tmp_path):
     assert len(doc["K"]) == 2 and set(doc["gains"]) == {"u_3", "u_6"}
     p = tmp_path / "g.json"
     p.write_text(json.dumps(doc))
-    gains, _ = read_platoon_gains(p, deeplcc_model())
+    gains, _ = read_gains(p, model=deeplcc_model())
     assert np.array_equal(gains.K, np.array(rep.K)) and gains.cavs == (3, 6)
     with pytest.raises(ConfigError) as e:
-        read_gains(p)  # the single-CAV reader names the right one
-    assert e.value.field == "kind" and "read_platoon_gains" in e.value.message
+        read_gains(p, system=System(kind="cf_lcc", m=0, n=2, v_star=15.0, hdv=OVM()))
+    assert e.value.field == "kind" and "platoon or ring" in e.value.message  # not one CAV's
     for key, value, field in (("h2_true", None, "h2_true"), ("K", [[0.0]], "K")):
         bad = dict(doc)
         if value is None:
@@ -475,13 +477,13 @@ def test_platoon_gains_file_is_validated(tmp_path):
             bad[key] = value
         p.write_text(json.dumps(bad))
         with pytest.raises(ConfigError) as e:
-            read_platoon_gains(p)
+            read_gains(p)
         assert e.value.field == field
     bad = json.loads(json.dumps(doc))
     bad["gains"]["u_3"]["s_3"] += 1.0  # the table disagrees with K
     p.write_text(json.dumps(bad))
     with pytest.raises(ConfigError) as e:
-        read_platoon_gains(p, deeplcc_model())
+        read_gains(p, model=deeplcc_model())
     assert e.value.field == "gains"
 
 

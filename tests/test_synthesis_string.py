@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from lcc_synth.analysis.string_stability import string_stability
-from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.hdv import OVM
 from lcc_synth.models.linear import model_from_hdv
 from lcc_synth.synthesis.design import design_gain_of
@@ -16,7 +16,7 @@ from lcc_synth.synthesis.string_lmi import string_aware_h2, string_lmi
 from lcc_synth.synthesis.structured import pattern_mask
 
 HDV = OVM(alpha=0.6, beta=0.9, s_st=5.0, s_go=35.0, v_max=30.0)
-CASE_D = StaticGains.from_mu_k(
+CASE_D = Gains.from_paper(
     {-2: 1.0, -1: 1.0, 1: -1.0, 2: -1.0}, {-2: -1.0, -1: -1.0, 1: -1.0, 2: -1.0}, "added"
 )
 

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.hdv import OVM
 from lcc_synth.models.linear import model_from_hdv
 from lcc_synth.synthesis.design import design_gain_of
@@ -70,7 +70,7 @@ def test_structured_gain_pattern_and_ordering(kind):
     assert math.sqrt(pol.J) <= res.h2_restriction
     assert math.sqrt(pol.J) == pytest.approx(res.h2, rel=1e-5)
     # paper's gain on the same pattern is worse
-    paper = StaticGains(PAPER_CF if kind == "cf_lcc" else PAPER_FD, "replace")
+    paper = Gains.named(PAPER_CF if kind == "cf_lcc" else PAPER_FD, "replace")
     h_paper = h2_norm(p, design_gain_of(p, paper))
     assert res.h2 < h_paper
 

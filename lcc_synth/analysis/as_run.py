@@ -65,7 +65,7 @@ import scipy.linalg as sla
 from lcc_synth.analysis.string_stability import StringStabilityReport, loop_string_stability
 from lcc_synth.analysis.transfer import check_head, hessenberg_solver
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.feedback import StaticGains, cav_feedback, hdv_law
+from lcc_synth.models.feedback import Gains, cav_feedback, hdv_law
 from lcc_synth.models.linear import LCCModel, discretize
 
 __all__ = [
@@ -126,10 +126,10 @@ def estimator_shift(model: LCCModel) -> np.ndarray:
     )
 
 
-def law_of_gains(model: LCCModel, gains: StaticGains) -> LoopLaw:
+def law_of_gains(model: LCCModel, gains: Gains) -> LoopLaw:
     """The :class:`LoopLaw` of static gains (eq. 23) on ``model``."""
     K, kh = cav_feedback(model, gains)
-    e = float(gains.vector(model) @ estimator_shift(model))
+    e = float(gains.matrix(model)[0] @ estimator_shift(model))
     if gains.semantics == "added":
         K_law, kh_law = hdv_law(model)
         return LoopLaw(np.asarray(K, float), float(kh), e, K_law, float(kh_law))

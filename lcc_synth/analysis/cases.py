@@ -14,8 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from lcc_synth.errors import ConfigError
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.linear import LCCModel
-from lcc_synth.models.platoon import PLATOON_KINDS, PlatoonGains, PlatoonModel
+from lcc_synth.models.platoon import PLATOON_KINDS, PlatoonModel
 from lcc_synth.models.records import Record
 
 __all__ = ["AnalysisOptions", "analysis_options_from", "GainCase", "cases_from"]
@@ -72,7 +73,7 @@ class GainCase(Record):
     """One ``[cases.NAME]`` table: a named static gain (eq. 23) to analyse."""
 
     name: str
-    gains: object  # StaticGains, or PlatoonGains on a platoon / ring: both have input_feedback
+    gains: Gains
     label: str
     table: dict | None = None  # platoon / ring: the per-CAV gains table as read
 
@@ -91,10 +92,9 @@ def cases_from(
     1.0, v_-2 = -1.0, ... }`` (state name -> gain, missing states 0) and an optional ``label``.
     On a platoon or ring (:class:`~lcc_synth.models.platoon.PlatoonModel`) ``gains`` holds one
     table per CAV input, ``[cases.NAME.gains.u_3]`` with ``s_i`` / ``v_i`` gains
-    (:meth:`~lcc_synth.models.platoon.PlatoonGains.from_table`). Errors name
+    (:meth:`~lcc_synth.models.feedback.Gains.from_table`). Errors name
     ``cases.NAME.<field>`` and the file.
     """
-    from lcc_synth.models.feedback import StaticGains
     from lcc_synth.problem import warn_large_gains
     from lcc_synth.schema import declared
 
@@ -115,11 +115,11 @@ def cases_from(
                 for u, row in raw.items():
                     if isinstance(row, dict):
                         warn_large_gains(row, f"{field}.gains.{u}")
-                pg = PlatoonGains.from_table(raw, model, semantics, field=f"{field}.gains")
-                out[name] = GainCase(name, pg, label, pg.as_table(model))
+                pg = Gains.from_table(raw, model, semantics, field=f"{field}.gains")
+                out[name] = GainCase(name, pg, label, pg.as_table())
                 continue
             try:
-                gains = StaticGains(raw, semantics)
+                gains = Gains.named(raw, semantics)
                 gains.check(model)
             except ConfigError as err:
                 raise ConfigError(f"{field}.{err.field}", err.message) from None

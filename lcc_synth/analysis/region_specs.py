@@ -20,7 +20,7 @@ from lcc_synth.analysis.regions import (
     region_map,
 )
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.linear import LCCModel
 
 __all__ = [
@@ -57,7 +57,7 @@ class RegionSpec:
     vehicle: int
     mu: np.ndarray
     k: np.ndarray
-    gains: StaticGains
+    gains: Gains
     baseline: str | None = None
     title: str = ""
 
@@ -139,7 +139,7 @@ def region_specs_from(
             raw = M.get(t, "gains", field)
             warn_large_gains(raw, f"{field}.gains")
             try:
-                gains = StaticGains(raw, semantics)
+                gains = Gains.named(raw, semantics)
                 gains.check(model)
             except ConfigError as err:
                 raise ConfigError(f"{field}.{err.field}", err.message) from None

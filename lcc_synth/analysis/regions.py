@@ -96,7 +96,7 @@ import numpy as np
 
 from lcc_synth.analysis.transfer import closed_form_gains, gamma_polynomials
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.feedback import StaticGains, input_feedback
+from lcc_synth.models.feedback import Gains, input_feedback
 from lcc_synth.models.linear import LCCModel
 from lcc_synth.models.records import Record
 
@@ -245,8 +245,8 @@ def region_frequency_grid(
 
 def _base_gains(model: LCCModel, gains) -> tuple[dict, dict, float]:
     if gains is None:
-        gains = StaticGains({})
-    if isinstance(gains, StaticGains):
+        gains = Gains.named({})
+    if isinstance(gains, Gains):
         K, kh = input_feedback(model, gains)
     else:
         K, kh = gains
@@ -258,7 +258,7 @@ def affine_polynomials(model: LCCModel, vehicle: int, gains=None):
     for the gains ``(mu, k)`` of ``vehicle``, the other gains from ``gains``.
 
     Coefficients are in *ascending* powers, all padded to the degree of ``den``.
-    ``gains`` is a :class:`~lcc_synth.models.feedback.StaticGains` or input feedback ``(K, kh)``.
+    ``gains`` is a :class:`~lcc_synth.models.feedback.Gains` or input feedback ``(K, kh)``.
     """
     if vehicle == 0 or vehicle not in model.vehicles:
         allowed = [i for i in model.vehicles if i != 0]
@@ -496,7 +496,7 @@ def region_map(
         The HDV whose ``s_i``/``v_i`` gains vary (``i != 0``).
     mu, k : array_like
         Grid axes, ``k`` sorted increasing.
-    gains : StaticGains or (K, kh), optional
+    gains : Gains or (K, kh), optional
         The other gains (those of ``vehicle`` are replaced by the grid values).
     omega : array_like, optional
         Frequency grid (``w > 0``); default :func:`region_frequency_grid`. ``w = 0`` (the
@@ -560,7 +560,7 @@ def region_map(
         labels[r0 : r0 + mr.size] = lab
         boundary[r0 : r0 + mr.size] = stable & undecided & ~violated
     fixed = {}
-    if isinstance(gains, StaticGains):
+    if isinstance(gains, Gains):
         fixed = {
             n: v
             for n, v in gains.gains.items()

@@ -552,7 +552,7 @@ def string_stability(model, K, kh=0.0, method: str = "grid") -> StringStabilityR
     K, kh : array_like, float
         Feedback on the model's input: one CAV, ``nx`` entries and a number
         (:func:`lcc_synth.models.feedback.input_feedback`); several CAVs, one row and one
-        entry per CAV (:meth:`lcc_synth.models.platoon.PlatoonGains.input_feedback`).
+        entry per CAV (:meth:`lcc_synth.models.feedback.Gains.input_feedback`).
     method : {"grid", "hamiltonian"}
         See :func:`loop_string_stability`.
 
@@ -584,7 +584,7 @@ def verdict_text(verdict: str | None) -> str:
 
 def gains_string_stability(model, gains, method: str = "grid") -> StringStabilityReport:
     """:func:`string_stability` of a gains object on ``model``: anything with
-    ``input_feedback(model) -> (K, kh)``, i.e. :class:`~lcc_synth.models.feedback.StaticGains`
-    on a one-CAV model or :class:`~lcc_synth.models.platoon.PlatoonGains` on a platoon."""
+    ``input_feedback(model) -> (K, kh)``, i.e. a :class:`~lcc_synth.models.feedback.Gains` of
+    the model's layout (one CAV or several)."""
     K, kh = gains.input_feedback(model)
     return string_stability(model, K, kh, method=method)

@@ -330,7 +330,7 @@ def head_to_tail_loop(model, K, kh=0.0) -> tuple[np.ndarray, np.ndarray, np.ndar
 
     ``K``, ``kh``: one CAV, ``nx`` entries and a number
     (:func:`lcc_synth.models.feedback.input_feedback`); several, one row / entry per CAV
-    (:meth:`lcc_synth.models.platoon.PlatoonGains.input_feedback`).
+    (:meth:`lcc_synth.models.feedback.Gains.input_feedback`).
     """
     check_head(model)
     Acl, Hcl = closed_loop(model, K, kh)

@@ -2,9 +2,10 @@
 controller's ``file`` and an MPC's ``fallback_gains_file``.
 
 Paths are relative to the problem file's folder. The files are read and validated by
-:mod:`lcc_synth.synthesis.gains_file` (the single-CAV form, or the platoon / ring form with one
-row per CAV) and checked against the problem's ``[system]``; every error names the problem
-file, the field that named the gains file, the gains file and the key. ``run`` and ``sweep``
+:func:`lcc_synth.synthesis.gains_file.read_gains` (the single-CAV form, or the platoon / ring
+form with one row per CAV, both into one :class:`~lcc_synth.models.feedback.Gains`) and
+checked against the problem's ``[system]``; every error names the problem file, the field
+that named the gains file, the gains file and the key. ``run`` and ``sweep``
 read them when they load the problem (:func:`check_gains_files`), before any design or
 simulation; the controllers read them again when built.
 """
@@ -29,25 +30,13 @@ def gains_file_path(rel: str, source: str | None) -> Path:
 
 
 def read_gains_at(path: Path, where: str, system: Any, source: str | None = None):
-    """The gains file ``path`` (named by the field ``where``) for ``system``, read and
-    validated by :func:`lcc_synth.synthesis.gains_file.read_gains` (single CAV: ``(StaticGains,
-    document)``, for the problem's ``m`` and ``n``) or
-    :func:`~lcc_synth.synthesis.gains_file.read_platoon_gains` (``kind = "platoon" | "ring"``:
-    ``(PlatoonGains, document)``, for the problem's layout); every error names ``where``, the
-    gains file and the key."""
-    from lcc_synth.synthesis.gains_file import read_gains, read_platoon_gains
+    """The gains file ``path`` (named by the field ``where``) for ``system``: ``(Gains,
+    document)``, read and checked against the problem's layout by
+    :func:`lcc_synth.synthesis.gains_file.read_gains`; every error names ``where``, the gains
+    file and the key."""
+    from lcc_synth.synthesis.gains_file import read_gains
 
-    if system.platoon is None:
-        return read_gains(path, where, source, system)
-    gains, doc = read_platoon_gains(path, system.linear_model(warn=False), where, source)
-    P = system.platoon
-    got = (doc["kind"], doc["size"], list(doc["cavs"]), doc["ring"])
-    want = (system.kind, P.size, list(P.cavs), bool(P.ring))
-    if got != want:
-        raise ConfigError(where, f"{path} holds gains for kind={got[0]!r}, size={got[1]}, "
-                          f"cavs={got[2]}, ring={got[3]}; the problem has kind={want[0]!r}, "
-                          f"size={want[1]}, cavs={want[2]}, ring={want[3]}", source)  # fmt: skip
-    return gains, doc
+    return read_gains(path, where, source, system)
 
 
 def read_gains_file(

@@ -12,7 +12,7 @@ built by the packages above this one; the entry for every type is
 
 For ``[system] kind = "platoon" | "ring"`` a ``static`` table gives one gain table per CAV
 input (``[controllers.NAME.gains.u_3]``, ``s_3 = ...``: states ``s_i, v_i`` of positions, the
-form of :meth:`~lcc_synth.models.platoon.PlatoonGains.as_table`), and a ``gains_file`` is the
+form of :meth:`~lcc_synth.models.feedback.Gains.as_table`), and a ``gains_file`` is the
 platoon form of the synthesis: a JSON object with ``kind``, ``size``, ``cavs``, ``ring``,
 ``semantics``, ``state_names``, ``K`` (one row per CAV), ``gains`` (``{"u_20": {"s_20": ..}}``)
 and ``h2_true``. Both forms are read by :mod:`lcc_synth.synthesis.gains_file`
@@ -33,9 +33,9 @@ from lcc_synth.controllers.static import (
 )
 from lcc_synth.controllers.switch import SwitchedOn
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.linear import model_from_hdv
-from lcc_synth.models.platoon import PLATOON_KINDS, PlatoonGains
+from lcc_synth.models.platoon import PLATOON_KINDS
 from lcc_synth.problem import warn_large_gains
 from lcc_synth.schema import declared
 
@@ -141,7 +141,7 @@ def _build(name: str, table, system, source: str | None, field: str) -> Controll
             )
         mf = T.get(table, "measurement_filter", field)
         try:
-            gains = StaticGains(raw, semantics)
+            gains = Gains.named(raw, semantics)
             model = model_from_hdv(kind, system.m, system.n, system.hdv, system.v_star, warn=False)
             ctrl = StaticGainController(name, gains, model, sample_time, equilibrium, tau, mf)
         except ConfigError as err:
@@ -178,8 +178,7 @@ def _platoon_controller(name: str, table, system, ctype: str, field: str, source
                               "for their HDV law)")  # fmt: skip
         warn_large_gains({f"{u}.{k}": g for u, row in raw.items() for k, g in row.items()},
                          f"{field}.gains")  # fmt: skip
-        gains = PlatoonGains.from_table(raw, model, T.get(table, "semantics", field),
-                                        f"{field}.gains")  # fmt: skip
+        gains = Gains.from_table(raw, model, T.get(table, "semantics", field), f"{field}.gains")
     else:
         gains, _ = read_gains_file(table, field, system, source)
     return PlatoonGainController(name, gains, model, _sample_time(table, field, ctype),

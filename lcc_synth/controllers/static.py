@@ -5,7 +5,7 @@ step); ``__call__`` evaluates the same law for any other caller.
 
 Several CAVs (a mixed platoon or a ring): :class:`HDVController` drives every CAV with its own
 HDV law (its slot's parameters), and :class:`PlatoonGainController` applies one row of a
-:class:`~lcc_synth.models.platoon.PlatoonGains` per CAV. Its gains are on the platoon model's
+:class:`~lcc_synth.models.feedback.Gains` per CAV. Its gains are on the platoon model's
 states ``s_i, v_i`` of positions ``i``: position ``i`` is array column ``i`` of an open platoon
 and ``i - 1`` on a ring, and every spacing error is taken from that vehicle's own equilibrium
 spacing at ``v*`` (the model linearises each vehicle at its own equilibrium).
@@ -230,7 +230,7 @@ class StaticGainController(_LinearController):
     Parameters
     ----------
     name : str
-    gains : lcc_synth.models.feedback.StaticGains
+    gains : lcc_synth.models.feedback.Gains
         Gains keyed by state name and their semantics (``added`` keeps the CAV's nonlinear
         HDV law towards the vehicle ahead and adds the gains; ``replace`` uses them alone).
     model : lcc_synth.models.linear.LCCModel
@@ -368,7 +368,7 @@ class PlatoonGainController(_LinearController):
     Parameters
     ----------
     name : str
-    gains : lcc_synth.models.platoon.PlatoonGains
+    gains : lcc_synth.models.feedback.Gains
         ``"replace"``: ``u = K x`` is the CAV's whole command; ``"added"``: the CAV keeps its
         own nonlinear HDV law towards its predecessor and adds ``K x`` (plus ``kh`` times the
         head's velocity error).
@@ -412,7 +412,7 @@ class PlatoonGainController(_LinearController):
                 f"CAV columns {list(ctx.cavs)} of {ctx.n_vehicles}"
                 f"{' on a ring' if ctx.ring else ''}",
             )
-        K = self.gains.K
+        K = self.gains.matrix(self.model)  # the model's state order
         Ks = np.zeros((len(want), nv))
         Kv = np.zeros((len(want), nv))
         Ks[:, list(cols)] = K[:, 0::2]
@@ -429,7 +429,7 @@ class PlatoonGainController(_LinearController):
             "type": "static",
             "kind": "ring" if self.model.ring else "platoon",
             "semantics": self.gains.semantics,
-            "gains": self.gains.as_table(self.model),
+            "gains": self.gains.as_table(),
             "sample_time": self.sample_time,
             "equilibrium": "fixed",
             "measurement_filter": self.measurement_filter,

@@ -411,11 +411,8 @@ def _inline_gains_file(name: str, table: Mapping[str, Any], spec: SweepSpec) -> 
     field_name = f"controllers.{name}"
     declared("controllers.NAME:gains_file").check(table, field_name)
     gains, doc = read_gains_file(table, field_name, spec.system, spec.source)
-    if spec.system.platoon is not None:  # the platoon form {u_i: {state: gain}}
-        rows = gains.as_table(spec.system.linear_model(warn=False))
-    else:
-        rows = dict(gains.gains)
-    out = {"type": "static", "kind": doc["kind"], "semantics": gains.semantics, "gains": rows}
+    out = {"type": "static", "kind": doc["kind"], "semantics": gains.semantics,
+           "gains": gains.as_table()}
     for key in passed:
         if key in table:
             out[key] = table[key]

@@ -3,8 +3,7 @@
 A gain is per unit: 1/s² on a spacing error, 1/s on a velocity error. Above
 :data:`lcc_synth.problem.GAIN_LIMIT` (100) it is valid but implausible (a warning); beyond
 :data:`GAIN_MAX` it is an error (:func:`valid_gain`):
-:class:`~lcc_synth.models.feedback.StaticGains` and
-:class:`~lcc_synth.models.platoon.PlatoonGains` refuse it, so a gain from a problem table, a
+:class:`~lcc_synth.models.feedback.Gains` refuses it, so a gain from a problem table, a
 gains file or the API never reaches a computation its size would break. The schema declares the
 same range on ``[controllers.NAME.gains]`` (``problems/REFERENCE.md``).
 """
@@ -17,7 +16,12 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 
-__all__ = ["GAIN_MAX", "valid_gain"]
+__all__ = ["GAIN_MAX", "SEMANTICS", "valid_gain"]
+
+#: How a static gain enters each CAV's command (:class:`lcc_synth.models.feedback.Gains`):
+#: ``"added"``: the CAV keeps its HDV law and ``K x`` is added (eq. 23); ``"replace"``:
+#: ``u = K x`` is the whole acceleration.
+SEMANTICS = ("added", "replace")
 
 #: Largest magnitude of a gain. Beyond it the rounding of a state of order 10 (float64,
 #: eps ≈ 2.2e-16) alone would move the command by more than 2e-3 m/s² (by the acceleration

@@ -43,7 +43,6 @@ import numpy as np
 import scipy.linalg as sla
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.gains import GAIN_MAX, valid_gain
 from lcc_synth.models.hdv import CarFollowingModel, LinearCoefficients, linear_coefficients
 from lcc_synth.models.records import Record
 
@@ -59,8 +58,6 @@ __all__ = [
     "state_index",
     "selection_matrix",
     "discretize",
-    "SEMANTICS",
-    "PlatoonGains",
     "hdv_law_rows",
 ]
 
@@ -491,12 +488,6 @@ def discretize(A: np.ndarray, B: np.ndarray, Ts: float) -> tuple[np.ndarray, np.
     return E[:nx, :nx], E[:nx, nx:]
 
 
-#: How a platoon gain enters each CAV's command (as :data:`lcc_synth.models.feedback.SEMANTICS`):
-#: ``"replace"``: ``u = K x`` is the whole acceleration; ``"added"``: the CAV keeps its HDV law
-#: and ``K x`` is added.
-SEMANTICS = ("added", "replace")
-
-
 def hdv_law_rows(model: PlatoonModel) -> np.ndarray:
     """``(n_cav, nx)`` rows ``K0`` with ``K0 x`` = each CAV's own HDV law linearised at its
     equilibrium (eq. 8: ``a1 s_i - a2 v_i + a3 v_{i-1}``; on the ring vehicle 1's
@@ -511,99 +502,3 @@ def hdv_law_rows(model: PlatoonModel) -> np.ndarray:
             pred = (i - 2) % N
             K0[k, 2 * pred + 1] += c.alpha3
     return K0
-
-
-@dataclass(frozen=True, eq=False, repr=False)
-class PlatoonGains(Record):
-    """Static feedback of every CAV of a platoon: row ``k`` of ``K`` is CAV ``cavs[k]``'s gain
-    on the model's states (``s_1, v_1, ..., s_N, v_N``).
-
-    Parameters
-    ----------
-    K : numpy.ndarray
-        ``(n_cav, 2N)``.
-    cavs : tuple of int
-        CAV positions, one per row.
-    semantics : {"added", "replace"}
-    kh : numpy.ndarray, optional
-        ``(n_cav,)`` gains on the head velocity error (open platoon, ``"added"``: the CAV
-        right behind the head uses ``v_h`` in its HDV law); default zeros.
-    """
-
-    K: np.ndarray
-    cavs: tuple[int, ...]
-    semantics: str = "replace"
-    kh: np.ndarray | None = None
-
-    def __post_init__(self) -> None:
-        K = np.atleast_2d(np.asarray(self.K, dtype=float))
-        if K.shape[0] != len(self.cavs):
-            raise ConfigError("gains", f"needs one row per CAV ({len(self.cavs)}), got {K.shape}")
-        if not np.all(np.isfinite(K)):
-            raise ConfigError("gains", "must be finite")
-        big = np.argwhere(np.abs(K) > GAIN_MAX)
-        if big.size:
-            k, j = (int(i) for i in big[0])
-            try:
-                valid_gain("gains", K[k, j])
-            except ConfigError as err:
-                raise ConfigError("gains", f"row {k + 1} (CAV {self.cavs[k]}), entry {j + 1}: "
-                                  f"{err.message}") from None  # fmt: skip
-        if self.semantics not in SEMANTICS:
-            raise ConfigError("semantics", f"must be one of {list(SEMANTICS)}, got "
-                              f"{self.semantics!r}")  # fmt: skip
-        object.__setattr__(self, "K", K)
-        object.__setattr__(self, "cavs", tuple(int(c) for c in self.cavs))
-        kh = np.zeros(len(self.cavs)) if self.kh is None else np.asarray(self.kh, float)
-        object.__setattr__(self, "kh", kh.reshape(len(self.cavs)))
-
-    def input_feedback(self, model: PlatoonModel) -> tuple[np.ndarray, np.ndarray]:
-        """``(Ku, ku_h)``: the CAV inputs ``u = Ku x + ku_h v_h`` in the model's coordinates
-        (``"added"``: the HDV law rows :func:`hdv_law_rows` plus ``K``)."""
-        if tuple(model.cavs) != self.cavs or model.nx != self.K.shape[1]:
-            raise ConfigError(
-                "gains", f"are for CAVs {list(self.cavs)} on {self.K.shape[1]} states; the "
-                f"model has CAVs {list(model.cavs)} on {model.nx} states",
-            )
-        if self.semantics == "replace":
-            return self.K.copy(), self.kh.copy()
-        kh0 = np.array([
-            model.coefficients[i - 1].alpha3 if (i == 1 and not model.ring) else 0.0
-            for i in self.cavs
-        ])  # fmt: skip
-        return hdv_law_rows(model) + self.K, kh0 + self.kh
-
-    def closed_loop(self, model: PlatoonModel) -> tuple[np.ndarray, np.ndarray]:
-        """``(A_cl, H_cl)`` of ``dx = A_cl x + H_cl v_h``."""
-        Ku, kh = self.input_feedback(model)
-        return model.A + model.B @ Ku, model.H + model.B @ kh[:, None]
-
-    def as_table(self, model: PlatoonModel) -> dict[str, dict[str, float]]:
-        """``{"u_3": {"s_1": ..., ...}, ...}``: each CAV's non-zero gains by state name (the
-        problem-file and gains-file form)."""
-        return {
-            f"u_{i}": {nm: float(g) for nm, g in zip(model.state_names, row, strict=True) if g}
-            for i, row in zip(self.cavs, self.K, strict=True)
-        }
-
-    @classmethod
-    def from_table(
-        cls, table: dict, model: PlatoonModel, semantics: str = "replace", field: str = "gains"
-    ) -> PlatoonGains:
-        """Read :meth:`as_table`'s form; an unknown CAV or state is a ConfigError naming it."""
-        K = np.zeros((len(model.cavs), model.nx))
-        names = set(model.input_names)
-        for u, row in table.items():
-            if u not in names:
-                raise ConfigError(f"{field}.{u}", f"not a CAV input; this platoon has "
-                                  f"{sorted(names)}")  # fmt: skip
-            if not isinstance(row, dict):
-                raise ConfigError(f"{field}.{u}", "must be a table of state name -> gain")
-            k = model.input_names.index(u)
-            for nm, g in row.items():
-                if nm not in model.state_names:
-                    raise ConfigError(f"{field}.{u}.{nm}", f"unknown state; states are "
-                                      f"s_1, v_1 .. s_{model.platoon.size}, "
-                                      f"v_{model.platoon.size}")  # fmt: skip
-                K[k, model.index(nm)] = valid_gain(f"{field}.{u}.{nm}", g)
-        return cls(K, model.cavs, semantics)

@@ -9,8 +9,7 @@ from __future__ import annotations
 
 from lcc_synth.controllers.gains_files import read_fallback_file
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.feedback import StaticGains
-from lcc_synth.models.platoon import PlatoonGains
+from lcc_synth.models.feedback import Gains
 from lcc_synth.mpc.controller import MPCController
 from lcc_synth.mpc.joint import JointMPCController
 from lcc_synth.mpc.settings import settings_from_table
@@ -18,7 +17,7 @@ from lcc_synth.mpc.settings import settings_from_table
 __all__ = ["mpc_controller_from_table", "build_mpc"]
 
 
-def _named_fallback(named, field_name: str) -> tuple[StaticGains, str]:
+def _named_fallback(named, field_name: str) -> tuple[Gains, str]:
     """The gain of ``fallback = "NAME"`` (as :func:`lcc_synth.experiments.spec.resolve_fallbacks`
     inlines it) and its source label ``controller NAME``."""
     if not isinstance(named, dict) or not isinstance(named.get("gains"), dict):
@@ -26,7 +25,7 @@ def _named_fallback(named, field_name: str) -> tuple[StaticGains, str]:
             field_name, f"names controller {named!r}, which is not a static or h2 controller"
         )
     try:
-        gains = StaticGains(named["gains"], named.get("semantics", "added"))
+        gains = Gains.named(named["gains"], named.get("semantics", "added"))
     except ConfigError as err:
         raise ConfigError(f"{field_name}.{err.field}", err.message) from None
     return gains, f"controller {named.get('controller', '?')}"
@@ -50,15 +49,15 @@ def mpc_controller_from_table(name: str, table, system, source: str | None = Non
         table = dict(table)
         named = table.pop("fallback", None)  # resolved by experiments.spec.resolve_fallbacks
         settings = settings_from_table(table, field_name)
-        fallback = None
-        fb_source = "paper"
-        if named is not None and getattr(system, "platoon", None) is None:
-            fallback, fb_source = _named_fallback(named, f"{field_name}.fallback")
-        if settings.fallback_gains_file and getattr(system, "platoon", None) is None:
-            fallback, path = read_fallback_file(table, field_name, system, source)
-            fb_source = str(path)
         if getattr(system, "platoon", None) is not None:  # kind = "platoon" | "ring"
             return _platoon_mpc(name, settings, system, named, source, field_name, table)
+        fallback = None
+        fb_source = "paper"
+        if named is not None:
+            fallback, fb_source = _named_fallback(named, f"{field_name}.fallback")
+        if settings.fallback_gains_file:
+            fallback, path = read_fallback_file(table, field_name, system, source)
+            fb_source = str(path)
         try:
             return MPCController(name, settings, system, fallback, fb_source)
         except ConfigError as err:
@@ -69,14 +68,15 @@ def mpc_controller_from_table(name: str, table, system, source: str | None = Non
         raise err.with_source(source) if source and not err.source else err from None
 
 
-def _platoon_gains(data, model, field_name: str) -> PlatoonGains:
-    """A :class:`PlatoonGains` from ``{"gains": {"u_i": {state: gain}}, "semantics": ...}``."""
+def _platoon_gains(data, model, field_name: str) -> Gains:
+    """A platoon :class:`~lcc_synth.models.feedback.Gains` from ``{"gains": {"u_i": {state:
+    gain}}, "semantics": ...}``."""
     if not isinstance(data, dict) or not isinstance(data.get("gains"), dict):
         raise ConfigError(field_name, "must give gains in the platoon form "
                           "{u_i: {state: gain}}")  # fmt: skip
     semantics = data.get("semantics", "added")
     try:
-        return PlatoonGains.from_table(data["gains"], model, semantics, f"{field_name}.gains")
+        return Gains.from_table(data["gains"], model, semantics, f"{field_name}.gains")
     except ConfigError as err:
         if err.field.startswith(field_name):
             raise

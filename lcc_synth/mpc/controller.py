@@ -53,7 +53,7 @@ import numpy as np
 
 from lcc_synth.controllers.base import ControlContext, Observation
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.feedback import StaticGains, cav_feedback
+from lcc_synth.models.feedback import Gains, cav_feedback
 from lcc_synth.models.hdv import free_speed
 from lcc_synth.mpc.comfort import jerk_bound
 from lcc_synth.mpc.delay import pad
@@ -103,7 +103,7 @@ class MPCController(MPCScaffold):
     settings : MPCSettings
     system : lcc_synth.problem.System
         Kind, ``m``, ``n``, nominal HDV model and design ``v*``.
-    fallback : StaticGains, optional
+    fallback : Gains, optional
         Static fallback gain (default :func:`paper_fallback_gains`).
     fallback_source : str
         Where the fallback came from (for :meth:`describe`).
@@ -120,7 +120,7 @@ class MPCController(MPCScaffold):
         name: str,
         settings: MPCSettings,
         system,
-        fallback: StaticGains | None = None,
+        fallback: Gains | None = None,
         fallback_source: str = "paper",
         record: bool = True,
     ):

@@ -68,7 +68,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.feedback import StaticGains, cav_feedback
+from lcc_synth.models.feedback import Gains, cav_feedback
 from lcc_synth.models.hdv import CarFollowingModel
 from lcc_synth.models.linear import LCCModel, discretize, model_from_hdv
 from lcc_synth.mpc.delay import DelayModel, pad
@@ -254,7 +254,7 @@ def _linearize(kind, m, n, hdv, v_lin, settings) -> Linearization:
     Bd, Hd = BH[:, 0].copy(), BH[:, 1].copy()
     q = state_weights(model, settings)
     if kind == "cf_lcc":
-        K_law, k_h = cav_feedback(model, StaticGains({}, "added"))
+        K_law, k_h = cav_feedback(model, Gains.named({}, "added"))
         K_law = np.asarray(K_law, float)
     else:
         K_law, k_h = np.zeros(model.nx), 0.0

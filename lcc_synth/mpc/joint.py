@@ -35,7 +35,7 @@ single-CAV MPC (:mod:`lcc_synth.mpc.solver`). Per sample:
    (:func:`~lcc_synth.mpc.comfort.solve_prioritised`).
 5. **Fallback chain, per CAV**, when the QP is not solved: the previous plan shifted by one
    step (while it lasts), else the CAV's static fallback row (a :class:`~lcc_synth.models.
-   platoon.PlatoonGains` row; default: the CAV's own HDV law, ``"added"`` semantics with a
+   feedback.Gains` row; default: the CAV's own HDV law, ``"added"`` semantics with a
    zero gain), computed from the states that row reads only, clipped to the limits; else the
    CAV holds its last command. Each CAV's outcome and the failure reason are counted
    (:meth:`JointMPCController.stats`, ``per_cav``).
@@ -72,8 +72,8 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.hdv import free_speed
-from lcc_synth.models.platoon import PlatoonGains
 from lcc_synth.mpc.comfort import jerk_bound
 from lcc_synth.mpc.delay import pad
 from lcc_synth.mpc.formulation import Family, Formulation, check_horizon
@@ -112,7 +112,7 @@ class JointMPCController(MPCScaffold):
     system : lcc_synth.problem.System
         A system with a :class:`~lcc_synth.models.platoon.Platoon` (``kind = "platoon"`` or
         ``"ring"``) with at least one CAV.
-    fallback : PlatoonGains, optional
+    fallback : Gains, optional
         Static fallback gains, one row per CAV (default: each CAV's HDV law).
     fallback_source : str
         Where the fallback came from (for :meth:`describe`).
@@ -121,7 +121,7 @@ class JointMPCController(MPCScaffold):
     """
 
     def __init__(self, name: str, settings: MPCSettings, system,
-                 fallback: PlatoonGains | None = None, fallback_source: str = "hdv_law",
+                 fallback: Gains | None = None, fallback_source: str = "hdv_law",
                  record: bool = True):
         self.name = name
         self.settings = settings
@@ -167,7 +167,7 @@ class JointMPCController(MPCScaffold):
         )
         self._shift_z, self._shift_y = self.formulation.shift_indices()
         if fallback is None:
-            fallback = PlatoonGains(np.zeros((self.nu, model.nx)), self.positions, "added")
+            fallback = Gains.zero(model, "added")
         try:
             fallback.input_feedback(model)
         except ConfigError as err:
@@ -425,7 +425,7 @@ class JointMPCController(MPCScaffold):
             {"joint": True, "cavs": list(self.positions), "ring": self.ring},
             {"equilibrium_reference": ref},
             "condensed joint QP, CasADi symbolic (built once)",
-            self.fallback.as_table(self._lin0.model),
+            self.fallback.as_table(),
         )
 
     def as_dict(self) -> dict[str, Any]:

@@ -66,7 +66,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.lag import check_lag
 from lcc_synth.models.records import Record
 from lcc_synth.schema import declared
@@ -369,12 +369,12 @@ def settings_from_table(table: Mapping[str, Any], field_name: str) -> MPCSetting
 _PAPER_TAIL = {"v_0": -0.5, "s_1": -0.2, "v_1": 0.05, "s_2": -0.1, "v_2": 0.05}
 
 
-def paper_fallback_gains(kind: str, n: int) -> StaticGains:
+def paper_fallback_gains(kind: str, n: int) -> Gains:
     """The default fallback: the paper's Section V-B gains (FD-LCC; CF-LCC adds ``0.1 s_0``),
     restricted to the vehicles the model has, or the CAV's HDV law for LCC / CCC."""
     if kind in ("fd_lcc", "cf_lcc"):
         g = {k: v for k, v in _PAPER_TAIL.items() if int(k.split("_")[1]) <= n}
         if kind == "cf_lcc":
             g["s_0"] = 0.1
-        return StaticGains(g, "replace")
-    return StaticGains({}, "added")
+        return Gains.named(g, "replace")
+    return Gains.named({}, "added")

@@ -208,7 +208,8 @@ CASES = Table(
 GAIN_TABLE = Table(
     "controllers.NAME.gains",
     "State name -> gain (also [synthesis.baseline.gains], [cases.NAME.gains], "
-    "[maps.NAME.gains]); the names are those of the model's state.",
+    "[maps.NAME.gains]); the names are those of the model's state: vehicle i of the layout "
+    "(one CAV: counted from the CAV, 0; platoon / ring: positions from the head).",
     ("simulate", "sweep", "run", "synthesize", "analyze", "regions"),
     any_key=Key("STATE", "number", "Gain on s_i (spacing error), v_i (velocity error) or "
                 "-p_0 (FD-LCC position); above 100 per unit is a warning (also in a gains "

@@ -22,6 +22,14 @@ commands that read it); "none" means absent = not set (the meaning says what the
 Upper-case parts of a table name (`NAME`, `LAYOUT`) are names you choose. An unknown table or
 key is an error naming it and the closest declared one; a wrong type or a value out of range is
 an error naming the file and the dotted field (exit code 2).
+
+State names in gains (tables and gains files) have one meaning: `s_i` / `v_i` are the spacing
+and velocity errors of vehicle `i` of the problem's layout (`-p_0`: FD-LCC's position state).
+The paper's one-CAV kinds (`lcc`, `cf_lcc`, `fd_lcc`, `ccc`) number the vehicles from the CAV:
+`0` is the CAV (`s_0`, `v_0`: its own errors), `1..n` the HDVs behind it, `-1..-m` those ahead
+(the paper's `mu_i`, `k_i`). Platoons and rings number the positions `1..size` from the head,
+and a gain table is per CAV input `u_i` (the CAV at position `i`). A gains file states its
+`kind` (and a platoon's `cavs`), and is read only for a problem of that layout.
 """
 
 

@@ -196,7 +196,7 @@ def loop_matrix(controller, scenario) -> tuple[np.ndarray, str] | None:
     (see the module docstring); ``None`` when its gains are for another string (the simulator
     reports that)."""
     from lcc_synth.controllers.static import StaticGainController
-    from lcc_synth.models.feedback import StaticGains, closed_loop, input_feedback
+    from lcc_synth.models.feedback import Gains, closed_loop, input_feedback
     from lcc_synth.models.linear import model_from_hdv
 
     name = getattr(controller, "name", "?")
@@ -211,7 +211,7 @@ def loop_matrix(controller, scenario) -> tuple[np.ndarray, str] | None:
         kind = "cf_lcc" if scenario.m == 0 else "lcc"
         model = model_from_hdv(kind, scenario.m, scenario.n, scenario.hdv, scenario.v_star,
                                warn=False)  # fmt: skip
-        gains = StaticGains({}, "added")
+        gains = Gains.named({}, "added")
         what = f"the HDV string (controller {name!r} checked with the CAV as an HDV)"
     A, _ = closed_loop(model, *input_feedback(model, gains))
     return A, what
@@ -224,7 +224,8 @@ def _platoon_loop(controller, scenario, name: str) -> tuple[np.ndarray, str] | N
     from dataclasses import replace
 
     from lcc_synth.controllers.static import PlatoonGainController
-    from lcc_synth.models.platoon import Platoon, PlatoonGains, platoon_model
+    from lcc_synth.models.feedback import Gains
+    from lcc_synth.models.platoon import Platoon, platoon_model
 
     if isinstance(controller, PlatoonGainController):
         model, gains = controller.model, controller.gains
@@ -239,7 +240,7 @@ def _platoon_loop(controller, scenario, name: str) -> tuple[np.ndarray, str] | N
         )  # fmt: skip
         cavs = tuple(c + 1 - off for c in scenario.cav_columns)
         model = platoon_model(Platoon(models, cavs, float(scenario.v_star), ring), warn=False)
-        gains = PlatoonGains(np.zeros((len(cavs), model.nx)), cavs, "added")
+        gains = Gains.zero(model, "added")
         what = f"the platoon with its CAVs as HDVs (controller {name!r})"
     A = gains.closed_loop(model)[0]
     if model.ring:

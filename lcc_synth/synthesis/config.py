@@ -107,7 +107,7 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.feedback import StaticGains
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.platoon import Platoon
 from lcc_synth.models.records import Record, system_tables, toml_text
 from lcc_synth.problem import Problem, System, check_top_level, system_from, warn_large_gains
@@ -151,7 +151,7 @@ class SynthesisSpec(Record):
     string_gamma: float = 1.0
     polish_steps: int = 200
     string_margin: float = 1e-4
-    baseline: tuple[str, StaticGains] | None = None
+    baseline: tuple[str, Gains] | None = None
     source: str | None = None
     as_run: Any = None  # lcc_synth.synthesis.as_run.AsRunSettings
     cav_lag: float = 0.0  # the CAV's actuator lag (s), lcc_synth.synthesis.lag_design
@@ -357,7 +357,7 @@ def synthesis_spec(
         bg = B.get(b, "gains", "synthesis.baseline")
         warn_large_gains(bg, "synthesis.baseline.gains")
         try:
-            gains = StaticGains(bg, bsem)
+            gains = Gains.named(bg, bsem)
             gains.check(system.linear_model(warn=False))
         except ConfigError as err:
             raise ConfigError(f"synthesis.baseline.{err.field}", err.message) from None

@@ -122,7 +122,7 @@ CROSS_CHECK_TOL = 1e-5
 
 
 def design_gain_of(plant: H2Plant, gains) -> np.ndarray:
-    """Design-plant gain ``g`` whose closed loop equals that of ``StaticGains`` ``gains``.
+    """Design-plant gain ``g`` whose closed loop equals that of ``Gains`` ``gains``.
 
     Raises :class:`SynthesisError` when it cannot be expressed on this plant (different head
     feed-through, or a gain on a dropped state).
@@ -548,7 +548,7 @@ def _synthesize_platoon(spec: PlatoonSynthesisSpec) -> PlatoonReport:
         comm_range=spec.comm_range,
         state_names=list(model.state_names),
         K=K.tolist(),
-        gains=gains.as_table(model),
+        gains=gains.as_table(),
         input_K=Ku.tolist(),
         input_kh=kh.tolist(),
         check=chk,

@@ -1,4 +1,15 @@
-"""The gains file: JSON written by ``lcc-synth synthesize --out``.
+"""The gains file: JSON written by ``lcc-synth synthesize --out`` (and ``run``), written by
+:func:`write_gains` and read by :func:`read_gains`, for every layout.
+
+Both forms below are read into one :class:`~lcc_synth.models.feedback.Gains`: the file's
+``kind`` says which vehicles its state names index. A single-CAV file (``kind = "lcc" |
+"cf_lcc" | "fd_lcc" | "ccc"``) uses the paper's indexing, vehicles counted from the CAV
+(``s_0``/``v_0`` the CAV's own errors, ``s_1`` the first HDV behind it, ``s_-1`` the HDV
+right ahead); a platoon or ring file uses positions from the head (``s_1`` the vehicle right
+behind the head; ``cavs`` the CAV positions). So ``s_1`` means "vehicle 1 of the file's
+layout" in both, and a file is only read for a problem of its own layout.
+
+Single-CAV gains file:
 
 Keys: ``kind, m, n, semantics, state_names, K, gains`` (``K`` = the gains in ``state_names``
 order, ``gains`` = ``{state_name: value}``; ``u = +K x`` with the semantics of ``feedback.py``),
@@ -6,13 +17,13 @@ plus ``pattern, weights, h2_true, h2_lmi_bound, gamma_peak, gamma_peak_omega, st
 plant_stable`` and extra information (``design``, ``v_star``, ``input_K``, ``input_kh``,
 ``h2_unstructured``, ``max_real_eig``, ``problem``). Non-finite numbers are written as null.
 
-Platoon / ring gains file (``[system] kind = "platoon" | "ring"``, read by
-:func:`read_platoon_gains`): keys ``kind, size, cavs, ring, semantics, state_names, K, gains,
-h2_true`` (:data:`PLATOON_REQUIRED_KEYS`). ``state_names`` = ``s_1, v_1, ..., s_N, v_N``;
-``K`` = one row per CAV (``cavs`` order, positions 1-based) on ``state_names``; ``gains`` =
-the same as ``{"u_i": {state_name: value}}`` (non-zero entries only, the form of
-:meth:`lcc_synth.models.platoon.PlatoonGains.as_table`); ``u = +K x`` with the semantics of
-:class:`~lcc_synth.models.platoon.PlatoonGains` (``"replace"``: the CAV's whole acceleration;
+Platoon / ring gains file (``[system] kind = "platoon" | "ring"``): keys ``kind, size, cavs,
+ring, semantics, state_names, K, gains, h2_true`` (:data:`PLATOON_REQUIRED_KEYS`).
+``state_names`` = ``s_1, v_1, ..., s_N, v_N``; ``K`` = one row per CAV (``cavs`` order,
+positions 1-based) on ``state_names``; ``gains`` = the same as ``{"u_i": {state_name:
+value}}`` (non-zero entries only, the form of
+:meth:`lcc_synth.models.feedback.Gains.as_table`); ``u = +K x`` with the semantics of
+:class:`~lcc_synth.models.feedback.Gains` (``"replace"``: the CAV's whole acceleration;
 ``"added"``: added to its HDV law). Extra keys: ``v_star, circumference`` (ring), ``patterns``
 (``{"u_i": [positions heard]}``), ``comm_range``, ``weights, disturbances, design, problem,
 h2_unstructured, max_real_eig`` (on ``stability_subspace``), ``input_K, input_kh`` (the
@@ -31,16 +42,16 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.feedback import SEMANTICS, StaticGains
-from lcc_synth.models.gains import valid_gain
+from lcc_synth.models.feedback import Gains
+from lcc_synth.models.gains import SEMANTICS, valid_gain
 from lcc_synth.models.linear import KINDS, model_from_hdv
-from lcc_synth.models.platoon import PlatoonGains
+from lcc_synth.models.platoon import PLATOON_KINDS
 from lcc_synth.problem import warn_large_gains
 from lcc_synth.schema.readers import read_json
 from lcc_synth.synthesis.report import PlatoonReport, SynthesisReport, _jsonable
 
 __all__ = ["gains_document", "write_gains", "read_gains", "REQUIRED_KEYS",
-           "PLATOON_REQUIRED_KEYS", "platoon_gains_document", "read_platoon_gains"]
+           "PLATOON_REQUIRED_KEYS", "platoon_gains_document"]
 
 REQUIRED_KEYS = ("kind", "m", "n", "semantics", "state_names", "K", "gains")
 
@@ -115,41 +126,7 @@ def _number_row(row: Any, names: list[str], key: str, what: str) -> list[float]:
                                                                                strict=True))]
 
 
-def read_platoon_gains(
-    path: str | Path, model=None, field: str | None = None, source: str | None = None
-) -> tuple[PlatoonGains, dict[str, Any]]:
-    """Read and validate a platoon / ring gains file; returns the gains and the document.
-
-    The file must hold every key of :data:`PLATOON_REQUIRED_KEYS`; ``K`` one row per CAV of
-    ``cavs``, each with one entry per state of ``state_names``, and ``gains`` (``{"u_i":
-    {state: gain}}``) the same gains, entry for entry (a state missing from ``gains`` has gain 0
-    in ``K``). An empty ``gains`` table (no CAV row, or only empty rows) is an error, not a zero
-    gain.
-
-    Parameters
-    ----------
-    path : str or Path
-    model : PlatoonModel, optional
-        When given, the file must be for its CAVs and states.
-    field, source : str, optional
-        The field of a problem file that named the file, and that problem file: errors are then
-        ``SOURCE: FIELD: PATH: KEY: ...``; else ``PATH: KEY: ...``.
-
-    Raises
-    ------
-    ConfigError
-        A missing or unreadable file (:func:`lcc_synth.schema.readers.read_json`), invalid
-        JSON, a missing key, or inconsistent contents.
-    """
-    p = Path(path)
-    doc = _read_document(p, field, source)
-    try:
-        return _platoon_gains(doc, model, _label(p, field)), doc
-    except ConfigError as err:
-        raise _located(err, p, field, source) from None
-
-
-def _platoon_gains(doc: dict[str, Any], model, label: str) -> PlatoonGains:
+def _platoon_gains(doc: dict[str, Any], model, label: str) -> Gains:
     for key in PLATOON_REQUIRED_KEYS:
         if key not in doc:
             raise ConfigError(key, "missing key of a platoon gains file (the keys: "
@@ -210,7 +187,7 @@ def _platoon_gains(doc: dict[str, Any], model, label: str) -> PlatoonGains:
                               f"the model's: CAVs {list(model.cavs)} on {model.nx} states")
     warn_large_gains({f"{u}.{nm}": g for u, row in table.items() for nm, g in row.items()},
                      f"{label}gains")  # fmt: skip
-    return PlatoonGains(np.array(rows, float), tuple(cavs), doc["semantics"])
+    return Gains(np.array(rows, float), tuple(cavs), tuple(names), doc["semantics"])
 
 
 def gains_document(rep: SynthesisReport | PlatoonReport) -> dict[str, Any]:
@@ -261,13 +238,17 @@ def write_gains(
 
 
 def read_gains(
-    path: str | Path, field: str | None = None, source: str | None = None, system=None
-) -> tuple[StaticGains, dict[str, Any]]:
-    """Read and validate a gains file; returns the gains and the whole document.
+    path: str | Path, field: str | None = None, source: str | None = None, system=None,
+    model=None,
+) -> tuple[Gains, dict[str, Any]]:
+    """Read and validate a gains file of any layout; returns the gains and the whole document.
 
-    The file must hold every key of :data:`REQUIRED_KEYS`; ``K`` one number per state of
-    ``state_names``, and ``gains`` the same gains by state name, entry for entry (a state
-    missing from ``gains`` has gain 0 in ``K``).
+    A single-CAV file must hold every key of :data:`REQUIRED_KEYS`, ``K`` one number per state
+    of ``state_names`` and ``gains`` the same gains by state name; a platoon or ring file
+    (``kind = "platoon" | "ring"``) every key of :data:`PLATOON_REQUIRED_KEYS`, ``K`` one row
+    per CAV of ``cavs`` and ``gains`` the same as ``{"u_i": {state: gain}}`` (not empty). In
+    both, ``gains`` must agree with ``K`` entry for entry (a state missing from ``gains`` has
+    gain 0 in ``K``).
 
     Parameters
     ----------
@@ -276,27 +257,54 @@ def read_gains(
         The field of a problem file that named the file, and that problem file: errors are then
         ``SOURCE: FIELD: PATH: KEY: ...``; else ``PATH: KEY: ...``.
     system : lcc_synth.problem.System, optional
-        When given, the file must hold gains for its ``m`` and ``n``, on the states of the
-        file's ``kind`` for them.
+        When given, the file must be for its layout: a single-CAV file for its ``m`` and ``n``
+        (on the states of the file's ``kind`` for them), a platoon / ring file for its kind,
+        size, CAVs and road.
+    model : LCCModel or PlatoonModel, optional
+        When given, the file must be for its CAVs and states.
 
     Raises
     ------
     ConfigError
         A missing or unreadable file (:func:`lcc_synth.schema.readers.read_json`), invalid
-        JSON, a missing key, or inconsistent contents.
+        JSON, a missing key, inconsistent contents, or a file of another layout.
     """
     p = Path(path)
     doc = _read_document(p, field, source)
     try:
-        return _static_gains(doc, system, _label(p, field)), doc
+        platoon = doc.get("kind") in PLATOON_KINDS
+        if system is not None and platoon != (system.platoon is not None):
+            raise ConfigError("kind", f"{doc.get('kind')!r}: a gains file for " + (
+                "a platoon or ring (one row per CAV)" if platoon else "one CAV") +
+                f"; the problem has kind={system.kind!r}")  # fmt: skip
+        if platoon:
+            if system is not None and model is None:
+                model = system.linear_model(warn=False)
+            gains = _platoon_gains(doc, model, _label(p, field))
+            if system is not None:
+                _check_layout(doc, system)
+        else:
+            gains = _static_gains(doc, system, _label(p, field))
+            if model is not None:
+                gains.check(model)
     except ConfigError as err:
         raise _located(err, p, field, source) from None
+    return gains, doc
 
 
-def _static_gains(doc: dict[str, Any], system, label: str) -> StaticGains:
-    if doc.get("kind") in ("platoon", "ring"):
-        raise ConfigError("kind", f"{doc['kind']!r}: a platoon gains file (one row per CAV); "
-                          "read it with read_platoon_gains")  # fmt: skip
+def _check_layout(doc: dict[str, Any], system) -> None:
+    """A :class:`ConfigError` (``kind``) unless the platoon / ring file ``doc`` is for the
+    platoon or ring ``system``."""
+    P = system.platoon
+    got = (doc["kind"], doc.get("size"), doc.get("cavs"), doc.get("ring"))
+    want = (system.kind, P.size, list(P.cavs), bool(P.ring))
+    if got != want:
+        raise ConfigError("kind", f"the file holds gains for kind={got[0]!r}, size={got[1]}, "
+                          f"cavs={got[2]}, ring={got[3]}; the problem has kind={want[0]!r}, "
+                          f"size={want[1]}, cavs={want[2]}, ring={want[3]}")  # fmt: skip
+
+
+def _static_gains(doc: dict[str, Any], system, label: str) -> Gains:
     for key in REQUIRED_KEYS:
         if key not in doc:
             raise ConfigError(key, "missing key of a gains file (the keys: "
@@ -331,6 +339,6 @@ def _static_gains(doc: dict[str, Any], system, label: str) -> StaticGains:
         if tuple(names) != tuple(model.state_names):
             raise ConfigError("state_names", f"are not the states of a {doc['kind']} model "
                               f"with m={system.m}, n={system.n}: {list(model.state_names)}")
-    gains = StaticGains(table, doc["semantics"])
+    gains = Gains.named(table, doc["semantics"])
     warn_large_gains(gains.gains, f"{label}gains")
     return gains

@@ -47,7 +47,7 @@ LMI designs work on the whole state, and the gains on the states ahead act as fe
 The platoon design plant
 ------------------------
 For a :class:`~lcc_synth.models.platoon.PlatoonModel` ``dx = A x + B u + H v_h`` (one input
-column per CAV) and a gain semantics (:meth:`~lcc_synth.models.platoon.PlatoonGains.
+column per CAV) and a gain semantics (:meth:`~lcc_synth.models.feedback.Gains.
 input_feedback`) the CAVs' gain rows ``K`` (``n_cav x nx``) act as
 ``u = (K0 + K) x + kh0 v_h`` (``"replace"``: ``K0 = 0``; ``"added"``: the CAVs' HDV-law rows),
 so the synthesis works on
@@ -95,9 +95,9 @@ import numpy as np
 import scipy.linalg as sla
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.feedback import SEMANTICS, StaticGains, input_feedback
+from lcc_synth.models.feedback import SEMANTICS, Gains, input_feedback
 from lcc_synth.models.linear import LCCModel
-from lcc_synth.models.platoon import PlatoonGains, PlatoonModel
+from lcc_synth.models.platoon import PlatoonModel
 from lcc_synth.models.records import Record
 from lcc_synth.synthesis.lyapunov import ClosedLoopSchur, closed_loop_schur
 
@@ -318,11 +318,11 @@ class H2Plant:
         full[self.keep] = g[: self.keep.size] if self.lag > 0 else g
         return full
 
-    def gains(self, g: np.ndarray) -> StaticGains:
-        """The :class:`StaticGains` (semantics of the plant) realising design gain ``g``."""
+    def gains(self, g: np.ndarray) -> Gains:
+        """The :class:`Gains` (semantics of the plant) realising design gain ``g``."""
         full = self.to_model_gain(g)
         names = self.model.state_names
-        return StaticGains({names[i]: float(full[i]) for i in range(len(names))}, self.semantics)
+        return Gains.named({names[i]: float(full[i]) for i in range(len(names))}, self.semantics)
 
     def input_feedback(self, g: np.ndarray) -> tuple[np.ndarray, float]:
         """``(K, kh)`` on the model's input, as ``feedback.input_feedback`` returns."""
@@ -368,7 +368,7 @@ def make_plant(
             "'added' needs a vehicle ahead to follow with the HDV law; FD-LCC has none: "
             "use 'replace'",
         )
-    K0, kh0 = input_feedback(model, StaticGains({}, semantics))
+    K0, kh0 = input_feedback(model, Gains.named({}, semantics))
     A_full = model.A + model.B @ K0.reshape(1, -1)
     H_eff = (model.H + model.B * kh0).ravel()
     names = model.state_names
@@ -679,9 +679,9 @@ class PlatoonPlant:
         (for the basis-independence check)."""
         return _reduced(self, np.asarray(V, float))
 
-    def gains(self, K: np.ndarray) -> PlatoonGains:
-        """The :class:`PlatoonGains` (semantics of the plant) of design gain ``K``."""
-        return PlatoonGains(np.asarray(K, float), self.model.cavs, self.semantics)
+    def gains(self, K: np.ndarray) -> Gains:
+        """The :class:`Gains` (semantics of the plant) of design gain ``K``."""
+        return Gains.on(self.model, np.asarray(K, float), self.semantics)
 
     def input_feedback(self, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(Ku, ku_h)``: the CAV inputs ``u = Ku x + ku_h v_h`` of design gain ``K``."""
@@ -718,10 +718,7 @@ def make_platoon_plant(
                           f"must be one of {list(SEMANTICS)}, got {semantics!r}")  # fmt: skip
     if model.ring and weights.head > 0:
         raise ConfigError("synthesis.weights.head", "a ring has no head vehicle: set it to 0")
-    n_in = len(model.cavs)
-    K0, kh0 = PlatoonGains(np.zeros((n_in, model.nx)), model.cavs, semantics).input_feedback(
-        model
-    )
+    K0, kh0 = Gains.zero(model, semantics).input_feedback(model)
     A = model.A + model.B @ K0
     H_eff = (model.H + model.B @ kh0[:, None]).ravel()
     names = model.state_names

@@ -302,7 +302,7 @@ class PlatoonReport(Record):
     """Result of ``lcc-synth synthesize`` for a platoon or ring.
 
     ``K`` has one row per CAV (``cavs`` order) on ``state_names``; ``gains`` is the same in
-    :meth:`~lcc_synth.models.platoon.PlatoonGains.as_table` form; ``input_K`` / ``input_kh``
+    :meth:`~lcc_synth.models.feedback.Gains.as_table` form; ``input_K`` / ``input_kh``
     the CAVs' whole inputs ``u = input_K x + input_kh v_h`` under the semantics. ``stages``
     lists each stage's true H2 and time; ``robust`` the per-member figures; ``pareto`` the
     range front of ``design = "sparsity"``.
