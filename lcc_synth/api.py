@@ -278,7 +278,7 @@ def control_energy(model: System | LCCModel | PlatoonModel, horizon: float):
 
 
 def gains(
-    values: Mapping[str, Any] | Gains,
+    values: Mapping[str, Any] | Gains | str | Path,
     semantics: str | None = None,
     model: System | PlatoonModel | None = None,
 ) -> Gains:
@@ -286,10 +286,13 @@ def gains(
 
     Parameters
     ----------
-    values : mapping or Gains
+    values : mapping, Gains or path
         State name -> gain (``{"s_1": -1.0, "v_1": -1.0}``, missing states 0); on a platoon or
         ring one table per CAV input, ``{"u_3": {"s_3": ..., "v_2": ...}, ...}`` (then give
-        ``model``). A gains object is returned as it is.
+        ``model``). A gains object is returned as it is. A path (``str`` or ``Path``): a gains
+        file of ``lcc-synth synthesize --out``, either form
+        (:func:`lcc_synth.synthesis.gains_file.read_gains`; with ``model``, checked against its
+        layout); the file states its semantics.
     semantics : {"added", "replace"}
         Required with a mapping (the paper uses both; there is no default): ``"added"``, the
         CAV keeps its HDV law and the gains add to it (eq. 23, Sec. IV and V-A); ``"replace"``,
@@ -310,6 +313,11 @@ def gains(
     ...
     lcc_synth.errors.ConfigError: semantics: must be given with gains: "added" (the CAV's ...
     """
+    if isinstance(values, str | Path):
+        from lcc_synth.synthesis.gains_file import read_gains
+
+        values = read_gains(values, system=model if isinstance(model, System) else None,
+                            model=model if isinstance(model, PlatoonModel) else None)[0]
     if isinstance(values, Gains):
         if semantics is not None and semantics != values.semantics:
             raise ConfigError(

@@ -106,6 +106,8 @@ def test_paper_view_round_trips_the_named_gains():
     assert g.gains == {"s_-2": 1.0, "s_-1": 1.0, "s_1": -1.0, "s_2": -1.0, "v_-2": -1.0,
                        "v_-1": -1.0, "v_1": -1.0, "v_2": -1.0}  # fmt: skip
     assert g == Gains.named(g.gains, "added") and g != Gains.named(g.gains, "replace")
+    assert g == Gains.named(dict(reversed(g.gains.items())), "added")  # by name, not position
+    assert g != Gains.named({**g.gains, "s_0": 0.0}, "added")  # another set of named states
     assert g.vehicles() == [-2, -1, 1, 2]
 
 
@@ -171,3 +173,17 @@ def test_files_of_the_previous_version_read_the_same_gains(name, problem):
     assert list(model.state_names) == names
     got = gains.matrix(model)
     assert got.shape == K.shape and np.array_equal(got, K)  # bit for bit
+
+
+def test_the_flat_api_reads_a_gains_file_of_either_form():
+    import lcc_synth as lcc
+
+    ring = system_from(load_problem(PROBLEMS / "synth_ring_sugiyama.toml").data)
+    fd = system_from(load_problem(PROBLEMS / "synth_fd_lcc_pattern.toml").data)
+    for name, system in (("ring_sugiyama.json", ring), ("fd_lcc_pattern.json", fd)):
+        assert lcc.gains(str(DATA / name), model=system) == read_gains(DATA / name)[0]
+    with pytest.raises(ConfigError, match=r"^semantics: 'replace' contradicts the gains' 'added'"):
+        lcc.gains(DATA / "ring_sugiyama.json", "replace")
+    with pytest.raises(ConfigError, match=r"ring_sugiyama\.json: kind: 'ring': a gains file for "
+                       r"a platoon or ring .*; the problem has kind='fd_lcc'"):
+        lcc.gains(DATA / "ring_sugiyama.json", model=fd)

@@ -19,8 +19,7 @@ from typing import Any
 from lcc_synth.errors import ConfigError
 from lcc_synth.schema import declared
 
-__all__ = ["check_gains_files", "gains_file_path", "read_fallback_file", "read_gains_at",
-           "read_gains_file"]
+__all__ = ["check_gains_files", "gains_file_path", "read_fallback_file", "read_gains_file"]
 
 
 def gains_file_path(rel: str, source: str | None) -> Path:
@@ -29,30 +28,26 @@ def gains_file_path(rel: str, source: str | None) -> Path:
     return path if path.is_absolute() or not source else Path(source).parent / path
 
 
-def read_gains_at(path: Path, where: str, system: Any, source: str | None = None):
-    """The gains file ``path`` (named by the field ``where``) for ``system``: ``(Gains,
-    document)``, read and checked against the problem's layout by
-    :func:`lcc_synth.synthesis.gains_file.read_gains`; every error names ``where``, the gains
-    file and the key."""
-    from lcc_synth.synthesis.gains_file import read_gains
-
-    return read_gains(path, where, source, system)
-
-
 def read_gains_file(
     table: Mapping[str, Any], field: str, system: Any, source: str | None = None
 ):
-    """The gains of a ``type = "gains_file"`` table (:func:`read_gains_at` of its ``file``)."""
+    """The gains of a ``type = "gains_file"`` table: ``(Gains, document)`` of its ``file``
+    (:func:`lcc_synth.synthesis.gains_file.read_gains`, for ``system``'s layout)."""
+    from lcc_synth.synthesis.gains_file import read_gains
+
     T = declared("controllers.NAME:gains_file")
-    return read_gains_at(gains_file_path(T.get(table, "file", field), source), f"{field}.file",
-                         system, source)  # fmt: skip
+    return read_gains(gains_file_path(T.get(table, "file", field), source), f"{field}.file",
+                      source, system)  # fmt: skip
 
 
 def read_fallback_file(
     table: Mapping[str, Any], field: str, system: Any, source: str | None = None
 ):
-    """The gains of an MPC table's ``fallback_gains_file`` (:func:`read_gains_at`; for the
-    MPC's own ``kind``): ``(gains, path)``, or ``None`` without one."""
+    """The gains of an MPC table's ``fallback_gains_file``
+    (:func:`lcc_synth.synthesis.gains_file.read_gains`; for the MPC's own ``kind``): ``(gains,
+    path)``, or ``None`` without one."""
+    from lcc_synth.synthesis.gains_file import read_gains
+
     value = declared("controllers.NAME:mpc").raw(table, "fallback_gains_file")
     if value is None:
         return None
@@ -60,7 +55,7 @@ def read_fallback_file(
     if not isinstance(value, str) or not value:
         raise ConfigError(where, f"must be the path of a gains file, got {value!r}", source)
     path = gains_file_path(value, source)
-    gains, doc = read_gains_at(path, where, system, source)
+    gains, doc = read_gains(path, where, source, system)
     if doc["kind"] != system.kind:
         raise ConfigError(where, f"{path} holds gains for kind={doc['kind']!r}; the MPC "
                           f"controls kind={system.kind!r}", source)  # fmt: skip

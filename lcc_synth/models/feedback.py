@@ -48,7 +48,7 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.models.gains import GAIN_MAX, SEMANTICS, valid_gain
 from lcc_synth.models.linear import KINDS, LCCModel
 from lcc_synth.models.platoon import hdv_law_rows
-from lcc_synth.models.records import Record, ValueEq, short
+from lcc_synth.models.records import Record, short
 
 __all__ = ["SEMANTICS", "Gains", "hdv_law", "cav_feedback", "input_feedback", "closed_loop"]
 
@@ -59,7 +59,7 @@ PAPER_CAVS = (0,)
 
 
 @dataclass(frozen=True, eq=False, repr=False)
-class Gains(ValueEq, Record):
+class Gains(Record):
     """Static feedback gains of every CAV of a layout (eq. 23).
 
     Parameters
@@ -114,6 +114,18 @@ class Gains(ValueEq, Record):
         object.__setattr__(self, "cavs", cavs)
         object.__setattr__(self, "states", states)
         object.__setattr__(self, "kh", kh.reshape(len(cavs)))
+
+    def __eq__(self, other: object) -> bool:
+        """Equal gains: the same CAVs, semantics and head gains, and the same column per state
+        name (the order of ``states`` does not matter)."""
+        if type(other) is not type(self):
+            return NotImplemented
+        cols = {nm: self.K[:, j].tolist() for j, nm in enumerate(self.states)}
+        other_cols = {nm: other.K[:, j].tolist() for j, nm in enumerate(other.states)}
+        return (self.cavs, self.semantics, self.kh.tolist(), cols) == (
+            other.cavs, other.semantics, other.kh.tolist(), other_cols)
+
+    __hash__ = None  # type: ignore[assignment]
 
     def __repr__(self) -> str:
         return (f"Gains(cavs={short(self.cavs)}, gains={short(self.as_table())}, "
