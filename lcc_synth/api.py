@@ -316,8 +316,9 @@ def gains(
     if isinstance(values, str | Path):
         from lcc_synth.synthesis.gains_file import read_gains
 
-        values = read_gains(values, system=model if isinstance(model, System) else None,
-                            model=model if isinstance(model, PlatoonModel) else None)[0]
+        is_system = isinstance(model, System)
+        values = read_gains(values, system=model if is_system else None,
+                            model=None if is_system else model)[0]
     if isinstance(values, Gains):
         if semantics is not None and semantics != values.semantics:
             raise ConfigError(

@@ -122,7 +122,7 @@ def test_gain_on_a_missing_state_and_wrong_length():
         closed_loop(model, np.zeros(3))
 
 
-def test_from_mu_k_and_vehicles():
+def test_from_paper_and_vehicles():
     g = Gains.from_paper({-1: 0.5, 2: 0.0}, {1: -1.0})
     assert g.gains == {"s_-1": 0.5, "s_2": 0.0, "v_1": -1.0}
     assert g.vehicles() == [-1, 1]
