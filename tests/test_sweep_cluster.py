@@ -1,5 +1,6 @@
 """A sweep on a Dask cluster the sweep did not start: `dask scheduler` and two `dask worker`
-processes on 127.0.0.1 (single-threaded, as the README advises), started and stopped by PID.
+processes on 127.0.0.1 (single-threaded, as docs/guide/sweeps.md advises), started and stopped
+by PID.
 
 The independent truth is the same sweep run task by task in this process (``client=None``):
 each scenario's draws come from (seed, index) only, so the cluster's samples must equal it bit
