@@ -10,6 +10,7 @@ of 1001 x 1001 points per map, is far longer).
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 import subprocess
@@ -46,6 +47,20 @@ def _repository_files() -> set[Path]:
         p for p in ROOT.rglob("*")
         if p.is_file() and not skip.intersection(p.relative_to(ROOT).parts)
     }  # fmt: skip
+
+
+def test_the_documentation_runs_the_examples_with_these_arguments():
+    """The gallery's quick arguments (``docs/_ext/lcc_docs.py``, ``EXAMPLE_ARGS``) are the ones
+    of a run tested here."""
+    ext = str(ROOT / "docs" / "_ext")
+    sys.path.insert(0, ext)
+    try:
+        lcc_docs = importlib.import_module("lcc_docs")
+    finally:
+        sys.path.remove(ext)
+    assert lcc_docs.EXAMPLE_ARGS
+    for name, args in lcc_docs.EXAMPLE_ARGS.items():
+        assert RUNS[name] == args, name
 
 
 def test_every_example_is_run_here():

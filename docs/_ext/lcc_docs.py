@@ -33,10 +33,15 @@ ROOT = DOCS.parent
 GENERATED = DOCS / "_generated"
 GALLERY_OUT = DOCS / "_build" / "gallery-out"
 
-#: Quick arguments of the slow examples (the same as tests/test_examples.py), besides --out.
+#: Quick arguments of the slow examples (the same as tests/test_examples.py, which checks
+#: that), besides --out.
 EXAMPLE_ARGS = {
     "fig5_control_energy.py": ["--n-max", "8"],  # default 30: minutes in multiprecision
     "fig7_fig8_regions.py": ["--step", "0.5"],  # default: the paper's 1001 x 1001 grid
+    # default: every controller; with the MPC and PI-with-saturation rows it took 102 of the
+    # gallery's 136 s wall, without them 18 s (2026-12-02, loaded 2-core machine); the whole
+    # table is in docs/guide/benchmark.md
+    "ring_sugiyama.py": ["--controllers", "all_hdv,follower_stopper,h2"],
 }
 
 #: Links of the included Markdown files -> their pages in the documentation.
