@@ -85,3 +85,17 @@ def test_the_timing_pattern_spares_units_and_names(line):
 
 def test_readme_is_short():
     assert len(readme().splitlines()) <= 260
+
+
+def test_the_showcase_table_shows_table_ii():
+    """The ``brake_behind`` rows of README's showcase table are the paper's Table II (AAVE,
+    fuel) as ``tests/test_api.py`` pins them: all-HDV and the paper's CF-LCC gain."""
+    from test_api import TABLE2
+
+    rows = {}
+    for line in readme().splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if cells[0] == "brake_behind":
+            rows[cells[1]] = (float(cells[2]), float(cells[3]))
+    assert rows["all_hdv"] == TABLE2["all_hdv"]
+    assert rows["paper"] == TABLE2["cf_lcc"]
