@@ -340,6 +340,7 @@ def test_controller_stats_lines_digits_and_counts():
     assert controller_stats_lines({"a": {}, "b": {}}) == []
 
 
+@pytest.mark.slow  # the same stats table: test_simulate_human_output_is_tables_without_raw_json
 def test_run_human_output_shows_mpc_stats_as_a_table(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     argv = ["run", "--scenarios", "head_sine", "--controllers", "all_hdv,mpc", "--no-figures",

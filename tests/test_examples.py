@@ -69,7 +69,18 @@ def test_every_example_is_run_here():
     assert scripts <= listed, f"add {sorted(scripts - listed)} to RUNS"
 
 
-@pytest.mark.parametrize("key", list(RUNS))
+#: Slow (deselected by a plain ``pytest``, run in CI): the longest runs. The quick ones left
+#: check the same ``--out`` handling (``lcc_synth.cli.arguments.add_example_out``), and the
+#: documentation build runs every example.
+SLOW = {"fig5_control_energy.py", "fig7_fig8_regions.py", "fig9_frequency_response.py",
+        "fig10_fig12_sec5a_profiles.py", "fig11_snapshots.py", "fig11_snapshots.py --appendix-c",
+        "mpc_head_brake.py", "showcase.py", "paper_walkthrough.py", "ring_sugiyama.py",
+        "synthesis_vs_paper.py --json"}  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "key", [pytest.param(k, marks=pytest.mark.slow) if k in SLOW else k for k in RUNS]
+)
 def test_example_writes_only_under_out_and_prints_each_path(key, tmp_path):
     script = EXAMPLES / key.split()[0]
     if not script.is_file():
