@@ -69,11 +69,13 @@ def test_ci_or_run_slow_runs_every_test(project, args):
     assert collected(project, *args, ci=not args) == ALL
 
 
+@pytest.mark.slow  # the deselection itself: test_a_plain_pytest_deselects_the_slow_tests
 def test_a_marker_expression_naming_slow_is_the_users_choice(project):
     assert collected(project, "-m", "slow") == ALL - {"test_quick"}
     assert collected(project, "-m", "not slow") == {"test_quick"}
 
 
+@pytest.mark.slow  # the deselection itself: test_a_plain_pytest_deselects_the_slow_tests
 def test_a_slow_test_named_by_node_id_runs(project):
     assert collected(project, "tests/test_some.py::test_long") == {"test_long"}
     assert collected(project, "tests/test_some.py::test_long_cases") == {
