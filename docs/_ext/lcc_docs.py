@@ -38,9 +38,9 @@ GALLERY_OUT = DOCS / "_build" / "gallery-out"
 EXAMPLE_ARGS = {
     "fig5_control_energy.py": ["--n-max", "8"],  # default 30: minutes in multiprecision
     "fig7_fig8_regions.py": ["--step", "0.5"],  # default: the paper's 1001 x 1001 grid
-    # default: every controller; with the MPC and PI-with-saturation rows it took 102 of the
-    # gallery's 136 s wall, without them 18 s (2026-12-02, loaded 2-core machine); the whole
-    # table is in docs/guide/benchmark.md
+    # default: every controller; with the MPC and PI-with-saturation rows it took 31.7 of the
+    # gallery's 42.2 s, without them 2.7 s (2026-12-02, 2-core machine at a load of 1); the
+    # whole table is in docs/guide/benchmark.md
     "ring_sugiyama.py": ["--controllers", "all_hdv,follower_stopper,h2"],
 }
 
