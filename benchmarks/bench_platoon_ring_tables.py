@@ -1,4 +1,4 @@
-"""The README's two tables of "Mixed platoons and the ring road", measured.
+"""The two tables of docs/guide/platoons.md ("Mixed platoons and the ring road"), measured.
 
 Runs ``problems/platoon_deeplcc_brake.toml`` (every controller: fuel with the DeeP-LCC paper's
 metric, its reduction against all_hdv, min spacing over the first CAV and behind) and

@@ -1,5 +1,5 @@
 """SUMO versus the built-in simulator on the ring road and with several CAVs: the figures of
-``tests/test_sumo_ring.py`` and the README ("The ring road and several CAVs in SUMO").
+``tests/test_sumo_ring.py`` and ``docs/guide/sumo.md`` ("The ring road and several CAVs in SUMO").
 
 * ``problems/sumo_ring_stop_and_go.toml`` (20 IDM vehicles, CAVs at 10 and 20): AAVE, fuel,
   minimum spacing per controller in both simulators, and the wall time of each run;

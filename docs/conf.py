@@ -4,7 +4,7 @@ Build (after ``pip install -e ".[docs]"``), from the repository root::
 
     sphinx-build -W --keep-going -b html docs docs/_build/html
 
-Generated sources (problem-file reference, README sections, API pages) are written to
+Generated sources (problem-file reference, CLI reference, API pages) are written to
 ``docs/_generated`` and the gallery to ``docs/gallery`` (both git-ignored) by
 ``docs/_ext/lcc_docs.py``; the examples write their files under ``docs/_build/gallery-out``.
 No extension fetches anything from the internet (no intersphinx, no link check).
@@ -43,7 +43,6 @@ source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 exclude_patterns = [
     "_build",
     "README.md",
-    "_generated/readme",
     "gallery/*.ipynb",
     "gallery/*.py",
     "gallery/*.zip",

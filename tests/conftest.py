@@ -1,5 +1,12 @@
-"""Test-session set-up: the ``sumo`` marker, and DeeP-LCC's data cache kept out of the
-repository.
+"""Test-session set-up: the ``slow`` and ``sumo`` markers, and DeeP-LCC's data cache kept out
+of the repository.
+
+**Slow checks.** A test marked ``@pytest.mark.slow`` repeats, at greater length, what a faster
+test already checks (a whole default run, every signal, a long scenario). A plain ``pytest``
+deselects them, so that the default suite stays within a few minutes of CPU on two cores; they
+run in CI (``CI=true``, as ``.ci/run`` sets it), with ``pytest --run-slow``, with a ``-m``
+expression naming ``slow`` (``pytest -m slow`` runs only them), or when a test is named by its
+node id (``pytest tests/test_x.py::test_y``).
 
 **SUMO.** A test marked ``@pytest.mark.sumo`` needs libsumo (the ``sumo`` extra): it is
 skipped when libsumo is not importable, except in CI (``CI=true``), where it runs and a
@@ -37,12 +44,51 @@ def have_sumo() -> bool:
     return True
 
 
+def pytest_addoption(parser):
+    parser.addoption("--run-slow", action="store_true", default=False,
+                     help="also run the tests marked slow (deselected by default, except "
+                          "in CI: CI=true)")  # fmt: skip
+
+
 def pytest_configure(config):
     config.addinivalue_line("markers", 'sumo: needs libsumo (pip install -e ".[sumo]"); '
                             "skipped without it, except in CI")  # fmt: skip
 
 
+def runs_slow_tests(config) -> bool:
+    """Do the tests marked ``slow`` run in this session? In CI, with ``--run-slow``, or with a
+    ``-m`` expression that names ``slow`` (the user chose)."""
+    return IN_CI or config.getoption("--run-slow") or "slow" in (config.option.markexpr or "")
+
+
+def _named_node_ids(config) -> list[str]:
+    """The node ids given on the command line (``tests/test_x.py::test_y``), rootdir-relative."""
+    out = []
+    for arg in config.args:
+        path, sep, rest = arg.partition("::")
+        if sep:
+            rel = Path(os.path.relpath(Path(path).resolve(), config.rootpath)).as_posix()
+            out.append(f"{rel}::{rest}")
+    return out
+
+
+def _deselect_slow(config, items) -> None:
+    if runs_slow_tests(config):
+        return
+    named = _named_node_ids(config)
+
+    def chosen(item) -> bool:
+        return any(item.nodeid == n or item.nodeid.startswith((n + "[", n + "::")) for n in named)
+
+    slow = [item for item in items if "slow" in item.keywords and not chosen(item)]
+    if slow:
+        config.hook.pytest_deselected(items=slow)
+        dropped = set(slow)
+        items[:] = [item for item in items if item not in dropped]
+
+
 def pytest_collection_modifyitems(config, items):
+    _deselect_slow(config, items)
     if IN_CI or have_sumo():
         return
     skip = pytest.mark.skip(reason='SUMO not installed (pip install -e ".[sumo]")')

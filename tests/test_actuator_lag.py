@@ -165,6 +165,8 @@ def test_structured_design_with_lag():
 
 
 # ----------------------------------------------------------------------------- simulator
+@pytest.mark.slow  # the lag model: test_lagged_model_matches_direct_solution; the simulator's
+# lag: test_simulator_lag_recursion_limits_and_braking
 def test_simulator_small_signal_matches_the_lag_model():
     """Tail/head amplitude ratio of a small multisine in the nonlinear simulator (Euler at dt,
     first order in dt: Richardson over dt = 2 ms and 1 ms) against |Gamma| of the lag model."""
@@ -215,7 +217,11 @@ def test_simulator_lag_recursion_limits_and_braking():
     assert not np.array_equal(a, a0)
 
 
-@pytest.mark.parametrize("problem", ["platoon_deeplcc_brake.toml", "ring_stop_and_go.toml"])
+@pytest.mark.parametrize("problem", [
+    # slow: the ring's several CAVs, each with its lag, check the same path faster
+    pytest.param("platoon_deeplcc_brake.toml", marks=pytest.mark.slow),
+    "ring_stop_and_go.toml",
+])  # fmt: skip
 def test_several_cavs_each_with_its_lag(problem):
     """A platoon (CAVs at positions 3, 6, lags 0.2 / 0.5 s) and the ring (its CAV at position
     20, the last column): each CAV's applied acceleration is the Euler lag of its own clipped

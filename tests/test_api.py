@@ -63,6 +63,17 @@ def test_readme_snippet_reproduces_table2_and_the_cli_synthesis():
     assert shown == lines
 
 
+def test_the_guide_shows_the_readme_snippet():
+    """The guide's "From Python" (docs/guide/getting_started.md) shows the same code and output
+    as README's, which the test above runs."""
+    readme = (ROOT / "README.md").read_text().split("## From Python", 1)[1].split("\n## ", 1)[0]
+    guide = (ROOT / "docs" / "guide" / "getting_started.md").read_text()
+    guide = guide.split("## From Python", 1)[1].split("\n## ", 1)[0]
+    for fence in ("python", "text"):
+        pattern = rf"```{fence}\n(.*?)```"
+        assert re.findall(pattern, guide, re.S) == re.findall(pattern, readme, re.S), fence
+
+
 def table2_system():
     return lcc.system("fd_lcc", n=10, v_star=15.0)
 

@@ -107,9 +107,10 @@ def test_every_command_has_exactly_its_options(command):
     assert options - {"--help"} == EXPECTED_OPTIONS[command]
 
 
-def test_run_options_are_the_ones_readme_lists():
-    """README's "Options:" line of ``lcc-synth run`` is an independent list of run's options."""
-    text = (ROOT / "README.md").read_text()
+def test_run_options_are_the_ones_the_guide_lists():
+    """The guide's "Options:" line of ``lcc-synth run`` (docs/guide/getting_started.md) is an
+    independent list of run's options."""
+    text = (ROOT / "docs" / "guide" / "getting_started.md").read_text()
     line = re.search(r"^Options: (.*?)\.$", text, re.M | re.S).group(1)
     listed = set(re.findall(r"`(--[a-z-]+)", line))
     assert listed == EXPECTED_OPTIONS["run"]
@@ -265,8 +266,9 @@ def test_label_pattern_catches_labels():
         assert not LABEL.search(text), text
 
 
-def test_no_internal_labels_in_sources_readme_problems_and_help():
+def test_no_internal_labels_in_sources_readme_guide_problems_and_help():
     files = [*sorted((ROOT / "lcc_synth").rglob("*.py")), ROOT / "README.md",
+             *sorted((ROOT / "docs" / "guide").glob("*.md")),
              *sorted((ROOT / "problems").iterdir()), *sorted((ROOT / "examples").glob("*.py"))]
     hits = []
     for f in files:
@@ -338,6 +340,7 @@ def test_controller_stats_lines_digits_and_counts():
     assert controller_stats_lines({"a": {}, "b": {}}) == []
 
 
+@pytest.mark.slow  # the same stats table: test_simulate_human_output_is_tables_without_raw_json
 def test_run_human_output_shows_mpc_stats_as_a_table(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     argv = ["run", "--scenarios", "head_sine", "--controllers", "all_hdv,mpc", "--no-figures",

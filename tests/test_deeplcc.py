@@ -216,7 +216,11 @@ def lemma_case():
     return model, data, windows(data, Tini, N), traj, x_t, q, r, N
 
 
-@pytest.mark.parametrize("a_lim", [None, (-1.0, 1.0)], ids=["free", "input_bound_active"])
+# slow: the unbounded case (the same equality with the input bound active covers it)
+@pytest.mark.parametrize(
+    "a_lim", [pytest.param(None, marks=pytest.mark.slow), (-1.0, 1.0)],
+    ids=["free", "input_bound_active"],
+)  # fmt: skip
 def test_noise_free_deeplcc_is_the_model_based_mpc(lemma_case, a_lim):
     """The fundamental lemma: with exact data, lambda_g = 0 and the past outputs as equalities
     (past_outputs = "exact"), DeeP-LCC's plan is the model-based finite-horizon QP's on the
@@ -231,6 +235,8 @@ def test_noise_free_deeplcc_is_the_model_based_mpc(lemma_case, a_lim):
     assert np.max(np.abs(u_deep - u_mpc)) < 1e-6
 
 
+@pytest.mark.slow  # noise-free DeeP-LCC equals the model-based MPC, whatever the data:
+# test_noise_free_deeplcc_is_the_model_based_mpc
 def test_noise_free_plan_does_not_depend_on_which_data_were_recorded(lemma_case):
     """A second, independent exact data set (other excitation, other length) describes the
     same system: the same plan (the Hankel matrices differ entirely, the answer may not)."""

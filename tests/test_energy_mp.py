@@ -107,6 +107,8 @@ def test_stated_digits_are_achieved_at_a_fixed_precision():
     assert agreed >= stated
 
 
+@pytest.mark.slow  # multiprecision against an independent method:
+# test_multiprecision_matches_an_independent_method_where_float64_is_singular
 def test_multiprecision_sweep_continues_the_fig5_trends_past_the_float64_limit():
     sweep = energy_vs_size(PAPER, horizons=(10.0, 30.0), n_max=10, method="mp")
     for t in (10.0, 30.0):

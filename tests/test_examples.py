@@ -10,6 +10,7 @@ of 1001 x 1001 points per map, is far longer).
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 import subprocess
@@ -48,13 +49,38 @@ def _repository_files() -> set[Path]:
     }  # fmt: skip
 
 
+def test_the_documentation_runs_the_examples_with_these_arguments():
+    """The gallery's quick arguments (``docs/_ext/lcc_docs.py``, ``EXAMPLE_ARGS``) are the ones
+    of a run tested here."""
+    ext = str(ROOT / "docs" / "_ext")
+    sys.path.insert(0, ext)
+    try:
+        lcc_docs = importlib.import_module("lcc_docs")
+    finally:
+        sys.path.remove(ext)
+    assert lcc_docs.EXAMPLE_ARGS
+    for name, args in lcc_docs.EXAMPLE_ARGS.items():
+        assert RUNS[name] == args, name
+
+
 def test_every_example_is_run_here():
     scripts = {p.name for p in EXAMPLES.glob("*.py")}
     listed = {key.split()[0] for key in RUNS}
     assert scripts <= listed, f"add {sorted(scripts - listed)} to RUNS"
 
 
-@pytest.mark.parametrize("key", list(RUNS))
+#: Slow (deselected by a plain ``pytest``, run in CI): the longest runs. The quick ones left
+#: check the same ``--out`` handling (``lcc_synth.cli.arguments.add_example_out``), and the
+#: documentation build runs every example.
+SLOW = {"fig5_control_energy.py", "fig7_fig8_regions.py", "fig9_frequency_response.py",
+        "fig10_fig12_sec5a_profiles.py", "fig11_snapshots.py", "fig11_snapshots.py --appendix-c",
+        "mpc_head_brake.py", "showcase.py", "paper_walkthrough.py", "ring_sugiyama.py",
+        "synthesis_vs_paper.py --json"}  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "key", [pytest.param(k, marks=pytest.mark.slow) if k in SLOW else k for k in RUNS]
+)
 def test_example_writes_only_under_out_and_prints_each_path(key, tmp_path):
     script = EXAMPLES / key.split()[0]
     if not script.is_file():

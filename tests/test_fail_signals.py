@@ -72,7 +72,10 @@ def test_run(tmp_path, sig):
     assert not leftovers, (delay, leftovers)  # the empty results directory is removed
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+# slow: SIGTERM (SIGINT checks the same stop of the simulation)
+@pytest.mark.parametrize(
+    "sig", [signal.SIGINT, pytest.param(signal.SIGTERM, marks=pytest.mark.slow)]
+)
 def test_simulate(tmp_path, sig):
     _, _, _, delay, _ = _interrupt(
         ["simulate", PROBLEMS / "mpc_head_brake.toml", "--seeds", "12", "--rrd", "m.rrd"],
@@ -81,7 +84,10 @@ def test_simulate(tmp_path, sig):
     _check_recording(tmp_path / "m.rrd", "mpc_head_brake", delay)
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+# slow: SIGTERM (SIGINT checks the same stop of the synthesis' child process)
+@pytest.mark.parametrize(
+    "sig", [signal.SIGINT, pytest.param(signal.SIGTERM, marks=pytest.mark.slow)]
+)
 def test_long_synthesis(tmp_path, sig):
     """Row 14: the 402-state structured design (n = 200) spends seconds at a time inside
     LAPACK (the Riccati's QZ) and Clarabel holding the interpreter lock; it stops at once."""

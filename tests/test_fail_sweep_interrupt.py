@@ -27,6 +27,11 @@ from pathlib import Path
 import pytest
 from cli_subprocess import PROBLEMS, cli_env, one_line_error, run_cli, start_cli, wait_for
 
+#: Slow (deselected by a plain ``pytest``, run in CI): the in-process resume is checked by
+#: tests/test_sweep.py::test_an_interrupted_sweep_resumes_to_the_same_results and the signal
+#: handling of a command in a subprocess by tests/test_fail_signals.py::test_simulate.
+pytestmark = pytest.mark.slow
+
 PROBLEM = PROBLEMS / "sweep_robustness.toml"
 COUNT = 120
 ARGS = ["--controllers", "all_hdv,paper", "--count", str(COUNT), "--batch-size", "2",

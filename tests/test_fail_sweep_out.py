@@ -122,6 +122,7 @@ def _fill(directory: Path) -> None:
             fh.flush()
 
 
+@pytest.mark.slow  # a disk that fills under run's results: tests/test_fail_disk_full.py
 def test_a_disk_that_fills_is_one_line_after_the_summary(tmp_path):
     """The estimate fits (the check passes); the test fills the file system once the results
     directory exists (before the cluster has started): the partial writes warn, the final

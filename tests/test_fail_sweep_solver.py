@@ -7,11 +7,13 @@ from __future__ import annotations
 import json
 import re
 
+import pytest
 from cli_subprocess import PROBLEMS, rrd_verifies, run_cli
 
 from lcc_synth.recording import summarize_recording
 
 
+@pytest.mark.slow  # the failing QP's report: tests/test_fail_solver.py (simulate)
 def test_a_failing_mpc_makes_the_sweep_exit_1(tmp_path):
     text = (PROBLEMS / "sweep_robustness.toml").read_text()
     assert "[controllers.mpc]" in text

@@ -11,6 +11,8 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import pytest
+
 from lcc_synth.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -95,6 +97,7 @@ def test_synthesis_progress_on_stderr(capsys):
     assert "lcc-synth: synthesis:" not in capsys.readouterr().err
 
 
+@pytest.mark.slow  # SIGINT of simulate at a random moment: tests/test_fail_signals.py
 def test_ctrl_c_exits_130_in_one_line(tmp_path):
     """Ctrl-C while the MPC runs, at two moments (most of the run is inside OSQP solves, where
     a signal late in a converging solve used to be swallowed: 8 of 32 tries ran to the end)."""

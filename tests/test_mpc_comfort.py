@@ -123,7 +123,11 @@ def test_safety_wins_over_comfort():
     assert abs(_first_accel(lin, np.zeros(lin.model.nx), 0.0, res.z) - 2.0) <= J + 1e-5
 
 
-@pytest.mark.parametrize("problem", ["mpc_head_brake.toml", "mpc_head_brake_hetero.toml"])
+# slow: the heterogeneous file (the homogeneous one checks the same bound in closed loop)
+@pytest.mark.parametrize(
+    "problem", ["mpc_head_brake.toml", pytest.param("mpc_head_brake_hetero.toml",
+                                                    marks=pytest.mark.slow)]
+)  # fmt: skip
 def test_closed_loop_head_brake_keeps_the_iso_jerk_limit(problem):
     """The head brakes 15 -> 5 m/s at -5 m/s^2: the CAV's 1 s average jerk stays within ISO
     15622's limit at its speed outside emergency braking (none is needed), and safely."""

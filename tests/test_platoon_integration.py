@@ -159,6 +159,7 @@ def test_profile_figure_styles_several_cavs_and_the_ring():
     assert vehicle_style(2, 1) == vehicle_style(2, 1, (1,))
 
 
+@pytest.mark.slow  # the platoon's and the ring's recordings: tests/test_recording_platoon.py
 def test_run_records_the_platoon_mpc_and_draws_both_new_layouts(tmp_path, capsys):
     pytest.importorskip("rerun")
     from rerun.chunk import RrdReader

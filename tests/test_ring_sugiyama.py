@@ -200,7 +200,8 @@ def test_benchmark_ordering_claims():
     assert h2["per_km"] < fs["per_km"] and h2["per_km"] < pi["per_km"]
     assert h2["braking_events"] < 0.05 * base["braking_events"]
     assert fs["velocity_std"] < 0.1 * base["velocity_std"]  # FollowerStopper damps it too
-    # on the shipped draw (15 of the next 19 draws too, README) h2 damps it further
+    # on the shipped draw (15 of the next 19 draws too, docs/guide/benchmark.md) h2 damps it
+    # further
     assert h2["velocity_std"] < fs["velocity_std"]
     assert fs["fuel_ml"] < h2["fuel_ml"]  # ... driving slower: the goal on fuel_ml is missed
     assert all(r["collisions"] == 0 for r in rows.values())

@@ -266,7 +266,10 @@ def test_platoon_problem_file_runs_and_its_fuel_uses_the_smoothed_accelerations(
     )
 
 
-@pytest.mark.parametrize("path", [PLATOON, RING])
+# slow: the platoon file (45 s) runs in-process in
+# test_platoon_problem_file_runs_and_its_fuel_uses_the_smoothed_accelerations; the CLI path is
+# the ring's
+@pytest.mark.parametrize("path", [pytest.param(PLATOON, marks=pytest.mark.slow), RING])
 def test_cli_simulate_json_on_the_platoon_and_ring_files(path, capsys):
     assert main(["simulate", str(path), "--json", "--no-record"]) == 0
     rep = json.loads(capsys.readouterr().out)["results"]

@@ -149,7 +149,8 @@ def test_sample_covers_every_verdict_and_kind():
     assert min(abs(r.margin) for r in close) < 1e-5
 
 
-@pytest.mark.parametrize("method", ["grid", "hamiltonian"])
+# slow: the Hamiltonian method (the two agree: test_grid_and_hamiltonian_agree)
+@pytest.mark.parametrize("method", ["grid", pytest.param("hamiltonian", marks=pytest.mark.slow)])
 def test_verdict_and_peak_invariant_under_coordinates(method):
     rng = np.random.default_rng(7 if method == "grid" else 8)
     flips = []

@@ -513,15 +513,14 @@ def test_sumo_run_is_recorded(tmp_path):
 
 
 @needs_sumo
-def test_readme_sumo_snippet(capsys):
-    """The python block of README.md's "Co-simulation in SUMO" section prints what it shows."""
+def test_guide_sumo_snippet(capsys):
+    """The python block of the guide's SUMO page (docs/guide/sumo.md) prints what it shows."""
     import re
 
-    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    section = text.split("## Co-simulation in SUMO", 1)[1].split("\n## ", 1)[0]
-    code = re.search(r"```python\n(.*?)```", section, flags=re.S).group(1)
-    shown = re.search(r"```text\n(.*?)```", section, flags=re.S).group(1)
-    exec(compile(code, "README.md", "exec"), {"__name__": "readme"})
+    text = (Path(__file__).resolve().parents[1] / "docs" / "guide" / "sumo.md").read_text()
+    code = re.search(r"```python\n(.*?)```", text, flags=re.S).group(1)
+    shown = re.search(r"```text\n(.*?)```", text, flags=re.S).group(1)
+    exec(compile(code, "docs/guide/sumo.md", "exec"), {"__name__": "guide"})
     assert capsys.readouterr().out == shown
 
 

@@ -317,6 +317,7 @@ def test_emergency_braking_per_cav_on_the_ring():
 
 
 @needs_sumo
+@pytest.mark.slow  # SUMO through the CLI with --json: tests/test_sumo.py (head brake)
 def test_sumo_ring_stop_and_go_cli_json(tmp_path, capfd):
     """``lcc-synth simulate problems/sumo_ring_stop_and_go.toml --json``: a kind = "ring"
     IDM file in SUMO prints the usual results; the two automated CAVs damp the wave the

@@ -1,5 +1,6 @@
 """A sweep on a Dask cluster the sweep did not start: `dask scheduler` and two `dask worker`
-processes on 127.0.0.1 (single-threaded, as the README advises), started and stopped by PID.
+processes on 127.0.0.1 (single-threaded, as docs/guide/sweeps.md advises), started and stopped
+by PID.
 
 The independent truth is the same sweep run task by task in this process (``client=None``):
 each scenario's draws come from (seed, index) only, so the cluster's samples must equal it bit
@@ -26,7 +27,12 @@ from lcc_synth.experiments.sweep import load_sweep, run_sweep
 ROOT = Path(__file__).parents[1]
 DASK = Path(sys.executable).parent / "dask"
 
-pytestmark = pytest.mark.skipif(not DASK.exists(), reason="the dask command is not installed")
+#: Slow (deselected by a plain ``pytest``, run in CI): the sweep on a local Dask cluster equals
+#: the serial one in tests/test_sweep.py::test_local_cluster_equals_serial.
+pytestmark = [
+    pytest.mark.skipif(not DASK.exists(), reason="the dask command is not installed"),
+    pytest.mark.slow,
+]
 
 # the robustness sweep, small: the static controllers and the MPC (so that a task lasts long
 # enough to lose a worker in the middle of it)

@@ -4,8 +4,6 @@ Everything here turns an existing source of truth into pages, so that nothing is
 
 * ``problem_reference.md`` from :func:`lcc_synth.schema.reference_markdown` (the text of
   ``problems/REFERENCE.md``) and ``problem_guide.md`` from ``problems/README.md``;
-* ``readme/<section>.md``: the sections of the top-level ``README.md``, included by the guide
-  pages;
 * ``cli.rst``: every command and flag, from the argument parser;
 * ``api/<package>.rst``: one ``automodule`` per public module of every ``lcc_synth`` package
   (autodoc honours each module's ``__all__``);
@@ -35,10 +33,15 @@ ROOT = DOCS.parent
 GENERATED = DOCS / "_generated"
 GALLERY_OUT = DOCS / "_build" / "gallery-out"
 
-#: Quick arguments of the slow examples (the same as tests/test_examples.py), besides --out.
+#: Quick arguments of the slow examples (the same as tests/test_examples.py, which checks
+#: that), besides --out.
 EXAMPLE_ARGS = {
     "fig5_control_energy.py": ["--n-max", "8"],  # default 30: minutes in multiprecision
     "fig7_fig8_regions.py": ["--step", "0.5"],  # default: the paper's 1001 x 1001 grid
+    # default: every controller; with the MPC and PI-with-saturation rows it took 31.7 of the
+    # gallery's 42.2 s, without them 2.7 s (2026-12-02, 2-core machine at a load of 1); the
+    # whole table is in docs/guide/benchmark.md
+    "ring_sugiyama.py": ["--controllers", "all_hdv,follower_stopper,h2"],
 }
 
 #: Links of the included Markdown files -> their pages in the documentation.
@@ -79,19 +82,6 @@ def problem_pages() -> None:
     _write(GENERATED / "problem_reference.md", _relink(reference_markdown(), ""))
     guide = (ROOT / "problems" / "README.md").read_text()
     _write(GENERATED / "problem_guide.md", _relink(guide, ""))
-
-
-def readme_sections() -> None:
-    """Every ``## `` section of README.md as ``readme/<slug>.md`` (the intro as ``intro.md``)."""
-    text = (ROOT / "README.md").read_text()
-    text = text.replace("](docs/img/", "](/img/")  # docs/img/, from the source directory
-    parts = re.split(r"^## ", text, flags=re.MULTILINE)
-    intro = parts[0].split("\n", 1)[1]  # drop the "# lcc_synth" title
-    _write(GENERATED / "readme" / "intro.md", _relink(intro, "../_generated/"))
-    for part in parts[1:]:
-        title, _, body = part.partition("\n")
-        slug = re.sub(r"[^a-z0-9]+", "_", title.lower()).strip("_")
-        _write(GENERATED / "readme" / f"{slug}.md", _relink(body, "../_generated/"))
 
 
 def public_modules(package: str = "lcc_synth") -> dict[str, list[str]]:
@@ -208,7 +198,6 @@ def generate() -> None:
     """All generated pages (called by conf.py before Sphinx reads the sources)."""
     cli_page()
     problem_pages()
-    readme_sections()
     api_pages()
 
 

@@ -17,10 +17,11 @@ lag whose verdict is not ``"string_stable"``, then bisection between it and the 
 verdict is ``"boundary"`` counts as not string stable. About 50 verdicts per gain (measured
 2.9 s for Table II's string, 0.8 s for m = n = 2, on a loaded 2-core machine).
 
-Measured critical lags (``tests/test_actuator_lag.py``, README): Table II's CF-LCC gain 2.194 s
-(beyond it an interior peak near 0.40 rad/s); Table I's case D (m = n = 2) 0.445 s (a resonance
-at 1.84 rad/s, the plant itself unstable by 0.6 s); the showcase's structured H2 gain 1.583 s;
-the lag-free ``string_stable`` design of ``problems/synth_string_stable_m2n2.toml`` 1.071 s.
+Measured critical lags (``tests/test_actuator_lag.py``, ``docs/guide/lag.md``): Table II's
+CF-LCC gain 2.194 s (beyond it an interior peak near 0.40 rad/s); Table I's case D (m = n = 2)
+0.445 s (a resonance at 1.84 rad/s, the plant itself unstable by 0.6 s); the showcase's
+structured H2 gain 1.583 s; the lag-free ``string_stable`` design of
+``problems/synth_string_stable_m2n2.toml`` 1.071 s.
 Checked against a direct per-frequency solution of the lag-free loop with the factor
 ``1 / (tau s + 1)`` on the CAV's velocity row (agreement 1e-10) and a dense ``|Gamma|`` grid on
 both sides of each critical lag. An open platoon whose CAVs have local laws is a cascade: with

@@ -21,7 +21,7 @@ acceleration; that would be a gain on ``a_0``, not implemented.) Consequences:
 * ``"sparsity"`` and ``[synthesis.as_run]`` are refused with a lag (their loops do not model
   it).
 
-Measured figures: README ("CAV actuator lag") and ``tests/test_actuator_lag.py``.
+Measured figures: ``docs/guide/lag.md`` and ``tests/test_actuator_lag.py``.
 """
 
 from __future__ import annotations
