@@ -535,3 +535,27 @@ def test_two_cavs_in_the_nonlinear_platoon_simulator(tmp_path):
     cfg = replace(spec.metrics, window=(0.0, 20.0))
     m, b = summary(res, cfg), summary(base, cfg)
     assert m["aave"] < 0.95 * b["aave"] and m["fuel_ml"] < 0.95 * b["fuel_ml"]
+
+
+def test_the_set_up_runs_with_one_blas_thread_whatever_the_caller_has():
+    """The controller's reduction is that of one BLAS thread bit for bit (a sweep's workers
+    have one; ``run`` and the sweep's client had the machine's cores, which round the
+    Cholesky factor and the products differently on data of the default size)."""
+    from threadpoolctl import threadpool_limits
+
+    n_veh, cavs = 10, (1,)
+    rng = np.random.default_rng(8)
+    model = platoon(n_veh, cavs)
+    data, _ = linear_data(model, 2000, rng, noise=1e-2)  # the default T: 1931 columns
+    st = DeePLCCSettings()
+    with threadpool_limits(limits=2, user_api="blas"):
+        ctrl = DeePLCCController("d", st, data, "platoon", OVM(), 15.0, n_veh + 1, cavs)
+    w = st.weights
+    q = np.concatenate([np.full(n_veh, w.velocity), np.full(1, w.spacing)])
+    W = spacing_rows(st.horizon, n_veh + 1, [0], st.constraints.t_gap)
+    with threadpool_limits(limits=1, user_api="blas"):
+        one = reduce(windows(data, st.t_ini, st.horizon), q, np.full(1, w.input), w.lambda_g,
+                     w.lambda_y, W)  # fmt: skip
+    for name in ("Gamma", "Cb", "Cy", "B"):
+        assert np.array_equal(getattr(ctrl.reduced, name), getattr(one, name)), name
+    assert ctrl.excitation is not None
