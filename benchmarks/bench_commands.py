@@ -24,7 +24,8 @@ children see this checkout first (``PYTHONPATH``), ``RERUN_ANALYTICS=0`` and
 (its whole session) and reported over budget.
 
 Every measured row is stored in ``benchmarks/commands.json`` with the UTC date, the load
-average of the machine when it started and its CPU count; ``--only NAME[,NAME]`` measures
+average of the machine when it started, its CPU count and the last lines of the command's
+output; ``--only NAME[,NAME]`` measures
 those rows again and keeps the others. ``benchmarks/commands.md`` is written from the JSON:
 the table ``| command | budget | CPU (s) | wall (s) | within budget | measured |`` and the
 load averages under it; ``--update-readme`` copies it, verbatim, between the lines
@@ -56,6 +57,8 @@ MD_PATH = ROOT / "benchmarks" / "commands.md"
 README = ROOT / "README.md"
 BEGIN = "<!-- begin benchmarks/commands.md -->"
 END = "<!-- end benchmarks/commands.md -->"
+#: Last lines of a command's output kept in commands.json (its own account of its time).
+TAIL_LINES = 6
 #: A command still running at this multiple of its budget is stopped.
 TIMEOUT_FACTOR = 10.0
 
@@ -215,7 +218,9 @@ def _write(path: Path, text: str) -> None:
     write_text(path, text, overwrite=True)
 
 
-def load_records(path: Path = JSON_PATH) -> dict[str, dict]:
+def load_records(path: Path | None = None) -> dict[str, dict]:
+    """The stored rows of ``path`` (default :data:`JSON_PATH`), ``{}`` before a first run."""
+    path = JSON_PATH if path is None else path
     if not path.exists():
         return {}
     return json.loads(path.read_text(encoding="utf-8")).get("rows", {})
@@ -240,9 +245,11 @@ def run_rows(names: Sequence[str], records: dict[str, dict]) -> dict[str, dict]:
             timeout = None if row.budget is None else TIMEOUT_FACTOR * row.budget
             log = Path(tmp) / "output.log"
             rec = measure(argv, cwd, log, timeout, _env())
+            lines = log.read_text(errors="replace").splitlines()
             if rec["exit"] and not rec["timed_out"]:
-                tail = log.read_text(errors="replace").splitlines()[-15:]
-                print("\n".join(f"    {ln}" for ln in tail), file=sys.stderr)
+                print("\n".join(f"    {ln}" for ln in lines[-15:]), file=sys.stderr)
+            # the command's own account of its time (run: "time: controllers ...")
+            rec["output_tail"] = [ln[-300:] for ln in lines[-TAIL_LINES:]]
         rec.update(date=datetime.now(UTC).strftime("%Y-%m-%d"), loadavg=load,
                    cpus=os.cpu_count())  # fmt: skip
         out[name] = rec
