@@ -33,24 +33,26 @@ load averages under it; ``--update-readme`` copies it, verbatim, between the lin
 ``README.md`` (an error naming README.md when they are missing). Progress, one line per row
 with an estimate before it, goes to stderr.
 
-Where the time goes (2026-12-02, the 2-core machine under a load average of 8-15, CPU
-seconds of one process, numba's cache warm; ``time.perf_counter`` read as CPU time for the
-phases, cProfile for the items):
+Where the time goes (2026-12-02, the 2-core machine at a load average of about 2, numba's
+cache warm; the phases in CPU seconds of the process, ``time.perf_counter`` read as
+``time.process_time``; the items from cProfile):
 
-* ``lcc-synth run``: 46-48 s CPU in all (main 47.7 s, after the changes 48.3 s: the same).
-  String stability as run 23.7 s: five simulator measurements of the controllers that are not
-  linear (mpc on string10 and sec5a, mpc, mpc_delay and deep_lcc at 0.1 s latency), 205.6 s
-  of simulated time each with about 2,056 QPs (4,112 for DeeP-LCC): OSQP's solves. The
-  suite's simulations 12.8 s (20,560 OSQP solves in all phases: 30 of 72 profiled seconds),
-  controllers (four H2 LMI designs, one per layout) 2.0 s, the rest (imports about 3 s;
-  figures, recording, tables) about 8 s. A fresh checkout compiles the simulator's numba
-  kernels once (43 of 115 profiled seconds; cached in ``__pycache__`` after that).
-* ``lcc-synth sweep problems/sweep_robustness.toml``: per scenario, one BLAS thread as a
-  worker has, 2.07 s CPU: deep_lcc 1.28 s (data 0.17 s, set-up 0.35 s, the 40 s run with
-  800 QPs), mpc 0.40 s, mpc_delay 0.36 s, all_hdv / paper / h2 0.01 s each; a worker's first
-  task 1.3 s more (it builds the controllers); the client synthesises h2 (1.4 s) and, at the
-  end, simulates the hardest scenario again with every controller for its recording. 1000
-  scenarios: about 2,070 s CPU, 17 min wall on 2 workers (budget 5 min).
+* ``lcc-synth run``: 40 s CPU (41.3 s here with its children; main before these changes
+  47.7 s and this branch 48.3 s at a load of 12-15). String stability as run 20.1 s: five
+  simulator measurements of the controllers that are not linear (mpc on string10 and sec5a;
+  mpc, mpc_delay and deep_lcc at 0.1 s latency), 205.6 s of simulated time each with about
+  2,056 QPs (4,112 for DeeP-LCC), nearly all of it OSQP's solves. The suite's simulations
+  11.8 s (OSQP again: 20,560 solves over both phases, 30 of 72 profiled seconds), the
+  controllers (four H2 LMI designs, one per layout) 2.1 s, the rest 6 s (imports about 3 s;
+  figures, recording, tables). A fresh checkout compiles the simulator's numba kernels once
+  (43 of 115 profiled seconds; cached in ``__pycache__`` after that).
+* ``lcc-synth sweep problems/sweep_robustness.toml``: per scenario, with one BLAS thread as a
+  worker has, 1.78 s CPU: deep_lcc 1.08 s (its data, its set-up about 0.35 s, the 40 s run
+  with 800 QPs), mpc 0.36 s, mpc_delay 0.31 s, all_hdv, paper and h2 0.01 s each; a
+  worker's first task 0.9 s more (it builds the controllers). The client synthesises h2
+  (1.3 s) and, at the end, writes the figure and the recordings and simulates the hardest
+  scenario again with every controller. ``--count 10``: the tasks 14.5-23 s of the 30 s
+  wall. 1000 scenarios: about 1,780 s CPU, 15 min wall on 2 workers (budget 5 min).
 
 Usage: python benchmarks/bench_commands.py [--only run,sweep10] [--update-readme]
        [--table-only]
