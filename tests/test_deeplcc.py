@@ -174,6 +174,42 @@ def test_reduced_qp_equals_the_full_qp_in_g(noise, lam_g, exact_past):
     assert res.ok and np.max(np.abs(u_osqp - u_red)) < tol
 
 
+@pytest.mark.parametrize("noise, lam_g, exact_past",
+                         [(1e-3, 100.0, False), (0.0, 0.0, False), (1e-3, 100.0, True)],
+                         ids=["noisy", "exact_lambda_g_0", "noisy_exact_past"])
+def test_reduce_without_the_maps_to_g_is_bit_for_bit_the_same(noise, lam_g, exact_past):
+    """The controller's reduction skips the maps back to g (G, G0b, G0y): what the online QP
+    uses (Gamma, Cb, Cy, B) is bit for bit that of the reduction with them; the maps, when
+    asked for, satisfy the reduction's identities (module docstring): A G = 0, C G = Gamma,
+    A (G0b b + G0y y_ini) = b and C (G0b b + G0y y_ini) = Cb b + Cy y_ini."""
+    rng = np.random.default_rng(7)
+    model = platoon(3, (1,))
+    data, _ = linear_data(model, 160, rng, noise=noise)
+    Tini, N = 4, 6
+    win = windows(data, Tini, N)
+    q, r = np.array([1.0, 1.0, 1.0, 0.5]), np.array([0.1])
+    W = spacing_rows(N, data.p, [0], 0.8)
+    lean = reduce(win, q, r, lam_g, 1e4, W, exact_past=exact_past)
+    full = reduce(win, q, r, lam_g, 1e4, W, exact_past=exact_past, maps=True)
+    for name in ("Gamma", "Cb", "Cy", "B"):
+        assert np.array_equal(getattr(lean, name), getattr(full, name)), name
+    assert lean.G is None and lean.G0b is None and lean.G0y is None
+    A = np.vstack([win.Up, win.Ep, win.Ef] + ([win.Yp] if exact_past else []))
+    C = np.vstack([win.Uf, W @ win.Yf])
+    scale = np.abs(full.Gamma).max()
+    assert np.abs(C @ full.G - full.Gamma).max() < 1e-8 * scale
+    assert np.abs(A @ full.G).max() < 1e-8 * np.abs(A).max() * np.abs(full.G).max() * A.shape[1]
+    traj, _ = linear_data(model, Tini + 1, rng, noise=noise, x0=rng.normal(size=model.nx))
+    b = np.concatenate([traj.u[:Tini].ravel(), traj.e[:Tini], [traj.e[Tini]], np.zeros(N - 1)])
+    y_ini = traj.y[1:].ravel()
+    g0 = full.G0b @ b + full.G0y @ y_ini
+    rhs = np.concatenate([b, y_ini]) if exact_past else b
+    if not (exact_past and noise == 0.0):
+        assert np.allclose(A @ g0, rhs, rtol=0, atol=1e-7 * np.abs(rhs).max())
+    assert np.allclose(C @ g0, full.Cb @ b + full.Cy @ y_ini, rtol=0,
+                       atol=1e-7 * np.abs(full.Cb @ b + full.Cy @ y_ini).max())
+
+
 def _mpc_first_plan(model, x_t, q, r, N, a_lim=None):
     """The model-based finite-horizon QP on DeeP-LCC's cost (future head error 0), solved by
     cvxpy + Clarabel at 1e-12: the independent truth of the fundamental-lemma tests."""
@@ -505,3 +541,27 @@ def test_two_cavs_in_the_nonlinear_platoon_simulator(tmp_path):
     cfg = replace(spec.metrics, window=(0.0, 20.0))
     m, b = summary(res, cfg), summary(base, cfg)
     assert m["aave"] < 0.95 * b["aave"] and m["fuel_ml"] < 0.95 * b["fuel_ml"]
+
+
+def test_the_set_up_runs_with_one_blas_thread_whatever_the_caller_has():
+    """The controller's reduction is that of one BLAS thread bit for bit (a sweep's workers
+    have one; ``run`` and the sweep's client had the machine's cores, which round the
+    Cholesky factor and the products differently on data of the default size)."""
+    from threadpoolctl import threadpool_limits
+
+    n_veh, cavs = 10, (1,)
+    rng = np.random.default_rng(8)
+    model = platoon(n_veh, cavs)
+    data, _ = linear_data(model, 2000, rng, noise=1e-2)  # the default T: 1931 columns
+    st = DeePLCCSettings()
+    with threadpool_limits(limits=2, user_api="blas"):
+        ctrl = DeePLCCController("d", st, data, "platoon", OVM(), 15.0, n_veh + 1, cavs)
+    w = st.weights
+    q = np.concatenate([np.full(n_veh, w.velocity), np.full(1, w.spacing)])
+    W = spacing_rows(st.horizon, n_veh + 1, [0], st.constraints.t_gap)
+    with threadpool_limits(limits=1, user_api="blas"):
+        one = reduce(windows(data, st.t_ini, st.horizon), q, np.full(1, w.input), w.lambda_g,
+                     w.lambda_y, W)  # fmt: skip
+    for name in ("Gamma", "Cb", "Cy", "B"):
+        assert np.array_equal(getattr(ctrl.reduced, name), getattr(one, name)), name
+    assert ctrl.excitation is not None

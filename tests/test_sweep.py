@@ -327,6 +327,25 @@ def test_cli_sweep_json_and_files(problem_file, serial, capsys, tmp_path):
         assert f"/small_sweep_scenario{hard.index}/{c}/velocity" in entities
 
 
+def test_cli_sizes_the_tasks_for_its_workers(problem_file, serial, capsys, tmp_path):
+    """Without --batch-size, 4 scenarios on 1 worker run as 4 tasks of one (the file's
+    batch_size = 3 is the largest task), with the serial sweep's samples, bit for bit."""
+    import json
+
+    code = main(["sweep", str(problem_file), "--count", "4", "--workers", "1", "--json",
+                 "--no-progress", "--no-record", "--no-figures", "--out", str(tmp_path)])
+    assert code == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert (doc["sweep"]["batch_size"], doc["sweep"]["tasks"]) == (1, 4)
+    (run_dir,) = tmp_path.iterdir()
+    rows = np.genfromtxt(run_dir / "samples.csv", delimiter=",", names=True, dtype=None,
+                         encoding="utf-8")  # fmt: skip
+    for c, per in serial.samples.items():
+        for k in SWEEP_METRICS:
+            np.testing.assert_array_equal(rows[rows["controller"] == c][k].astype(float),
+                                          np.asarray(per[k][:4], float), err_msg=f"{c}.{k}")
+
+
 def test_a_config_error_on_a_worker_is_not_retried_and_ends_as_one_line(
     problem_file, tmp_path, capsys, monkeypatch
 ):

@@ -45,7 +45,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_problem_arguments(parser, "sweep problem file (TOML) with a [sweep] table")
     parser.add_argument("--count", type=int, metavar="N", help="scenarios (overrides [sweep])")
     parser.add_argument(
-        "--batch-size", type=int, metavar="B", help="scenarios per Dask task (overrides [sweep])"
+        "--batch-size", type=int, metavar="B",
+        help="scenarios per Dask task (default: [sweep] batch_size at most, fewer when the "
+        "count is small for the workers, so that every worker has tasks)",
     )
     parser.add_argument("--seed", type=int, metavar="S", help="base seed (overrides [scenario])")
     parser.add_argument(
@@ -142,8 +144,9 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--workers", f"must be an integer in [1, 256], got {args.workers}")
     partial = read_partial(args.resume) if args.resume else None
     got = _settings(args, partial)
+    workers = None if args.scheduler else (2 if args.workers is None else args.workers)
     spec = load_sweep(args.problem, got["count"], got["batch_size"], got["seed"],
-                      got["controllers"])  # fmt: skip
+                      got["controllers"], workers)  # fmt: skip
     if partial is not None:
         partial.check(spec, args.problem)
     rrd = recording_path(args, spec.name)  # a bad --rrd fails before the sweep runs
@@ -269,7 +272,7 @@ def _failure_lines(summary) -> list[str]:
 
 
 def _rate(x) -> str:
-    return "-" if x is None else f"{x:.1f}"
+    return "-" if x is None else f"{x:.3g}"
 
 
 def _status(err: BaseException) -> str:

@@ -16,8 +16,10 @@ Measured on ``problems/sweep_robustness.toml`` (10-HDV string, T = 2000 at 0.05 
 of one process with one BLAS thread, as a Dask worker has, 4 draws on the loaded 2-core
 machine): per scenario 0.05 s to collect the data (0.6 s for the first, compiling the
 simulator), 0.3-1.0 s to set up the controller (mostly the exact reduction of the data,
-:func:`lcc_synth.deeplcc.hankel.reduce`; 2.0-3.2 s with two BLAS threads on the loaded
-machine) and 0.5-1.0 s to drive the 40 s run (800 QPs); a cached data file is 0.22 MB.
+:func:`lcc_synth.deeplcc.hankel.reduce`; the set-up always runs with one BLAS thread,
+also in ``run`` and in the client, where two threads had cost 2.0-3.2 s on the loaded
+machine and rounded differently from the workers) and 0.5-1.0 s to drive the 40 s run
+(800 QPs); a cached data file is 0.22 MB.
 
 The rest is unchanged: :func:`scenario_controllers` builds every other table as
 :func:`lcc_synth.experiments.controller_tables.controller_from_table` does and a

@@ -20,7 +20,8 @@ result does not depend on how scenarios are grouped into tasks, nor on the worke
 
 Execution
 ---------
-Scenarios are cut into tasks of ``batch_size`` consecutive indices; a task simulates its
+Scenarios are cut into tasks of ``batch_size`` consecutive indices (``lcc-synth sweep``
+makes them smaller when the count is small for its workers, :func:`task_size`); a task simulates its
 scenarios as ONE batch per controller (the simulator's batch axis; all controllers on the same
 draws) and returns the per-scenario metrics. Tasks run on a Dask cluster (a ``LocalCluster`` of
 processes by default, or any scheduler address) with retries; Dask recomputes the tasks of a
@@ -68,6 +69,7 @@ from lcc_synth.experiments.sweep_cluster import (
     local_cluster,
     run_tasks,
     stop_cluster,
+    task_size,
 )
 from lcc_synth.experiments.sweep_samples import (
     SWEEP_COUNTS,
@@ -89,7 +91,7 @@ __all__ = [
     "SWEEP_METRICS", "SWEEP_SAMPLES", "SWEEP_COUNTS", "MAX_COUNT", "TASKS_PER_THREAD",
     "SweepSpec", "SweepResult", "SweepProgress", "load_sweep", "chunks", "scenario_metrics",
     "run_chunk", "aggregate", "run_sweep", "local_cluster", "stop_cluster", "table_digest",
-    "format_summary",
+    "format_summary", "task_size",
 ]  # fmt: skip
 
 #: Largest ``[sweep].count`` and ``batch_size`` (declared in :mod:`lcc_synth.schema`).
@@ -138,8 +140,14 @@ def _count(value, field_name: str, hi: int) -> int:
 def load_sweep(
     path: str | Path | Problem, count: int | None = None, batch_size: int | None = None,
     seed: int | None = None, controllers: Sequence[str] | None = None,
+    workers: int | None = None,
 ) -> SweepSpec:  # fmt: skip
     """Read a sweep problem file; ``count``, ``batch_size``, ``seed`` override the file.
+
+    With ``workers`` (the worker threads the sweep will run on) and no ``batch_size``, the
+    file's ``batch_size`` is the largest task: :func:`task_size` makes the tasks smaller when
+    the count is small for the workers (a scenario's result does not depend on it). A given
+    ``batch_size`` is taken as it is.
 
     Everything is checked here, in the client, before any work: every value a random draw can
     produce (:mod:`lcc_synth.simulation.checks`), the controllers' ``start`` times and the
@@ -175,6 +183,8 @@ def load_sweep(
             n = _count(count, "--count", MAX_COUNT)
         if batch_size is not None:
             bs = _count(batch_size, "--batch-size", _MAX_BATCH)
+        elif workers is not None:
+            bs = task_size(n, workers, bs)
         if seed is not None:
             if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
                 raise ConfigError("--seed", f"must be an integer >= 0, got {seed!r}")

@@ -7,6 +7,9 @@ does not wait for running tasks, and a bounded window of tasks in flight.
 * :func:`stop_cluster`: closes the client and the cluster and removes the scratch space; for an
   interrupted sweep, at once (the workers are killed first).
 * :func:`run_tasks`: the tasks of a sweep, a few per worker thread at a time.
+* :func:`task_size`: scenarios per task from the count and the workers, so that every worker
+  has work and the progress bar moves (``--count 10`` on 2 workers: 10 tasks of one scenario,
+  where one task of 10 left a worker idle and the bar at 0/10 until the end).
 
 Used by :func:`lcc_synth.experiments.sweep.run_sweep` and ``lcc-synth sweep``; also
 importable from :mod:`lcc_synth.experiments.sweep`.
@@ -21,13 +24,37 @@ from typing import Any
 
 from lcc_synth.errors import ConfigError
 
-__all__ = ["TASKS_PER_THREAD", "local_cluster", "dask_setup", "stop_cluster", "run_tasks"]
+__all__ = ["TASKS_PER_THREAD", "TASKS_PER_WORKER", "local_cluster", "dask_setup", "stop_cluster",
+           "run_tasks", "task_size"]  # fmt: skip
 
 #: How ``distributed.worker`` logs a heartbeat that did not reach the scheduler.
 HEARTBEAT_FAILURE = "Failed to communicate with scheduler during heartbeat"
 
 #: Tasks in flight per worker thread (the next one is submitted when one finishes).
 TASKS_PER_THREAD = 2
+
+#: Tasks per worker that :func:`task_size` aims at (smaller tasks balance the workers and move
+#: the progress bar; a task costs a few ms of Dask overhead, a scenario of
+#: ``problems/sweep_robustness.toml`` seconds).
+TASKS_PER_WORKER = 8
+
+
+def task_size(count: int, workers: int, batch_size: int) -> int:
+    """Scenarios per task of a sweep of ``count`` scenarios on ``workers`` worker threads:
+    ``batch_size`` at most (the file's ``[sweep] batch_size``), and at most
+    ``count // (workers * TASKS_PER_WORKER)`` so that each worker gets about
+    :data:`TASKS_PER_WORKER` tasks, at least 1. A pure function of its arguments; a scenario's
+    result does not depend on it (:mod:`lcc_synth.experiments.sweep`).
+
+    Raises
+    ------
+    ConfigError
+        ``count``, ``workers`` or ``batch_size`` not a positive integer.
+    """
+    for name, value in (("count", count), ("--workers", workers), ("batch_size", batch_size)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ConfigError(name, f"must be an integer >= 1, got {value!r}")
+    return max(1, min(batch_size, count // (workers * TASKS_PER_WORKER)))
 
 
 def local_cluster(n_workers: int = 2, local_directory: str | None = None):

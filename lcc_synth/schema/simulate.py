@@ -334,8 +334,9 @@ SWEEP = Table(
     ("sweep",),
     (
         Key("count", "integer", "Scenarios (--count overrides).", 100, lo=1, hi=10_000_000),
-        Key("batch_size", "integer", "Scenarios per worker batch (--batch-size overrides).", 50,
-            lo=1, hi=100_000),
+        Key("batch_size", "integer", "Most scenarios per worker batch (a task); fewer when the "
+            "count is small for the workers, so that every worker has tasks (--batch-size "
+            "overrides, exactly).", 50, lo=1, hi=100_000),
     ),
 )
 
