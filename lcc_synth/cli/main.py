@@ -20,7 +20,7 @@ import importlib
 import os
 import sys
 
-from lcc_synth.cli.arguments import check_options
+from lcc_synth.cli.arguments import add_quiet, check_options
 from lcc_synth.errors import ConfigError, FileError, Interrupted
 
 COMMANDS = ("run", "analyze", "regions", "simulate", "synthesize", "sweep", "review")
@@ -64,6 +64,7 @@ def build_parser() -> argparse.ArgumentParser:
     for name, mod in _available().items():
         p = sub.add_parser(name, help=mod.HELP, description=mod.HELP)
         mod.add_arguments(p)
+        add_quiet(p)
         p.set_defaults(_run=mod.run)
     return parser
 
@@ -71,6 +72,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    from lcc_synth.resources import set_quiet
+
+    set_quiet(args.quiet)  # process-wide for the command's run, cleared after it
     try:
         check_options(args)
         return int(args._run(args) or 0)
@@ -89,6 +93,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"lcc-synth {args.command}: interrupted", file=sys.stderr)
         return 130
+    finally:
+        set_quiet(False)
 
 
 def entry() -> None:
