@@ -92,8 +92,14 @@ class SuiteEstimate:
 
         lo, hi = self.controllers
         per = f"{lo}" if lo == hi else f"{lo}–{hi}"
-        return (f"{self.scenarios} scenarios × {per} controllers ({self.runs} runs, "
-                f"{self.curves} |Γ| curves), about {format_duration(self.total)}")  # fmt: skip
+
+        def plural(k: int, word: str) -> str:
+            return f"{k} {word}" + ("" if k == 1 else "s")
+
+        return (f"{plural(self.scenarios, 'scenario')} × {per} controller"
+                f"{'' if hi == 1 else 's'} ({plural(self.runs, 'run')}, "
+                f"{plural(self.curves, '|Γ| curve')}), about "
+                f"{format_duration(self.total)}")  # fmt: skip
 
 
 def _per_step(table: dict[str, Any], per_step_50: float) -> float:
