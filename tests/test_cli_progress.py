@@ -34,7 +34,7 @@ def _results(out_root):
 
 
 def test_quiet_run_prints_nothing_on_stderr_and_writes_svg(tmp_path):
-    proc = run_cli([*SMALL, "--quiet", "--format", "svg", "--out", tmp_path / "r"], tmp_path)
+    proc = run_cli([*SMALL, "--quiet", "--format", "svg", "--out", "r"], tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == ""  # no estimate, no bar
     assert "brake_behind" in proc.stdout and "0.8928" in proc.stdout  # Table II's all-HDV AAVE
@@ -47,7 +47,7 @@ def test_quiet_run_prints_nothing_on_stderr_and_writes_svg(tmp_path):
 
 
 def test_run_prints_its_estimate_then_bars_and_short_lines(tmp_path):
-    proc = run_cli([*SMALL, "--format", "pdf", "--out", tmp_path / "r"], tmp_path)
+    proc = run_cli([*SMALL, "--format", "pdf", "--out", "r"], tmp_path)  # short paths
     assert proc.returncode == 0, proc.stderr
     first = proc.stderr.splitlines()[0]
     assert first.startswith("lcc-synth run: estimate: 1 scenario × 2 controllers (2 runs, "
@@ -63,15 +63,15 @@ def test_run_prints_its_estimate_then_bars_and_short_lines(tmp_path):
     # the |Γ| lines are in the file, one summary line on stdout points to it
     text = (run_dir / "string_stability.txt").read_text().splitlines()
     assert [t.split(":")[0] for t in text] == ["|Γ| string10/all_hdv", "|Γ| string10/paper"]
-    assert not any(line.startswith("|Γ|") for line in lines)
-    summary = [line for line in lines if line.startswith("string stability as run:")]
-    assert len(summary) == 1 and "2 controllers and settings" in summary[0]
-    assert str(run_dir / "string_stability.txt") in proc.stdout.replace("\n    ", " ")
+    assert not any(line.startswith("|Γ| string10") for line in lines)
+    summary = [line for line in lines if line.startswith("|Γ| as run:")]
+    assert summary == ["|Γ| as run: 2 curves, 0 string stable, 0 measured (not linear): "
+                       "string_stability.txt"]  # fmt: skip
+    assert f"results: {run_dir.relative_to(tmp_path)}" in lines
 
 
 def test_verbose_prints_the_gamma_lines(tmp_path):
-    proc = run_cli([*SMALL, "-q", "--verbose", "--no-figures", "--out", tmp_path / "r"],
-                   tmp_path)  # fmt: skip
+    proc = run_cli([*SMALL, "-q", "--verbose", "--no-figures", "--out", "r"], tmp_path)
     assert proc.returncode == 0 and proc.stderr == ""
     run_dir = _results(tmp_path / "r")
     gamma = (run_dir / "string_stability.txt").read_text().splitlines()
@@ -153,7 +153,7 @@ def test_wrapped_table_has_the_cells_of_the_one_block_table(width):
     assert max(len(line) for line in wrapped) <= width
     (one,) = _parse(whole)
     blocks = _parse(wrapped)
-    assert len(blocks) > 1
+    assert len(blocks) > 1 or width >= 140  # the whole table is 110-140 characters wide
     joined = [r[:2] + [c for b in blocks for c in b[i][2:]] for i, r in enumerate(blocks[0])]
     assert joined == one
     # every block repeats the scenario and controller columns

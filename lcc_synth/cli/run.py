@@ -149,7 +149,7 @@ def run(args: argparse.Namespace) -> int:
         remove_if_empty(out_dir)  # interrupted or failed before writing anything into it
         raise
     if gamma and not args.json:
-        _say(f"{_gamma_summary(curves)}: {written[-1]}", log)
+        _say(f"{_gamma_summary(curves)}: {written[-1].name}", log)
     _say(f"results: {out_dir}", log)
     if rrd_written is not None:
         _say(f"recording: {rrd_written}  (open with: lcc-synth review {rrd_written})", log)
@@ -337,13 +337,13 @@ def _gamma_lines(suite, curves, settings) -> list[str]:
 
 
 def _gamma_summary(curves) -> str:
-    """``string stability as run: 14 controllers and settings, 3 string stable, 5 measured
-    (not linear)``."""
+    """``|Γ| as run: 14 curves, 2 string stable, 5 measured (not linear)``: one curve per
+    controller and setting."""
     reps = [rep for per in curves.values() for _, rep in per.values()]
     stable = sum(1 for r in reps if getattr(r, "verdict", None) == "string_stable")
     measured = sum(1 for r in reps if hasattr(r, "ratio"))
-    return (f"string stability as run: {len(reps)} controllers and settings, {stable} string "
-            f"stable, {measured} measured (not linear)")  # fmt: skip
+    return (f"|Γ| as run: {len(reps)} curves, {stable} string stable, {measured} measured "
+            "(not linear)")  # fmt: skip
 
 
 def _write_files(
