@@ -188,6 +188,8 @@ def run(args: argparse.Namespace) -> int:
             notice("sweep", f"estimate: {estimate.describe()}")
         from lcc_synth.interrupts import held_signals
 
+        where = args.scheduler or f"a local cluster of {estimate.workers} workers"
+        notice("sweep", f"starting the Dask client on {where}")  # 2-10 s here, before any bar
         with held_signals():
             _client(args, handles)
         if args.scheduler and estimate.seconds > LONG_S:
@@ -207,6 +209,7 @@ def run(args: argparse.Namespace) -> int:
         stop_cluster(handles.get("cluster"), handles.get("client"), now=result is None)
 
     failure = None
+    notice("sweep", "writing the results" + ("" if args.no_figures else " and the figure"))
     try:
         doc = complete_doc(spec, result)
         writer.complete(done, doc)
@@ -321,12 +324,14 @@ def _record(rrd, spec, result, provenance=None, failed: str = "") -> None:
     from lcc_synth.experiments.sweep_review import hardest_scenario, simulate_scenario
     from lcc_synth.metrics import summary
     from lcc_synth.recording import SimulationRecorder, record_sweep_file
+    from lcc_synth.resources import notice
 
     hard = hardest_scenario(result.samples)
     second = rrd.with_name(f"{rrd.stem}-scenario{hard.index}.rrd")
     what = (f"scenario {hard.index}: {hard.controller} "
             f"{'collided' if hard.collided else f'min spacing {hard.min_spacing:.3g} m'}")
     info = {**result.info, "hardest scenario": what, "its recording": str(second)}
+    notice("sweep", "writing the recording")
     rrd = record_sweep_file(rrd, spec.name, result.samples, SWEEP_SAMPLES, result.summary, info,
                             provenance=provenance, failed=failed)  # fmt: skip
     print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
