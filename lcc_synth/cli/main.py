@@ -11,6 +11,10 @@ that cannot be written, a run too large for the disk, memory or the recording li
 one-line message naming the file and the field, before any work; 130 / 143 stopped by SIGINT /
 SIGTERM (:mod:`lcc_synth.interrupts`: the recording is finalised as "interrupted", finished
 work is kept). A bad option of a command prints that command's usage, not the top-level one.
+
+Every command has ``--quiet`` (``-q``; ``--no-progress`` is the same flag,
+:func:`lcc_synth.cli.arguments.add_quiet`): no progress bar, stage line or estimate on stderr
+for that run (:func:`lcc_synth.resources.set_quiet`); results and errors stay.
 """
 
 from __future__ import annotations

@@ -135,6 +135,8 @@ def run(args: argparse.Namespace) -> int:
         failures = _failure_lines(result)
         for line in failures:
             _say(f"lcc-synth run: {line}", sys.stderr)
+        what = "tables, gains and details" + ("" if args.no_figures else ", figures")
+        notice("run", f"writing the results: {what}")  # 2-5 s with the figures
         try:
             written = _write_files(args, problem, suite, result, curves, omega, out_dir,
                                    rrd_written, prov, gamma)  # fmt: skip
