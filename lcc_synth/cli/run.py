@@ -134,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
         _print_results(args, suite, result, gamma, log, prov)
         failures = _failure_lines(result)
         for line in failures:
-            _say(f"lcc-synth run: {line}", sys.stderr)
+            print(f"lcc-synth run: {line}", file=sys.stderr)  # one line each (stderr)
         what = "tables, gains and details" + ("" if args.no_figures else ", figures")
         notice("run", f"writing the results: {what}")  # 2-5 s with the figures
         try:
