@@ -152,9 +152,9 @@ def run(args: argparse.Namespace) -> int:
         raise
     if gamma and not args.json:
         _say(f"{_gamma_summary(curves)}: {written[-1].name}", log)
-    _say(f"results: {out_dir}", log)
+    print(f"results: {out_dir}", file=log)  # a path: never wrapped
     if rrd_written is not None:
-        _say(f"recording: {rrd_written}  (open with: lcc-synth review {rrd_written})", log)
+        print(f"recording: {rrd_written}  (open with: lcc-synth review {rrd_written})", file=log)
     t = result.timings
     _say(
         f"time: controllers {t['controllers']:.1f} s, simulations {t['simulations']:.1f} s, "
