@@ -53,7 +53,7 @@ def test_run_prints_its_estimate_then_bars_and_short_lines(tmp_path):
     assert first.startswith("lcc-synth run: estimate: 1 scenario × 2 controllers (2 runs, "
                             "2 |Γ| curves), about ")  # fmt: skip
     for stage in ("controllers (synthesis, MPC set-up)", "simulations",
-                  "string stability as run"):  # fmt: skip
+                  "string stability as run", "figures"):  # fmt: skip
         assert f"{stage}: 100%" in proc.stderr, stage
     lines = proc.stdout.splitlines()
     assert max(len(line) for line in lines) <= 100

@@ -135,8 +135,6 @@ def run(args: argparse.Namespace) -> int:
         failures = _failure_lines(result)
         for line in failures:
             print(f"lcc-synth run: {line}", file=sys.stderr)  # one line each (stderr)
-        what = "tables, gains and details" + ("" if args.no_figures else ", figures")
-        notice("run", f"writing the results: {what}")  # 2-5 s with the figures
         try:
             written = _write_files(args, problem, suite, result, curves, omega, out_dir,
                                    rrd_written, prov, gamma)  # fmt: skip
@@ -402,20 +400,26 @@ def _write_files(
     written.append(write_text(out_dir / "details.json", text))
     if not args.no_figures:
         from lcc_synth.figures import plot_gamma_curves, plot_profiles
+        from lcc_synth.resources import progress_bar
 
         ext = f".{args.format}"
-        for sname, per in result.results.items():
-            if per:
-                ss = suite.scenarios[sname]
-                written.append(plot_profiles(per, name("profiles", sname, ext=ext),
-                                             title=ss.title or sname))  # fmt: skip
-        for lname, per in curves.items():
-            if per:
-                sy = suite.layouts[lname]
-                written.append(plot_gamma_curves(
-                    per, omega, name("gamma", lname, ext=ext),
-                    title=f"|Γ(jω)| on layout {lname} ({sy.kind}, m={sy.m}, n={sy.n})",
-                ))  # fmt: skip
+        count = sum(1 for per in result.results.values() if per) + sum(
+            1 for per in curves.values() if per)
+        with progress_bar(count, "figures", unit="figure") as bar:  # 0.3-2 s each
+            for sname, per in result.results.items():
+                if per:
+                    ss = suite.scenarios[sname]
+                    written.append(plot_profiles(per, name("profiles", sname, ext=ext),
+                                                 title=ss.title or sname))  # fmt: skip
+                    bar.update(1)
+            for lname, per in curves.items():
+                if per:
+                    sy = suite.layouts[lname]
+                    written.append(plot_gamma_curves(
+                        per, omega, name("gamma", lname, ext=ext),
+                        title=f"|Γ(jω)| on layout {lname} ({sy.kind}, m={sy.m}, n={sy.n})",
+                    ))  # fmt: skip
+                    bar.update(1)
     if gamma:
         written.append(write_text(out_dir / "string_stability.txt", "\n".join(gamma) + "\n"))
     return written
