@@ -149,7 +149,8 @@ def vehicle_styles(
         for a CAV, ``marker``. The head yellow (label ``head vehicle``); CAV ``k`` colour
         ``PALETTE.cavs[k]`` and marker ``CAV_MARKERS[k]`` (label ``CAV (vehicle j)``); the HDVs
         :data:`HDV_COLORMAP` sampled evenly from front to back (label on the first and last:
-        ``HDV j (front)``, ``HDV j (back)``), dashed ahead of the first CAV.
+        ``HDV j (front)``, ``HDV j (back)``; a ring numbers its vehicles from 1 and says
+        ``first``, ``last``), dashed ahead of the first CAV.
     """
     from matplotlib import colormaps
 
@@ -159,13 +160,15 @@ def vehicle_styles(
     name, lo, hi = HDV_COLORMAP
     cmap = colormaps[name]
     shades = [lo + (hi - lo) * (i / max(len(hdvs) - 1, 1)) for i in range(len(hdvs))]
+    number = 1 if ring else 0  # a ring's column 0 is vehicle 1; else the head is vehicle 0
+    ends = ("first", "last") if ring else ("front", "back")
     out: list[dict] = []
     for j in range(n_vehicles):
         if j in cavs:
             k = cavs.index(j)
             out.append({"color": PALETTE.cavs[k % len(PALETTE.cavs)], "lw": 2.0, "ls": "-",
                         "zorder": 4, "marker": CAV_MARKERS[k % len(CAV_MARKERS)], "ms": 5,
-                        "label": f"CAV (vehicle {j})"})  # fmt: skip
+                        "label": f"CAV (vehicle {j + number})"})  # fmt: skip
         elif j == 0 and not ring:
             out.append({"color": PALETTE.head, "lw": 1.8, "ls": "-", "zorder": 3,
                         "label": "head vehicle"})  # fmt: skip
@@ -173,9 +176,9 @@ def vehicle_styles(
             i = hdvs.index(j)
             label = None
             if i == 0:
-                label = f"HDV {j} (front)"
+                label = f"HDV {j + number} ({ends[0]})"
             elif i == len(hdvs) - 1:
-                label = f"HDV {j} (back)"
+                label = f"HDV {j + number} ({ends[1]})"
             out.append({"color": tuple(float(c) for c in cmap(shades[i])[:3]), "lw": 1.0,
                         "ls": "--" if (not ring and j < first) else "-", "zorder": 2,
                         "label": label})  # fmt: skip
