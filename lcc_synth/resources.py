@@ -8,7 +8,11 @@
   stderr before a run estimated to take more than :data:`LONG_RUN_S`.
 * :func:`progress` prints one line on stderr (``lcc-synth: synthesis: ...``) for long work
   that has no progress bar (synthesis stages, LMI solves, sparsity sweep); commands switch it
-  off with ``--no-progress`` through :func:`set_progress`.
+  on through :func:`set_progress`.
+* :func:`progress_bar` is the one progress bar of the package (tqdm on stderr, with a count);
+  :func:`notice` prints one line on stderr (a command's estimate). ``--quiet`` (alias
+  ``--no-progress``) of every command sets :func:`set_quiet`: no bar, no progress line, no
+  estimate line (results on stdout and errors stay).
 
 Per-unit costs (``benchmarks/bench_recording_size.py``, this 2-core machine, shared with other
 work while measured, so times vary by up to 3x; the constants take the high end)
@@ -81,7 +85,11 @@ __all__ = [
     "format_size",
     "require_memory",
     "progress",
+    "progress_bar",
+    "notice",
+    "quiet",
     "set_progress",
+    "set_quiet",
     "simulation_bytes",
 ]
 
@@ -120,7 +128,7 @@ VIEW_OBJECT_BYTES = 20_000
 #: 0.21 GiB higher with its recording than without)
 RECORDER_BYTES = 1.5e8
 
-_PROGRESS = {"enabled": False}
+_PROGRESS = {"enabled": False, "quiet": False}
 
 
 def _read_int(path: str) -> int | None:
@@ -202,10 +210,48 @@ def set_progress(enabled: bool) -> None:
     _PROGRESS["enabled"] = bool(enabled)
 
 
+def set_quiet(value: bool) -> None:
+    """Silence (``True``) or restore every bar, progress line and estimate line of the process
+    (``--quiet``; the commands set it for their run and clear it after)."""
+    _PROGRESS["quiet"] = bool(value)
+
+
+def quiet() -> bool:
+    """Whether ``--quiet`` silenced the progress output (:func:`set_quiet`)."""
+    return _PROGRESS["quiet"]
+
+
 def progress(message: str) -> None:
-    """One progress line on stderr when enabled (flushed at once)."""
-    if _PROGRESS["enabled"]:
+    """One progress line on stderr when enabled and not quiet (flushed at once)."""
+    if _PROGRESS["enabled"] and not _PROGRESS["quiet"]:
         print(f"lcc-synth: {message}", file=sys.stderr, flush=True)
+
+
+def notice(command: str, message: str) -> None:
+    """``lcc-synth COMMAND: MESSAGE`` on stderr unless quiet (:func:`set_quiet`), flushed at
+    once: a command's estimate, or the stage it starts when the stage has no bar."""
+    if not _PROGRESS["quiet"]:
+        print(f"lcc-synth {command}: {message}", file=sys.stderr, flush=True)
+
+
+def progress_bar(
+    total: int, desc: str, enabled: bool = True, unit: str = "run", delay: float = 0.0
+):
+    """A progress bar with a count on stderr (tqdm); a silent one when ``enabled`` is false or
+    the process is quiet (:func:`set_quiet`). ``delay``: seconds before it appears (a quick
+    job prints nothing)."""
+    from tqdm import tqdm
+
+    return tqdm(
+        total=total,
+        desc=desc,
+        file=sys.stderr,
+        disable=not enabled or _PROGRESS["quiet"],
+        leave=True,
+        dynamic_ncols=True,
+        unit=unit,
+        delay=delay,
+    )
 
 
 def simulation_bytes(sc: Any) -> int:
@@ -355,7 +401,7 @@ def estimate_simulation(
 def announce(command: str, estimate: WorkEstimate, threshold: float = LONG_RUN_S) -> bool:
     """Print ``estimate`` as one line on stderr when it is above ``threshold`` seconds;
     returns whether it did."""
-    if estimate.seconds <= threshold:
+    if estimate.seconds <= threshold or _PROGRESS["quiet"]:
         return False
     print(estimate.line(command), file=sys.stderr, flush=True)
     return True

@@ -83,16 +83,18 @@ _STEPS = {"--record-every", "--max-recording-size"}
 #: Every command's options (the audit): a simulation records steps (--record-every, and its
 #: size is limited: --max-recording-size); analyze, regions, synthesize and sweep record no
 #: steps; review reads a recording.
+#: Every command: --quiet (its alias --no-progress).
+_QUIET = {"--quiet", "--no-progress"}
 EXPECTED_OPTIONS = {
-    "run": {"--json", "--scenarios", "--controllers", "--out", "--no-figures", "--no-progress",
-            *_RECORD, *_STEPS},
-    "analyze": {"--json", "--png", *_RECORD},
-    "regions": {"--json", "--png", "--step", *_RECORD},
-    "simulate": {"--json", "--seeds", "--record-seeds", *_RECORD, *_STEPS},
-    "synthesize": {"--json", "--out", "--figure", "--no-progress", *_RECORD},
+    "run": {"--json", "--scenarios", "--controllers", "--out", "--no-figures", "--format",
+            "--verbose", *_QUIET, *_RECORD, *_STEPS},
+    "analyze": {"--json", "--png", *_QUIET, *_RECORD},
+    "regions": {"--json", "--png", "--step", *_QUIET, *_RECORD},
+    "simulate": {"--json", "--seeds", "--record-seeds", *_QUIET, *_RECORD, *_STEPS},
+    "synthesize": {"--json", "--out", "--figure", *_QUIET, *_RECORD},
     "sweep": {"--json", "--count", "--batch-size", "--seed", "--scheduler", "--workers", "--resume",
-              "--controllers", "--out", "--no-figures", "--no-progress", *_RECORD},
-    "review": {"--summary", "--json", "--web", "--web-port", "--port"},
+              "--controllers", "--out", "--no-figures", "--format", *_QUIET, *_RECORD},
+    "review": {"--summary", "--json", "--web", "--web-port", "--port", *_QUIET},
 }  # fmt: skip
 
 

@@ -104,7 +104,7 @@ def test_profiles_rows_share_y_scales_cav_blue_head_yellow_units(tmp_path, captu
     assert "(m)" in axes[0, 1].get_ylabel() and "(s)" in axes[1, 0].get_xlabel()
     assert_legends_outside(fig)
     labels = [t.get_text() for t in fig.legends[0].get_texts()]
-    assert labels == ["head vehicle", "HDVs ahead", "CAV", "HDVs behind"]
+    assert labels == ["head vehicle", "HDV 1 (front)", "CAV (vehicle 2)", "HDV 4 (back)"]
 
 
 @pytest.mark.parametrize("quantity", ["velocity", "spacing"])
@@ -198,3 +198,117 @@ def test_the_legend_check_can_fail(tmp_path, capture):
     ax.legend(loc="upper left")
     with pytest.raises(AssertionError):
         assert_legends_outside(fig)
+
+
+# ------------------------------------------------- vehicles told apart, AEB, measured points
+
+
+def _distance(a, b) -> float:
+    return float(np.abs(np.subtract(to_rgb(a), to_rgb(b))).max())
+
+
+@pytest.mark.parametrize(("n_vehicles", "cavs", "ring"),
+                         [(12, [1], False), (9, [3, 6], False), (5, [2], False),
+                          (20, [0], True), (40, [0, 10, 20, 30], True)])  # fmt: skip
+def test_vehicle_styles_tell_every_vehicle_apart(n_vehicles, cavs, ring):
+    styles = figures.vehicle_styles(n_vehicles, cavs, ring)
+    assert len(styles) == n_vehicles
+    assert styles == figures.vehicle_styles(n_vehicles, cavs, ring)  # a pure function
+    colors = [st["color"] for st in styles]
+    for i in range(n_vehicles):  # every pair of vehicles differs in colour
+        for j in range(i):
+            assert _distance(colors[i], colors[j]) > 0.01, (i, j)
+    hdvs = [j for j in range(n_vehicles) if j not in cavs and (ring or j > 0)]
+    for j in hdvs:  # the HDVs' colormap stays away from the head's yellow and every CAV colour
+        assert "marker" not in styles[j]
+        assert _distance(colors[j], HEAD_YELLOW) > 0.1
+        for c in cavs:
+            assert _distance(colors[j], colors[c]) > 0.1
+    # sequential: the HDVs' colours move monotonically along the colormap (front to back)
+    from matplotlib import colormaps
+
+    name, lo, hi = figures.style.HDV_COLORMAP
+    ref = [to_rgb(colormaps[name](lo + (hi - lo) * i / max(len(hdvs) - 1, 1))) for i in
+           range(len(hdvs))]  # fmt: skip
+    np.testing.assert_allclose([to_rgb(colors[j]) for j in hdvs], ref, rtol=0, atol=1e-12)
+    markers = [styles[c]["marker"] for c in cavs]
+    assert len(set(markers)) == len(cavs)  # each CAV its own marker
+    assert len({tuple(to_rgb(colors[c])) for c in cavs}) == len(cavs)  # and colour
+    assert to_rgb(colors[cavs[0]]) == CAV_BLUE
+    if not ring:
+        assert to_rgb(colors[0]) == HEAD_YELLOW and styles[0]["label"] == "head vehicle"
+
+
+def test_aeb_intervals_are_the_runs_of_the_flags():
+    t = np.arange(10) * 0.5
+    flags = np.array([0, 1, 1, 0, 0, 1, 0, 0, 1, 1], dtype=bool)
+    # independent truth: each run [first, last] of True, ending at the next sample's time
+    assert figures.aeb_intervals(t, flags) == [(0.5, 1.5), (2.5, 3.0), (4.0, 4.5)]
+    assert figures.aeb_intervals(t, np.zeros(10, bool)) == []
+    assert figures.aeb_intervals(t, np.ones(10, bool)) == [(0.0, 4.5)]
+
+
+def test_profiles_shade_the_recorded_aeb_intervals_per_cav(tmp_path, capture):
+    from matplotlib.colors import to_rgba
+    from matplotlib.patches import Rectangle
+
+    res = _run(1.0, m=1, n=3)
+    cavs = (2, 4)
+    res.cavs = cavs
+    aeb = np.zeros((1, res.t.size, 2), dtype=bool)
+    aeb[0, 40:61, 0] = True  # CAV at column 2: t = 8.0 .. 12.0 s (samples every 0.2 s)
+    aeb[0, 100:106, 1] = True  # CAV at column 4: t = 20.0 .. 21.0 s
+    aeb[0, 200:211, 1] = True  # and t = 40.0 .. 42.0 s
+    res.aeb_active = aeb
+    figures.plot_profiles({"mpc": res, "h2": _run(0.5, m=1, n=3)}, tmp_path / "p.png")
+    (fig,) = capture()
+    axes = np.array(fig.axes).reshape(2, 2)
+    styles = figures.vehicle_styles(res.n_vehicles, cavs)
+    want = {(8.0, 12.2, to_rgb(styles[2]["color"])), (20.0, 21.2, to_rgb(styles[4]["color"])),
+            (40.0, 42.2, to_rgb(styles[4]["color"]))}  # fmt: skip
+    for ax in axes[0]:
+        got = set()
+        for p in ax.patches:
+            if isinstance(p, Rectangle) or hasattr(p, "get_xy"):
+                xy = np.asarray(p.get_xy()) if not isinstance(p, Rectangle) else None
+                x0, x1 = ((p.get_x(), p.get_x() + p.get_width()) if xy is None
+                          else (xy[:, 0].min(), xy[:, 0].max()))  # fmt: skip
+                got.add((round(x0, 6), round(x1, 6), to_rgb(to_rgba(p.get_facecolor()))))
+        assert got == {(round(a, 6), round(b, 6), c) for a, b, c in want}
+    assert not axes[1, 0].patches and not axes[1, 1].patches  # no AEB in the other run
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert labels.count("AEB active") == 1 and "CAV (vehicle 4)" in labels
+    assert_legends_outside(fig)
+
+
+def test_gamma_measured_points_are_points_and_the_axis_ends_where_curves_decay(tmp_path,
+                                                                                capture):
+    omega = np.logspace(-3, 1.5, 400)
+    stable = SimpleNamespace(verdict="string_stable", gamma_peak=1.0)
+    lin = 1.0 / np.sqrt(1.0 + (omega / 0.5) ** 8)  # below 1e-3 above 0.5 * 1000**0.25 = 2.81
+    measured = {
+        name: (np.full(omega.shape, np.nan),
+               SimpleNamespace(omega=np.array([0.05, 0.1, 0.3, 1.0]), ratio=r,
+                               gamma_peak=float(r.max())))
+        for name, r in (("mpc_delay @ 0.1 s latency", np.array([1.01, 1.03, 1.14, 0.19])),
+                        ("deep_lcc @ 0.1 s latency", np.array([1.02, 1.04, 1.13, 0.19])))
+    }  # fmt: skip
+    curves = {"h2": (lin, stable), **measured}
+    figures.plot_gamma_curves(curves, omega, tmp_path / "g.png")
+    (fig,) = capture()
+    (ax,) = fig.axes
+    lines = [ln for ln in ax.get_lines() if len(ln.get_xdata()) > 2]
+    points = [ln for ln in lines if ln.get_linestyle() == "None"]
+    assert len(points) == 2  # the measured ratios: markers only, no line between them
+    assert points[0].get_marker() != points[1].get_marker()  # mpc_delay not hidden
+    lo, hi = ax.get_xlim()
+    w_decay = 0.5 * 1000**0.25
+    assert w_decay <= hi <= 1.5 * w_decay * 1.05 and hi < omega[-1]
+    # from a third of where the first curve leaves 1 by 1e-3: 0.5 * (2e-3)**(1/8) = 0.230
+    # (|Γ| = 1 - x^8 / 2 near 0), the measured points start at 0.05
+    assert lo == pytest.approx(0.05 / 3, rel=0.02)
+    assert ax.get_ylim()[1] == pytest.approx(1.06 * 1.14)
+    assert_legends_outside(fig)
+    fig.canvas.draw()  # the legend takes at most a third of the figure's height
+    box = fig.legends[0].get_window_extent(fig.canvas.get_renderer())
+    assert box.height < fig.bbox.height / 3

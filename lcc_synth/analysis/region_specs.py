@@ -8,7 +8,7 @@ others, the grid and an optional baseline map (the expansion of Fig. 7(c)-(f) ov
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -194,13 +194,19 @@ def regions_tables(specs: Mapping[str, RegionSpec], omega: np.ndarray) -> dict:
 
 
 def run_region_specs(
-    model: LCCModel, specs: Mapping[str, RegionSpec], omega: np.ndarray | None = None
+    model: LCCModel,
+    specs: Mapping[str, RegionSpec],
+    omega: np.ndarray | None = None,
+    on_rows: Callable[[str, int], None] | None = None,
 ) -> dict[str, RegionMap]:
-    """Compute every map of :func:`region_specs_from`."""
-    return {
-        name: region_map(model, s.vehicle, s.mu, s.k, gains=s.gains, omega=omega, name=name)
-        for name, s in specs.items()
-    }
+    """Compute every map of :func:`region_specs_from`; ``on_rows(name, rows)`` after each chunk
+    of ``rows`` grid rows of map ``name`` (a progress bar)."""
+    out = {}
+    for name, s in specs.items():
+        step = None if on_rows is None else (lambda rows, name=name: on_rows(name, rows))
+        out[name] = region_map(model, s.vehicle, s.mu, s.k, gains=s.gains, omega=omega,
+                               name=name, on_rows=step)  # fmt: skip
+    return out
 
 
 def expansion(rm: RegionMap, baseline: RegionMap) -> dict[str, float | bool]:

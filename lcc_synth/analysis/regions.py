@@ -89,7 +89,7 @@ frequency, ``|Gamma|^2 >= (1 - 1e-9)^2``, flagged every gain with ``|c| < ~2e-9 
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -485,6 +485,7 @@ def region_map(
     omega: np.ndarray | None = None,
     name: str = "",
     chunk_points: int = 20_000,
+    on_rows: Callable[[int], None] | None = None,
 ) -> RegionMap:
     """Classify every ``(mu[a], k[b])`` for ``vehicle`` (see the module docstring).
 
@@ -505,6 +506,9 @@ def region_map(
         Grid points processed at once: ``chunk_points // n_k`` rows (at least one) at a time.
         Memory is about ``300 * rows * n_omega`` bytes; the default keeps the working arrays
         in cache (1.3 MB each on the paper's grid), which is faster than larger chunks.
+    on_rows : callable, optional
+        ``on_rows(rows)`` after each chunk, with the number of ``mu`` rows it classified (a
+        progress bar).
     """
     t0 = time.perf_counter()
     mu = np.asarray(mu, dtype=float).reshape(-1)
@@ -559,6 +563,8 @@ def region_map(
         lab[stable & ~undecided] = STRING_STABLE
         labels[r0 : r0 + mr.size] = lab
         boundary[r0 : r0 + mr.size] = stable & undecided & ~violated
+        if on_rows is not None:
+            on_rows(mr.size)
     fixed = {}
     if isinstance(gains, Gains):
         fixed = {

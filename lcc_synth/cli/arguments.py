@@ -40,11 +40,17 @@ def check_options(args: argparse.Namespace) -> None:
     Raises
     ------
     ConfigError
-        ``--record-every``, ``--record-seeds`` or ``--max-recording-size`` with
-        ``--no-record`` (nothing is recorded).
+        ``--format`` not one of :data:`FIGURE_FORMATS`; ``--record-every``,
+        ``--record-seeds`` or ``--max-recording-size`` with ``--no-record`` (nothing is
+        recorded).
     """
     from lcc_synth.errors import ConfigError
 
+    fmt = getattr(args, "format", None)
+    if fmt is not None and fmt not in FIGURE_FORMATS:
+        raise ConfigError(
+            "--format", f"must be one of {', '.join(FIGURE_FORMATS)}, got {fmt!r}"
+        )
     if getattr(args, "no_record", False):
         if getattr(args, "record_every", None) is not None:
             raise ConfigError("--record-every", "does not apply with --no-record")
@@ -55,8 +61,8 @@ def check_options(args: argparse.Namespace) -> None:
 
 
 def add_output_arguments(parser: argparse.ArgumentParser, what: str, figures: str) -> None:
-    """``--controllers``, ``--out DIR``, ``--no-figures`` and ``--no-progress`` of the commands
-    that run many simulations (``what`` writes ``DIR/<problem>-<UTC timestamp>/``)."""
+    """``--controllers``, ``--out DIR``, ``--no-figures`` and ``--format`` of the commands that
+    run many simulations (``what`` writes ``DIR/<problem>-<UTC timestamp>/``)."""
     parser.add_argument(
         "--controllers", metavar="A,B", help="comma-separated controller names (default all)"
     )
@@ -65,7 +71,24 @@ def add_output_arguments(parser: argparse.ArgumentParser, what: str, figures: st
         help=f"results root; {what} writes DIR/<problem>-<UTC timestamp>/ (default results)",
     )  # fmt: skip
     parser.add_argument("--no-figures", action="store_true", help=f"do not write {figures}")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars on stderr")
+    parser.add_argument(
+        "--format", default="png", metavar="FMT",
+        help=f"file type of the figures: {', '.join(FIGURE_FORMATS)} (default png)",
+    )  # fmt: skip
+
+
+#: File types the figures can be written as (``--format``).
+FIGURE_FORMATS = ("png", "pdf", "svg")
+
+
+def add_quiet(parser: argparse.ArgumentParser) -> None:
+    """``--quiet`` (``-q``; ``--no-progress`` is the same flag) of every command: no progress
+    bar, progress line or estimate on stderr (:func:`lcc_synth.resources.set_quiet`); the
+    results on stdout and the errors stay."""
+    parser.add_argument(
+        "-q", "--quiet", "--no-progress", dest="quiet", action="store_true",
+        help="no progress bars, stage lines or estimates on stderr (results and errors stay)",
+    )  # fmt: skip
 
 
 def add_example_out(parser: argparse.ArgumentParser) -> None:

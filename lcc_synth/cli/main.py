@@ -11,6 +11,10 @@ that cannot be written, a run too large for the disk, memory or the recording li
 one-line message naming the file and the field, before any work; 130 / 143 stopped by SIGINT /
 SIGTERM (:mod:`lcc_synth.interrupts`: the recording is finalised as "interrupted", finished
 work is kept). A bad option of a command prints that command's usage, not the top-level one.
+
+Every command has ``--quiet`` (``-q``; ``--no-progress`` is the same flag,
+:func:`lcc_synth.cli.arguments.add_quiet`): no progress bar, stage line or estimate on stderr
+for that run (:func:`lcc_synth.resources.set_quiet`); results and errors stay.
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ import importlib
 import os
 import sys
 
-from lcc_synth.cli.arguments import check_options
+from lcc_synth.cli.arguments import add_quiet, check_options
 from lcc_synth.errors import ConfigError, FileError, Interrupted
 
 COMMANDS = ("run", "analyze", "regions", "simulate", "synthesize", "sweep", "review")
@@ -64,6 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
     for name, mod in _available().items():
         p = sub.add_parser(name, help=mod.HELP, description=mod.HELP)
         mod.add_arguments(p)
+        add_quiet(p)
         p.set_defaults(_run=mod.run)
     return parser
 
@@ -71,6 +76,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    from lcc_synth.resources import set_quiet
+
+    set_quiet(args.quiet)  # process-wide for the command's run, cleared after it
     try:
         check_options(args)
         return int(args._run(args) or 0)
@@ -89,6 +97,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"lcc-synth {args.command}: interrupted", file=sys.stderr)
         return 130
+    finally:
+        set_quiet(False)
 
 
 def entry() -> None:

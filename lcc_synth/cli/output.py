@@ -11,7 +11,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-__all__ = ["sig", "text_table", "controller_stats_lines"]
+__all__ = ["LINE_WIDTH", "sig", "text_table", "controller_stats_lines"]
 
 
 def sig(value: Any, digits: int = 3) -> str:
@@ -35,16 +35,19 @@ def sig(value: Any, digits: int = 3) -> str:
     return f"{x:.{max(0, digits - 1 - exponent)}f}"  # 1234.5 -> "1234": no exponent
 
 
-def text_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
-    """Lines of a left-aligned table: the header, a rule, one line per row (cells as given)."""
-    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h)
-              for i, h in enumerate(header)]  # fmt: skip
-    lines = ["  ".join(h.ljust(w) for h, w in zip(header, widths, strict=True)).rstrip()]
-    lines.append("  ".join("-" * w for w in widths))
-    for r in rows:
-        lines.append("  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)).rstrip())
-    return lines
+def text_table(
+    header: Sequence[str], rows: Sequence[Sequence[str]], width: int | None = None
+) -> list[str]:
+    """Lines of a left-aligned table: the header, a rule, one line per row (cells as given);
+    with ``width``, split into blocks of columns no wider, each repeating the first column
+    (:func:`lcc_synth.experiments.tables.column_blocks`)."""
+    from lcc_synth.experiments.tables import column_blocks
 
+    return column_blocks(header, rows, width, keep=1)
+
+
+#: The longest line of a command's text output (``run``'s tables wrap their columns to it).
+LINE_WIDTH = 100
 
 _MPC_HEADER = ["controller", "steps", "solves", "step ms median", "p99", "max", "iterations",
                "fallbacks", "QP failures", "slack steps", "errors"]  # fmt: skip
@@ -61,7 +64,9 @@ def _whole(value: Any) -> str:
     return "n/a" if value is None else f"{float(value):g}"
 
 
-def controller_stats_lines(stats: Mapping[str, Mapping[str, Any]]) -> list[str]:
+def controller_stats_lines(
+    stats: Mapping[str, Mapping[str, Any]], width: int | None = None
+) -> list[str]:
     """The run statistics of the controllers that have some (``{label: stats}``, the MPC's
     :meth:`~lcc_synth.mpc.controller.MPCController.stats`) as a short table.
 
@@ -70,7 +75,8 @@ def controller_stats_lines(stats: Mapping[str, Mapping[str, Any]]) -> list[str]:
     (median / max), fallbacks, QP failures (every non-solved status), steps that used the
     safety slack, and errors (then the first error message). Other controllers' statistics
     follow as ``label: key = value``.
-    Empty when no controller has statistics.
+    Empty when no controller has statistics. ``width``: the table's columns wrap to it
+    (:func:`text_table`).
     """
     rows, other = [], []
     for label, st in stats.items():
@@ -97,5 +103,5 @@ def controller_stats_lines(stats: Mapping[str, Mapping[str, Any]]) -> list[str]:
     lines = []
     if rows:
         lines.append("MPC solver (step time per batch member, ms; iterations median / max):")
-        lines += text_table(_MPC_HEADER, rows)
+        lines += text_table(_MPC_HEADER, rows, width)
     return lines + other

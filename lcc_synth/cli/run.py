@@ -4,9 +4,17 @@ Default problem: ``problems/showcase.toml`` of the repository checkout. Synthesi
 controllers for every layout, builds the MPC, runs every controller on every scenario, prints
 the metrics table and writes under ``results/<problem>-<UTC timestamp>/``: ``table.md``,
 ``table.csv``, ``table.json`` (the ``--json`` shape), ``details.json`` (controller tables,
-synthesis reports, controller statistics, timings), the synthesised gains files, PNG figures
-(velocity and spacing profiles per scenario, ``|Gamma(j omega)|`` of the linear designs per
-layout) and ONE Rerun recording with every run side by side (``logs/`` by default).
+synthesis reports, controller statistics, timings), the synthesised gains files,
+``string_stability.txt`` (the as-run ``|Gamma|`` line of every controller; ``--verbose`` prints
+them too), figures (``--format png|pdf|svg``: velocity and spacing profiles per scenario,
+``|Gamma(j omega)|`` of the designs per layout) and ONE Rerun recording with every run side by
+side (``logs/`` by default).
+
+On stderr, before the work, one estimate line
+(:func:`lcc_synth.experiments.suite_size.estimate_suite`: the work counted from the tables
+times measured per-unit costs), then a progress bar with a count per stage (controllers,
+simulations, string stability as run); ``--quiet`` silences them. Text lines on stdout are at
+most :data:`~lcc_synth.cli.output.LINE_WIDTH` characters: the tables wrap their columns.
 """
 
 from __future__ import annotations
@@ -33,7 +41,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--scenarios", metavar="A,B", help="comma-separated scenario names to run (default all)"
     )
-    add_output_arguments(parser, "the run", "PNG figures")
+    add_output_arguments(parser, "the run", "figures")
+    parser.add_argument(
+        "--verbose", action="store_true",
+        help="also print the as-run |Gamma| line of every controller (always written to "
+        "string_stability.txt in the results directory)",
+    )  # fmt: skip
     add_recording(parser)
 
 
@@ -89,9 +102,10 @@ def run(args: argparse.Namespace) -> int:
 
     from lcc_synth.errors import FileError
     from lcc_synth.experiments.comparison import gamma_settings, load_suite
-    from lcc_synth.experiments.suite_size import check_suite_recording
+    from lcc_synth.experiments.suite_size import check_suite_recording, estimate_suite
     from lcc_synth.outputs import check_directory, new_directory, remove_if_empty
     from lcc_synth.recording import recording_decimation, recording_path
+    from lcc_synth.resources import notice
 
     problem = Path(args.problem) if args.problem else default_problem()
     suite = load_suite(problem, _names(args.scenarios), _names(args.controllers))
@@ -99,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
     stamp = now.strftime("%Y%m%dT%H%M%SZ")
     rrd = recording_path(args, suite.name, now=now)  # a bad or existing --rrd: before the work
     every = recording_decimation(args)
-    check_suite_recording(args, suite)  # --max-recording-size and the free space, before it
+    rec_estimate = check_suite_recording(args, suite)  # --max-recording-size, the free space
     settings = gamma_settings(suite)  # {layout: [(suffix, dt, latency, scenarios)]}
     prov = _provenance(problem, suite)
     log = sys.stderr if args.json else sys.stdout
@@ -107,6 +121,7 @@ def run(args: argparse.Namespace) -> int:
     # the directory is new (exclusive create) and removed again if the run leaves it empty
     check_directory(args.out, "--out", RESULTS_BYTES, "tables, details, gains and figures")
     out_dir = new_directory(args.out, suite.name, stamp)
+    notice("run", f"estimate: {estimate_suite(suite, rec_estimate).line()}")
     try:
         result, curves, omega, rrd_written, rec_error = _simulate_and_record(
             args, suite, rrd, every, settings, prov
@@ -115,27 +130,34 @@ def run(args: argparse.Namespace) -> int:
             remove_if_empty(out_dir)
             return 1
         # what was computed is printed first: a file that cannot be written cannot hide it
-        _print_results(args, suite, result, curves, settings, log, prov)
+        gamma = _gamma_lines(suite, curves, settings)
+        _print_results(args, suite, result, gamma, log, prov)
         failures = _failure_lines(result)
         for line in failures:
-            print(f"lcc-synth run: {line}", file=sys.stderr)
+            print(f"lcc-synth run: {line}", file=sys.stderr)  # one line each (stderr)
         try:
-            _write_files(args, problem, suite, result, curves, omega, out_dir, rrd_written, prov)
+            written = _write_files(args, problem, suite, result, curves, omega, out_dir,
+                                   rrd_written, prov, gamma)  # fmt: skip
         except FileError as err:
+            if not args.verbose and not args.json:  # computed: shown if it cannot be kept
+                for line in gamma:
+                    _say(line, log)
             print(f"lcc-synth run: error: {err}", file=sys.stderr)
             remove_if_empty(out_dir)
             return 1
     except BaseException:
         remove_if_empty(out_dir)  # interrupted or failed before writing anything into it
         raise
-    print(f"results: {out_dir}", file=log)
+    if gamma and not args.json:
+        _say(f"{_gamma_summary(curves)}: {written[-1].name}", log)
+    print(f"results: {out_dir}", file=log)  # a path: never wrapped
     if rrd_written is not None:
         print(f"recording: {rrd_written}  (open with: lcc-synth review {rrd_written})", file=log)
     t = result.timings
-    print(
+    _say(
         f"time: controllers {t['controllers']:.1f} s, simulations {t['simulations']:.1f} s, "
         f"string stability as run {t.get('string_stability', 0.0):.1f} s",
-        file=log,
+        log,
     )
     if rec_error is not None:
         print(f"lcc-synth run: error: {rec_error}", file=sys.stderr)
@@ -181,6 +203,7 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
         set_status,
         written_path,
     )
+    from lcc_synth.resources import progress_bar
     from lcc_synth.synthesis.gains_file import gains_document
 
     ctrl_names = list(suite.controllers)
@@ -213,7 +236,7 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
                     mpc_history=history or None,
                 )
 
-            result = run_suite(suite, progress=not args.no_progress, on_result=on_result)
+            result = run_suite(suite, progress=not args.quiet, on_result=on_result)
             if not result.results or not any(result.results.values()):
                 for line in _failure_lines(result):
                     print(f"lcc-synth run: {line}", file=sys.stderr)
@@ -221,13 +244,19 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
                     set_status(rec, "failed", "\n".join(_failure_lines(result)))
                 return None, {}, omega, None, None
             t0 = time.perf_counter()
-            for lname, rows in settings.items():
-                curves[lname] = {}
-                for suffix, dt, lat, snames in rows:  # the controllers of those scenarios
-                    ctrls = {c: k for c, k in result.controllers[lname].items()
-                             if any(applies(suite.controllers[c], lname, s) for s in snames)}
-                    per = gamma_curves(ctrls, suite.layouts[lname], omega, dt, lat)
-                    curves[lname].update({f"{c}{suffix}": v for c, v in per.items()})
+            todo = [(lname, suffix, dt, lat, c, k) for lname, rows in settings.items()
+                    for suffix, dt, lat, snames in rows
+                    for c, k in result.controllers[lname].items()
+                    if any(applies(suite.controllers[c], lname, s) for s in snames)]
+            curves = {lname: {} for lname in settings}
+            # one count per controller and setting: a measured (not linear) one takes seconds
+            with progress_bar(len(todo), "string stability as run", not args.quiet,
+                              unit="curve") as bar:  # fmt: skip
+                for lname, suffix, dt, lat, c, k in todo:
+                    bar.set_postfix_str(f"{lname}/{c}{suffix}")
+                    per = gamma_curves({c: k}, suite.layouts[lname], omega, dt, lat)
+                    curves[lname].update({f"{n}{suffix}": v for n, v in per.items()})
+                    bar.update(1)
             result.timings["string_stability"] = time.perf_counter() - t0
             if rec is not None:
                 for lname, per in curves.items():
@@ -247,42 +276,82 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
     return result, curves, omega, (written_path(rec) if rec is not None else None), None
 
 
-def _print_results(args, suite, result, curves, settings, log, prov) -> None:
-    """The table (``--json``: the JSON document on stdout), collisions, controller statistics
-    and the as-run |Γ| lines."""
-    from lcc_synth.analysis.string_stability import verdict_text
+def _print_results(args, suite, result, gamma, log, prov) -> None:
+    """The table (``--json``: the JSON document on stdout), collisions and controller
+    statistics, in lines of at most :data:`~lcc_synth.cli.output.LINE_WIDTH` characters; the
+    as-run |Γ| lines (``gamma``) with ``--verbose`` only (they go to a file)."""
+    from lcc_synth.cli.output import LINE_WIDTH, controller_stats_lines
     from lcc_synth.experiments.tables import format_table, json_rows, json_safe, unsafe_lines
 
     if args.json:
         print(json.dumps(json_safe({"results": json_rows(result.table), "provenance": prov})))
         for line in _collision_lines(result):
-            print(line, file=log)
+            _say(line, log)
         return
-    print(_title(suite))
-    print(format_table(result.table))
+    _say(_title(suite))
+    print(format_table(result.table, width=LINE_WIDTH))
     for line in _collision_lines(result):
-        print(line)
+        _say(line)
     for line in unsafe_lines(result.table):
-        print(line)
-    from lcc_synth.cli.output import controller_stats_lines
-
+        _say(line)
     stats = {f"{s}/{c}": r.controller_stats for s, per in result.results.items()
              for c, r in per.items()}  # fmt: skip
-    for line in controller_stats_lines(stats):
-        print(line)
+    for line in controller_stats_lines(stats, LINE_WIDTH):
+        _say(line)
+    if args.verbose:
+        for line in gamma:
+            _say(line)
+
+
+def _say(line: str, file=None) -> None:
+    """Print a line of prose wrapped at :data:`~lcc_synth.cli.output.LINE_WIDTH` characters
+    (continuations indented; words and paths never split)."""
+    import textwrap
+
+    from lcc_synth.cli.output import LINE_WIDTH
+
+    out = sys.stdout if file is None else file
+    if len(line) <= LINE_WIDTH:
+        print(line, file=out)
+        return
+    for part in textwrap.wrap(line, LINE_WIDTH, subsequent_indent="    ",
+                              break_long_words=False, break_on_hyphens=False):  # fmt: skip
+        print(part, file=out)
+
+
+def _gamma_lines(suite, curves, settings) -> list[str]:
+    """The as-run |Γ| line of every controller and setting (``string_stability.txt``)."""
+    from lcc_synth.analysis.string_stability import verdict_text
+
+    lines = []
     for lname, rows in settings.items():
         for suffix, _, lat, snames in rows:
             if suffix:
-                print(f"|Γ| on {lname} with the V2V latency {lat:g} s of {', '.join(snames)}:")
+                lines.append(f"|Γ| on {lname} with the V2V latency {lat:g} s of "
+                             f"{', '.join(snames)}:")  # fmt: skip
             for cname in suite.controllers:
                 if f"{cname}{suffix}" in curves.get(lname, {}):
                     rep = curves[lname][f"{cname}{suffix}"][1]
-                    print(f"|Γ| {lname}/{cname}{suffix}: {_gamma_line(rep, verdict_text)}")
+                    lines.append(f"|Γ| {lname}/{cname}{suffix}: {_gamma_line(rep, verdict_text)}")
+    return lines
 
 
-def _write_files(args, problem, suite, result, curves, omega, out_dir, rrd, prov) -> list[Path]:
+def _gamma_summary(curves) -> str:
+    """``|Γ| as run: 14 curves, 2 string stable, 5 measured (not linear)``: one curve per
+    controller and setting."""
+    reps = [rep for per in curves.values() for _, rep in per.values()]
+    stable = sum(1 for r in reps if getattr(r, "verdict", None) == "string_stable")
+    measured = sum(1 for r in reps if hasattr(r, "ratio"))
+    return (f"|Γ| as run: {len(reps)} curves, {stable} string stable, {measured} measured "
+            "(not linear)")  # fmt: skip
+
+
+def _write_files(
+    args, problem, suite, result, curves, omega, out_dir, rrd, prov, gamma
+) -> list[Path]:
     """Every file of the results directory, each written atomically under a name built from
-    safe parts (:func:`lcc_synth.outputs.path_part`) inside ``out_dir``."""
+    safe parts (:func:`lcc_synth.outputs.path_part`) inside ``out_dir``; figures as
+    ``--format``; the as-run |Γ| lines (``gamma``) last, in ``string_stability.txt``."""
     from lcc_synth.experiments.tables import json_safe, write_csv, write_json, write_markdown
     from lcc_synth.outputs import child, path_part, write_text
     from lcc_synth.synthesis.gains_file import write_gains
@@ -331,19 +400,28 @@ def _write_files(args, problem, suite, result, curves, omega, out_dir, rrd, prov
     written.append(write_text(out_dir / "details.json", text))
     if not args.no_figures:
         from lcc_synth.figures import plot_gamma_curves, plot_profiles
+        from lcc_synth.resources import progress_bar
 
-        for sname, per in result.results.items():
-            if per:
-                ss = suite.scenarios[sname]
-                written.append(plot_profiles(per, name("profiles", sname, ext=".png"),
-                                             title=ss.title or sname))  # fmt: skip
-        for lname, per in curves.items():
-            if per:
-                sy = suite.layouts[lname]
-                written.append(plot_gamma_curves(
-                    per, omega, name("gamma", lname, ext=".png"),
-                    title=f"|Γ(jω)| on layout {lname} ({sy.kind}, m={sy.m}, n={sy.n})",
-                ))  # fmt: skip
+        ext = f".{args.format}"
+        count = sum(1 for per in result.results.values() if per) + sum(
+            1 for per in curves.values() if per)
+        with progress_bar(count, "figures", unit="figure") as bar:  # 0.3-2 s each
+            for sname, per in result.results.items():
+                if per:
+                    ss = suite.scenarios[sname]
+                    written.append(plot_profiles(per, name("profiles", sname, ext=ext),
+                                                 title=ss.title or sname))  # fmt: skip
+                    bar.update(1)
+            for lname, per in curves.items():
+                if per:
+                    sy = suite.layouts[lname]
+                    written.append(plot_gamma_curves(
+                        per, omega, name("gamma", lname, ext=ext),
+                        title=f"|Γ(jω)| on layout {lname} ({sy.kind}, m={sy.m}, n={sy.n})",
+                    ))  # fmt: skip
+                    bar.update(1)
+    if gamma:
+        written.append(write_text(out_dir / "string_stability.txt", "\n".join(gamma) + "\n"))
     return written
 
 

@@ -145,12 +145,20 @@ def iter_results(spec, budget: float = MEMORY_BUDGET):
     """Yield ``(chunk, controller_name, SimResult)``, one controller run at a time: every
     controller on the same draws, seed chunk after seed chunk (a single chunk unless the study
     exceeds ``budget``)."""
+    from lcc_synth.resources import progress_bar
     from lcc_synth.simulation.backends import run_scenario
 
-    for i, scenario in enumerate(chunks(spec.scenario, budget)):
-        draws = scenario.draw()
-        for name, ctrl in spec.controllers.items():
-            yield i, name, run_scenario(scenario, ctrl, draws)
+    parts = chunks(spec.scenario, budget)
+    # a bar with a count of controller runs, naming the one running (--quiet: none)
+    with progress_bar(len(parts) * len(spec.controllers), "simulations") as bar:
+        for i, scenario in enumerate(parts):
+            draws = scenario.draw()
+            for name, ctrl in spec.controllers.items():
+                bar.set_postfix_str(name if len(parts) == 1 else f"{name}, chunk {i + 1}")
+                result = run_scenario(scenario, ctrl, draws)
+                bar.update(1)
+                yield i, name, result
+
 
 
 def collect(args, on_result=None):

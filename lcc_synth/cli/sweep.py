@@ -5,9 +5,10 @@ Runs ``[sweep] count`` random scenarios for every controller (see
 the counts of collisions, emergency brakings and MPC fallbacks, and writes under
 ``results/<problem>-<UTC timestamp>/``: ``sweep.json`` (the ``--json`` document, with its
 provenance), ``samples.csv`` (every scenario's metrics) and ``distributions.png``
-(:mod:`lcc_synth.experiments.sweep_files`); and a Rerun recording
-(``logs/<problem>-<UTC timestamp>.rrd``, ``--rrd PATH`` / ``--no-record``) of every scenario's
-metrics per controller and the summary (:mod:`lcc_synth.recording.sweep`), with beside it
+(``--format pdf|svg``: ``.pdf``, ``.svg``; :mod:`lcc_synth.experiments.sweep_files`); and a
+Rerun recording (``logs/<problem>-<UTC timestamp>.rrd``, ``--rrd PATH`` / ``--no-record``) of
+every scenario's metrics per controller and the summary (:mod:`lcc_synth.recording.sweep`),
+with beside it
 ``<stem>-scenario<i>.rrd``: the hardest scenario simulated again with every controller
 (:mod:`lcc_synth.experiments.sweep_review`).
 
@@ -19,7 +20,8 @@ Before the work (exit 2, one line): the sweep's memory and disk estimate
 (:mod:`lcc_synth.experiments.sweep_estimate`) must fit, naming ``--count`` (or
 ``[sweep].count``) otherwise; the results directory is created (exclusively) and a file is
 written in it, and ``--rrd``'s directory is probed, before the cluster starts. A sweep
-estimated to run longer than a minute prints its estimate first (one line on stderr).
+estimated to run longer than a minute prints its estimate first (one line on stderr); the
+hardest scenario's second simulation has its own progress bar; ``--quiet`` silences both.
 
 Nothing finished is lost: the partial ``samples.csv`` and ``sweep.json`` (``"partial":
 true``) are written while the sweep runs (after the first task, then every few seconds) and
@@ -65,7 +67,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "problem file; --count, --batch-size, --seed and --controllers default to its own and "
         "must match it)",
     )  # fmt: skip
-    add_output_arguments(parser, "the sweep", "the PNG")
+    add_output_arguments(parser, "the sweep", "the distributions figure")
     add_recording(parser, steps=False)
 
 
@@ -136,6 +138,7 @@ def run(args: argparse.Namespace) -> int:
     from lcc_synth.experiments.sweep_files import ResultsWriter, complete_doc, read_partial
     from lcc_synth.outputs import check_directory, new_directory, writing
     from lcc_synth.recording import recording_path
+    from lcc_synth.resources import notice
     from lcc_synth.synthesis.h2 import SynthesisError
 
     if args.scheduler is not None and args.workers is not None:
@@ -152,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
     rrd = recording_path(args, spec.name)  # a bad --rrd fails before the sweep runs
     stamp = datetime.now(UTC).strftime("%Y%m%dT%H%M%SZ")
     log = sys.stderr if args.json else sys.stdout
-    progress = not args.no_progress
+    progress = not args.quiet
 
     # before the work: memory, disk, a results directory that takes files
     estimate = estimate_sweep(spec, 2 if args.workers is None else args.workers, rrd is not None)
@@ -185,17 +188,17 @@ def run(args: argparse.Namespace) -> int:
             done = partial.progress(spec)
             start = done.done
         if estimate.seconds > LONG_S and not args.scheduler:
-            print(f"lcc-synth sweep: estimate: {estimate.describe()}", file=sys.stderr,
-                  flush=True)  # fmt: skip
+            notice("sweep", f"estimate: {estimate.describe()}")
         from lcc_synth.interrupts import held_signals
 
+        where = args.scheduler or f"a local cluster of {estimate.workers} workers"
+        notice("sweep", f"starting the Dask client on {where}")  # 2-10 s here, before any bar
         with held_signals():
             _client(args, handles)
         if args.scheduler and estimate.seconds > LONG_S:
             threads = sum(handles["client"].nthreads().values()) or 1
             again = estimate_sweep(spec, threads, rrd is not None)
-            print(f"lcc-synth sweep: estimate: {again.describe()}",
-                  file=sys.stderr, flush=True)  # fmt: skip
+            notice("sweep", f"estimate: {again.describe()}")
         result = run_sweep(spec, client=handles["client"], progress=progress, done=done,
                            on_task=writer.on_task)  # fmt: skip
     except SynthesisError as err:
@@ -209,13 +212,14 @@ def run(args: argparse.Namespace) -> int:
         stop_cluster(handles.get("cluster"), handles.get("client"), now=result is None)
 
     failure = None
+    notice("sweep", "writing the results" + ("" if args.no_figures else " and the figure"))
     try:
         doc = complete_doc(spec, result)
         writer.complete(done, doc)
         if not args.no_figures:
             from lcc_synth.figures import plot_sweep_distributions
 
-            with writing(out_dir / "distributions.png", overwrite=True) as png:
+            with writing(out_dir / f"distributions.{args.format}", overwrite=True) as png:
                 plot_sweep_distributions(
                     result.samples, png.tmp, metrics=SWEEP_METRICS,
                     title=f"{spec.name}: {spec.count} scenarios (box 25-75 %, whiskers 5-95 %, "
@@ -323,16 +327,18 @@ def _record(rrd, spec, result, provenance=None, failed: str = "") -> None:
     from lcc_synth.experiments.sweep_review import hardest_scenario, simulate_scenario
     from lcc_synth.metrics import summary
     from lcc_synth.recording import SimulationRecorder, record_sweep_file
+    from lcc_synth.resources import notice
 
     hard = hardest_scenario(result.samples)
     second = rrd.with_name(f"{rrd.stem}-scenario{hard.index}.rrd")
     what = (f"scenario {hard.index}: {hard.controller} "
             f"{'collided' if hard.collided else f'min spacing {hard.min_spacing:.3g} m'}")
     info = {**result.info, "hardest scenario": what, "its recording": str(second)}
+    notice("sweep", "writing the recording")
     rrd = record_sweep_file(rrd, spec.name, result.samples, SWEEP_SAMPLES, result.summary, info,
                             provenance=provenance, failed=failed)  # fmt: skip
     print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
-    scenario, runs, ctrls = simulate_scenario(spec, result.tables, hard.index)
+    scenario, runs, ctrls = simulate_scenario(spec, result.tables, hard.index, progress=True)
     view = argparse.Namespace(rrd=str(second), no_record=False, record_every="minmax")
     one = argparse.Namespace(name=f"{spec.name}_scenario{hard.index}", controllers=ctrls,
                              scenario=scenario)  # fmt: skip

@@ -22,9 +22,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--figure", metavar="PNG", help="design = 'sparsity': write the Pareto-front PNG"
     )
-    parser.add_argument(
-        "--no-progress", action="store_true", help="no progress lines (stages) on stderr"
-    )
     add_recording(parser, steps=False)
 
 
@@ -106,7 +103,7 @@ def _design(args: argparse.Namespace, design, spec):
     from lcc_synth.resources import set_progress
     from lcc_synth.synthesis.h2 import SynthesisError
 
-    set_progress(not args.no_progress)
+    set_progress(not args.quiet)
     try:  # in a child process: Ctrl-C / SIGTERM stop it at once, even inside a long LAPACK or
         # Clarabel call that holds the interpreter lock (a 402-state Riccati QZ takes seconds)
         return call_in_child(design, spec)

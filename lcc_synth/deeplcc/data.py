@@ -47,7 +47,6 @@ import io
 import json
 import math
 import os
-import sys
 import uuid
 import zipfile
 from dataclasses import dataclass, fields, is_dataclass, replace
@@ -288,13 +287,12 @@ BAR_DELAY = 1.0
 
 
 def collection_bar(steps: int):
-    """The collection's progress bar on stderr (tqdm, as
-    :func:`lcc_synth.experiments.comparison.progress_bar`), shown only once the collection
-    has run :data:`BAR_DELAY` s (a cached or quick collection prints nothing)."""
-    from tqdm import tqdm
+    """The collection's progress bar on stderr (:func:`lcc_synth.resources.progress_bar`),
+    shown only once the collection has run :data:`BAR_DELAY` s (a cached or quick collection
+    prints nothing; ``--quiet``: never)."""
+    from lcc_synth.resources import progress_bar
 
-    return tqdm(total=steps, desc="deep_lcc data", file=sys.stderr, delay=BAR_DELAY,
-                leave=True, dynamic_ncols=True, unit="step")  # fmt: skip
+    return progress_bar(steps, "deep_lcc data", unit="step", delay=BAR_DELAY)
 
 
 def collect(scenario, settings: DataSettings) -> DataSet:

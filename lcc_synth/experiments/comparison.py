@@ -34,7 +34,6 @@ the metrics are those of :func:`lcc_synth.metrics.summary` (:data:`SUITE_METRICS
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -51,6 +50,7 @@ from lcc_synth.experiments.tables import SUITE_METRICS, rank_failed_last
 from lcc_synth.metrics import MetricsConfig, metrics_from
 from lcc_synth.models.records import Record, system_tables, toml_text
 from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
+from lcc_synth.resources import progress_bar
 from lcc_synth.schema import declared
 from lcc_synth.simulation.results import SimResult
 from lcc_synth.simulation.scenario import Scenario
@@ -61,7 +61,7 @@ __all__ = [
     "SUITE_TYPES", "SuiteScenario", "Suite", "SuiteRun", "load_suite", "select_names",
     "controller_table", "synthesize_table", "applies", "layout_controllers",
     "prepare_controllers", "fallback_names", "build_controllers", "metrics_row", "run_suite",
-    "gamma_curves", "gamma_settings", "progress_bar",
+    "gamma_curves", "gamma_settings",
 ]  # fmt: skip
 
 #: Controller types of a suite file: those of ``lcc-synth simulate`` plus synthesised ``h2``.
@@ -395,21 +395,6 @@ def metrics_row(result: SimResult, config: MetricsConfig) -> dict[str, Any]:
     row["collided"] = s["scenarios_with_collision"] > 0
     row["failed_steps"] = failed_steps(result.controller_stats)
     return row
-
-
-def progress_bar(total: int, desc: str, enabled: bool = True):
-    """A progress bar on stderr (tqdm); a silent one when ``enabled`` is false."""
-    from tqdm import tqdm
-
-    return tqdm(
-        total=total,
-        desc=desc,
-        file=sys.stderr,
-        disable=not enabled,
-        leave=True,
-        dynamic_ncols=True,
-        unit="run",
-    )
 
 
 @dataclass

@@ -465,7 +465,8 @@ def run_sweep(
         (:class:`~lcc_synth.errors.Interrupted`) the tasks not finished are cancelled; ``done``
         holds the finished ones.
     """
-    from lcc_synth.experiments.comparison import prepare_controllers, progress_bar
+    from lcc_synth.experiments.comparison import prepare_controllers
+    from lcc_synth.resources import progress_bar
 
     t_all = time.perf_counter()
     with progress_bar(len(spec.controllers), "controllers (synthesis)", progress) as bar:

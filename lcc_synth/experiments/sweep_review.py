@@ -82,7 +82,9 @@ def hardest_scenario(samples: Mapping[str, Mapping[str, np.ndarray]]) -> Hardest
     return HardestScenario(best[1], best[2], best[3], best[4])
 
 
-def simulate_scenario(spec: Any, tables: Mapping[str, Mapping[str, Any]], index: int):
+def simulate_scenario(
+    spec: Any, tables: Mapping[str, Mapping[str, Any]], index: int, progress: bool = False
+):
     """Simulate scenario ``index`` of a sweep alone with every controller of ``tables``.
 
     Parameters
@@ -94,6 +96,9 @@ def simulate_scenario(spec: Any, tables: Mapping[str, Mapping[str, Any]], index:
         (:attr:`~lcc_synth.experiments.sweep.SweepResult.tables`).
     index : int
         Scenario index, ``0 <= index < spec.count``.
+    progress : bool
+        A progress bar on stderr, one count per controller
+        (:func:`lcc_synth.resources.progress_bar`).
 
     Returns
     -------
@@ -119,6 +124,13 @@ def simulate_scenario(spec: Any, tables: Mapping[str, Mapping[str, Any]], index:
         raise ConfigError("index", f"must be in [0, {spec.count - 1}], got {index}")
     ctrls = scenario_controllers(tables, spec.system, spec.source)
     (scenario,) = scenario_runs(spec.scenario, spec.ranges, int(index), int(index) + 1, ctrls)
+    from lcc_synth.resources import progress_bar
+
     draws = scenario.draw()
-    results = {name: run_scenario(scenario, c, draws) for name, c in ctrls.items()}
+    results = {}
+    with progress_bar(len(ctrls), f"scenario {index} again", progress) as bar:
+        for name, c in ctrls.items():
+            bar.set_postfix_str(name)
+            results[name] = run_scenario(scenario, c, draws)
+            bar.update(1)
     return scenario, results, ctrls

@@ -32,7 +32,7 @@ when safe).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -50,6 +50,7 @@ __all__ = [
     "rank_failed_last",
     "unsafe_lines",
     "format_table",
+    "column_blocks",
     "markdown_table",
     "write_markdown",
     "write_csv",
@@ -166,10 +167,20 @@ def _headers() -> list[str]:
     return ["scenario", "controller"] + [h for h, _ in SUITE_METRICS.values()]
 
 
-def format_table(table: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> str:
-    """Plain-text table (one row per scenario and controller) for the terminal."""
+def format_table(
+    table: Mapping[str, Mapping[str, Mapping[str, Any]]], width: int | None = None
+) -> str:
+    """Plain-text table (one row per scenario and controller) for the terminal.
+
+    With ``width`` (characters), no line is longer: the headers' units go on a second header
+    line and the metric columns are split into blocks, each repeating the scenario and
+    controller columns (:func:`column_blocks`); the cells are the same either way.
+    """
     head = _headers()
     rows = _rows(table)
+    if width is not None:
+        head = [h.replace(" (", "\n(", 1) for h in head]
+        return "\n".join(column_blocks(head, rows, width, keep=2, blank_repeats=True))
     widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in
               enumerate(head)]
     lines = ["  ".join(h.ljust(w) for h, w in zip(head, widths, strict=True))]
@@ -182,6 +193,66 @@ def format_table(table: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> str:
         prev = r[0]
         lines.append("  ".join(v.ljust(w) for v, w in zip(shown, widths, strict=True)).rstrip())
     return "\n".join(lines)
+
+
+def column_blocks(
+    header: Sequence[str],
+    rows: Sequence[Sequence[str]],
+    width: int | None = None,
+    keep: int = 1,
+    blank_repeats: bool = False,
+) -> list[str]:
+    """Lines of a left-aligned text table no wider than ``width`` characters.
+
+    Parameters
+    ----------
+    header : sequence of str
+        Column titles; a ``"\\n"`` in a title splits it over header lines (e.g. the unit
+        under the name).
+    rows : sequence of sequence of str
+        Cells, as they are to be shown (never changed or cut).
+    width : int, optional
+        The longest line allowed; the columns after the first ``keep`` are split into
+        consecutive blocks that fit, each block repeating the first ``keep`` columns and
+        separated by an empty line. ``None``: one block. A column too wide on its own gets a
+        block of its own.
+    keep : int
+        Leading columns repeated in every block (the row names).
+    blank_repeats : bool
+        Show the first column only where it changes (a scenario name over its rows).
+    """
+    parts = [h.split("\n") for h in header]
+    depth = max(len(p) for p in parts)
+    parts = [p + [""] * (depth - len(p)) for p in parts]
+    widths = [max([len(x) for x in parts[i]] + [len(r[i]) for r in rows])
+              for i in range(len(header))]  # fmt: skip
+    shown = [list(r) for r in rows]
+    if blank_repeats:
+        for prev, r in zip(rows, shown[1:], strict=False):
+            if r[0] == prev[0]:
+                r[0] = ""
+    fixed = list(range(keep))
+    base = sum(widths[:keep]) + 2 * max(keep - 1, 0)
+    blocks: list[list[int]] = []
+    used = base
+    for i in range(keep, len(header)):
+        if not blocks or (width is not None and used + 2 + widths[i] > width):
+            blocks.append([])
+            used = base
+        blocks[-1].append(i)
+        used += 2 + widths[i]
+    lines: list[str] = []
+    for b, block in enumerate(blocks or [[]]):
+        cols = fixed + block
+        if b:
+            lines.append("")
+        for level in range(depth):  # a header line this block leaves empty is not shown
+            if any(parts[i][level] for i in cols):
+                lines.append("  ".join(parts[i][level].ljust(widths[i]) for i in cols).rstrip())
+        lines.append("  ".join("-" * widths[i] for i in cols))
+        for r in shown:
+            lines.append("  ".join(r[i].ljust(widths[i]) for i in cols).rstrip())
+    return lines
 
 
 def markdown_table(table: Mapping[str, Mapping[str, Mapping[str, Any]]]) -> str:

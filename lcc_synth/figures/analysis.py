@@ -12,7 +12,7 @@ from lcc_synth.figures.style import (
     _pyplot,
     _save,
     _styled,
-    controller_colors,
+    curve_styles,
     display_name,
 )
 
@@ -83,39 +83,67 @@ def plot_gamma_curves(curves, omega, path: str | Path, title: str | None = None)
         ``{label: (|Gamma| on omega, StringStabilityReport)}``, e.g. from
         :func:`lcc_synth.experiments.comparison.gamma_curves`; the legend gives each peak and
         verdict. A report with measured points (``omega``, ``ratio``: a controller that is not
-        linear) is drawn as markers.
+        linear) is drawn as its points only (markers, no line: nothing was measured between
+        them), each controller its own marker.
     omega : array_like
         Frequencies (rad/s).
     path : str or Path
-        Output PNG.
+        Output file; its extension picks the type (``.png``, ``.pdf``, ``.svg``).
+
+    Axes: the frequency axis spans where the curves change: from a third of the lowest
+    frequency at which a curve has moved :data:`GAMMA_FLOOR` from its low-frequency value (or
+    the lowest measured point) to 1.5 times the frequency past which every curve has decayed
+    below :data:`GAMMA_FLOOR` (or the last measured point); the y-axis spans the data; the
+    legend (two compact columns) sits under the plot. A setting after ``" @ "`` in a label
+    (e.g. a V2V latency) is dotted in the colour of its controller (:func:`curve_styles`).
     """
+    import numpy as np
+
     from lcc_synth.analysis.string_stability import verdict_text
 
     plt = _pyplot()
     path = Path(path)
-    fig, ax = plt.subplots(figsize=(6.5, 4.2 + 0.18 * len(curves)), constrained_layout=True)
-    # "name @ setting" labels (e.g. a V2V latency) keep the colour of "name", dotted
-    base = {label: label.split(" @ ")[0] for label in curves}
-    colors = controller_colors(dict.fromkeys(base.values()))
+    omega = np.asarray(omega, dtype=float)
+    rows = -(-len(curves) // 2)
+    fig, ax = plt.subplots(figsize=(7.0, 4.0 + 0.2 * rows), constrained_layout=True)
+    styles = curve_styles(list(curves))
+    top, w_hi, w_lo = 1.0, float(omega[0]), float(omega[-1])
     for label, (mag, rep) in curves.items():
-        verdict = verdict_text(rep.verdict)
-        name = " @ ".join([display_name(base[label]), *label.split(" @ ")[1:]])
-        text = f"{name}: peak {rep.gamma_peak:.3f} ({verdict})"
-        measured = hasattr(rep, "ratio")  # measured in the simulator (not linear): points
-        ls = ":" if " @ " in label else ("--" if measured else "-")
-        kw = {"color": colors[base[label]], "label": text, "ls": ls}
-        if measured:
-            ax.semilogx(rep.omega, rep.ratio, marker="o", ms=4, **kw)
-        else:
-            ax.semilogx(omega, mag, lw=1.6, **kw)
+        name = " @ ".join([display_name(label.split(" @ ")[0]), *label.split(" @ ")[1:]])
+        st = styles[label]
+        if hasattr(rep, "ratio"):  # measured in the simulator (not linear): points only
+            text = f"{name}: max {rep.gamma_peak:.3f} (measured)"
+            ax.semilogx(rep.omega, rep.ratio, ls="none", marker=st["marker"], ms=6,
+                        color=st["color"], mfc="none" if " @ " in label else st["color"],
+                        mew=1.4, label=text, zorder=4)  # fmt: skip
+            top = max(top, float(np.nanmax(rep.ratio)))
+            w_hi = max(w_hi, float(np.max(rep.omega)))
+            w_lo = min(w_lo, float(np.min(rep.omega)))
+            continue
+        text = f"{name}: peak {rep.gamma_peak:.3f} ({verdict_text(rep.verdict)})"
+        ax.semilogx(omega, mag, lw=1.6, color=st["color"], ls=st["ls"], label=text)
+        m = np.asarray(mag, dtype=float)
+        live = np.flatnonzero(np.isfinite(m) & (m >= GAMMA_FLOOR))
+        if live.size:
+            w_hi = max(w_hi, float(omega[live[-1]]))
+            top = max(top, float(np.nanmax(m)))
+        moved = np.flatnonzero(np.isfinite(m) & (np.abs(m - m[0]) >= GAMMA_FLOOR))
+        if moved.size:  # where the curve leaves its low-frequency value
+            w_lo = min(w_lo, float(omega[moved[0]]))
     ax.axhline(1.0, color="k", lw=0.8, ls="--")
+    ax.set_xlim(max(float(omega[0]), w_lo / 3.0), min(float(omega[-1]), 1.5 * w_hi))
+    ax.set_ylim(0.0, 1.06 * top)
     ax.set_xlabel("ω (rad/s)")
     ax.set_ylabel("|Γ(jω)|, tail / head velocity (m/s per m/s)")
     ax.grid(True, which="both", alpha=0.3)
-    _legend_below(fig, [ax], ncols=1 if len(curves) > 3 else 2)
+    _legend_below(fig, [ax], ncols=2)
     ax.set_title(title or "Head-to-tail transfer")
     return _save(fig, path, dpi=120)
 
+
+#: |Γ| below which a curve counts as decayed, and the change from its low-frequency value
+#: that counts as moving: the frequency axis of :func:`plot_gamma_curves` spans the rest.
+GAMMA_FLOOR = 1e-3
 
 
 @_styled

@@ -11,9 +11,11 @@ from lcc_synth.figures.style import (
     _pyplot,
     _save,
     _styled,
+    aeb_intervals,
     controller_colors,
     display_name,
     vehicle_style,
+    vehicle_styles,
 )
 
 
@@ -26,14 +28,17 @@ def plot_profiles(results, path: str | Path, title: str | None = None, run: int 
     results : mapping of str to lcc_synth.simulation.results.SimResult
         ``{controller: result}`` of one scenario (same layout for all).
     path : str or Path
-        Output PNG.
+        Output file; its extension picks the type (``.png``, ``.pdf``, ``.svg``).
     title : str, optional
     run : int
         Batch member to draw.
 
-    Head vehicle yellow, CAV(s) blue (drawn on top), HDVs grey (:func:`vehicle_style`; a ring:
-    no head, every vehicle's spacing); the rows share their y-axes (velocity, spacing) so
-    that controllers compare by eye.
+    Every vehicle can be told apart (:func:`vehicle_styles`): head yellow, each CAV its own
+    colour and marker (drawn on top), the HDVs a sequential colormap from front to back
+    (dashed ahead of the first CAV; a ring: no head, every vehicle's spacing). The intervals
+    in which a CAV's emergency braking (AEB) was active (the result's ``aeb_active``) are
+    shaded in that CAV's colour (:func:`aeb_intervals`). The rows share their y-axes
+    (velocity, spacing) so that controllers compare by eye; the legend sits under them.
     """
     import numpy as np
 
@@ -44,14 +49,28 @@ def plot_profiles(results, path: str | Path, title: str | None = None, run: int 
         len(items), 2, figsize=(11, 2.3 * len(items) + 1.0), sharex=True, sharey="col",
         squeeze=False, constrained_layout=True,
     )  # fmt: skip
+    aeb_label = True
     for row, (name, res) in enumerate(items):
         ring = bool(getattr(res, "ring", False))
         cavs = getattr(res, "cavs", None)
+        cavs = [res.cav] if cavs is None else [int(c) for c in cavs]
+        styles = vehicle_styles(res.n_vehicles, cavs, ring)
+        every = max(1, res.t.size // 12)  # a CAV's marker about 12 times per curve
         for j in range(res.n_vehicles):
-            kw = vehicle_style(j, res.cav, cavs, ring)
+            kw = {**styles[j], "markevery": every} if "marker" in styles[j] else styles[j]
             axes[row, 0].plot(res.t, res.velocity[run, :, j], **kw)
             if j > 0 or ring:  # a ring's column 0 is vehicle 1, whose gap is to vehicle N
                 axes[row, 1].plot(res.t, res.spacing[run, :, j], **kw)
+        active = getattr(res, "aeb_active", None)
+        if active is not None:
+            cols = np.asarray(active)
+            cols = cols[:, :, None] if cols.ndim == 2 else cols
+            for k, j in enumerate(cavs[: cols.shape[2]]):
+                for t0, t1 in aeb_intervals(res.t, cols[run, :, k]):
+                    for ax in axes[row]:
+                        ax.axvspan(t0, t1, color=styles[j]["color"], alpha=0.3, lw=0,
+                                   zorder=1, label="AEB active" if aeb_label else None)
+                    aeb_label = False
         v_star = float(np.asarray(res.v_star).reshape(-1)[run])
         axes[row, 0].axhline(v_star, color="k", lw=0.6, ls=":")
         axes[row, 0].set_ylabel(f"{display_name(name)}\nvelocity (m/s)")
@@ -60,7 +79,8 @@ def plot_profiles(results, path: str | Path, title: str | None = None, run: int 
             axes[row, 1].set_title("collision", color=PALETTE.bound, fontsize=9)
     for ax in axes[-1]:
         ax.set_xlabel("time (s)")
-    _legend_below(fig, axes.flat)
+        ax.set_xlim(float(items[0][1].t[0]), float(items[0][1].t[-1]))
+    _legend_below(fig, axes.flat, ncols=6)
     return _save(fig, path, title, dpi=110)
 
 

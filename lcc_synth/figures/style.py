@@ -3,6 +3,13 @@
 Head vehicle yellow, CAV blue, HDVs grey (the colours of the Rerun recordings,
 :mod:`lcc_synth.recording.core`), HDVs ahead of the CAV darker and dashed; controllers in
 :data:`PALETTE`'s ``controllers`` colours, which are never blue or yellow, baselines grey.
+
+Figures that must tell every vehicle apart (the profiles of ``lcc-synth run``) use
+:func:`vehicle_styles`: the head yellow, each CAV its own colour (:data:`Palette.cavs`, the
+first the recordings' blue) and marker (:data:`CAV_MARKERS`), the HDVs a sequential colormap
+(:data:`HDV_COLORMAP`, dark purple at the front to orange at the back, never yellow or blue)
+by position behind the head. :func:`curve_styles` gives the |Γ| curves one colour per
+controller and, per controller, one line style and marker, so that no curve hides another.
 """
 
 from __future__ import annotations
@@ -17,10 +24,23 @@ from lcc_synth.recording.core import COLOR_CAV, COLOR_HDV, COLOR_HEAD
 __all__ = [
     "PALETTE",
     "Palette",
+    "CAV_MARKERS",
+    "HDV_COLORMAP",
     "display_name",
     "controller_colors",
+    "curve_styles",
+    "aeb_intervals",
     "vehicle_style",
+    "vehicle_styles",
 ]
+
+#: Markers of the CAVs, in order (each CAV its own).
+CAV_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
+#: Markers of the measured |Γ| points, one per controller (the CAVs' markers, in order).
+POINT_MARKERS = CAV_MARKERS
+#: The HDVs' sequential colormap (matplotlib name) and the part of it used: dark to light
+#: without its yellow end (the head's colour).
+HDV_COLORMAP = ("plasma", 0.0, 0.72)
 
 
 @dataclass(frozen=True)
@@ -35,6 +55,8 @@ class Palette:
     bound: tuple = (0.84, 0.15, 0.16)
     controllers: tuple = ("#2ca02c", "#d62728", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2",
                           "#17becf")  # fmt: skip
+    cavs: tuple = (tuple(c / 255 for c in COLOR_CAV), "#17becf", "#2ca02c", "#000000",
+                   "#8c564b", "#e377c2")  # fmt: skip
 
 
 PALETTE = Palette()
@@ -104,6 +126,94 @@ def vehicle_style(
                 "label": "HDVs ahead" if j == 1 else None}  # fmt: skip
     return {"color": PALETTE.hdv, "lw": 0.9, "ls": "-", "zorder": 2,
             "label": "HDVs behind" if j == cav + 1 else None}  # fmt: skip
+
+
+def vehicle_styles(
+    n_vehicles: int, cavs: tuple[int, ...] | list[int], ring: bool = False
+) -> list[dict]:
+    """Line styles that tell every vehicle apart, one per array column (a pure function).
+
+    Parameters
+    ----------
+    n_vehicles : int
+        Columns of the run (the head is column 0 unless ``ring``).
+    cavs : sequence of int
+        Columns of the CAVs.
+    ring : bool
+        A ring road: no head; column 0 is an HDV like the others.
+
+    Returns
+    -------
+    list of dict
+        Matplotlib keywords per column: ``color``, ``lw``, ``ls``, ``zorder``, ``label`` and,
+        for a CAV, ``marker``. The head yellow (label ``head vehicle``); CAV ``k`` colour
+        ``PALETTE.cavs[k]`` and marker ``CAV_MARKERS[k]`` (label ``CAV (vehicle j)``); the HDVs
+        :data:`HDV_COLORMAP` sampled evenly from front to back (label on the first and last:
+        ``HDV j (front)``, ``HDV j (back)``; a ring numbers its vehicles from 1 and says
+        ``first``, ``last``), dashed ahead of the first CAV.
+    """
+    from matplotlib import colormaps
+
+    cavs = [int(c) for c in cavs]
+    first = min(cavs) if cavs else n_vehicles
+    hdvs = [j for j in range(n_vehicles) if j not in cavs and (ring or j > 0)]
+    name, lo, hi = HDV_COLORMAP
+    cmap = colormaps[name]
+    shades = [lo + (hi - lo) * (i / max(len(hdvs) - 1, 1)) for i in range(len(hdvs))]
+    number = 1 if ring else 0  # a ring's column 0 is vehicle 1; else the head is vehicle 0
+    ends = ("first", "last") if ring else ("front", "back")
+    out: list[dict] = []
+    for j in range(n_vehicles):
+        if j in cavs:
+            k = cavs.index(j)
+            out.append({"color": PALETTE.cavs[k % len(PALETTE.cavs)], "lw": 2.0, "ls": "-",
+                        "zorder": 4, "marker": CAV_MARKERS[k % len(CAV_MARKERS)], "ms": 5,
+                        "label": f"CAV (vehicle {j + number})"})  # fmt: skip
+        elif j == 0 and not ring:
+            out.append({"color": PALETTE.head, "lw": 1.8, "ls": "-", "zorder": 3,
+                        "label": "head vehicle"})  # fmt: skip
+        else:
+            i = hdvs.index(j)
+            label = None
+            if i == 0:
+                label = f"HDV {j + number} ({ends[0]})"
+            elif i == len(hdvs) - 1:
+                label = f"HDV {j + number} ({ends[1]})"
+            out.append({"color": tuple(float(c) for c in cmap(shades[i])[:3]), "lw": 1.0,
+                        "ls": "--" if (not ring and j < first) else "-", "zorder": 2,
+                        "label": label})  # fmt: skip
+    return out
+
+
+def curve_styles(labels) -> dict:
+    """``{label: matplotlib keywords}`` of |Γ| curves: one colour per controller (the part of
+    the label before ``" @ "``, :func:`controller_colors`), a setting after ``" @ "`` dotted in
+    the same colour; each measured controller (``measured`` in the keywords' caller) gets its
+    own marker from :data:`POINT_MARKERS` in the order of the labels (a pure function)."""
+    base = {label: label.split(" @ ")[0] for label in labels}
+    colors = controller_colors(dict.fromkeys(base.values()))
+    out = {}
+    for i, label in enumerate(labels):
+        out[label] = {"color": colors[base[label]], "ls": ":" if " @ " in label else "-",
+                      "marker": POINT_MARKERS[i % len(POINT_MARKERS)]}  # fmt: skip
+    return out
+
+
+def aeb_intervals(t, active) -> list[tuple[float, float]]:
+    """The time intervals ``[start, end)`` over which ``active`` (one flag per sample of ``t``)
+    holds: from the first sample of each run of flags to the sample after its last (the last
+    sample's time at the end of the record)."""
+    import numpy as np
+
+    a = np.asarray(active, dtype=bool).reshape(-1)
+    t = np.asarray(t, dtype=float).reshape(-1)
+    if not a.any():
+        return []
+    edges = np.diff(np.concatenate([[0], a.astype(np.int8), [0]]))
+    starts = np.flatnonzero(edges == 1)
+    ends = np.flatnonzero(edges == -1)  # index after the last active sample
+    return [(float(t[s]), float(t[min(e, t.size - 1)])) for s, e in zip(starts, ends,
+                                                                          strict=True)]
 
 
 def _styled(func):
