@@ -93,6 +93,8 @@ EXPECTED_OPTIONS = {
     "sweep": {"--json", "--count", "--batch-size", "--seed", "--scheduler", "--workers", "--resume",
               "--controllers", "--out", "--no-figures", "--no-progress", *_RECORD},
     "review": {"--summary", "--json", "--web", "--web-port", "--port"},
+    "calibrate": {"--model", "--json", "--out", "--length", "--starts", "--seed", "--substeps",
+                  "--overwrite", "--no-progress"},
 }  # fmt: skip
 
 
