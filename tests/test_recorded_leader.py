@@ -173,3 +173,14 @@ def _run_named(path: Path):
     objs = lcc.load_problem(path)
     [name] = objs.controllers
     return lcc.simulate(objs.scenario, objs.controllers[name])
+
+
+def test_shipped_calibrated_lane2_problem_simulates():
+    """problems/ngsim_lane2_calibrated.toml (written by ``lcc-synth calibrate --out``): the
+    head replays lane 2's front vehicle, the followers start from the data, nobody collides."""
+    tr = read_trajectory(LANE2)
+    res = _run_named(ROOT / "problems" / "ngsim_lane2_calibrated.toml")
+    k = np.rint(tr.t / 0.01).astype(int)
+    assert np.abs(res.velocity[0, k, 0] - tr.v[0]).max() < 1e-9
+    assert res.velocity[0, 0] == pytest.approx(tr.v[:, 0], abs=1e-12)
+    assert not res.collided.any()

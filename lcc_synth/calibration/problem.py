@@ -39,9 +39,9 @@ def _free_speed(model: str, params: dict[str, float]) -> float:
     return params["v_max"] if model == "ovm" else params["v0"]
 
 
-def problem_table(cal: Calibration, traj: Trajectory, data_file: str) -> dict:
-    """The TOML document (as a dict) of the calibrated platoon; ``data_file`` is the
-    trajectory file as the problem file names it (relative to the problem file)."""
+def problem_table(cal: Calibration, traj: Trajectory, data_file: str, name: str) -> dict:
+    """The TOML document (as a dict) of the calibrated platoon named ``name``; ``data_file``
+    is the trajectory file as the problem file names it (relative to the problem file)."""
     ratio = traj.dt / SIM_DT
     if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
         raise ConfigError("--out", f"the recording's period {traj.dt:g} s is not a multiple of "
@@ -67,7 +67,7 @@ def problem_table(cal: Calibration, traj: Trajectory, data_file: str) -> dict:
         "law (controllers.replay, type = hdv): the run is the all-HDV replay."
     )
     return {
-        "name": f"{Path(traj.path).stem}_calibrated",
+        "name": name,
         "description": description,
         "hdv": {"model": cal.model, **{k: round(cal.pooled.params[k], 6) for k in names}},
         "system": {
@@ -92,5 +92,5 @@ def write_problem(path: str | Path, cal: Calibration, traj: Trajectory,
     the data file is named relative to it. Returns the name used."""
     path = Path(path)
     rel = os.path.relpath(Path(traj.path).resolve(), path.resolve().parent)
-    text = tomli_w.dumps(problem_table(cal, traj, Path(rel).as_posix()))
+    text = tomli_w.dumps(problem_table(cal, traj, Path(rel).as_posix(), path.stem))
     return write_text(path, text, overwrite)
