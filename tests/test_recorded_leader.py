@@ -38,6 +38,7 @@ a_min = -9.0
 a_max = 9.0
 cav_aeb = false
 initial = "{initial}"
+{extra}
 [[scenario.perturbations]]
 type = "trajectory"
 vehicle = {vehicle}
@@ -56,7 +57,8 @@ type = "hdv"
 def _problem(tmp_path: Path, **keys) -> Path:
     shutil.copy(LANE2, tmp_path / "lane2.csv")
     values = {"duration": 12.0, "initial": "data", "vehicle": '"head"', "file": "lane2.csv",
-              "column": "v0", "interpolation": "linear", "start": 0.0, **keys}  # fmt: skip
+              "column": "v0", "interpolation": "linear", "start": 0.0, "extra": "",
+              **keys}  # fmt: skip
     path = tmp_path / "p.toml"
     path.write_text(PROBLEM.format(**values))
     return path
@@ -116,6 +118,11 @@ BAD = {
     "head speed differs": ({"initial": "equilibrium"},
                            "scenario.perturbations[0].column: the head starts at 8 m/s but the "
                            'recording starts at 3.3345 m/s: set [scenario] initial = "data"'),
+    "in SUMO": ({"extra": 'backend = "sumo"'}, "scenario.initial: \"data\" runs in the "
+                "built-in simulator only"),
+    "leader in SUMO": ({"extra": 'backend = "sumo"', "initial": "equilibrium"},
+                       "scenario.perturbations[0].type: a recorded trajectory runs in the "
+                       "built-in simulator only"),
     "bad interpolation": ({"interpolation": "cubic"},
                           "scenario.perturbations[0].interpolation: must be one of"),
 }
