@@ -1,7 +1,7 @@
 """Calibration of OVM and IDM drivers on recorded platoons, with identifiability.
 
-Method
-------
+Calibration method
+------------------
 For each follower ``i`` of a :class:`~lcc_synth.schema.trajectories.Trajectory`, its recorded
 leader ``i - 1`` drives a simulated follower from the recorded initial gap and speed
 (:func:`~lcc_synth.calibration.replay.replay_pairs`), and the parameters minimise by bounded
@@ -18,8 +18,8 @@ package's IDM), the others uniform in the bounds from ``numpy.random.default_rng
 best is kept, and the report says how many starts reached its cost (within 1 %). The
 **pooled** fit is one parameter set for every follower (their residuals stacked).
 
-Bounds (:data:`BOUNDS`)
------------------------
+Calibration bounds (:data:`BOUNDS`)
+-----------------------------------
 OVM (eq. 2-4): the paper's nominal driver (alpha 0.6, beta 0.9, s_st 5, s_go 35, v_max 30;
 Sec. V) and its heterogeneous range (Appendix: alpha 0.6 ± 0.1, beta 0.9 ± 0.1, s_go 35 ± 5)
 lie well inside alpha in [0.05, 2] 1/s, beta in [0, 2] 1/s, s_st in [0, 15] m, s_go in
@@ -28,15 +28,15 @@ Treiber & Kesting, *Traffic Flow Dynamics* (Springer 2013), ch. 11 (v0 54-120 km
 s0 2 m, a 1 m/s², b 1.5-3 m/s², delta 4) with wide margins: v0 in [5, 40] m/s, T in [0.3, 3]
 s, s0 in [0.5, 8] m, a in [0.2, 4] m/s², b in [0.3, 5] m/s², delta in [1, 8].
 
-Vehicle length
---------------
+Vehicle length in a calibration
+-------------------------------
 Fixed (``length``, default 5 m), never fitted: a recorded headway includes the length of the
 vehicle ahead, and shifting ``L`` is exactly undone by shifting s_st and s_go (OVM) or s0 (IDM)
 by the same amount, so ``L`` and those parameters are not separately identifiable from
 spacings. The fitted s_st, s_go, s0 are therefore *gaps for that L*.
 
-Identifiability
----------------
+Identifiability of the parameters
+---------------------------------
 At the optimum, with ``J = dr/du`` (scaled parameters) and its SVD ``J = U S V^T``:
 
 1. a direction with ``S_k / S_1 < NULL_RATIO = 1e-6`` is flat (the data do not move when the
@@ -54,8 +54,8 @@ follower at equilibrium; the follower never moves off ``V(s*) = v*``, so alpha a
 have no effect at all on the data, and s_st, s_go and v_max act only through the single value
 ``V(s*)``.
 
-Data consistency
-----------------
+Consistency of the recorded data
+--------------------------------
 ``data_rmse_m``: the RMS difference between a follower's recorded gap and its initial gap plus
 the integral of its recorded relative speed. A few cm on every NGSIM I-80 follower except lane
 2's vehicle 1 (4.5 m: a glitch in its recorded headway), a floor no model can beat in spacing.
