@@ -229,7 +229,7 @@ def data_rmse(traj: Trajectory, i: int) -> float:
     return _rmse(traj.headway[i] - traj.headway[i, 0] - integ)
 
 
-def _identify(J: np.ndarray, r: np.ndarray, span: np.ndarray):
+def _identify(J: np.ndarray, r: np.ndarray):
     """``(identified, half-width of the 95 % interval in u)`` per parameter."""
     p = J.shape[1]
     _, S, Vt = np.linalg.svd(J, full_matrices=False)
@@ -304,7 +304,7 @@ def fit_followers(
     best = results[int(np.argmin(costs))]
     u = best.x
     r = residuals(u[None])[0]
-    identified, half = _identify(jac(u), r, span)
+    identified, half = _identify(jac(u), r)
     names = PARAMS[model]
     theta = lo + span * u
     n_s = F * (T - 1)
@@ -358,7 +358,7 @@ def calibrate(
     if seed < 0:
         raise ConfigError("--seed", f"must be >= 0, got {seed!r}")
     if not 1 <= substeps <= 20:
-        raise ConfigError("substeps", f"must be in [1, 20], got {substeps!r}")
+        raise ConfigError("--substeps", f"must be in [1, 20], got {substeps!r}")
     s_all = gaps(traj.headway, length)
     F = traj.n_vehicles - 1
     fits = []
