@@ -95,6 +95,8 @@ EXPECTED_OPTIONS = {
     "sweep": {"--json", "--count", "--batch-size", "--seed", "--scheduler", "--workers", "--resume",
               "--controllers", "--out", "--no-figures", "--format", *_QUIET, *_RECORD},
     "review": {"--summary", "--json", "--web", "--web-port", "--port", *_QUIET},
+    "calibrate": {"--model", "--json", "--out", "--length", "--starts", "--seed", "--substeps",
+                  "--overwrite", *_QUIET},
 }  # fmt: skip
 
 

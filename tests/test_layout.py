@@ -169,7 +169,7 @@ LAYERS = (
     ("lcc_synth.models", "lcc_synth.resources", "lcc_synth.interrupts"),
     ("lcc_synth.schema", "lcc_synth.outputs"),
     ("lcc_synth.problem", "lcc_synth.provenance"),
-    ("lcc_synth.analysis",),
+    ("lcc_synth.analysis", "lcc_synth.calibration"),
     ("lcc_synth.synthesis",),
     ("lcc_synth.controllers",),
     ("lcc_synth.simulation",),

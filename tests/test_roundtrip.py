@@ -44,6 +44,9 @@ def _load(path: Path):
 def round_trip(path: Path, tmp_path: Path):
     first = _load(path)
     text = first.to_toml()
+    data = path.parent / "data"  # the recordings a problem file names, relative to it
+    if data.is_dir() and not (tmp_path / "data").exists():
+        (tmp_path / "data").symlink_to(data, target_is_directory=True)
     copy = tmp_path / path.name
     copy.write_text(text)
     return first, lcc.load_problem(copy), text

@@ -278,6 +278,30 @@ weight = 0.0
 polish_steps = 10
 """
 
+_COVERAGE_RECORDED = """
+[system]
+kind = "platoon"
+size = 2
+cavs = [2]
+v_star = 10.0
+vehicle_length = 5.0
+[scenario]
+duration = 0.3
+dt = 0.01
+initial = "data"
+[[scenario.perturbations]]
+type = "trajectory"
+vehicle = "head"
+file = "platoon.csv"
+column = "v0"
+interpolation = "previous"
+start = 0.0
+[metrics]
+window = [0.0, 0.2]
+[controllers.replay]
+type = "hdv"
+"""
+
 _COVERAGE_REGIONS = """
 [system]
 kind = "lcc"
@@ -305,6 +329,11 @@ def _load_coverage_corpus(tmp: Path) -> None:
     for name, text in (("sim", _COVERAGE_SIMULATE), ("syn", _COVERAGE_SYNTHESIZE),
                        ("reg", _COVERAGE_REGIONS)):  # fmt: skip
         (tmp / f"{name}.toml").write_text(text)
+    (tmp / "platoon.csv").write_text("t,v0,headway0,v1,headway1,v2,headway2\n"
+                                     "0.0,10,0,10,30,10,30\n0.1,10,0,10,30,10,30\n"
+                                     "0.2,10,0,10,30,10,30\n")
+    (tmp / "rec.toml").write_text(_COVERAGE_RECORDED)
+    assert load_spec(tmp / "rec.toml").scenario.initial_state[0][1:] == (25.0, 25.0)
     spec = load_spec(tmp / "sim.toml")
     assert spec.scenario.v2v.loss_rate[3] == 0.1 and len(spec.scenario.perturbations) == 3
     assert spec_from_problem(load_problem(tmp / "syn.toml")).as_run.polish_steps == 10

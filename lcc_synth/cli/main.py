@@ -27,7 +27,7 @@ import sys
 from lcc_synth.cli.arguments import add_quiet, check_options
 from lcc_synth.errors import ConfigError, FileError, Interrupted
 
-COMMANDS = ("run", "analyze", "regions", "simulate", "synthesize", "sweep", "review")
+COMMANDS = ("run", "analyze", "regions", "simulate", "synthesize", "sweep", "review", "calibrate")
 
 
 def _available() -> dict[str, object]:

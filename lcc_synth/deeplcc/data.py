@@ -265,7 +265,7 @@ def _cavs_of(scenario) -> tuple[int, ...]:
 def collection_scenario(base, settings: DataSettings):
     """The collection scenario: ``base`` with the data table's ``dt``, ``T + 1`` samples,
     ``v_star``, ``seed``, one run, no perturbations (the head profile is added by
-    :func:`collect`)."""
+    :func:`collect`), starting from the equilibrium (not from a recording)."""
     from lcc_synth.simulation.scenario import Scenario
 
     if not isinstance(base, Scenario):
@@ -273,7 +273,7 @@ def collection_scenario(base, settings: DataSettings):
     changes: dict[str, Any] = dict(
         dt=float(settings.dt), duration=(settings.T + 1) * float(settings.dt), t_start=0.0,
         batch=1, perturbations=(), seed=int(settings.seed), first_index=0, record_every=1,
-        name="deep_lcc_data",
+        name="deep_lcc_data", initial_state=None,  # collected around the equilibrium
     )  # fmt: skip
     if settings.v_star is not None:
         changes["v_star"] = float(settings.v_star)

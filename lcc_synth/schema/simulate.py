@@ -162,6 +162,11 @@ SCENARIO = Table(
         Key("v2v", "table", "What the CAV receives: [scenario.v2v].", {}),
         Key("perturbations", "any", "Prescribed motions: an array of tables "
             "[[scenario.perturbations]].", []),
+        Key("initial", "string", "Initial state: every vehicle at its equilibrium at v_star, "
+            'or "data": the speeds and spacings (headway - [system] vehicle_length, > 0 '
+            'needed) at the first sample of the first type = "trajectory" perturbation\'s '
+            "file, file vehicle k in column k (head, then front to tail; as many vehicles as "
+            "the string; built-in simulator).", "equilibrium", choices=("equilibrium", "data")),
         Key("hdv_values", "table", "Explicit per-HDV model parameters: [scenario.hdv_values].",
             {}),
         Key("backend", "string", "The simulator: the built-in one, or SUMO (co-simulation "
@@ -253,7 +258,8 @@ LOSS_RATE_LIST = Table(
 )
 
 _P_TYPE = Key("type", "string", "The kind of motion.", REQUIRED,
-              choices=("sine", "brake", "brake_profile", "accel_profile", "speed_profile"))
+              choices=("sine", "brake", "brake_profile", "accel_profile", "speed_profile",
+                       "trajectory"))
 _P_VEHICLE = Key("vehicle", "any", 'The vehicle driven: "head" or a paper index (-m..n); '
                  'kind = platoon: "head" or a position 1..size; ring: a position.', "head")
 _P_START = Key("start", "number", "Start of the window (open interval start < t < end), "
@@ -304,6 +310,20 @@ PERTURBATIONS = (
             REQUIRED, unit="m/s"),
         _P_CSV, _P_INTERP,
     ), variant="speed_profile"),
+    Table(_PERT, "The head replays a recorded speed (a trajectory file's column): its "
+          "acceleration is the recorded speed's change over each step, not clipped by "
+          "a_min / a_max; from the recorded initial speed it has the recorded speed at every "
+          "sample time. After the recording it cruises.", _SIM, (
+        _P_TYPE,
+        Key("vehicle", "any", 'The vehicle driven: "head" only (open road).', "head"),
+        Key("file", "string", "Trajectory file (relative to the problem file): t, v0, "
+            "headway0, v1, headway1, ... (problems/data/ngsim_i80/README.md).", REQUIRED),
+        Key("column", "string", "The speed column replayed, v<k> of the file.", "v0"),
+        Key("interpolation", "string", "Speed between samples: linear, or previous (held "
+            "until the next sample).", "linear", choices=("linear", "previous")),
+        Key("start", "number", "Simulation time of the recording's first sample.", 0.0,
+            unit="s"),
+    ), variant="trajectory"),
 )
 
 METRICS = Table(

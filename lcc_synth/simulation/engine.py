@@ -172,10 +172,14 @@ def simulate(
 
     # initial state: equilibrium cruise, head at p = 0
     s0 = np.nan_to_num(draws.initial_spacing, nan=0.0)
+    v = np.full((B, nv), float(sc.v_star))
+    if sc.initial_state is not None:  # a recording's first sample ([scenario] initial = "data")
+        s0[:] = sc.initial_state[0]
+        s0[:, 0] = 0.0
+        v[:] = sc.initial_state[1]
     if ring:  # column 0 at p = 0; its spacing is what the others leave of the circumference
         s0[:, 0] = 0.0
     p = -np.cumsum(s0, axis=1)
-    v = np.full((B, nv), float(sc.v_star))
 
     # delays / latency ring buffer (history before t_start: the equilibrium cruise)
     delay_steps = np.rint(draws.delay / dt).astype(np.int64)

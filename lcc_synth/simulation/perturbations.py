@@ -12,6 +12,10 @@ Signs carry meaning and are checked, never reinterpreted: a ``brake``'s ``decel`
 ``brake_profile``'s ``decel`` are braking accelerations (< 0), the profile's ``accel`` its
 recovery acceleration (> 0); a ``sine``'s amplitude and an ``accel_profile``'s values are signed
 accelerations of either sign, a ``speed_profile``'s values speeds (>= 0).
+A ``trajectory`` replays a recorded speed (a column of a trajectory file,
+:mod:`lcc_synth.schema.trajectories`) on the head vehicle: its acceleration is the recorded
+speed's difference over each step, never clipped (the recording is what happened), so a head
+that starts at the recorded speed has it exactly at every sample time.
 Activity windows are open intervals ``start < t < end``, tested with a tolerance of
 ``1e-6 dt`` so that floating-point sample times (``t_start + k dt``) never flip an endpoint.
 
@@ -33,17 +37,21 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.models.records import Record
 from lcc_synth.schema import declared
 from lcc_synth.schema.readers import read_file
+from lcc_synth.schema.trajectories import Trajectory, read_trajectory
 
 __all__ = [
     "Sine",
     "Brake",
     "BrakeProfile",
     "Profile",
+    "Recorded",
     "Perturbation",
     "vehicle_column",
     "overrides",
     "perturbation_from_table",
     "read_profile_csv",
+    "recorded_file",
+    "recorded_from_table",
 ]
 
 Vehicle = int | str
@@ -254,7 +262,54 @@ class Profile(Record):
         return np.where(active, self._eval(query), np.nan)
 
 
-Perturbation = Sine | Brake | BrakeProfile | Profile
+@dataclass(frozen=True, repr=False)
+class Recorded(Record):
+    """The head replays a recorded speed: column ``column`` of the trajectory file ``file``,
+    its first sample at simulation time ``start``.
+
+    Between samples the speed is ``"linear"`` or held (``"previous"``). On each step
+    ``[t, t + dt]`` inside the recording the head's acceleration is ``(V(t + dt) - V(t)) / dt``
+    (not clipped by the limits), so from the recorded initial speed its speed is ``V`` at
+    every step, hence the recording's value at every sample time a step lands on (up to
+    round-off). After the recording the head cruises.
+    """
+
+    file: str
+    column: str
+    times: tuple[float, ...]
+    speeds: tuple[float, ...]
+    interpolation: str = "linear"
+    start: float = 0.0
+    vehicle: Vehicle = "head"
+    target = "accel"
+
+    def toml_table(self) -> dict[str, Any]:
+        """The ``[[scenario.perturbations]]`` entry (the file as the problem file names it)."""
+        return {"type": "trajectory", "vehicle": self.vehicle, "file": self.file,
+                "column": self.column, "interpolation": self.interpolation,
+                "start": self.start}  # fmt: skip
+
+    def window(self) -> tuple[float, float, str]:
+        """``(start, end, key)``: when it may act, and the key that sets the start."""
+        return float(self.times[0]), float(self.times[-1]), "start"
+
+    def speed(self, t: np.ndarray, dt: float) -> np.ndarray:
+        """The recorded speed ``V(t)`` (clamped to the recording's ends)."""
+        times = np.asarray(self.times)
+        vals = np.asarray(self.speeds)
+        if self.interpolation == "linear":
+            return np.interp(t, times, vals)
+        idx = np.searchsorted(times, np.asarray(t) + 1e-6 * dt, side="right") - 1
+        return vals[np.clip(idx, 0, len(times) - 1)]
+
+    def values(self, t: np.ndarray, dt: float) -> np.ndarray:
+        eps = 1e-6 * dt
+        active = (t >= self.times[0] - eps) & (t + dt <= self.times[-1] + eps)
+        acc = (self.speed(t + dt, dt) - self.speed(t, dt)) / dt
+        return np.where(active, acc, np.nan)
+
+
+Perturbation = Sine | Brake | BrakeProfile | Profile | Recorded
 
 
 def overrides(
@@ -352,6 +407,8 @@ def perturbation_from_table(
         if err.field.startswith(field):  # a reader's error already names the field
             raise
         raise ConfigError(f"{field}.{err.field}", err.message) from None
+    if kind == "trajectory":
+        return recorded_from_table(table, field, base_dir, platoon)
     target = "accel" if kind == "accel_profile" else "speed"
     interp = P.get(table, "interpolation", field)
     if "csv" in table:
@@ -367,3 +424,42 @@ def perturbation_from_table(
         return Profile(tuple(times), tuple(vals), target, interp, vehicle)
     except ConfigError as err:
         raise ConfigError(f"{field}.{err.field}", err.message) from None
+
+
+def recorded_from_table(
+    table: Mapping[str, Any], field: str, base_dir: Path | None = None,
+    platoon: tuple[int, bool] | None = None,
+) -> Recorded:
+    """The :class:`Recorded` of a ``type = "trajectory"`` entry: the file (relative to the
+    problem file) read by :func:`~lcc_synth.schema.trajectories.read_trajectory`, a speed
+    column ``v<k>`` of it, on the head vehicle of an open road."""
+    P = declared("scenario.perturbations:trajectory")
+    vehicle = P.raw(table, "vehicle")
+    if vehicle != "head" or (platoon is not None and platoon[1]):
+        raise ConfigError(f"{field}.vehicle", 'a recorded trajectory drives the head vehicle '
+                          f'of an open road: must be "head", got {vehicle!r}')
+    traj = recorded_file(table, field, base_dir)
+    column = P.get(table, "column", field)
+    if not (isinstance(column, str) and column.startswith("v")):
+        raise ConfigError(f"{field}.column", f"must be a speed column v<k> (m/s), got {column!r}")
+    speeds = traj.column(column, f"{field}.column")
+    start = P.get(table, "start", field)
+    times = start + (traj.t - traj.t[0])
+    return Recorded(P.get(table, "file", field), column, tuple(float(x) for x in times),
+                    tuple(float(x) for x in speeds), P.get(table, "interpolation", field),
+                    start, vehicle)  # fmt: skip
+
+
+def recorded_file(
+    table: Mapping[str, Any], field: str, base_dir: Path | None = None
+) -> Trajectory:
+    """The trajectory file of a ``type = "trajectory"`` entry (``file`` relative to
+    ``base_dir``, the problem file's directory)."""
+    rel = declared("scenario.perturbations:trajectory").get(table, "file", field)
+    path = Path(rel) if base_dir is None or Path(rel).is_absolute() else base_dir / rel
+    try:
+        return read_trajectory(path, f"{field}.file")
+    except ConfigError as err:
+        if err.field.startswith(field):  # the file itself: missing, unreadable
+            raise
+        raise ConfigError(f"{field}.file", str(err)) from None

@@ -119,6 +119,10 @@ class Scenario(ValueEq, Record):
         integrates and records is the bumper-to-bumper gap (exact for gap-based laws); the
         result's positions put column ``j`` ``j * vehicle_length`` further back and its
         circumference is ``circumference + N * vehicle_length`` (the road a user sees).
+    initial_state : pair of tuples, optional
+        ``(spacings, speeds)``, one per column (the head's spacing is ignored): the initial
+        state instead of the equilibrium at ``v*`` (``[scenario] initial = "data"``: a
+        recording's first sample). Spacing errors stay relative to the equilibrium.
     accel_noise_uniform : float
         Half width ``w`` (m/s^2, >= 0) of a uniform acceleration noise ``U[-w, w]`` on every
         vehicle but the head (CAVs included), added after the limits and emergency braking
@@ -164,9 +168,11 @@ class Scenario(ValueEq, Record):
     accel_noise_uniform: float = 0.0
     cav_lag: float | tuple[float, ...] = 0.0
     vehicle_length: float = 0.0
+    initial_state: tuple[tuple[float, ...], tuple[float, ...]] | None = None
 
     def __post_init__(self) -> None:
         self._check_layout()
+        self._check_initial_state()
         for key, lo in (
             ("m", -1 if self.ring else 0), ("n", 0), ("batch", 1), ("record_every", 1),
             ("seed", 0), ("first_index", 0),
@@ -235,6 +241,45 @@ class Scenario(ValueEq, Record):
                 )
         if self.backend == "sumo":
             check_sumo_scenario(self)
+
+    def _check_initial_state(self) -> None:
+        """An explicit initial state: one finite spacing (> 0 behind the head) and speed
+        (>= 0) per column, on an open road, in the built-in simulator; a recorded head
+        (:class:`~lcc_synth.simulation.perturbations.Recorded`) starts at its recording's
+        first speed."""
+        from lcc_synth.simulation.perturbations import Recorded
+
+        f = "scenario.initial"
+        head_v = float(self.v_star)
+        if self.initial_state is not None:
+            gaps, speeds = (np.asarray(x, dtype=float) for x in self.initial_state)
+            nv = self.m + self.n + 2
+            if self.ring or gaps.shape != (nv,) or speeds.shape != (nv,):
+                raise ConfigError(f, f"an initial state needs one spacing and one speed per "
+                                  f"vehicle of an open road ({nv}), got {gaps.shape[0]} and "
+                                  f"{speeds.shape[0]}{' on a ring' if self.ring else ''}")
+            if not (np.all(np.isfinite(gaps[1:])) and np.all(gaps[1:] > 0)):
+                raise ConfigError(f, f"every initial spacing behind the head must be > 0 m, got "
+                                  f"{np.round(gaps[1:], 3).tolist()}: check [system] "
+                                  "vehicle_length against the recorded headways")
+            if not (np.all(np.isfinite(speeds)) and np.all(speeds >= 0)):
+                raise ConfigError(f, f"every initial speed must be >= 0 m/s, got "
+                                  f"{np.round(speeds, 3).tolist()}")
+            if self.backend != "builtin":
+                raise ConfigError(f, '"data" runs in the built-in simulator only (backend = '
+                                  '"builtin")')
+            head_v = float(speeds[0])
+        for i, p in enumerate(self.perturbations):
+            if not isinstance(p, Recorded):
+                continue
+            if self.backend != "builtin":
+                raise ConfigError(f"scenario.perturbations[{i}].type", 'a recorded trajectory '
+                                  'runs in the built-in simulator only (backend = "builtin")')
+            if abs(p.speeds[0] - head_v) > 1e-9 * max(1.0, head_v):
+                raise ConfigError(f"scenario.perturbations[{i}].column", f"the head starts at "
+                                  f"{head_v:g} m/s but the recording starts at {p.speeds[0]:g} "
+                                  'm/s: set [scenario] initial = "data" or [system] v_star = '
+                                  f"{p.speeds[0]:g}")
 
     def _hdv_base(self) -> dict[str, np.ndarray] | None:
         """Every model parameter's value of every HDV before the draws (nominal, or the
@@ -365,6 +410,8 @@ class Scenario(ValueEq, Record):
                     )
                 out["hdv_values"][key] = arr[hdv].tolist()
         out["perturbations"] = [p.toml_table() for p in self.perturbations]
+        if self.initial_state is not None:
+            out["initial"] = "data"
         if self.backend != "builtin":
             out["backend"] = self.backend
             out["sumo"] = self.sumo.toml_table()

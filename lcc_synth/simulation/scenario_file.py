@@ -17,7 +17,9 @@ from lcc_synth.schema import declared
 from lcc_synth.simulation.checks import check_timing
 from lcc_synth.simulation.perturbations import (
     Perturbation,
+    Recorded,
     perturbation_from_table,
+    recorded_file,
     vehicle_column,
 )
 from lcc_synth.simulation.scenario import MODEL_PARAMS, V2V, Scenario
@@ -169,9 +171,13 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
         perturbation_from_table(p, f"{f}.perturbations[{i}]", m, n, base_dir, where)
         for i, p in enumerate(perts)
     )
+    initial_state = None
+    if S.get(sc, "initial", f) == "data":
+        initial_state = _initial_from_data(perts, perturbations, system, nv, base_dir)
     return scenario_for(
         system,
         perturbations,
+        initial_state=initial_state,
         dt=S.get(sc, "dt", f),
         duration=S.get(sc, "duration", f),
         t_start=S.get(sc, "t_start", f),
@@ -196,6 +202,33 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
         accel_noise_uniform=S.get(sc, "accel_noise_uniform", f),
         cav_lag=S.get(sc, "cav_lag", f),
     )
+
+
+def _initial_from_data(
+    tables: list, perturbations: Sequence[Perturbation], system: System, nv: int,
+    base_dir: Path | None,
+) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """``[scenario] initial = "data"``: speeds and spacings (headway - vehicle length) of every
+    vehicle at the first sample of the first recorded trajectory's file."""
+    f = "scenario.initial"
+    idx = [i for i, p in enumerate(perturbations) if isinstance(p, Recorded)]
+    if not idx:
+        raise ConfigError(f, '"data" takes the initial state from a recording: add a '
+                          '[[scenario.perturbations]] entry with type = "trajectory"')
+    length = system.platoon.vehicle_length if system.platoon is not None else 0.0
+    if system.platoon is None or system.platoon.ring or not length > 0:
+        raise ConfigError(f, '"data" needs [system] kind = "platoon" with vehicle_length > 0 '
+                          "(recorded headways are front to front: spacing = headway - "
+                          "vehicle_length)")
+    i = idx[0]
+    traj = recorded_file(tables[i], f"scenario.perturbations[{i}]", base_dir)
+    if traj.n_vehicles != nv:
+        raise ConfigError(f, f"{traj.path} holds {traj.n_vehicles} vehicles; the string has "
+                          f"{nv} (the head and [system] size = {nv - 1}): one file vehicle per "
+                          "vehicle, file vehicle k in column k")
+    gaps = traj.headway[:, 0] - length
+    gaps[0] = 0.0  # the head follows no one
+    return tuple(float(x) for x in gaps), tuple(float(x) for x in traj.v[:, 0])
 
 
 def nominal_scenario(system: System):
