@@ -172,15 +172,19 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
 
     from lcc_synth.errors import FileError
     from lcc_synth.experiments.comparison import applies, gamma_curves, run_suite
+    from lcc_synth.experiments.suite_context import scenario_context
     from lcc_synth.recording import (
+        entity_name,
         open_recording,
         record_gains,
         record_gamma,
         record_provenance,
         record_simulation,
+        record_text,
         set_status,
         written_path,
     )
+    from lcc_synth.recording.context import context_markdown
     from lcc_synth.synthesis.gains_file import gains_document
 
     ctrl_names = list(suite.controllers)
@@ -203,6 +207,9 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
         with recording as rec:
             if rec is not None:
                 record_provenance(rec, prov)
+                for sname in suite.scenarios:  # each tab's context document, as simulate's
+                    record_text(rec, f"/{entity_name(sname)}/context",
+                                context_markdown(scenario_context(suite, sname)))  # fmt: skip
 
             def on_result(sname, cname, res, row, ctrl):
                 if rec is None:

@@ -2,7 +2,8 @@
 needs it without the problem file at hand.
 
 A recording of ``lcc-synth simulate`` holds, at ``/<scenario>/context``, one markdown document
-(:func:`context_markdown`):
+(:func:`context_markdown`), and so does every scenario tab of ``lcc-synth run``'s
+(:func:`lcc_synth.experiments.suite_context.scenario_context`):
 
 * the problem's name and ``description``;
 * the layout (the paper's ``m`` HDVs ahead and ``n`` behind the CAV, or the platoon / ring with
@@ -64,8 +65,10 @@ def _layout(scenario: Any) -> str:
 
 def context_markdown(spec: Any) -> str:
     """The context document of ``spec`` (a
-    :class:`~lcc_synth.experiments.spec.SimulationSpec`: ``name``, ``description``,
-    ``scenario``, ``metrics``, ``controllers``, ``to_toml()``)."""
+    :class:`~lcc_synth.experiments.spec.SimulationSpec`, or one scenario of a suite,
+    :class:`~lcc_synth.experiments.suite_context.ScenarioContext`: ``name``,
+    ``description``, ``scenario``, ``metrics``, ``controllers`` (objects or tables),
+    ``to_toml()``)."""
     sc, cfg = spec.scenario, spec.metrics
     lines = [f"# {spec.name}: context", ""]
     description = str(getattr(spec, "description", "") or "").strip()
@@ -116,7 +119,7 @@ def context_markdown(spec: Any) -> str:
         lines.append(f"- V2V: {_pairs(nonzero) if nonzero else ideal}")
     lines += ["", "## controllers", ""]
     for name, ctrl in dict(spec.controllers).items():
-        table = getattr(ctrl, "source_table", None)
+        table = ctrl if isinstance(ctrl, Mapping) else getattr(ctrl, "source_table", None)
         if not table and callable(getattr(ctrl, "toml_table", None)):
             try:
                 table = ctrl.toml_table()
