@@ -91,6 +91,7 @@ def test_every_scenario_tab_has_its_context_document(recorded, tmp_path):
         assert f"Scenario `{sname}` of the suite `tiny_suite`, on its layout `tail2`" in text
         p = ss.scenario.perturbations[0]
         assert f"- {type(p).__name__}: " in text and f"start = {p.start:g}" in text
+        assert f"- first event at t = {p.start:g} s\n" in text  # no claim on the time panel
         w = ss.metrics.window
         assert f"window {w[0]:g} s ≤ t ≤ {w[1]:g} s" in text
         listed = [ln[2:].split(":")[0] for ln in text.split("## controllers")[1].split("##")[0]

@@ -209,7 +209,8 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
                 record_provenance(rec, prov)
                 for sname in suite.scenarios:  # each tab's context document, as simulate's
                     record_text(rec, f"/{entity_name(sname)}/context",
-                                context_markdown(scenario_context(suite, sname)))  # fmt: skip
+                                context_markdown(scenario_context(suite, sname),
+                                                 time_panel=False))  # fmt: skip
 
             def on_result(sname, cname, res, row, ctrl):
                 if rec is None:

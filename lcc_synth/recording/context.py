@@ -63,12 +63,14 @@ def _layout(scenario: Any) -> str:
             f"a platoon of {size} vehicles behind the head") + f", CAVs at positions {cavs}"
 
 
-def context_markdown(spec: Any) -> str:
+def context_markdown(spec: Any, time_panel: bool = True) -> str:
     """The context document of ``spec`` (a
     :class:`~lcc_synth.experiments.spec.SimulationSpec`, or one scenario of a suite,
     :class:`~lcc_synth.experiments.suite_context.ScenarioContext`: ``name``,
     ``description``, ``scenario``, ``metrics``, ``controllers`` (objects or tables),
-    ``to_toml()``)."""
+    ``to_toml()``). ``time_panel``: the recording's time panel opens at the first event
+    (``simulate``'s; ``run``'s one panel serves every scenario, so its documents do not say
+    so)."""
     sc, cfg = spec.scenario, spec.metrics
     lines = [f"# {spec.name}: context", ""]
     description = str(getattr(spec, "description", "") or "").strip()
@@ -92,7 +94,8 @@ def context_markdown(spec: Any) -> str:
         lines.append("- none (the run starts from the equilibrium, or its noise only)")
     t0 = first_event(sc)
     if t0 is not None:
-        lines.append(f"- first event at t = {t0:g} s (the time panel opens there)")
+        lines.append(f"- first event at t = {t0:g} s"
+                     + (" (the time panel opens there)" if time_panel else ""))
     baseline = getattr(cfg, "baseline", None)
     lines += [
         "", "## metrics", "",
