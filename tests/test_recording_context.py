@@ -281,3 +281,31 @@ def test_flags_are_drawn_as_steps_never_averaged(head_brake):
                            "interpolation_mode": [rc.InterpolationMode.StepAfter.value]}, e
         else:
             assert got == {"aggregation_policy": None, "interpolation_mode": None}, e
+
+
+def time_axes(path):
+    """``{space_origin: (link, view_range)}`` of every time-series view of the saved
+    blueprint (the final one: the views are sent as opened and at the end)."""
+    values = _blueprint_values(path)
+    out = {}
+    for entity, fields in values.items():
+        if fields.get("class_identifier") == ["TimeSeries"]:
+            axis = values.get(f"{entity}/TimeAxis", {})
+            out[fields["space_origin"][0]] = (axis.get("link"), axis.get("view_range"))
+    return out
+
+
+def test_every_time_plot_opens_on_the_whole_run_on_its_own_axis(head_brake):
+    """Linked axes (``LinkToGlobal``) ignore a view's range in Rerun 0.41 and open a run longer
+    than 60 s on the time cursor +- 30 s: every plot has its own axis on the whole run."""
+    import rerun.blueprint.components as bpc
+
+    problem = tomllib.loads((PROBLEMS / "mpc_head_brake.toml").read_text())
+    sc = problem["scenario"]
+    t0 = sc.get("t_start", 0.0)
+    whole = [{"start": round(t0 * 1e9), "end": round((t0 + sc["duration"] - sc["dt"]) * 1e9)}]
+    axes = time_axes(head_brake)
+    assert len(axes) >= 4 * 3 + 1 + 3 + 1  # 4 controllers x 3 rows, u_cmd, MPC predictions
+    for origin, (link, view_range) in axes.items():
+        assert link == [bpc.LinkAxis.Independent.value], origin
+        assert view_range == whole, origin

@@ -106,3 +106,19 @@ def test_every_scenario_tab_has_its_context_document(recorded, tmp_path):
         assert again.scenarios[sname].metrics == ss.metrics
         assert tomllib.loads(toml)["name"] == "tiny_suite"
     assert texts["/brake/context"].split("\n")[2] == "the HDV behind brakes"  # the title
+
+
+def test_every_tab_plots_its_own_run(recorded):
+    """Each scenario's time plots open on that scenario's run (8 s and 6 s here), not on the
+    recording's longest timeline, each on its own axis."""
+    import rerun.blueprint.components as bpc
+    from test_recording_context import time_axes
+
+    _, rrd = recorded
+    axes = time_axes(rrd)
+    ends = {"brake": 7.99, "sine": 5.99}  # duration - dt: the last sample
+    assert {o.split("/")[1] for o in axes} == set(ends)
+    for origin, (link, view_range) in axes.items():
+        end = ends[origin.split("/")[1]]
+        assert link == [bpc.LinkAxis.Independent.value], origin
+        assert view_range == [{"start": 0, "end": round(end * 1e9)}], origin

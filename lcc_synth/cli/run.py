@@ -68,7 +68,9 @@ def _blueprint(suite, controllers, gamma_cases, design_names):
     for sname, ss in suite.scenarios.items():  # the controllers that run in this scenario
         ctrls = [c for c in controllers if applies(suite.controllers[c], ss.layout, sname)]
         mpc = [c for c in ctrls if suite.controllers[c].get("type") == "mpc"]
-        box = simulation_blueprint(sname, ctrls or controllers, mpc).root_container
+        t = ss.scenario.times()  # each tab's plots open on its own run (not the longest)
+        box = simulation_blueprint(sname, ctrls or controllers, mpc,
+                                   {"time": (float(t[0]), float(t[-1]))}).root_container
         box.name = ss.title or sname
         tabs.append(box)
     if gamma_cases:

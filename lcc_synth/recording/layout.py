@@ -130,20 +130,29 @@ def merge_ranges(*ranges: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _time_views(rrb, ranges: Mapping[str, Any]) -> dict[str, Any]:
-    """Keyword arguments of every time-series view: the whole run on the x axis (linked across
-    views, so zooming one zooms all). The whole timeline is queried by default (Rerun's
+    """Keyword arguments of every time-series view: the whole run on the x axis.
+
+    With the run's ``"time"`` span the x axis is that span and **independent**: Rerun 0.41
+    ignores a view's own range when its axis is linked (``LinkToGlobal`` reads one shared,
+    hidden range instead, which no blueprint API sets), and that shared range falls back to the
+    data when it spans at most 60 s and to the time cursor +- 30 s beyond: Table II's 100 s run
+    opened on -30 .. +30 s, its brake and the whole recovery off screen. Zooming one plot
+    therefore no longer zooms the others (the hover cursor is still shared; a double click
+    returns a plot to the whole run). Without a span (nothing known yet) the axes stay linked
+    on the viewer's default. The whole timeline is queried by default (Rerun's
     ``VisibleTimeRanges``: "for time series views, the default is to show the entire
     timeline"), so no visible time range is saved (3.3 kB per view in the file)."""
     t = ranges.get("time")
-    if t is not None:
-        start = rrb.TimeRangeBoundary.absolute(seconds=float(t[0]))
-        end = rrb.TimeRangeBoundary.absolute(seconds=float(t[1]))
-    else:
-        start = end = rrb.TimeRangeBoundary.infinite()
+    if t is None:
+        infinite = rrb.TimeRangeBoundary.infinite()
+        return {"axis_x": rrb.TimeAxis(view_range=rrb.TimeRange(start=infinite, end=infinite),
+                                       link=rrb.components.LinkAxis.LinkToGlobal)}  # fmt: skip
+    start = rrb.TimeRangeBoundary.absolute(seconds=float(t[0]))
+    end = rrb.TimeRangeBoundary.absolute(seconds=float(t[1]))
     return {
         "axis_x": rrb.TimeAxis(
             view_range=rrb.TimeRange(start=start, end=end),
-            link=rrb.components.LinkAxis.LinkToGlobal,
+            link=rrb.components.LinkAxis.Independent,
         ),
     }
 
@@ -190,9 +199,10 @@ def simulation_blueprint(
     MPC controllers named in ``mpc``, tabs with their solve times / status and their predicted
     velocities.
 
-    Every time-series view opens on the whole run (x axes linked). ``ranges``
-    (:func:`plot_ranges`) fixes the opening time span and y ranges; without it the x axis spans
-    the recording and y fits the data. The per-vehicle plots hide their legends (12 series
+    Every time-series view opens on the whole run. ``ranges`` (:func:`plot_ranges`) fixes the
+    opening time span (each view's own x axis: :func:`_time_views`) and y ranges; without it
+    the x axes are linked on the viewer's default (the data up to 60 s long, else the cursor
+    +- 30 s) and y fits the data. The per-vehicle plots hide their legends (12 series
     would cover the curves; hovering names a curve); a one-line key above them
     (``/<scenario>/key``, :data:`~lcc_synth.recording.simulation.KEY_TEXT`) says the colours
     and the axes. The time panel opens paused on the first event (:func:`time_panel`).
