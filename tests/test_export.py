@@ -38,7 +38,8 @@ EPS = np.finfo(float).eps
 
 def _layouts():
     brake = [lcc.Brake(vehicle=1, start=3.0, duration=1.0, decel=-4.0)]
-    string = lcc.scenario(lcc.system("lcc", m=2, n=3), brake, duration=12.0)
+    head = [lcc.Brake(vehicle="head", start=3.0, duration=1.0, decel=-4.0)]
+    string = lcc.scenario(lcc.system("lcc", m=2, n=3), head, duration=12.0)
     platoon = lcc.scenario(lcc.system(size=6, cavs=[2, 5], vehicle_length=4.5), brake,
                            duration=12.0)  # fmt: skip
     ring = lcc.scenario(lcc.ring(8, cavs=[8], vehicle_length=5.0), brake, duration=40.0)
