@@ -205,3 +205,107 @@ def test_two_recordings_side_by_side(head_brake, tmp_path):
                    cwd=tmp_path).returncode == 0  # fmt: skip
     with pytest.raises(ConfigError, match="no simulation run in common"):
         side_by_side(head_brake, table2, tmp_path / "none.rrd", rerun_binary())
+
+
+def _blueprint_values(path):
+    """``{entity: {field: latest value}}`` of the saved blueprint."""
+    reader = RrdReader(path)
+    out: dict = {}
+    for bp in reader.blueprints():
+        for ch in reader.stream(store=bp):
+            rb = ch.to_record_batch()
+            entity = (rb.schema.metadata or {}).get(b"rerun:entity_path", b"").decode()
+            fields = out.setdefault(entity, {})
+            for name in rb.schema.names:
+                if ":" in name:
+                    fields[name.split(":", 1)[1]] = rb.column(name).to_pylist()[-1]
+    return out
+
+
+def _series_names(path, prefixes):
+    """The ``SeriesLines`` names of every entity under one of ``prefixes``."""
+    names = set()
+    for ch in RrdReader(path).stream():
+        rb = ch.to_record_batch()
+        entity = (rb.schema.metadata or {}).get(b"rerun:entity_path", b"").decode()
+        if any(entity.startswith(p) for p in prefixes) and "SeriesLines:names" in rb.schema.names:
+            names.update(rb.column("SeriesLines:names").to_pylist()[0])
+    return names
+
+
+#: Legend rows the viewer showed in the command view at 1920x1080 when that view had 1/5 of the
+#: right column's height (web viewer, ``benchmarks/screenshot_review.py``): 4 (of 8 entries).
+_ROWS_AT_ONE_FIFTH = 4
+
+
+def test_the_command_legend_has_room_for_every_controller(head_brake):
+    """One legend entry per controller's command and one shared AEB entry (the viewer's legend
+    has one entry per distinct series name and cuts what does not fit), in a view tall enough
+    for them by the measured rows per height."""
+    from lcc_synth.recording.simulation import AEB_SERIES
+
+    values = _blueprint_values(head_brake)
+    views = [e for e, d in values.items()
+             if d.get("display_name") == ["CAV command u_cmd (m/s²) and AEB"]]  # fmt: skip
+    assert views  # the blueprint is saved as opened and as final: both are checked
+    problem = tomllib.loads((PROBLEMS / "mpc_head_brake.toml").read_text())
+    for view in views:
+        query = values[f"{view}/ViewContents"]["query"]
+        names = _series_names(head_brake, [q[2:].removesuffix("**") for q in query])
+        assert names == {f"{c} u_cmd" for c in problem["controllers"]} | {AEB_SERIES}
+        ref = "view/" + view.split("/")[-1]
+        (box,) = [d for d in values.values() if ref in (d.get("contents") or [])]
+        shares = box["row_shares"]
+        share = shares[box["contents"].index(ref)] / sum(shares)
+        assert len(names) <= int(_ROWS_AT_ONE_FIFTH * share / 0.2)
+
+
+def test_flags_are_drawn_as_steps_never_averaged(head_brake):
+    """The AEB flags and the MPC status are piecewise constant: the viewer draws them as steps
+    and never averages their points (an averaged chattering flag took values it never has)."""
+    import rerun.components as rc
+
+    styled = {}
+    for ch in RrdReader(head_brake).stream():
+        rb = ch.to_record_batch()
+        entity = (rb.schema.metadata or {}).get(b"rerun:entity_path", b"").decode()
+        if "SeriesLines:names" in rb.schema.names:
+            get = {n: rb.column(f"SeriesLines:{n}").to_pylist()[0] if f"SeriesLines:{n}" in
+                   rb.schema.names else None for n in ("aggregation_policy", "interpolation_mode")}
+            styled[entity] = get
+    flags = {e for e in styled if e.endswith(("/cav/aeb_active", "/mpc/status"))}
+    assert len(flags) == 5
+    for e, got in styled.items():
+        if e in flags:
+            assert got == {"aggregation_policy": [rc.AggregationPolicy.Off.value],
+                           "interpolation_mode": [rc.InterpolationMode.StepAfter.value]}, e
+        else:
+            assert got == {"aggregation_policy": None, "interpolation_mode": None}, e
+
+
+def time_axes(path):
+    """``{space_origin: (link, view_range)}`` of every time-series view of the saved
+    blueprint (the final one: the views are sent as opened and at the end)."""
+    values = _blueprint_values(path)
+    out = {}
+    for entity, fields in values.items():
+        if fields.get("class_identifier") == ["TimeSeries"]:
+            axis = values.get(f"{entity}/TimeAxis", {})
+            out[fields["space_origin"][0]] = (axis.get("link"), axis.get("view_range"))
+    return out
+
+
+def test_every_time_plot_opens_on_the_whole_run_on_its_own_axis(head_brake):
+    """Linked axes (``LinkToGlobal``) ignore a view's range in Rerun 0.41 and open a run longer
+    than 60 s on the time cursor +- 30 s: every plot has its own axis on the whole run."""
+    import rerun.blueprint.components as bpc
+
+    problem = tomllib.loads((PROBLEMS / "mpc_head_brake.toml").read_text())
+    sc = problem["scenario"]
+    t0 = sc.get("t_start", 0.0)
+    whole = [{"start": round(t0 * 1e9), "end": round((t0 + sc["duration"] - sc["dt"]) * 1e9)}]
+    axes = time_axes(head_brake)
+    assert len(axes) >= 4 * 3 + 1 + 3 + 1  # 4 controllers x 3 rows, u_cmd, MPC predictions
+    for origin, (link, view_range) in axes.items():
+        assert link == [bpc.LinkAxis.Independent.value], origin
+        assert view_range == whole, origin

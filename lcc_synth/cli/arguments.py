@@ -98,3 +98,41 @@ def add_example_out(parser: argparse.ArgumentParser) -> None:
         "--out", metavar="DIR", default="results",
         help="directory the outputs are written under (default results)",
     )  # fmt: skip
+
+
+def add_export_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--export DIR`` and ``--export-format`` of the commands that simulate
+    (:mod:`lcc_synth.simulation.export`: every run's trajectories, one file per scenario and
+    controller)."""
+    parser.add_argument(
+        "--export", metavar="DIR", default=None,
+        help="write every run's trajectories (time, position, velocity, acceleration, spacing "
+        "of every vehicle, the CAV commands) to DIR, one file per scenario and controller",
+    )  # fmt: skip
+    parser.add_argument(
+        "--export-format", choices=("csv", "parquet"), default="csv",
+        help="file format of --export (default csv, exact floats; parquet needs pyarrow)",
+    )  # fmt: skip
+
+
+def check_export(args: argparse.Namespace, size: float, runs: int) -> None:
+    """Before any simulation: ``--export DIR`` can take ``runs`` files of ``size`` bytes in
+    all (writable, with room: :func:`lcc_synth.simulation.export.export_bytes` estimates it)
+    and ``--export-format parquet`` has pyarrow. Without ``--export``, only that
+    ``--export-format`` was not given alone.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``--export`` (the directory) or ``--export-format``.
+    """
+    from lcc_synth.errors import ConfigError
+    from lcc_synth.outputs import check_directory
+    from lcc_synth.simulation.export import check_format
+
+    if getattr(args, "export", None) is None:
+        if getattr(args, "export_format", "csv") != "csv":
+            raise ConfigError("--export-format", "applies with --export DIR only")
+        return
+    check_format(args.export_format)
+    check_directory(args.export, "--export", size, f"trajectories of {runs} run(s)")

@@ -81,7 +81,9 @@ def _blueprint(suite, controllers, gamma_cases, design_names):
     for sname, ss in suite.scenarios.items():  # the controllers that run in this scenario
         ctrls = [c for c in controllers if applies(suite.controllers[c], ss.layout, sname)]
         mpc = [c for c in ctrls if suite.controllers[c].get("type") == "mpc"]
-        box = simulation_blueprint(sname, ctrls or controllers, mpc).root_container
+        t = ss.scenario.times()  # each tab's plots open on its own run (not the longest)
+        box = simulation_blueprint(sname, ctrls or controllers, mpc,
+                                   {"time": (float(t[0]), float(t[-1]))}).root_container
         box.name = ss.title or sname
         tabs.append(box)
     if gamma_cases:
@@ -194,15 +196,19 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
 
     from lcc_synth.errors import FileError
     from lcc_synth.experiments.comparison import applies, gamma_curves, run_suite
+    from lcc_synth.experiments.suite_context import scenario_context
     from lcc_synth.recording import (
+        entity_name,
         open_recording,
         record_gains,
         record_gamma,
         record_provenance,
         record_simulation,
+        record_text,
         set_status,
         written_path,
     )
+    from lcc_synth.recording.context import context_markdown
     from lcc_synth.resources import progress_bar
     from lcc_synth.synthesis.gains_file import gains_document
 
@@ -226,6 +232,10 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
         with recording as rec:
             if rec is not None:
                 record_provenance(rec, prov)
+                for sname in suite.scenarios:  # each tab's context document, as simulate's
+                    record_text(rec, f"/{entity_name(sname)}/context",
+                                context_markdown(scenario_context(suite, sname),
+                                                 time_panel=False))  # fmt: skip
 
             def on_result(sname, cname, res, row, ctrl):
                 if rec is None:

@@ -1,8 +1,9 @@
-"""``lcc-synth simulate PROBLEM.toml [--json] [--seeds N]``.
+"""``lcc-synth simulate PROBLEM.toml [--json] [--seeds N] [--export DIR]``.
 
 Runs every controller of the problem file on its scenario (the same random draws for all
 controllers) and prints AAVE, fuel, safety metrics and, when ``[metrics] baseline`` names a
 controller, the reductions versus that controller (paired per seed: mean and spread).
+``--export DIR`` writes every run's trajectories (:mod:`lcc_synth.simulation.export`).
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import math
 import sys
 from typing import Any
 
-from lcc_synth.cli.arguments import add_problem_arguments, add_recording
+from lcc_synth.cli.arguments import add_export_arguments, add_problem_arguments, add_recording
 
 HELP = "Simulate every controller of a problem file and report AAVE, fuel and safety metrics."
 
@@ -34,6 +35,7 @@ def add_arguments(parser) -> None:
         "each as <controller>_seed<k>, one tab per seed in the viewer)",
     )
     add_recording(parser)
+    add_export_arguments(parser)
 
 
 #: Collided draws listed by name per controller (the rest are counted).
@@ -46,15 +48,19 @@ MEMORY_BUDGET = 1.5e9
 def load(args):
     """The :class:`~lcc_synth.experiments.spec.SimulationSpec` of ``args.problem``
     (+ ``--seeds``)."""
+    from lcc_synth.cli.arguments import check_export
     from lcc_synth.errors import ConfigError
     from lcc_synth.experiments.spec import load_spec
     from lcc_synth.simulation.backends import check_backend
+    from lcc_synth.simulation.export import export_bytes
 
     if args.seeds is not None and args.seeds < 1:
         raise ConfigError("--seeds", f"must be >= 1, got {args.seeds}")
     spec = load_spec(args.problem, seeds=args.seeds, keep_going=True)
     check_backend(spec.scenario)  # SUMO missing: before any run
     check_simulation(args, spec)
+    sc, runs = spec.scenario, spec.scenario.batch * len(spec.controllers)
+    check_export(args, export_bytes(sc, runs), runs)
     return spec
 
 
@@ -438,9 +444,12 @@ def run(args) -> int:
     from lcc_synth.errors import ConfigError, FileError
     from lcc_synth.metrics import concatenate, per_scenario
     from lcc_synth.recording import SimulationRecorder
+    from lcc_synth.simulation.export import write_trajectories
 
     rep: dict[str, Any] | None = None
     rec_error: FileError | None = None
+    export_error: FileError | None = None
+    exported: list = []
     try:
         with ExitStack() as stack:  # the recording is finalised however the run ends
             recorder = SimulationRecorder(args, stack)
@@ -462,6 +471,14 @@ def run(args) -> int:
             info: dict[str, tuple] = {}
             for chunk, name, result in iter_results(spec):
                 recorder(spec, name, result, offset=offsets[chunk])  # the selected seeds
+                if args.export is not None and export_error is None:
+                    try:
+                        exported += write_trajectories(
+                            result, args.export, spec.name, prov, args.export_format,
+                            first_index=offsets[chunk] if spec.scenario.batch > 1 else None,
+                        )  # fmt: skip
+                    except FileError as err:  # the results still print; exit 1
+                        export_error = err
                 parts[name].append(per_scenario(result, spec.metrics))
                 crashes[name] += result.collision_report()[: _MAX_LISTED - len(crashes[name])]
                 wall = info[name][2] + result.wall_time if name in info else result.wall_time
@@ -480,6 +497,8 @@ def run(args) -> int:
     if recorder.written is not None:
         path = recorder.written
         print(f"recording: {path} (lcc-synth review {path})", file=sys.stderr)
+    if exported:
+        print(f"trajectories: {len(exported)} file(s) in {args.export}", file=sys.stderr)
     if args.json:
         print(json.dumps({"results": _clean(rep), "provenance": prov}))
         for line in collision_lines(rep, crashes):
@@ -488,7 +507,7 @@ def run(args) -> int:
         print_table(spec, rep, collisions=crashes)
     for line in failures:
         print(f"lcc-synth simulate: {line}", file=sys.stderr)
-    if rec_error is not None:
-        print(f"lcc-synth simulate: error: {rec_error}", file=sys.stderr)
-        return 1
-    return 1 if failures else 0
+    errors = [e for e in (rec_error, export_error) if e is not None]
+    for err in errors:
+        print(f"lcc-synth simulate: error: {err}", file=sys.stderr)
+    return 1 if failures or errors else 0

@@ -32,6 +32,7 @@ Simulation (:func:`record_simulation`), under ``/<scenario>/<controller>/``:
 ``acceleration``       ``Scalars``, one series per vehicle (applied acceleration)
 ``cav/u_cmd``          ``Scalars``, the CAV command before limits and emergency braking
 ``cav/aeb_active``     ``Scalars``, 1 while the CAV's emergency braking is active, else 0
+                       (drawn as steps; every controller's series named ``AEB_SERIES``)
 ``road``               ``Points2D``, every vehicle over time: x = position relative to the CAV
                        (m), y = ``ROAD_Y_SCALE`` x velocity error (m/s), as in the paper's Fig. 11;
                        CAV blue, HDVs grey, head vehicle yellow; labels = vehicle names
@@ -48,6 +49,8 @@ Simulation (:func:`record_simulation`), under ``/<scenario>/<controller>/``:
 =====================  =========================================================================
 
 ``/<scenario>/metrics`` (markdown) compares every controller recorded so far,
+``/<scenario>/context`` (markdown, ``simulate`` and every scenario of ``run``:
+:mod:`lcc_synth.recording.context`) says what was run,
 ``/<scenario>/status`` says whether the run completed, was interrupted (and by what), failed,
 or is partial (some controllers failed), and ``/provenance`` (markdown) holds the run's
 provenance (:mod:`lcc_synth.provenance`: package version, problem file and SHA-256, backend,

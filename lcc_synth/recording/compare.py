@@ -9,7 +9,8 @@ therefore writes one recording that holds both:
   (``rerun.chunk``: ``Chunk.with_entity_path``, the data copied as they are, not re-simulated);
 * a blueprint with one row per quantity of every run the two have in common (the same
   ``/<scenario>/<controller>``): A's plot on the left, B's on the right, each on the whole
-  run (the union of the two time ranges) with the x axes linked (zooming one zooms all),
+  run (the union of the two time ranges; each plot's own x axis, as
+  :func:`lcc_synth.recording.layout.simulation_blueprint`'s),
   then the scenarios' metrics tables side by side; the time panel paused on the simulated
   time (:func:`lcc_synth.recording.layout.time_panel`);
 * the merge is ``rerun rrd merge`` of the data and the blueprint (``.rbl``).
@@ -61,7 +62,7 @@ def _blueprint(labels: tuple[str, str], runs: list[tuple[str, str]], scenarios: 
     from lcc_synth.recording.layout import _time_views, time_panel
 
     la, lb = labels
-    link = _time_views(rrb, {"time": span} if span else {})  # the whole run, x axes linked
+    link = _time_views(rrb, {"time": span} if span else {})  # the whole run
     tabs = []
     for s, c in runs:
         rows = [

@@ -2,7 +2,8 @@
 needs it without the problem file at hand.
 
 A recording of ``lcc-synth simulate`` holds, at ``/<scenario>/context``, one markdown document
-(:func:`context_markdown`):
+(:func:`context_markdown`), and so does every scenario tab of ``lcc-synth run``'s
+(:func:`lcc_synth.experiments.suite_context.scenario_context`):
 
 * the problem's name and ``description``;
 * the layout (the paper's ``m`` HDVs ahead and ``n`` behind the CAV, or the platoon / ring with
@@ -62,10 +63,14 @@ def _layout(scenario: Any) -> str:
             f"a platoon of {size} vehicles behind the head") + f", CAVs at positions {cavs}"
 
 
-def context_markdown(spec: Any) -> str:
+def context_markdown(spec: Any, time_panel: bool = True) -> str:
     """The context document of ``spec`` (a
-    :class:`~lcc_synth.experiments.spec.SimulationSpec`: ``name``, ``description``,
-    ``scenario``, ``metrics``, ``controllers``, ``to_toml()``)."""
+    :class:`~lcc_synth.experiments.spec.SimulationSpec`, or one scenario of a suite,
+    :class:`~lcc_synth.experiments.suite_context.ScenarioContext`: ``name``,
+    ``description``, ``scenario``, ``metrics``, ``controllers`` (objects or tables),
+    ``to_toml()``). ``time_panel``: the recording's time panel opens at the first event
+    (``simulate``'s; ``run``'s one panel serves every scenario, so its documents do not say
+    so)."""
     sc, cfg = spec.scenario, spec.metrics
     lines = [f"# {spec.name}: context", ""]
     description = str(getattr(spec, "description", "") or "").strip()
@@ -89,7 +94,8 @@ def context_markdown(spec: Any) -> str:
         lines.append("- none (the run starts from the equilibrium, or its noise only)")
     t0 = first_event(sc)
     if t0 is not None:
-        lines.append(f"- first event at t = {t0:g} s (the time panel opens there)")
+        lines.append(f"- first event at t = {t0:g} s"
+                     + (" (the time panel opens there)" if time_panel else ""))
     baseline = getattr(cfg, "baseline", None)
     lines += [
         "", "## metrics", "",
@@ -116,7 +122,7 @@ def context_markdown(spec: Any) -> str:
         lines.append(f"- V2V: {_pairs(nonzero) if nonzero else ideal}")
     lines += ["", "## controllers", ""]
     for name, ctrl in dict(spec.controllers).items():
-        table = getattr(ctrl, "source_table", None)
+        table = ctrl if isinstance(ctrl, Mapping) else getattr(ctrl, "source_table", None)
         if not table and callable(getattr(ctrl, "toml_table", None)):
             try:
                 table = ctrl.toml_table()

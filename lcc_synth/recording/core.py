@@ -314,11 +314,16 @@ def _rows(rr: Any, descriptor: Any, flat: Any, rows: int, per_row: int):
 
 def _send_series(
     rec: Any, entity: str, t: Any, values: np.ndarray, names, colors, widths=None,
-    points: bool = False,
+    points: bool = False, flag: bool = False,
 ) -> None:  # fmt: skip
     """One entity with ``values.shape[1]`` scalar series (one ``send_columns`` call); ``t`` is
     the times (s) or a ready ``TimeColumn``; ``widths`` the line widths (default 1.5), or with
-    ``points`` the marker sizes (default 2: a scatter plot, for values that are not a signal)."""
+    ``points`` the marker sizes (default 2: a scatter plot, for values that are not a signal).
+
+    ``flag``: a piecewise-constant series (a 0/1 flag, a status code) recorded at its
+    breakpoints: drawn as steps and never averaged by the viewer. Its default aggregation
+    (``Average`` of the points within a pixel) drew a chattering AEB flag as a slope rising
+    from 0 at t = 0 to 0.6 at 27 s, values the flag never takes."""
     import pyarrow as pa
 
     rr = _rr()
@@ -331,9 +336,10 @@ def _send_series(
             marker_sizes=[2.0] * k if widths is None else [float(w) for w in widths],
         )  # fmt: skip
     else:
+        step = {"aggregation_policy": "Off", "interpolation_mode": "StepAfter"} if flag else {}
         style = rr.SeriesLines(
             names=list(names), colors=colors,
-            widths=[1.5] * k if widths is None else [float(w) for w in widths],
+            widths=[1.5] * k if widths is None else [float(w) for w in widths], **step,
         )  # fmt: skip
     rec.log(entity, style, static=True)
     flat = pa.array(values.reshape(-1), type=pa.float64())  # NaN stays NaN (a gap)

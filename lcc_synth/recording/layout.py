@@ -1,4 +1,30 @@
-"""Default layouts (Rerun blueprints) saved in the recordings."""
+"""Default layouts (Rerun blueprints) saved in the recordings.
+
+Legends
+-------
+The viewer's plot legend (Rerun 0.41) has one entry per distinct series name, sorted by name,
+and is not scrolled: entries beyond the view's height are cut. The per-vehicle plots hide theirs
+(12 series; the one-line key above them says the colours); the overlaid CAV command view lists
+one ``u_cmd`` per controller and one shared entry for every AEB flag
+(:data:`~lcc_synth.recording.simulation.AEB_SERIES`), and gets the height for them
+(:data:`RIGHT_SHARES`).
+
+Time-axis labels of narrow plots
+--------------------------------
+A time-series plot 290 px wide (four controllers side by side on a 1920 px screen) labels only
+``+0s`` for a 60 s run (``+0s`` and ``+1m`` for 100 s). The blueprint cannot change that: the
+viewer places the grid of a duration timeline itself (Rerun 0.41, ``re_view_time_series``,
+its nanosecond grid spacer): at most one "medium" grid line per 150 px of plot width, with
+spacings stepping 1 s, 10 s, 60 s, 10 min, and a line gets a label only when its neighbours are
+far enough apart on screen (10 s lines were labelled 123 px apart and not 48 px apart). A plot
+of a run of ``D`` seconds gets a label every 10 s from about ``15 D`` px wide (900 px for 60 s,
+1,500 px for 100 s). The blueprint API has no setting that reaches the grid: ``TimeAxis`` holds
+``link``, ``view_range`` and ``zoom_lock``; ``TimeSeriesView`` adds ``axis_y``,
+``plot_legend``, ``background``, ``interaction`` and ``time_ranges``; a narrower ``view_range``
+would hide part of the run. So the plots keep the whole run; the time panel below them (same
+``time`` timeline, the whole width) carries the seconds, hovering a curve shows its time, and a
+view maximised (its expand button) gets 10 s labels.
+"""
 
 from __future__ import annotations
 
@@ -12,6 +38,12 @@ from lcc_synth.recording.core import ROAD_Y_SCALE, _rrb, entity_name
 
 #: Quantities of the time-series rows of :func:`simulation_blueprint` (and ``"u_cmd"``).
 PLOT_QUANTITIES = ("velocity", "spacing", "acceleration")
+#: Heights of the right column of :func:`simulation_blueprint`: road views, the overlaid CAV
+#: command view, the reports. The command view's legend is not scrolled by the viewer (Rerun
+#: 0.41): entries beyond its height are cut. At 1920x1080 a share of 1 in 5 showed 4 legend
+#: rows; 1.5 in 5.5 holds the 5 of four controllers (one ``u_cmd`` each and the shared AEB
+#: entry, :data:`~lcc_synth.recording.simulation.AEB_SERIES`).
+RIGHT_SHARES = (2.0, 1.5, 2.0)
 
 
 
@@ -98,20 +130,29 @@ def merge_ranges(*ranges: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _time_views(rrb, ranges: Mapping[str, Any]) -> dict[str, Any]:
-    """Keyword arguments of every time-series view: the whole run on the x axis (linked across
-    views, so zooming one zooms all). The whole timeline is queried by default (Rerun's
+    """Keyword arguments of every time-series view: the whole run on the x axis.
+
+    With the run's ``"time"`` span the x axis is that span and **independent**: Rerun 0.41
+    ignores a view's own range when its axis is linked (``LinkToGlobal`` reads one shared,
+    hidden range instead, which no blueprint API sets), and that shared range falls back to the
+    data when it spans at most 60 s and to the time cursor +- 30 s beyond: Table II's 100 s run
+    opened on -30 .. +30 s, its brake and the whole recovery off screen. Zooming one plot
+    therefore no longer zooms the others (the hover cursor is still shared; a double click
+    returns a plot to the whole run). Without a span (nothing known yet) the axes stay linked
+    on the viewer's default. The whole timeline is queried by default (Rerun's
     ``VisibleTimeRanges``: "for time series views, the default is to show the entire
     timeline"), so no visible time range is saved (3.3 kB per view in the file)."""
     t = ranges.get("time")
-    if t is not None:
-        start = rrb.TimeRangeBoundary.absolute(seconds=float(t[0]))
-        end = rrb.TimeRangeBoundary.absolute(seconds=float(t[1]))
-    else:
-        start = end = rrb.TimeRangeBoundary.infinite()
+    if t is None:
+        infinite = rrb.TimeRangeBoundary.infinite()
+        return {"axis_x": rrb.TimeAxis(view_range=rrb.TimeRange(start=infinite, end=infinite),
+                                       link=rrb.components.LinkAxis.LinkToGlobal)}  # fmt: skip
+    start = rrb.TimeRangeBoundary.absolute(seconds=float(t[0]))
+    end = rrb.TimeRangeBoundary.absolute(seconds=float(t[1]))
     return {
         "axis_x": rrb.TimeAxis(
             view_range=rrb.TimeRange(start=start, end=end),
-            link=rrb.components.LinkAxis.LinkToGlobal,
+            link=rrb.components.LinkAxis.Independent,
         ),
     }
 
@@ -158,9 +199,10 @@ def simulation_blueprint(
     MPC controllers named in ``mpc``, tabs with their solve times / status and their predicted
     velocities.
 
-    Every time-series view opens on the whole run (x axes linked). ``ranges``
-    (:func:`plot_ranges`) fixes the opening time span and y ranges; without it the x axis spans
-    the recording and y fits the data. The per-vehicle plots hide their legends (12 series
+    Every time-series view opens on the whole run. ``ranges`` (:func:`plot_ranges`) fixes the
+    opening time span (each view's own x axis: :func:`_time_views`) and y ranges; without it
+    the x axes are linked on the viewer's default (the data up to 60 s long, else the cursor
+    +- 30 s) and y fits the data. The per-vehicle plots hide their legends (12 series
     would cover the curves; hovering names a curve); a one-line key above them
     (``/<scenario>/key``, :data:`~lcc_synth.recording.simulation.KEY_TEXT`) says the colours
     and the axes. The time panel opens paused on the first event (:func:`time_panel`).
@@ -257,7 +299,7 @@ def simulation_blueprint(
         ]
     tabs = [*first, *tabs]
     texts = rrb.Tabs(*tabs, name="reports")
-    right = rrb.Vertical(road, u_cmd, texts, row_shares=[2, 1, 2])
+    right = rrb.Vertical(road, u_cmd, texts, row_shares=list(RIGHT_SHARES))
     return rrb.Blueprint(
         rrb.Horizontal(plots, right, column_shares=[3, 2]),
         rrb.BlueprintPanel(state="collapsed"),

@@ -66,6 +66,11 @@ CAV_COLORS = ((31, 119, 180), (148, 103, 189), (44, 160, 44), (23, 190, 207), (2
 KEY_TEXT = ("**head** yellow · **CAV** blue, thick (more CAVs: purple, green, cyan) · **HDVs** "
             "grey · **AEB** red, nothing else · v velocity, s spacing, a acceleration · x axes: "
             "simulated time t (s) · road: x m from the CAV, up = faster")  # fmt: skip
+#: Name of every AEB flag series (``cav/aeb_active``, all red): the viewer's plot legend has
+#: one entry per distinct name, so the overlaid command view lists each controller's ``u_cmd``
+#: and this one entry (toggling it shows or hides every controller's flags), not two entries
+#: per controller, which overflowed the legend of a short view (4 of 8 shown for 4 controllers).
+AEB_SERIES = "AEB active (every controller)"
 #: Ring road view: radial offset per m/s of velocity error, as a fraction of the radius.
 RING_V_SCALE = 0.02
 
@@ -239,17 +244,17 @@ def record_simulation(
     u_all = np.asarray(result.u_cmd)[run].reshape(T, -1)
     idx, tcol = rows(u_all)
     if len(cavs) == 1:
-        u_names, u_colors, aeb_names = [f"{c} u_cmd"], [u_color], [f"{c} AEB active"]
+        u_names, u_colors = [f"{c} u_cmd"], [u_color]
     else:
         u_names = [f"{c} u_cmd {names[j]}" for j in cavs]
         u_colors = [tuple(int(x) for x in colors[j]) for j in cavs]
-        aeb_names = [f"{c} AEB active {names[j]}" for j in cavs]
+    aeb_names = [AEB_SERIES] * len(cavs)  # one legend entry for every controller's flags
     _send_series(rec, f"{base}/cav/u_cmd", tcol, u_all[idx], u_names, u_colors,
                  [2.0] * len(cavs))  # fmt: skip
     aeb = aeb_cav.astype(np.float64)
     idx, tcol = rows(aeb, "flag")
     red = [COLOR_ALARM] * len(cavs)
-    _send_series(rec, f"{base}/cav/aeb_active", tcol, aeb[idx], aeb_names, red)
+    _send_series(rec, f"{base}/cav/aeb_active", tcol, aeb[idx], aeb_names, red, flag=True)
 
     # Road view (Fig. 11): x = position relative to the CAV, y = scaled velocity error.
     pos = np.asarray(result.position)[run]
@@ -455,7 +460,8 @@ def record_mpc_history(
         colors = [_PALETTE[j % len(_PALETTE)] for j in range(code.shape[1])] if joint else [
             (90, 90, 90)]
         idx, tcol = rows(vals, flag=True)
-        _send_series(rec, f"{base}/mpc/status", tcol, vals[idx], names, [*colors, COLOR_ALARM])
+        _send_series(rec, f"{base}/mpc/status", tcol, vals[idx], names, [*colors, COLOR_ALARM],
+                     flag=True)  # fmt: skip
     if not joint:
         _record_lookahead(rec, base, t, history, member, minmax)
     if joint:
