@@ -156,3 +156,66 @@ def test_robust_h2_gain_lowers_the_mean_h2_over_the_spread_of_the_fits():
     assert rob.robust["robust_design"]["mean_h2"] == pytest.approx(h_rob.mean(), rel=1e-8)
     assert rob.robust["nominal_design"]["mean_h2"] == pytest.approx(h_nom.mean(), rel=1e-8)
 
+
+
+# ------------------------------------------------------------------------------------------
+# the recording of a replay: recorded trajectories next to the simulated ones
+# ------------------------------------------------------------------------------------------
+
+
+def _series(path: Path, entity: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(times in s, values (rows, series))`` of a Scalars entity read back from the file."""
+    from rerun.chunk import RrdReader
+
+    times, values = [], []
+    for ch in RrdReader(path).stream():
+        if ch.entity_path != entity or ch.is_static:
+            continue
+        rb = ch.to_record_batch()
+        col = next(n for n in rb.schema.names if n.endswith("scalars"))
+        times.append(rb.column("time").cast("int64").to_numpy())
+        values += rb.column(col).to_pylist()
+    t = np.concatenate(times)
+    order = np.argsort(t, kind="stable")
+    return t[order] * 1e-9, np.array(values, dtype=float)[order]
+
+
+def test_replay_recording_holds_the_recorded_trajectories(tmp_path):
+    """``simulate --rrd`` of the calibrated replay: ``/<scenario>/recorded/velocity`` is every
+    recorded speed of the file (leader and followers) and ``.../spacing`` every recorded
+    headway minus the vehicle length, at the recorded sample times, beside the simulated
+    run."""
+    pytest.importorskip("rerun")
+    from lcc_synth.cli.main import main
+    from lcc_synth.schema.trajectories import read_trajectory
+
+    rrd = tmp_path / "replay.rrd"
+    assert main(["simulate", str(CALIBRATED), "--rrd", str(rrd), "-q"]) == 0
+    tr = read_trajectory(ROOT / "problems" / "data" / "ngsim_i80" / "i80_lane2.csv")
+    t, v = _series(rrd, "/ngsim_lane2_calibrated/recorded/velocity")
+    np.testing.assert_allclose(t, tr.t, rtol=0, atol=1e-9)
+    assert np.array_equal(v, tr.v.T)  # exactly as read
+    t, s = _series(rrd, "/ngsim_lane2_calibrated/recorded/spacing")
+    assert np.array_equal(s, tr.headway[1:].T - 5.0)
+    _, sim = _series(rrd, "/ngsim_lane2_calibrated/replay/velocity")
+    assert sim.shape[1] == v.shape[1] == 5  # one series per vehicle in both
+
+
+def test_recorded_leader_without_initial_data_is_the_head_only(tmp_path):
+    """Without ``initial = "data"`` the file's other vehicles are not this run's: only the
+    replayed leader's speed is recorded (no spacing)."""
+    from lcc_synth.recording import recorded_trajectories
+    from lcc_synth.schema.trajectories import read_trajectory
+
+    text = CALIBRATED.read_text().replace('initial = "data"\n', "").replace(
+        "v_star = 6.98", "v_star = 3.3345").replace(
+        'file = "data/', f'file = "{ROOT / "problems" / "data"}/')  # fmt: skip
+    path = tmp_path / "p.toml"
+    path.write_text(text)
+    sc = lcc.load_problem(path).scenario
+    data = recorded_trajectories(sc)
+    tr = read_trajectory(ROOT / "problems" / "data" / "ngsim_i80" / "i80_lane2.csv")
+    assert data.velocity.shape == (len(tr.t), 1) and data.spacing.shape == (len(tr.t), 0)
+    assert np.array_equal(data.velocity[:, 0], tr.v[0])
+    assert recorded_trajectories(lcc.load_problem(ROOT / "problems" / "paper_table2.toml")
+                                 .scenario) is None  # fmt: skip
