@@ -25,8 +25,8 @@ Sec. V, eq. (29)          :func:`scenario`, :class:`Brake`, :class:`Sine`, :clas
                           :func:`mpc`, :func:`simulate`
 Table II metrics          :func:`metrics` (AAVE, fuel, spacing, TTC, jerk...; ``window``
                           explicit), :func:`aave`, :func:`fuel`
-real drivers              :func:`calibrate` (OVM / IDM fitted to a recorded platoon, as
-                          ``lcc-synth calibrate``)
+real drivers              :func:`~lcc_synth.calibration.fit.calibrate` (``lcc.calibrate``:
+                          OVM / IDM fitted to a recorded platoon, ``lcc-synth calibrate``)
 recordings                :func:`record` (a Rerun ``.rrd`` file)
 problem files             :func:`load_problem` / :func:`build_problem` -> :class:`ProblemObjects`
                           (``to_toml()``; ``==`` by value)
@@ -55,6 +55,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from lcc_synth.calibration.fit import calibrate
 from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import MetricsConfig
 from lcc_synth.models.feedback import Gains
@@ -637,60 +638,6 @@ def fuel(result, *, window: tuple[float, float], vehicles="cav_and_behind") -> n
 
     config = _metrics_config(window, vehicles)
     return _fuel(result, config.window, config.vehicles)
-
-
-def calibrate(
-    data: Any, model: str = "ovm", length: float = 5.0, starts: int = 5, seed: int = 0,
-    substeps: int = 1,
-):
-    """Fit the OVM or the IDM to every follower of a recorded platoon (pairwise, each behind
-    its recorded leader) and to all followers at once, and compare with the paper's nominal
-    OVM: ``lcc-synth calibrate`` (:func:`lcc_synth.calibration.fit.calibrate`; the file read
-    by :func:`lcc_synth.schema.trajectories.read_trajectory`).
-
-    Parameters
-    ----------
-    data : str, Path or Trajectory
-        A trajectory file (``t, v0, headway0, v1, headway1, ...``; ``problems/data/ngsim_i80/``)
-        or a trajectory already read.
-    model : {"ovm", "idm"}
-    length : float
-        Vehicle length (m): gap = front-to-front headway - length.
-    starts, seed : int
-        Optimiser starts (1..100) and their seed.
-    substeps : int
-        Integration steps per recorded sample (1..20).
-
-    Returns
-    -------
-    lcc_synth.calibration.fit.Calibration
-        ``followers`` (per follower: ``fit.params``, ``fit.identified``, ``fit.ci95``, the
-        spacing / velocity RMSE against the data, the nominal OVM's, the platoon replay's),
-        ``pooled``; ``as_dict()`` is the command's ``--json``;
-        :func:`lcc_synth.calibration.problem.write_problem` writes the platoon as a problem
-        file (``--out``).
-
-    Raises
-    ------
-    ConfigError
-        A bad file (named with the column and row) or value (named by the command's flag:
-        ``--model``, ``--length``, ``--starts``, ``--seed``, ``--substeps``).
-
-    Examples
-    --------
-    Lane 1 of NGSIM I-80 (4 followers and the pooled fit, 5 starts each: about 10 s here, so
-    not run as a doctest):
-
-    >>> cal = lcc.calibrate(problems / "data/ngsim_i80/i80_lane1.csv")  # doctest: +SKIP
-    >>> f = cal.followers[0]                                              # doctest: +SKIP
-    >>> f.fit.rmse_spacing < f.nominal_rmse_spacing                       # doctest: +SKIP
-    True
-    """
-    from lcc_synth.calibration.fit import calibrate as _calibrate
-    from lcc_synth.schema.trajectories import Trajectory, read_trajectory
-
-    traj = data if isinstance(data, Trajectory) else read_trajectory(Path(data), "data")
-    return _calibrate(traj, model, length, starts, seed, substeps)
 
 
 def record(
