@@ -1,7 +1,8 @@
 """Design for the measured drivers (``problems/ngsim_lane2_design.toml``) and the followers'
 velocity standard deviation: the metric against closed forms, the all-HDV row against the
 calibrated replay (a second problem file, the CAV slot elsewhere), the robust H2 gain against
-an independent Lyapunov evaluation over the sampled members."""
+an independent Lyapunov evaluation over the sampled members; and the recording of a replay,
+read back from the file, against the trajectory file."""
 
 from __future__ import annotations
 
