@@ -25,6 +25,8 @@ Sec. V, eq. (29)          :func:`scenario`, :class:`Brake`, :class:`Sine`, :clas
                           :func:`mpc`, :func:`simulate`
 Table II metrics          :func:`metrics` (AAVE, fuel, spacing, TTC, jerk...; ``window``
                           explicit), :func:`aave`, :func:`fuel`
+real drivers              :func:`~lcc_synth.calibration.fit.calibrate` (``lcc.calibrate``:
+                          OVM / IDM fitted to a recorded platoon, ``lcc-synth calibrate``)
 recordings                :func:`record` (a Rerun ``.rrd`` file)
 problem files             :func:`load_problem` / :func:`build_problem` -> :class:`ProblemObjects`
                           (``to_toml()``; ``==`` by value)
@@ -53,6 +55,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from lcc_synth.calibration.fit import calibrate
 from lcc_synth.errors import ConfigError
 from lcc_synth.metrics import MetricsConfig
 from lcc_synth.models.feedback import Gains
@@ -70,7 +73,7 @@ __all__ = [
     "system", "ring", "model", "controllability", "observability", "control_energy", "gains",
     "string_stability", "region_map", "h2_problem", "synthesize_h2", "hdv_controller",
     "static_controller",
-    "mpc", "scenario", "simulate", "metrics", "aave", "fuel", "record",
+    "mpc", "scenario", "simulate", "metrics", "aave", "fuel", "calibrate", "record",
     "ProblemObjects", "Regions", "build_problem", "load_problem", "TABLE2_WINDOW",
 ]  # fmt: skip
 

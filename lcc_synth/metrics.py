@@ -44,6 +44,12 @@ recorded sample of the window (one population, ``ddof = 0``: ``sqrt(mean (v - me
 samples in the window with ``a_{k-1} >= -1 > a_k``), summed over the vehicles. NaN (the
 counts: as computed until the stop) for a scenario with a collision, as AAVE.
 
+Followers' velocity standard deviation (:func:`follower_velocity_std`, the design for measured
+drivers, ``problems/ngsim_lane2_design.toml``): ``velocity_std`` of a fixed vehicle set, the
+HDVs behind the first CAV (CAVs excluded; on a ring every HDV), whatever ``[metrics]
+vehicles`` says: how much of the leader's stop-and-go the CAV passes on to the human drivers
+it leads. NaN when no HDV drives behind a CAV, as for a collision.
+
 Fuel of the DeeP-LCC paper (Wang et al. 2023, the platoon brake test): the same Bowyer rate
 (:func:`bowyer_fuel_rate`) on accelerations first smoothed by a centred moving average of
 ``accel_smoothing = 9`` recorded samples (:func:`smooth_acceleration`; the window shrinks at
@@ -100,6 +106,8 @@ __all__ = [
     "unsafe_reasons",
     "BRAKING_THRESHOLD",
     "velocity_std",
+    "follower_columns",
+    "follower_velocity_std",
     "mean_speed",
     "braking_events",
     "WAVE_METRICS",
@@ -420,6 +428,7 @@ METRIC_DISPLAY: dict[str, tuple[str, str]] = {
     "fuel_ml_std": ("fuel std over the batch (mL)", ".2f"),
     "velocity_std": ("velocity std (m/s)", ".3f"),
     "mean_speed": ("mean speed (m/s)", ".3f"),
+    "follower_velocity_std": ("followers' velocity std (m/s)", ".3f"),
     "braking_events": ("braking events", "d"),
     "min_spacing": ("min spacing (m)", ".2f"),
     "min_ttc": ("min TTC (s)", ".2f"),
@@ -513,6 +522,27 @@ def velocity_std(result, window=(20.0, 40.0), vehicles="all") -> np.ndarray:
     return np.where(result.collided.any(axis=1), np.nan, out)
 
 
+def follower_columns(result) -> np.ndarray:
+    """Array columns of the HDVs behind the first CAV (CAVs excluded; a ring: every HDV),
+    ascending; empty when the first CAV is the tail."""
+    nv = result.n_vehicles
+    cavs = tuple(getattr(result, "cavs", None) or (result.cav,))
+    first = 0 if getattr(result, "ring", False) else min(cavs) + 1
+    return np.array([j for j in range(first, nv) if j not in cavs], dtype=int)
+
+
+def follower_velocity_std(result, window=(20.0, 40.0)) -> np.ndarray:
+    """:func:`velocity_std` (m/s, pooled, ``ddof = 0``) of the HDVs behind the first CAV
+    (:func:`follower_columns`) over the window; NaN when there is none or for a scenario with
+    a collision."""
+    cols = follower_columns(result)
+    if cols.size == 0:
+        return np.full(result.batch, np.nan)
+    v = result.velocity[:, window_mask(result, window)][:, :, cols]
+    out = v.reshape(v.shape[0], -1).std(axis=1)
+    return np.where(result.collided.any(axis=1), np.nan, out)
+
+
 def mean_speed(result, window=(20.0, 40.0), vehicles="all") -> np.ndarray:
     """Mean (m/s) of every speed of the vehicle set over the window (pooled as
     :func:`velocity_std`); NaN for a scenario with a collision."""
@@ -577,6 +607,7 @@ def _per_scenario(result, cfg: MetricsConfig) -> dict[str, np.ndarray]:
         "fuel_ml": fuel(result, cfg.window, cfg.vehicles, cfg.accel_smoothing),
         **phases,
         **wave_metrics(result, cfg),
+        "follower_velocity_std": follower_velocity_std(result, cfg.window),
         "min_spacing": min_spacing(result),
         "min_ttc": min_time_to_collision(result),
         "max_abs_velocity_error": max_abs_velocity_error(result),
@@ -611,6 +642,7 @@ def aggregate(per: dict[str, np.ndarray]) -> dict[str, Any]:
             "fuel_ml_all": f.tolist(),
             "velocity_std": _stat(per["velocity_std"]),
             "mean_speed": _stat(per["mean_speed"]),
+            "follower_velocity_std": _stat(per["follower_velocity_std"]),
             "braking_events": int(per["braking_events"].sum()),
             "scenarios_with_collision": int((per["collisions"] > 0).sum()),
             "min_spacing": float(np.nanmin(ms)),  # the head's is NaN
@@ -641,7 +673,8 @@ def summary(result, config: MetricsConfig | None = None) -> dict[str, Any]:
     scenario); ``min_spacing`` and ``collisions``/``aeb_activations`` are the worst case /
     totals. A scenario that collided has NaN AAVE and fuel: the means and deviations are over
     the other scenarios, and ``scenarios_with_collision`` counts them (NaN when all collided).
-    ``velocity_std`` and ``mean_speed`` are means over the batch, ``braking_events`` the total.
+    ``velocity_std``, ``follower_velocity_std`` and ``mean_speed`` are means over the batch,
+    ``braking_events`` the total.
     The CAV's jerk: ``rms_jerk_cav`` is the mean, ``max_jerk_1s_cav`` (:func:`max_jerk_1s`)
     the worst case, ``jerk_1s_margin_cav`` the least margin to ISO 15622's limit (negative:
     exceeded), ``jerk_1s_over_limit_s`` the total time above it (0: within the limit).

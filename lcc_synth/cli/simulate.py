@@ -319,8 +319,8 @@ def print_table(spec, rep: dict[str, Any], file=None, collisions=None) -> None:
     cols = ["controller", "AAVE (m/s)", "fuel (mL)"]
     if has_red:
         cols += ["AAVE red. %", "fuel red. %"]
-    cols += ["min s (m)", "min TTC (s)", "max|u|", "jerk rms", "jerk 1 s", "ISO 15622 jerk", "AEB",
-             "collisions"]  # fmt: skip
+    cols += ["foll. v std", "min s (m)", "min TTC (s)", "max|u|", "jerk rms", "jerk 1 s",
+             "ISO 15622 jerk", "AEB", "collisions"]  # fmt: skip
     from lcc_synth.experiments.tables import UNSAFE_RULE, row_label
 
     rows = []
@@ -350,6 +350,7 @@ def print_table(spec, rep: dict[str, Any], file=None, collisions=None) -> None:
             else:
                 row += ["(baseline)", ""]
         row += [
+            f"{e['follower_velocity_std']:.3f}",
             f"{e['min_spacing']:.2f}",
             f"{e['min_ttc']:.2f}",
             f"{e['max_abs_command']:.3f}",

@@ -48,6 +48,13 @@ Simulation (:func:`record_simulation`), under ``/<scenario>/<controller>/``:
                        one every 0.5 s when it changed)
 =====================  =========================================================================
 
+``/<scenario>/recorded/`` (a scenario that replays a recording, ``simulate``:
+:func:`record_recorded`): ``velocity`` (``Scalars``, the recorded leader and, with ``[scenario]
+initial = "data"``, every recorded follower, named ``recorded <vehicle>`` and coloured as the
+simulated vehicle of that column), ``spacing`` (the followers' ``headway - vehicle_length``)
+and ``source`` (markdown: the file), every recorded sample on the simulated time; the default
+layout shows them after the controllers' velocity and spacing views.
+
 ``/<scenario>/metrics`` (markdown) compares every controller recorded so far,
 ``/<scenario>/context`` (markdown, ``simulate`` and every scenario of ``run``:
 :mod:`lcc_synth.recording.context`) says what was run,
@@ -146,9 +153,13 @@ from lcc_synth.recording.reader import (
     viewer_environment,
 )
 from lcc_synth.recording.simulation import (
+    RECORDED_ENTITY,
+    RecordedTrajectories,
     record_metrics,
     record_mpc_history,
+    record_recorded,
     record_simulation,
+    recorded_trajectories,
 )
 from lcc_synth.recording.size import (
     RecordingEstimate,
@@ -196,6 +207,10 @@ __all__ = [
     "set_status",
     "written_path",
     "record_simulation",
+    "RECORDED_ENTITY",
+    "RecordedTrajectories",
+    "recorded_trajectories",
+    "record_recorded",
     "record_metrics",
     "SimulationRecorder",
     "record_mpc_history",

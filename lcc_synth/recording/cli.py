@@ -30,7 +30,12 @@ from lcc_synth.recording.layout import (
     seeds_blueprint,
     simulation_blueprint,
 )
-from lcc_synth.recording.simulation import record_metrics, record_simulation
+from lcc_synth.recording.simulation import (
+    record_metrics,
+    record_recorded,
+    record_simulation,
+    recorded_trajectories,
+)
 
 __all__ = [
     "SimulationRecorder",
@@ -179,6 +184,7 @@ class SimulationRecorder:
         self.seeds: list[int] = []  # study scenarios recorded (several-seed recordings)
         self.ranges: dict[str, Any] = {}
         self._layout: tuple = ()
+        self._recorded: Any = None  # what the scenario replays (recorded_trajectories)
         #: the run's provenance document, recorded at ``/provenance`` when the file opens
         self.provenance: dict[str, Any] | None = None
 
@@ -217,6 +223,9 @@ class SimulationRecorder:
             self.ranges = plot_ranges(result)
             self.event = first_event(getattr(spec, "scenario", None))
             self._layout = (spec.name, list(spec.controllers), mpc, batch > 1)
+            source = getattr(spec, "source", None)
+            self._recorded = recorded_trajectories(getattr(spec, "scenario", None),
+                                                   Path(source).parent if source else None)
             self.rec = self.stack.enter_context(
                 open_recording(self.path, spec.name, self._blueprint(),
                                overwrite=bool(getattr(self.args, "overwrite", False)))
@@ -226,6 +235,8 @@ class SimulationRecorder:
             if getattr(spec, "scenario", None) is not None and hasattr(spec, "to_toml"):
                 record_text(self.rec, f"/{entity_name(spec.name)}/context",
                             context_markdown(spec))  # fmt: skip
+            if self._recorded is not None:
+                record_recorded(self.rec, spec.name, self._recorded, result)
         else:
             self.ranges = merge_ranges(self.ranges, plot_ranges(result))
         controller = dict(spec.controllers).get(name)
@@ -249,7 +260,8 @@ class SimulationRecorder:
         ranges = {**self.ranges, "event": self.event}  # the time panel opens on the event
         if several:
             return seeds_blueprint(scenario, controllers, self.seeds, mpc, ranges)
-        return simulation_blueprint(scenario, controllers, mpc, ranges)
+        return simulation_blueprint(scenario, controllers, mpc, ranges,
+                                    recorded=self._recorded is not None)
 
     def metrics(
         self, report: Mapping[str, Mapping[str, Any]], per: Mapping[str, Any] | None = None

@@ -190,6 +190,7 @@ def simulation_blueprint(
     controllers: Sequence[str],
     mpc: Sequence[str] = (),
     ranges: Mapping[str, Any] | None = None,
+    recorded: bool = False,
 ):
     """Default layout of a simulation recording.
 
@@ -206,6 +207,9 @@ def simulation_blueprint(
     would cover the curves; hovering names a curve); a one-line key above them
     (``/<scenario>/key``, :data:`~lcc_synth.recording.simulation.KEY_TEXT`) says the colours
     and the axes. The time panel opens paused on the first event (:func:`time_panel`).
+    ``recorded``: the scenario replays a recording (``/<scenario>/recorded``,
+    :func:`~lcc_synth.recording.simulation.record_recorded`): the velocity and spacing rows
+    end with a view of the recorded trajectories, next to the simulated ones.
     """
     rrb = _rrb()
     s = entity_name(scenario)
@@ -217,6 +221,7 @@ def simulation_blueprint(
 
     def row(quantity: str, title: str):
         short = {"velocity": "v (m/s)", "spacing": "s (m)", "acceleration": "a (m/s²)"}
+        shown = [*ctrls, *(["recorded"] if recorded and quantity != "acceleration" else [])]
         return rrb.Horizontal(
             *[
                 rrb.TimeSeriesView(
@@ -226,7 +231,7 @@ def simulation_blueprint(
                     plot_legend=rrb.PlotLegend(visible=False),
                     **tkw,
                 )
-                for c in ctrls
+                for c in shown
             ],
             name=title,
         )

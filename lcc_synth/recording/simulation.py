@@ -7,11 +7,21 @@ is a circle: a vehicle at position ``p`` (not wrapped by the simulator) is drawn
 ``2 pi p / C`` on the circle of circumference ``C`` (radius ``R = C / 2 pi``), its radius
 raised by ``RING_V_SCALE * R`` per m/s of velocity error (:func:`ring_view`); the open road
 view is as for one CAV, positions relative to the first CAV.
+
+A scenario that replays a recording (a ``type = "trajectory"`` head,
+:class:`~lcc_synth.simulation.perturbations.Recorded`) also gets the recorded trajectories,
+once per scenario, under ``/<scenario>/recorded/`` (:func:`record_recorded`): the recorded
+leader's speed, and with ``[scenario] initial = "data"`` (one file vehicle per simulated
+vehicle) every recorded follower's speed and spacing (``headway - vehicle_length``), on the
+simulated time (the file's first sample at the perturbation's ``start``), named and coloured
+as the simulated vehicle in that column, every sample exactly as read.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -73,6 +83,75 @@ KEY_TEXT = ("**head** yellow · **CAV** blue, thick (more CAVs: purple, green, c
 AEB_SERIES = "AEB active (every controller)"
 #: Ring road view: radial offset per m/s of velocity error, as a fraction of the radius.
 RING_V_SCALE = 0.02
+
+
+#: Entity (under ``/<scenario>/``) of the trajectories a scenario replays.
+RECORDED_ENTITY = "recorded"
+
+
+@dataclass(frozen=True)
+class RecordedTrajectories:
+    """What a scenario replays, on the simulated time.
+
+    Attributes
+    ----------
+    t : ndarray, shape (T,)
+        Simulated time (s) of every recorded sample.
+    velocity : ndarray, shape (T, k)
+        Recorded speeds (m/s) of array columns ``0 .. k - 1`` (the head, then with
+        ``initial = "data"`` every follower).
+    spacing : ndarray, shape (T, k - 1)
+        Recorded spacings (m, ``headway - vehicle_length``) of columns ``1 .. k - 1``.
+    file : str
+        The trajectory file.
+    """
+
+    t: np.ndarray
+    velocity: np.ndarray
+    spacing: np.ndarray
+    file: str
+
+
+def recorded_trajectories(scenario: Any, base_dir: str | Path | None = None):
+    """The :class:`RecordedTrajectories` of ``scenario``'s recorded head
+    (:class:`~lcc_synth.simulation.perturbations.Recorded`), or ``None`` when it replays none.
+    With an initial state from the data the file (``base_dir``: the problem file's directory)
+    is read again for every follower's speed and headway."""
+    from lcc_synth.schema.trajectories import read_trajectory
+    from lcc_synth.simulation.perturbations import Recorded
+
+    found = [p for p in getattr(scenario, "perturbations", ()) if isinstance(p, Recorded)]
+    if not found:
+        return None
+    p = found[0]
+    t = np.asarray(p.times, dtype=np.float64)
+    head = np.asarray(p.speeds, dtype=np.float64)[:, None]
+    if getattr(scenario, "initial_state", None) is None:
+        return RecordedTrajectories(t, head, np.empty((len(t), 0)), p.file)
+    path = Path(p.file)
+    if base_dir is not None and not path.is_absolute():
+        path = Path(base_dir) / path
+    tr = read_trajectory(path, "scenario.perturbations.file")
+    gaps = tr.headway[1:].T - float(scenario.vehicle_length)
+    return RecordedTrajectories(t, tr.v.T.astype(np.float64), gaps, p.file)
+
+
+def record_recorded(rec: Any, scenario: str, data: RecordedTrajectories, result: Any) -> str:
+    """Record ``data`` (:func:`recorded_trajectories`) under ``/<scenario>/recorded/``
+    (``velocity``, and ``spacing`` when there are followers), every sample; names and colours
+    those of ``result``'s columns (:func:`vehicle_style`). Returns the entity prefix."""
+    names, colors, widths = vehicle_style(result)
+    base = f"/{entity_name(scenario)}/{RECORDED_ENTITY}"
+    k = data.velocity.shape[1]
+    label = [f"recorded {v}" for v in names[:k]]
+    tcol = _time_column(data.t)
+    _send_series(rec, f"{base}/velocity", tcol, data.velocity, label, colors[:k], widths[:k])
+    if data.spacing.shape[1]:
+        _send_series(rec, f"{base}/spacing", tcol, data.spacing, label[1:], colors[1:k],
+                     widths[1:k])  # fmt: skip
+    record_text(rec, f"{base}/source", f"# recorded\n\n`{data.file}`: {k} vehicle(s), "
+                f"{len(data.t)} samples from t = {_fmt(float(data.t[0]))} s.\n")  # fmt: skip
+    return base
 
 
 def vehicle_style(result) -> tuple[list[str], np.ndarray, list[float]]:
