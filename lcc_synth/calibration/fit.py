@@ -325,7 +325,7 @@ def fit_followers(
 
 
 def calibrate(
-    traj: Trajectory | str | Path, model: str = "idm", length: float = 5.0, starts: int = 5,
+    traj: Trajectory | str | Path, model: str = "ovm", length: float = 5.0, starts: int = 5,
     seed: int = 0, substeps: int = 1, progress: Callable[[str], None] | None = None,
 ) -> Calibration:
     """Calibrate ``model`` on every follower of ``traj``, pooled too, and compare with the
@@ -338,7 +338,7 @@ def calibrate(
         A recorded platoon, or its file (read by
         :func:`lcc_synth.schema.trajectories.read_trajectory`; a bad file is one error naming
         the column and row).
-    model : {"ovm", "idm"}
+    model : {"ovm", "idm"}, default "ovm"
     length : float
         Vehicle length (m), > 0 and below the smallest follower headway: gap = headway -
         length.
