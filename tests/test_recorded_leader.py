@@ -90,6 +90,22 @@ def test_head_has_the_recorded_speed_at_every_sample_time(tmp_path, interpolatio
     assert np.abs(mid - expected).max() < 1e-9
 
 
+@pytest.mark.sumo
+def test_sumo_replays_the_recorded_leader_from_the_first_sample(tmp_path):
+    """The same entry in SUMO (``backend = "sumo"``): the head, commanded by ``setSpeed``,
+    has the file's speed at every sample time, and the platoon departs from the file's first
+    sample (speeds, and spacings as headway - vehicle length)."""
+    tr = read_trajectory(LANE2)
+    path = _problem(tmp_path, extra='backend = "sumo"')
+    path.write_text(path.read_text().replace('model = "ovm"', 'model = "idm"'))
+    res = _run(path)
+    assert res.velocity[0, 0] == pytest.approx(tr.v[:, 0], abs=1e-9)
+    assert res.spacing[0, 0, 1:] == pytest.approx(tr.headway[1:, 0] - 5.0, abs=1e-9)
+    k = np.rint(tr.t / 0.01).astype(int)
+    k = k[k < res.t.size]
+    assert np.abs(res.velocity[0, k, 0] - tr.v[0, : k.size]).max() < 1e-9
+
+
 def test_platoon_starts_from_the_first_sample(tmp_path):
     tr = read_trajectory(LANE2)
     res = _run(_problem(tmp_path))
@@ -118,11 +134,6 @@ BAD = {
     "head speed differs": ({"initial": "equilibrium"},
                            "scenario.perturbations[0].column: the head starts at 8 m/s but the "
                            'recording starts at 3.3345 m/s: set [scenario] initial = "data"'),
-    "in SUMO": ({"extra": 'backend = "sumo"'}, "scenario.initial: \"data\" runs in the "
-                "built-in simulator only"),
-    "leader in SUMO": ({"extra": 'backend = "sumo"', "initial": "equilibrium"},
-                       "scenario.perturbations[0].type: a recorded trajectory runs in the "
-                       "built-in simulator only"),
     "bad interpolation": ({"interpolation": "cubic"},
                           "scenario.perturbations[0].interpolation: must be one of"),
 }

@@ -265,16 +265,10 @@ class Scenario(ValueEq, Record):
             if not (np.all(np.isfinite(speeds)) and np.all(speeds >= 0)):
                 raise ConfigError(f, f"every initial speed must be >= 0 m/s, got "
                                   f"{np.round(speeds, 3).tolist()}")
-            if self.backend != "builtin":
-                raise ConfigError(f, '"data" runs in the built-in simulator only (backend = '
-                                  '"builtin")')
             head_v = float(speeds[0])
         for i, p in enumerate(self.perturbations):
             if not isinstance(p, Recorded):
                 continue
-            if self.backend != "builtin":
-                raise ConfigError(f"scenario.perturbations[{i}].type", 'a recorded trajectory '
-                                  'runs in the built-in simulator only (backend = "builtin")')
             if abs(p.speeds[0] - head_v) > 1e-9 * max(1.0, head_v):
                 raise ConfigError(f"scenario.perturbations[{i}].column", f"the head starts at "
                                   f"{head_v:g} m/s but the recording starts at {p.speeds[0]:g} "

@@ -188,14 +188,19 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
     v_star = float(sc.v_star)
 
     s0 = np.nan_to_num(draws.initial_spacing[b], nan=0.0)
+    v = np.full(nv, v_star)
+    if sc.initial_state is not None:  # a recording's first sample, as the built-in simulator
+        s0[:] = sc.initial_state[0]
+        s0[0] = 0.0
+        v[:] = sc.initial_state[1]
     if ring:  # column 0 at 0; its spacing is what the others leave of the circumference
         s0[0] = 0.0
     p = -np.cumsum(s0)  # built-in frame: column 0 at 0
-    v = np.full(nv, v_star)
     names = MODEL_PARAMS["idm"]
     params = {k: draws.hdv_values[k][b] for k in names}
-    vmax = max(float(np.max(params["v0"])), v_star, float(np.nanmax(spd_ovr, initial=0.0)))
-    travel = 0.0 if ring else head_travel(acc_ovr, spd_ovr, v_star, dt, a_min, a_max)
+    vmax = max(float(np.max(params["v0"])), v_star, float(np.max(v)),
+               float(np.nanmax(spd_ovr, initial=0.0)))  # fmt: skip
+    travel = 0.0 if ring else head_travel(acc_ovr, spd_ovr, float(v[0]), dt, a_min, a_max)
     road = place_string(p, L_veh, circ if ring else None, travel, 2.0 * vmax + 10.0,
                         T * dt)  # fmt: skip
     hdv_mask = sc.is_hdv()
@@ -212,8 +217,8 @@ def _one(sc: Scenario, controller: Controller, draws: Draws, b: int, acc_ovr, sp
             idm["v0"] = cap
         types.append(vehicle_types(sc.sumo, idm, dt, a_min))
     run_dir = Path(tempfile.mkdtemp(prefix="run_", dir=work_dir()))
-    routes = route_file(run_dir / "string.rou.xml", types,
-                        [(x, v_star) for x in road.lane_pos], routes=road.routes)  # fmt: skip
+    departures = list(zip(road.lane_pos, v.tolist(), strict=True))  # (lane position, speed)
+    routes = route_file(run_dir / "string.rou.xml", types, departures, routes=road.routes)
     ids = [f"v{j}" for j in range(nv)]
     seed = int(np.random.default_rng([int(sc.seed), int(sc.first_index) + b]).integers(2**31 - 1))
 
