@@ -7,6 +7,7 @@ is checked against the problem file it came from."""
 
 from __future__ import annotations
 
+import re
 import tomllib
 
 import pytest
@@ -309,3 +310,59 @@ def test_every_time_plot_opens_on_the_whole_run_on_its_own_axis(head_brake):
     for origin, (link, view_range) in axes.items():
         assert link == [bpc.LinkAxis.Independent.value], origin
         assert view_range == whole, origin
+
+
+def test_an_mpc_run_opens_on_its_predictions_and_its_solver(head_brake):
+    """The first screen of an MPC run: the reports tab opens (its saved active tab) on the
+    CAV's predicted velocity, spacing and input next to what happened, each a time plot with
+    data (the measured series and the predictions); the solve time and status come next, then
+    the plans of the moment."""
+    values = _blueprint_values(head_brake)
+    s = summarize_recording(head_brake)
+    reports = [d for d in values.values() if d.get("display_name") == ["reports"]]
+    assert reports  # the blueprint as opened and as final: both are checked
+    base = "/mpc_head_brake/mpc/mpc"
+    for box in reports:
+        first, solver, plans = box["contents"][:3]
+        assert box["active_tab"] == [first]
+        predictions = values[f"/{first}"]
+        assert predictions["display_name"] == ["mpc: predictions"]
+        views = [values[f"/{v}"] for v in predictions["contents"]]
+        assert [v["space_origin"] for v in views] == [
+            [f"{base}/lookahead/{q}"] for q in ("velocity", "spacing", "u")]  # fmt: skip
+        assert all(v["class_identifier"] == ["TimeSeries"] for v in views)
+        for v in views:
+            series = {e.rsplit("/", 1)[1] for e in s.entities
+                      if e.startswith(v["space_origin"][0] + "/")}  # fmt: skip
+            assert {"measured", "ahead_1s"} <= series
+        assert values[f"/{solver}"]["space_origin"] == [base]
+        assert values[f"/{solver}"]["class_identifier"] == ["TimeSeries"]
+        assert values[f"/{plans}"]["space_origin"] == [f"{base}/predicted/velocity"]
+
+
+def test_review_summary_shows_round_off_values_as_such(tmp_path):
+    """``review --summary`` (the real CLI) on a recording whose metrics are at round-off: a
+    time to collision of 2.66e12 s (the vehicle is not closing in) and a command of 6e-12
+    m/s² are shown as the tables show them (``>= 1e6``, ``0.000``), under labels with units."""
+    from lcc_synth import recording as R
+    from lcc_synth.controllers.static import HDVController
+    from lcc_synth.simulation.engine import simulate
+    from lcc_synth.simulation.scenario import Scenario
+
+    res = simulate(Scenario(m=0, n=2, duration=2.0), HDVController("all_hdv"))
+    path = tmp_path / "flat.rrd"
+    metrics = {"aave": 0.0, "min_ttc": 2.66e12, "max_abs_command": 6e-12, "min_spacing": 20.0,
+               "aeb_activations": 0, "collisions": 0}  # fmt: skip
+    with R.open_recording(path, "flat", R.simulation_blueprint("flat", ["all_hdv"])) as rec:
+        R.record_simulation(rec, res, "flat", metrics=metrics, decimate=1)
+    proc = run_cli(["review", path, "--summary"], cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    (head,) = [ln for ln in lines if ln.strip().startswith("scenario")]
+    (row,) = [ln for ln in lines if ln.strip().startswith("flat ")]
+    cells = dict(zip(re.split(r"\s{2,}", head.strip()), re.split(r"\s{2,}", row.strip()),
+                     strict=True))  # fmt: skip
+    assert cells["min TTC (s)"] == ">= 1e6"
+    assert cells["max |u| (m/s²)"] == "0.000"
+    assert cells["controller"] == "all_hdv"  # safe: no emergency braking, 20 m, no TTC
+    assert "e+12" not in proc.stdout and "e-12" not in proc.stdout

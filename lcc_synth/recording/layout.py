@@ -298,7 +298,9 @@ def simulation_blueprint(
             ),
         ]
     tabs = [*first, *tabs]
-    texts = rrb.Tabs(*tabs, name="reports")
+    # the first tab shown, saved rather than left to the viewer: an MPC run's predictions,
+    # else the comparison metrics
+    texts = rrb.Tabs(*tabs, name="reports", active_tab=0)
     right = rrb.Vertical(road, u_cmd, texts, row_shares=list(RIGHT_SHARES))
     return rrb.Blueprint(
         rrb.Horizontal(plots, right, column_shares=[3, 2]),
