@@ -60,6 +60,7 @@ def test_the_context_document_says_what_was_run(head_brake):
     assert problem["description"].split("\n")[0] in text
     assert "n = 10 behind" in text and "v* = 15 m/s" in text
     assert "BrakeProfile: start = 20, decel = -5" in text
+    assert "first event at t = 20 s (the time panel's selection starts there)" in text
     assert "window 20 s ≤ t ≤ 60 s" in text and "reductions against all_hdv" in text
     assert "alpha = 0.6, beta = 0.9, s_st = 5, s_go = 35, v_max = 30" in text
     for name, table in problem["controllers"].items():
