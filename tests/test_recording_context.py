@@ -367,3 +367,17 @@ def test_review_summary_shows_round_off_values_as_such(tmp_path):
     assert cells["max |u| (m/s²)"] == "0.000"
     assert cells["controller"] == "all_hdv"  # safe: no emergency braking, 20 m, no TTC
     assert "e+12" not in proc.stdout and "e-12" not in proc.stdout
+
+
+def test_every_time_plot_names_its_unit(head_brake):
+    """Rerun 0.41's plot axes carry no label (``ScalarAxis``: range and zoom lock only): every
+    time-series view's title names its quantity's unit instead; the x axes are the simulated
+    time in seconds, which the key above the plots says."""
+    values = _blueprint_values(head_brake)
+    titles = [d["display_name"][0] for d in values.values()
+              if d.get("class_identifier") == ["TimeSeries"]]  # fmt: skip
+    assert len(titles) >= 2 * (4 * 3 + 1 + 3 + 1)  # as opened and final
+    units = re.compile(r"\((m/s|m|m/s²|ms)\)")
+    assert [t for t in titles if not units.search(t)] == []
+    key = summarize_recording(head_brake).texts["/mpc_head_brake/key"]
+    assert "x axes: simulated time t (s)" in key
