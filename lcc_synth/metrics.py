@@ -104,6 +104,7 @@ __all__ = [
     "UNSAFE_MIN_TTC",
     "UNSAFE_RULE",
     "unsafe_reasons",
+    "sweep_safety_rank",
     "BRAKING_THRESHOLD",
     "velocity_std",
     "follower_columns",
@@ -508,6 +509,21 @@ def unsafe_reasons(metrics: Mapping[str, Any]) -> list[str]:
         if value is not None and float(value) < limit:  # NaN compares False
             out.append(f"{name} {float(value):.2f} {unit} < {limit:g} {unit}")
     return out
+
+
+def sweep_safety_rank(entry: Mapping[str, Any]) -> tuple[bool, bool, bool]:
+    """Sort key of a controller's entry in a sweep summary, safety before efficiency: the
+    controllers without a collided run first, then those with an unsafe one
+    (``unsafe_scenarios``, judged by :func:`unsafe_reasons`), then those whose solver fell
+    back (``fallbacks``); a stable sort keeps the given order within each group.
+
+    >>> sorted(["a", "b", "c"], key=lambda c: sweep_safety_rank(
+    ...     {"a": {"unsafe_scenarios": 2}, "b": {"collision_scenarios": 1}, "c": {}}[c]))
+    ['c', 'a', 'b']
+    """
+    return (int(entry.get("collision_scenarios") or 0) > 0,
+            int(entry.get("unsafe_scenarios") or 0) > 0,
+            int(entry.get("fallbacks") or 0) > 0)  # fmt: skip
 
 
 #: Deceleration (m/s²) below which a vehicle brakes (:func:`braking_events`).

@@ -205,3 +205,19 @@ def test_port_validation(rrd, capsys):
         assert main(["review", "--web", "--port", str(port), str(rrd)]) == 2
     assert f"port {port} on 127.0.0.1 is in use" in capsys.readouterr().err
     assert np.isfinite(review._free_port())
+
+
+def test_summary_report_facts_are_rounded_with_units():
+    """A report line of the summary: |Gamma|'s peak rounded to 3 decimals, its frequency with
+    its unit, words as written, a missing number as written (the report's own text)."""
+    from lcc_synth.recording.reader import RecordingSummary
+    from lcc_synth.recording.summary import summary_lines
+
+    report = ("# case A\n\n| quantity | value |\n|---|---|\n| verdict | string_unstable |\n"
+              "| gamma_peak | 1.12723 |\n| gamma_peak_omega | 0.451821 |\n| h2_true | None |\n")
+    s = RecordingSummary(path="x.rrd", size_bytes=0, application_id="a", recording_ids=["r"],
+                         has_blueprint=False, entities={},
+                         texts={"/analysis/gamma/a/report": report})  # fmt: skip
+    (line,) = [ln for ln in summary_lines(s) if "/analysis/gamma/a" in ln]
+    assert line.split("/analysis/gamma/a", 1)[1].strip() == (
+        "verdict string_unstable, max |Γ| 1.127, at ω 0.452 rad/s, true H2 None")

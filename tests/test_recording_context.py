@@ -7,6 +7,7 @@ is checked against the problem file it came from."""
 
 from __future__ import annotations
 
+import re
 import tomllib
 
 import pytest
@@ -59,6 +60,7 @@ def test_the_context_document_says_what_was_run(head_brake):
     assert problem["description"].split("\n")[0] in text
     assert "n = 10 behind" in text and "v* = 15 m/s" in text
     assert "BrakeProfile: start = 20, decel = -5" in text
+    assert "first event at t = 20 s (the time panel's selection starts there)" in text
     assert "window 20 s ≤ t ≤ 60 s" in text and "reductions against all_hdv" in text
     assert "alpha = 0.6, beta = 0.9, s_st = 5, s_go = 35, v_max = 30" in text
     for name, table in problem["controllers"].items():
@@ -261,8 +263,10 @@ def test_the_command_legend_has_room_for_every_controller(head_brake):
 
 
 def test_flags_are_drawn_as_steps_never_averaged(head_brake):
-    """The AEB flags and the MPC status are piecewise constant: the viewer draws them as steps
-    and never averages their points (an averaged chattering flag took values it never has)."""
+    """The AEB flags and the MPC status are piecewise constant: the viewer draws them as steps.
+    No line's points are averaged by the viewer (an averaged chattering flag took values it
+    never has; the head's acceleration, recorded as 0 at 0 s and 20.00 s and -5 m/s² from
+    20.01 s, was drawn as a 20 s ramp to -2.5): the recording holds the rows that draw it."""
     import rerun.components as rc
 
     styled = {}
@@ -280,7 +284,8 @@ def test_flags_are_drawn_as_steps_never_averaged(head_brake):
             assert got == {"aggregation_policy": [rc.AggregationPolicy.Off.value],
                            "interpolation_mode": [rc.InterpolationMode.StepAfter.value]}, e
         else:
-            assert got == {"aggregation_policy": None, "interpolation_mode": None}, e
+            assert got == {"aggregation_policy": [rc.AggregationPolicy.Off.value],
+                           "interpolation_mode": None}, e  # fmt: skip
 
 
 def time_axes(path):
@@ -309,3 +314,73 @@ def test_every_time_plot_opens_on_the_whole_run_on_its_own_axis(head_brake):
     for origin, (link, view_range) in axes.items():
         assert link == [bpc.LinkAxis.Independent.value], origin
         assert view_range == whole, origin
+
+
+def test_an_mpc_run_opens_on_its_predictions_and_its_solver(head_brake):
+    """The first screen of an MPC run: the reports tab opens (its saved active tab) on the
+    CAV's predicted velocity, spacing and input next to what happened, each a time plot with
+    data (the measured series and the predictions); the solve time and status come next, then
+    the plans of the moment."""
+    values = _blueprint_values(head_brake)
+    s = summarize_recording(head_brake)
+    reports = [d for d in values.values() if d.get("display_name") == ["reports"]]
+    assert reports  # the blueprint as opened and as final: both are checked
+    base = "/mpc_head_brake/mpc/mpc"
+    for box in reports:
+        first, solver, plans = box["contents"][:3]
+        assert box["active_tab"] == [first]
+        predictions = values[f"/{first}"]
+        assert predictions["display_name"] == ["mpc: predictions"]
+        views = [values[f"/{v}"] for v in predictions["contents"]]
+        assert [v["space_origin"] for v in views] == [
+            [f"{base}/lookahead/{q}"] for q in ("velocity", "spacing", "u")]  # fmt: skip
+        assert all(v["class_identifier"] == ["TimeSeries"] for v in views)
+        for v in views:
+            series = {e.rsplit("/", 1)[1] for e in s.entities
+                      if e.startswith(v["space_origin"][0] + "/")}  # fmt: skip
+            assert {"measured", "ahead_1s"} <= series
+        assert values[f"/{solver}"]["space_origin"] == [base]
+        assert values[f"/{solver}"]["class_identifier"] == ["TimeSeries"]
+        assert values[f"/{plans}"]["space_origin"] == [f"{base}/predicted/velocity"]
+
+
+def test_review_summary_shows_round_off_values_as_such(tmp_path):
+    """``review --summary`` (the real CLI) on a recording whose metrics are at round-off: a
+    time to collision of 2.66e12 s (the vehicle is not closing in) and a command of 6e-12
+    m/s² are shown as the tables show them (``>= 1e6``, ``0.000``), under labels with units."""
+    from lcc_synth import recording as R
+    from lcc_synth.controllers.static import HDVController
+    from lcc_synth.simulation.engine import simulate
+    from lcc_synth.simulation.scenario import Scenario
+
+    res = simulate(Scenario(m=0, n=2, duration=2.0), HDVController("all_hdv"))
+    path = tmp_path / "flat.rrd"
+    metrics = {"aave": 0.0, "min_ttc": 2.66e12, "max_abs_command": 6e-12, "min_spacing": 20.0,
+               "aeb_activations": 0, "collisions": 0}  # fmt: skip
+    with R.open_recording(path, "flat", R.simulation_blueprint("flat", ["all_hdv"])) as rec:
+        R.record_simulation(rec, res, "flat", metrics=metrics, decimate=1)
+    proc = run_cli(["review", path, "--summary"], cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    (head,) = [ln for ln in lines if ln.strip().startswith("scenario")]
+    (row,) = [ln for ln in lines if ln.strip().startswith("flat ")]
+    cells = dict(zip(re.split(r"\s{2,}", head.strip()), re.split(r"\s{2,}", row.strip()),
+                     strict=True))  # fmt: skip
+    assert cells["min TTC (s)"] == ">= 1e6"
+    assert cells["max |u| (m/s²)"] == "0.000"
+    assert cells["controller"] == "all_hdv"  # safe: no emergency braking, 20 m, no TTC
+    assert "e+12" not in proc.stdout and "e-12" not in proc.stdout
+
+
+def test_every_time_plot_names_its_unit(head_brake):
+    """Rerun 0.41's plot axes carry no label (``ScalarAxis``: range and zoom lock only): every
+    time-series view's title names its quantity's unit instead; the x axes are the simulated
+    time in seconds, which the key above the plots says."""
+    values = _blueprint_values(head_brake)
+    titles = [d["display_name"][0] for d in values.values()
+              if d.get("class_identifier") == ["TimeSeries"]]  # fmt: skip
+    assert len(titles) >= 2 * (4 * 3 + 1 + 3 + 1)  # as opened and final
+    units = re.compile(r"\((m/s|m|m/s²|ms)\)")
+    assert [t for t in titles if not units.search(t)] == []
+    key = summarize_recording(head_brake).texts["/mpc_head_brake/key"]
+    assert "x axes: simulated time t (s)" in key

@@ -100,3 +100,25 @@ def test_bad_samples_are_refused_by_name(tmp_path, samples):
     with pytest.raises(ConfigError, match="one value per scenario"):
         R.record_sweep_file(tmp_path / "c.rrd", "s", short, {"aave": "AAVE"})
     assert not list(tmp_path.iterdir())  # refused before any file is written
+
+
+def test_the_report_ranks_a_controller_with_an_unsafe_scenario_after_the_safe_ones(tmp_path):
+    """Safety before efficiency in the sweep's recording as in its table: ``fast`` has the
+    better AAVE but one scenario under 2 m (unsafe), so its column comes after ``slow``'s,
+    marked, its AAVE still shown; the count of unsafe scenarios is a row of its own."""
+    n = 4
+    base = {k: np.full(n, 5.0) for k in SWEEP_METRICS}
+    base.update(collisions=np.zeros(n), aeb_activations=np.zeros(n),
+                jerk_1s_over_limit_s=np.zeros(n), min_spacing=np.full(n, 9.0))  # fmt: skip
+    samples = {"fast": {**base, "aave": np.full(n, 1.0),
+                        "min_spacing": np.array([9.0, 1.5, 9.0, 9.0])},
+               "slow": {**base, "aave": np.full(n, 3.0)}}  # fmt: skip
+    summary = aggregate(samples, dict.fromkeys(samples, 0))
+    assert summary["fast"]["unsafe_scenarios"] == 1 and summary["slow"]["unsafe_scenarios"] == 0
+    path = R.record_sweep_file(tmp_path / "u.rrd", "u", samples, {"aave": "AAVE (m/s)"}, summary)
+    lines = _report(path, "u").splitlines()
+    table = [ln for ln in lines if ln.startswith("| ")]
+    assert table[0] == "| metric | slow | fast |"
+    assert table[1] == "| safety | safe | unsafe in 1/4 |"
+    assert table[2].startswith("| AAVE (m/s) | 3 [3, 3] | 1 [1, 1] |")
+    assert "| unsafe scenarios | 0 | 1 |" in table

@@ -79,7 +79,7 @@ from lcc_synth.experiments.sweep_samples import (
     aggregate,
     table_digest,
 )
-from lcc_synth.metrics import MetricsConfig
+from lcc_synth.metrics import MetricsConfig, sweep_safety_rank
 from lcc_synth.models.records import Record, system_tables
 from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
 from lcc_synth.schema import declared
@@ -564,12 +564,7 @@ def format_summary(summary: Mapping[str, Mapping[str, Any]]) -> str:
             "AEB steps (scen.)", "unsafe (scen.)", "over ISO jerk (scen.)", "MPC fallbacks"]
     rows = []
 
-    def rank(item: tuple[str, Mapping[str, Any]]) -> tuple[bool, bool, bool]:
-        e = item[1]  # safety before efficiency: controllers with unsafe runs after the others
-        return (e["collision_scenarios"] > 0, e.get("unsafe_scenarios", 0) > 0,
-                int(e.get("fallbacks") or 0) > 0)  # fmt: skip
-
-    for name, e in sorted(summary.items(), key=rank):
+    for name, e in sorted(summary.items(), key=lambda item: sweep_safety_rank(item[1])):
         steps = int(e.get("fallbacks") or 0)  # the solver failed (fell back) on these steps
         marks = [f"unsafe in {e['unsafe_scenarios']}/{e['scenarios']}"] if (
             e.get("unsafe_scenarios") and not e["collision_scenarios"]) else []  # fmt: skip

@@ -68,9 +68,9 @@ def context_markdown(spec: Any, time_panel: bool = True) -> str:
     :class:`~lcc_synth.experiments.spec.SimulationSpec`, or one scenario of a suite,
     :class:`~lcc_synth.experiments.suite_context.ScenarioContext`: ``name``,
     ``description``, ``scenario``, ``metrics``, ``controllers`` (objects or tables),
-    ``to_toml()``). ``time_panel``: the recording's time panel opens at the first event
-    (``simulate``'s; ``run``'s one panel serves every scenario, so its documents do not say
-    so)."""
+    ``to_toml()``). ``time_panel``: the recording's time panel selects from the first event
+    to the end (``simulate``'s; ``run``'s one panel serves every scenario, so its documents do
+    not say so)."""
     sc, cfg = spec.scenario, spec.metrics
     lines = [f"# {spec.name}: context", ""]
     description = str(getattr(spec, "description", "") or "").strip()
@@ -95,7 +95,7 @@ def context_markdown(spec: Any, time_panel: bool = True) -> str:
     t0 = first_event(sc)
     if t0 is not None:
         lines.append(f"- first event at t = {t0:g} s"
-                     + (" (the time panel opens there)" if time_panel else ""))
+                     + (" (the time panel's selection starts there)" if time_panel else ""))
     baseline = getattr(cfg, "baseline", None)
     lines += [
         "", "## metrics", "",

@@ -321,9 +321,13 @@ def _send_series(
     ``points`` the marker sizes (default 2: a scatter plot, for values that are not a signal).
 
     ``flag``: a piecewise-constant series (a 0/1 flag, a status code) recorded at its
-    breakpoints: drawn as steps and never averaged by the viewer. Its default aggregation
-    (``Average`` of the points within a pixel) drew a chattering AEB flag as a slope rising
-    from 0 at t = 0 to 0.6 at 27 s, values the flag never takes."""
+    breakpoints: drawn as steps. No line is averaged by the viewer (aggregation ``Off``): the
+    rows are already those that draw the line at about a pixel (the ``minmax`` recording,
+    :mod:`~lcc_synth.recording.decimate`), and Rerun's default aggregation (``Average`` of the
+    points within a pixel) turns a plateau kept as its two ends into a slope: a chattering AEB
+    flag rose from 0 at t = 0 to 0.6 at 27 s, and the head's acceleration of the MPC head brake
+    (0 up to 20 s, then -5 m/s²) was drawn as a ramp from 0 at t = 0 to -2.5 at 20 s (its rows
+    (20.00 s, 0) and (20.01 s, -5) averaged in one pixel; web viewer, 218 px wide plot)."""
     import pyarrow as pa
 
     rr = _rr()
@@ -336,8 +340,9 @@ def _send_series(
             marker_sizes=[2.0] * k if widths is None else [float(w) for w in widths],
         )  # fmt: skip
     else:
-        step = {"aggregation_policy": "Off", "interpolation_mode": "StepAfter"} if flag else {}
+        step = {"interpolation_mode": "StepAfter"} if flag else {}
         style = rr.SeriesLines(
+            aggregation_policy="Off",
             names=list(names), colors=colors,
             widths=[1.5] * k if widths is None else [float(w) for w in widths], **step,
         )  # fmt: skip

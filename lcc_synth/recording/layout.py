@@ -24,6 +24,23 @@ of a run of ``D`` seconds gets a label every 10 s from about ``15 D`` px wide (9
 would hide part of the run. So the plots keep the whole run; the time panel below them (same
 ``time`` timeline, the whole width) carries the seconds, hovering a curve shows its time, and a
 view maximised (its expand button) gets 10 s labels.
+
+The time cursor
+---------------
+The blueprint sets the time panel's state, timeline, play state and time selection
+(:func:`time_panel`: expanded, ``time``, paused, from the first event to the end), but not
+where the cursor stands: Rerun 0.41's ``TimePanel`` / ``TimePanelBlueprint`` hold ``state``,
+``timeline``, ``playback_speed``, ``fps``, ``play_state``, ``loop_mode`` and
+``time_selection`` only, and Rerun's guide says so ("The time panel blueprint has no field for
+the position of the time cursor"). Its other way, a viewer URL ending in ``#when=time@...``,
+belongs to recordings on a Rerun server (dataset segment URLs): the web viewer serving a
+``.rrd`` (``lcc-synth review --web``, a ``rerun+http://.../proxy`` URL) left its cursor at the
+start of the run with ``#when=time@20s`` inside its ``url`` parameter (the MPC head brake) and
+on the page address (Table II) alike, in headless Chromium driven as
+``benchmarks/screenshot_review.py`` drives it (2026-12-02), and never wrote a fragment to its
+address. So a recording opens with the cursor at the start, the
+event marked by the selection; every plot shows the whole run, and the road views show the
+moment under the cursor (click the time panel at the selection's start to go there).
 """
 
 from __future__ import annotations
@@ -206,7 +223,8 @@ def simulation_blueprint(
     +- 30 s) and y fits the data. The per-vehicle plots hide their legends (12 series
     would cover the curves; hovering names a curve); a one-line key above them
     (``/<scenario>/key``, :data:`~lcc_synth.recording.simulation.KEY_TEXT`) says the colours
-    and the axes. The time panel opens paused on the first event (:func:`time_panel`).
+    and the axes. The time panel opens paused, its selection from the first event
+    (:func:`time_panel`; the cursor cannot be placed in Rerun 0.41: see the module's notes).
     ``recorded``: the scenario replays a recording (``/<scenario>/recorded``,
     :func:`~lcc_synth.recording.simulation.record_recorded`): the velocity and spacing rows
     end with a view of the recorded trajectories, next to the simulated ones.
@@ -303,7 +321,9 @@ def simulation_blueprint(
             ),
         ]
     tabs = [*first, *tabs]
-    texts = rrb.Tabs(*tabs, name="reports")
+    # the first tab shown, saved rather than left to the viewer: an MPC run's predictions,
+    # else the comparison metrics
+    texts = rrb.Tabs(*tabs, name="reports", active_tab=0)
     right = rrb.Vertical(road, u_cmd, texts, row_shares=list(RIGHT_SHARES))
     return rrb.Blueprint(
         rrb.Horizontal(plots, right, column_shares=[3, 2]),

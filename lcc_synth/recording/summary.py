@@ -13,10 +13,10 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping
 
-from lcc_synth.metrics import METRIC_DISPLAY
+from lcc_synth.metrics import METRIC_DISPLAY, format_metric
 from lcc_synth.recording.reader import RecordingSummary
 
-__all__ = ["MAX_LINES", "full_lines", "markdown_pairs", "summary_lines"]
+__all__ = ["FACT_DISPLAY", "MAX_LINES", "full_lines", "markdown_pairs", "summary_lines"]
 
 #: The compact summary never prints more lines than this (one screen).
 MAX_LINES = 60
@@ -26,6 +26,13 @@ KEY_METRICS = ("aave", "fuel_ml", "min_spacing", "min_ttc", "max_abs_command",
 #: Facts shown for a report document, when present.
 KEY_FACTS = ("verdict", "gamma_peak", "gamma_peak_omega", "why", "string_verdict", "h2_true",
              "h2_lmi_bound")  # fmt: skip
+#: How a numeric report fact is shown: its label and unit, and the format of its value.
+FACT_DISPLAY = {
+    "gamma_peak": ("max |Γ|", "", ".3f"),
+    "gamma_peak_omega": ("at ω", " rad/s", ".3f"),
+    "h2_true": ("true H2", "", ".4g"),
+    "h2_lmi_bound": ("H2 LMI bound", "", ".4g"),
+}
 _CAPS = {"groups": 10, "metrics": 24, "reports": 14}
 
 
@@ -159,9 +166,21 @@ def _reports(texts: Mapping[str, str]) -> list[str]:
     lines = []
     for p in paths:
         pairs = markdown_pairs(texts[p])
-        facts = ", ".join(f"{k} {pairs[k]}" for k in KEY_FACTS if pairs.get(k) not in (None, ""))
+        facts = ", ".join(_fact(k, pairs[k]) for k in KEY_FACTS if pairs.get(k) not in (None, ""))
         lines.append(f"  {p[: -len('/report')]:<{width}}  {facts or '(see --full)'}")
     return [f"reports      {len(paths)}", *_capped(lines, _CAPS["reports"], "reports")]
+
+
+def _fact(key: str, value: str) -> str:
+    """``key value`` of a report, a number rounded and labelled as :data:`FACT_DISPLAY` says
+    (``gamma_peak_omega 0.451821`` -> ``at ω 0.452 rad/s``); anything else as written."""
+    if key not in FACT_DISPLAY:
+        return f"{key} {value}"
+    label, unit, fmt = FACT_DISPLAY[key]
+    try:
+        return f"{label} {format_metric(float(value), fmt)}{unit}"
+    except ValueError:  # "None", "n/a": not a number
+        return f"{label} {value}"
 
 
 def summary_lines(summary: RecordingSummary) -> list[str]:

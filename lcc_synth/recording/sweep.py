@@ -155,16 +155,24 @@ def _scenario_count(samples: Mapping[str, Mapping[str, np.ndarray]], labels: Map
 #: Counts of the summary table: (label, total key, scenarios key or None).
 _COUNTS = (("collisions (scenarios)", "collisions", "collision_scenarios"),
            ("AEB steps (scenarios)", "aeb_activations", "aeb_scenarios"),
+           ("unsafe scenarios", "unsafe_scenarios", None),
            ("scenarios over ISO jerk", "jerk_scenarios", None),
            ("MPC fallbacks", "fallbacks", None))  # fmt: skip
 
 
 def _summary_rows(summary: Mapping[str, Mapping[str, Any]], labels: Mapping[str, str]):
-    """``{controller: {label: cell}}`` for the comparison table: ``mean [p5, p95]`` of every
-    metric with a distribution, then the counts."""
+    """``{controller: {label: cell}}`` for the comparison table: a first row ``safety``
+    (``safe``, ``unsafe in k/N`` or ``collided in k/N`` scenarios), ``mean [p5, p95]`` of every
+    metric with a distribution, then the counts; safety before efficiency: the controllers in
+    the order of :func:`~lcc_synth.metrics.sweep_safety_rank` (as the ``sweep`` table)."""
+    from lcc_synth.metrics import sweep_safety_rank
+
     rows: dict[str, dict[str, str]] = {}
-    for c, e in summary.items():
-        row = rows[c] = {}
+    for c, e in sorted(summary.items(), key=lambda item: sweep_safety_rank(item[1])):
+        n = e.get("scenarios", "?")
+        hit, unsafe = int(e.get("collision_scenarios") or 0), int(e.get("unsafe_scenarios") or 0)
+        row = rows[c] = {"safety": f"collided in {hit}/{n}" if hit else
+                         f"unsafe in {unsafe}/{n}" if unsafe else "safe"}  # fmt: skip
         for metric, label in labels.items():
             d = e.get(metric)
             if isinstance(d, Mapping) and "mean" in d:
