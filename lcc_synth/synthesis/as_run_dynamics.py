@@ -1,0 +1,390 @@
+"""Dynamic structured synthesis on the loop as it runs: the gain *and* the controller's dynamics.
+
+:mod:`lcc_synth.synthesis.as_run` designs the static gain with the estimator, the filter and
+the sample time held fixed. Here they are design variables too. The controller is the one the
+simulator runs (:class:`~lcc_synth.controllers.static.StaticGainController`, equilibrium
+"estimated"): the static gain ``g`` on its pattern, the time constant ``tau`` of the
+equilibrium estimate, the time constant ``tau_f`` of the filter on every received value, and
+the sample time ``T`` from a set of candidates. The loop is that of
+:func:`lcc_synth.analysis.as_run.as_run_loop` (exact ZOH plant, estimator, filter, V2V delay
+line), and its head-to-tail response ``|Gamma(e^{j w T})|`` is evaluated on a log grid over
+``[1e-3, 3]`` rad/s in one vectorised Hessenberg solve per loop.
+
+Problem
+-------
+``minimise J(x) = H2(x)`` subject to ``max_w |Gamma_l(w)| <= bound`` at every latency ``l``
+(0 and 0.1 s) and closed-loop stability at every latency, with
+``x = (g on the pattern, log tau, log tau_f)`` in the box ``tau in [0.1, 100]`` s,
+``tau_f in [0.01, 5]`` s; ``H2`` is :func:`lcc_synth.analysis.as_run_h2.as_run_h2` of the
+continuous-limit as-run loop (estimator and filter included) from the design's acceleration
+noise to its weighted states and command. The sampled-data H2 of the same loop (also
+:func:`as_run_h2`) costs 20-50 times more per evaluation and differs little: for the
+showcase's h2 on string10 (estimate 1 s, filter 0.3 s) 7.290 at ``T = 0.01`` s and 7.314 at
+``T = 0.1`` s; the reports give it for the chosen design. ``bound = 1`` asks for string
+stability; the verdict is then decided on the exact loop by
+:func:`~lcc_synth.analysis.as_run.as_run_report` (the grid is only the search's measure).
+The sample time is a discrete choice: a latency that is not a multiple of ``T`` has no exact
+loop (:class:`~lcc_synth.analysis.as_run.NotRepresentable`), so the candidates must divide
+every latency; each candidate is searched on its own.
+
+Method
+------
+Non-smooth optimisation of a fixed-structure controller from many starts, in the spirit of
+hinfstruct / systune: the peak of ``|Gamma|`` is a max over frequencies (not differentiable
+where the arg max jumps) and the estimator's and filter's time constants enter the loop
+through ``e^{-T/tau}``, so the search is derivative-free: scipy's Nelder-Mead (adaptive
+simplex) on the exact penalty ``J / J_0 + rho sum_l max(0, peak_l - bound)^2`` (``rho = 1e3``;
+the box and an unstable loop give a constant barrier value). The feasible-direction descent of
+:mod:`lcc_synth.synthesis.as_run` needs the dynamics fixed (its gradient is that of a static
+output feedback) and cannot move ``tau``, ``tau_f``, ``T``. :func:`lowest_peak` minimises
+``max_l peak_l`` itself from the same starts: the lowest peak the structure reaches (the
+certificate when no design meets the bound). Starts: the given design and ``starts - 1``
+random ones (each gain scaled by a log-uniform factor in [1/3, 3], ``tau`` and ``tau_f``
+log-uniform in their box; a start whose loop is unstable is counted and skipped).
+
+Measured (string10 of the showcase, pattern CAV + HDVs 1, 2, "replace", ``T = 0.1`` s,
+240 frequencies, 2 cores shared): one evaluation (two sampled loops of 28 and 33 states and
+the continuous H2) 25-50 ms; a start of 600 evaluations 15-30 s. Results of
+``examples/as_run_front.py``: see "Results" below.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lcc_synth.analysis.as_run import (
+    AsRunReport,
+    NotRepresentable,
+    as_run_loop,
+    as_run_report,
+    law_of_gains,
+)
+from lcc_synth.analysis.as_run_h2 import as_run_h2
+from lcc_synth.errors import ConfigError
+from lcc_synth.synthesis.h2 import H2Plant
+
+__all__ = [
+    "DynamicsSettings",
+    "AsRunPoint",
+    "DynamicDesign",
+    "evaluate_point",
+    "design_dynamics",
+    "lowest_peak",
+]
+
+_BARRIER = 1e6  # objective value of an unstable loop or a point outside the box
+
+
+@dataclass(frozen=True)
+class DynamicsSettings:
+    """Settings of the search (module docstring).
+
+    Attributes
+    ----------
+    sample_times : tuple of float
+        Candidate controller periods (s), each > 0 and dividing every latency.
+    latencies : tuple of float
+        V2V latencies (s, >= 0) at which the loop must meet the bound.
+    tau_bounds, filter_bounds : (float, float)
+        Boxes of the estimator's and the filter's time constants (s), ``0 < lo < hi``.
+    omega : (float, float)
+        Frequency band (rad/s) of the peak, ``0 < lo < hi``; ``points`` log-spaced frequencies.
+    starts : int
+        Starts of the search (>= 1), the given design first.
+    maxfev : int
+        Objective evaluations per start (>= 10).
+    seed : int
+        Seed of the random starts.
+    penalty : float
+        ``rho`` of the exact penalty (> 0).
+    """
+
+    sample_times: tuple[float, ...] = (0.1,)
+    latencies: tuple[float, ...] = (0.0, 0.1)
+    tau_bounds: tuple[float, float] = (0.1, 100.0)
+    filter_bounds: tuple[float, float] = (0.01, 5.0)
+    omega: tuple[float, float] = (1e-3, 3.0)
+    points: int = 240
+    starts: int = 8
+    maxfev: int = 600
+    seed: int = 0
+    penalty: float = 1e3
+
+    def __post_init__(self) -> None:
+        def bad(name: str, rng: str, value) -> ConfigError:
+            return ConfigError(f"as_run_dynamics.{name}", f"must be {rng}, got {value!r}")
+
+        lats = tuple(self.latencies)
+        if not lats or not all(math.isfinite(x) and x >= 0 for x in lats):
+            raise bad("latencies", "a non-empty list of seconds >= 0", self.latencies)
+        ts = tuple(self.sample_times)
+        if not ts or not all(math.isfinite(x) and x > 0 for x in ts):
+            raise bad("sample_times", "a non-empty list of seconds > 0", self.sample_times)
+        for T in ts:
+            for lat in lats:
+                r = lat / T
+                if abs(r - round(r)) > 1e-9 * max(1.0, r):
+                    raise ConfigError(
+                        "as_run_dynamics.sample_times",
+                        f"{T:g} s does not divide the latency {lat:g} s: use a sample time "
+                        "that does (the loop has no exact model otherwise)",
+                    )
+        for name in ("tau_bounds", "filter_bounds", "omega"):
+            lo, hi = getattr(self, name)
+            if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi):
+                raise bad(name, "a pair (lo, hi) with 0 < lo < hi", getattr(self, name))
+        for name, lo in (("points", 10), ("starts", 1), ("maxfev", 10)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+                raise bad(name, f"an integer >= {lo}", v)
+        if not (math.isfinite(self.penalty) and self.penalty > 0):
+            raise bad("penalty", "a number > 0", self.penalty)
+
+    @property
+    def grid(self) -> np.ndarray:
+        lo, hi = self.omega
+        return np.logspace(math.log10(lo), math.log10(hi), self.points)
+
+
+@dataclass(frozen=True)
+class AsRunPoint:
+    """One controller of the structure and its as-run figures.
+
+    ``gains``: the gain on its pattern by state name; ``peaks`` / ``peak_omegas``: the grid
+    peak of ``|Gamma|`` and its frequency (rad/s) at each latency of the settings; ``h2``: the
+    continuous-limit as-run H2 norm (``inf`` if unstable).
+    """
+
+    gains: dict[str, float]
+    equilibrium_tau: float
+    measurement_filter: float
+    sample_time: float
+    latencies: tuple[float, ...]
+    peaks: tuple[float, ...]
+    peak_omegas: tuple[float, ...]
+    h2: float
+
+    @property
+    def peak(self) -> float:
+        """The largest peak over the latencies."""
+        return max(self.peaks)
+
+    def controller_table(self, semantics: str = "replace", kind: str = "cf_lcc") -> dict:
+        """The ``[controllers.NAME]`` table (type "static") of this controller."""
+        return {
+            "type": "static", "kind": kind, "semantics": semantics,
+            "gains": dict(self.gains), "equilibrium": "estimated",
+            "equilibrium_tau": self.equilibrium_tau,
+            "measurement_filter": self.measurement_filter, "sample_time": self.sample_time,
+        }  # fmt: skip
+
+
+@dataclass(frozen=True)
+class DynamicDesign:
+    """Result of a search: the best point, the exact verdicts and what the search cost.
+
+    ``reports``: :class:`~lcc_synth.analysis.as_run.AsRunReport` at each latency (exact grid
+    method); ``h2_sampled``: the sampled-data H2 of the latency-0 loop; ``bound``: the peak
+    bound of the search (``None`` for :func:`lowest_peak`); ``starts``: the starts run,
+    ``unstable_starts`` those skipped; ``history``: ``(start, objective)`` of every start.
+    """
+
+    point: AsRunPoint
+    reports: tuple[AsRunReport, ...]
+    h2_sampled: float | None
+    bound: float | None
+    starts: int
+    unstable_starts: int
+    evaluations: int
+    seconds: float
+    history: list[tuple[int, float]] = field(default_factory=list)
+
+    @property
+    def string_stable(self) -> bool:
+        """String stable (exact verdict) at every latency."""
+        return all(r.string_stable for r in self.reports)
+
+
+# --------------------------------------------------------------------------------------------
+# Evaluation
+# --------------------------------------------------------------------------------------------
+
+
+def _pattern(plant: H2Plant, mask: np.ndarray) -> np.ndarray:
+    idx = np.flatnonzero(np.asarray(mask, bool))
+    if idx.size == 0:
+        raise ConfigError("pattern", "needs at least one gain entry")
+    return idx
+
+
+def _loops(plant: H2Plant, g: np.ndarray, tau: float, tf: float, T: float | None, lats):
+    law = law_of_gains(plant.model, plant.gains(g))
+    return [as_run_loop(plant.model, law, T, lat, tau, tf) for lat in lats]
+
+
+def evaluate_point(
+    plant: H2Plant,
+    gains: np.ndarray,
+    equilibrium_tau: float,
+    measurement_filter: float,
+    sample_time: float,
+    settings: DynamicsSettings | None = None,
+) -> AsRunPoint | None:
+    """The :class:`AsRunPoint` of design gain ``gains`` (on ``plant``'s states) with the given
+    dynamics, or ``None`` when the loop is unstable at a latency."""
+    st = settings or DynamicsSettings()
+    g = np.asarray(gains, float)
+    w = st.grid
+    peaks, at = [], []
+    for loop in _loops(plant, g, equilibrium_tau, measurement_filter, sample_time,
+                       st.latencies):  # fmt: skip
+        if np.max(np.abs(np.linalg.eigvals(loop.A))) >= 1.0 - 1e-9:
+            return None
+        mag = np.abs(loop.response(w))
+        k = int(np.argmax(mag))
+        peaks.append(float(mag[k]))
+        at.append(float(w[k]))
+    (cont,) = _loops(plant, g, equilibrium_tau, measurement_filter, None, (0.0,))
+    h2 = as_run_h2(cont, plant.Bw, plant.Q, plant.r)
+    if h2 is None or not math.isfinite(h2):
+        return None
+    names = plant.state_names
+    return AsRunPoint(
+        {names[i]: float(g[i]) for i in np.flatnonzero(g)}, float(equilibrium_tau),
+        float(measurement_filter), float(sample_time), tuple(st.latencies), tuple(peaks),
+        tuple(at), float(h2),
+    )  # fmt: skip
+
+
+# --------------------------------------------------------------------------------------------
+# Search
+# --------------------------------------------------------------------------------------------
+
+
+def _starts(idx, g0, tau0, tf0, st: DynamicsSettings, extra):
+    rng = np.random.default_rng(st.seed)
+    first = [np.r_[g0[idx], math.log(tau0), math.log(tf0)]]
+    first += [np.asarray(x, float) for x in extra]
+    (tl, th), (fl, fh) = st.tau_bounds, st.filter_bounds
+    out = list(first)
+    while len(out) < st.starts + len(extra):
+        scale = np.exp(rng.uniform(-math.log(3.0), math.log(3.0), idx.size))
+        out.append(np.r_[g0[idx] * scale, rng.uniform(math.log(tl), math.log(th)),
+                         rng.uniform(math.log(fl), math.log(fh))])  # fmt: skip
+    return out
+
+
+def _search(plant, mask, g0, tau0, tf0, st, bound, extra=()):
+    from scipy.optimize import minimize
+
+    t0 = time.perf_counter()
+    idx = _pattern(plant, mask)
+    g0 = np.asarray(g0, float)
+    lo = np.log([st.tau_bounds[0], st.filter_bounds[0]])
+    hi = np.log([st.tau_bounds[1], st.filter_bounds[1]])
+    nfev = [0]
+
+    def point(x, T):
+        if np.any(x[-2:] < lo - 1e-12) or np.any(x[-2:] > hi + 1e-12):
+            return None
+        g = np.zeros(plant.nx)
+        g[idx] = x[:-2]
+        nfev[0] += 1
+        try:
+            return evaluate_point(plant, g, math.exp(x[-2]), math.exp(x[-1]), T, st)
+        except (np.linalg.LinAlgError, NotRepresentable, ValueError):
+            return None
+
+    first = point(np.r_[g0[idx], math.log(tau0), math.log(tf0)], st.sample_times[0])
+    if first is None:
+        raise ConfigError("as_run_dynamics", "the initial controller's as-run loop is unstable: "
+                          "start from a stabilising design")  # fmt: skip
+    J0 = first.h2
+
+    def objective(x, T):
+        p = point(x, T)
+        if p is None:
+            return _BARRIER
+        if bound is None:
+            return p.peak
+        excess = sum(max(0.0, pk - bound) ** 2 for pk in p.peaks)
+        return p.h2 / J0 + st.penalty * excess
+
+    best, best_f, unstable, history, k = None, math.inf, 0, [], 0
+    for T in st.sample_times:
+        for x0 in _starts(idx, g0, tau0, tf0, st, extra):
+            k += 1
+            if objective(x0, T) >= _BARRIER:
+                unstable += 1
+                continue
+            res = minimize(objective, x0, args=(T,), method="Nelder-Mead", options={
+                "maxfev": st.maxfev, "xatol": 1e-5, "fatol": 1e-8, "adaptive": True})
+            history.append((k, float(res.fun)))
+            if res.fun < best_f:
+                best, best_f = (res.x.copy(), T), float(res.fun)
+    if best is None:
+        raise ConfigError("as_run_dynamics.starts", "every start was unstable: raise starts")
+    p = point(*best)
+    g = np.zeros(plant.nx)
+    g[idx] = best[0][:-2]
+    loops = _loops(plant, g, p.equilibrium_tau, p.measurement_filter, p.sample_time,
+                   st.latencies)  # fmt: skip
+    reports = tuple(as_run_report(loop) for loop in loops)
+    h2s = as_run_h2(loops[0], plant.Bw, plant.Q, plant.r) if st.latencies[0] == 0 else None
+    return DynamicDesign(p, reports, h2s, bound, k, unstable, nfev[0],
+                         time.perf_counter() - t0, history)  # fmt: skip
+
+
+def design_dynamics(
+    plant: H2Plant,
+    mask: np.ndarray,
+    gains: np.ndarray,
+    equilibrium_tau: float,
+    measurement_filter: float,
+    bound: float,
+    settings: DynamicsSettings | None = None,
+    extra_starts=(),
+) -> DynamicDesign:
+    """Minimise the as-run H2 cost subject to ``peak <= bound`` at every latency.
+
+    Parameters
+    ----------
+    plant : H2Plant
+        The design plant (:func:`lcc_synth.synthesis.h2.make_plant`; its model has a head).
+    mask : array of bool
+        The gain's pattern on ``plant``'s states.
+    gains, equilibrium_tau, measurement_filter : the first start (a stabilising controller).
+    bound : float
+        Bound on the grid peak of ``|Gamma|`` (>= 1; 1 asks for string stability).
+    settings : DynamicsSettings, optional
+    extra_starts : sequence of arrays
+        More starts ``(g on the pattern, log tau, log tau_f)``, e.g. a neighbour of the front.
+
+    Raises
+    ------
+    ConfigError
+        A bound below 1, an unstable first start, every start unstable.
+    """
+    if not (math.isfinite(bound) and bound >= 1.0):
+        raise ConfigError("bound", f"must be a peak |Gamma| >= 1 (|Gamma(0)| = 1), got {bound!r}")
+    st = settings or DynamicsSettings()
+    return _search(plant, mask, gains, equilibrium_tau, measurement_filter, st, float(bound),
+                   extra_starts)  # fmt: skip
+
+
+def lowest_peak(
+    plant: H2Plant,
+    mask: np.ndarray,
+    gains: np.ndarray,
+    equilibrium_tau: float,
+    measurement_filter: float,
+    settings: DynamicsSettings | None = None,
+) -> DynamicDesign:
+    """The lowest ``max_l peak_l`` the structure reaches from ``settings.starts`` starts (the
+    certificate of the module docstring); arguments as :func:`design_dynamics`."""
+    st = settings or DynamicsSettings()
+    return _search(plant, mask, gains, equilibrium_tau, measurement_filter, st, None)
