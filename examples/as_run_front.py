@@ -36,10 +36,13 @@ def main() -> None:
     ap.add_argument("--maxfev", type=int, default=400, help="evaluations per start (400)")
     ap.add_argument("--cert-starts", type=int, default=12,
                     help="starts of the lowest-peak search (default 12)")
+    ap.add_argument("--gap-bound", type=float, default=None,
+                    help="bound on the CAV's gap response |s_0/v_h| as a multiple of today's "
+                    "h2 (>= 1; default none)")
     add_example_out(ap)
     args = ap.parse_args()
 
-    st = DynamicsSettings(starts=args.starts, maxfev=args.maxfev)
+    st = DynamicsSettings(starts=args.starts, maxfev=args.maxfev, gap_bound=args.gap_bound)
     cert = replace(st, starts=args.cert_starts)
     front = as_run_front(args.problem, settings=st, certificate=cert, progress=print)
     cert = front.certificate
@@ -48,13 +51,15 @@ def main() -> None:
           f"({cert.unstable_starts} unstable), {cert.evaluations} evaluations, "
           f"{cert.seconds:.0f} s; exact verdict "
           f"{'string stable' if cert.string_stable else 'not string stable'}")
-    print(f"{'name':>14s} {'peak0':>7s} {'peak.1':>7s} {'ss':>3s} {'tau':>7s} {'tau_f':>6s} "
+    print(f"{'name':>14s} {'peak0':>7s} {'peak.1':>7s} {'ss':>3s} {'gap':>5s} {'tau':>7s} "
+          f"{'tau_f':>6s} "
           f"{'AAVE hb':>8s} {'gap hb':>7s} {'jerk hb':>7s} {'AEB hb':>6s} {'AAVE he':>8s} "
           f"{'fuel he':>8s} {'gap he':>7s} {'AEB he':>6s}")
     for p in front.points:
         v = p.values()
         print(f"{p.name:>14s} {v['peak_lat0']:7.4f} {v['peak_lat01']:7.4f} "
-              f"{'y' if p.string_stable else 'n':>3s} {v['equilibrium_tau']:7.3f} "
+              f"{'y' if p.string_stable else 'n':>3s} {v['gap_peak']:5.2f} "
+              f"{v['equilibrium_tau']:7.3f} "
               f"{v['measurement_filter']:6.3f} {v['aave_head_brake']:8.4f} "
               f"{v['min_gap_head_brake']:7.2f} {v['jerk1s_head_brake']:7.2f} "
               f"{v['aeb_head_brake']:6d} {v['aave_heterogeneous']:8.4f} "

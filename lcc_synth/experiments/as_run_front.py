@@ -43,7 +43,8 @@ SCENARIOS = ("head_brake", "heterogeneous")
 
 #: Columns of :func:`front_csv` after ``name`` and ``bound``.
 FRONT_COLUMNS = (
-    "peak_lat0", "peak_lat01", "string_stable", "h2", "equilibrium_tau", "measurement_filter",
+    "peak_lat0", "peak_lat01", "string_stable", "h2", "gap_peak", "equilibrium_tau",
+    "measurement_filter",
     "sample_time", "aave_head_brake", "fuel_head_brake", "min_gap_head_brake",
     "jerk1s_head_brake", "aeb_head_brake", "aave_heterogeneous", "fuel_heterogeneous",
     "min_gap_heterogeneous", "jerk1s_heterogeneous", "jerk_over_limit_s_heterogeneous",
@@ -68,7 +69,7 @@ class FrontPoint:
         p = self.point
         return {
             "peak_lat0": p.peaks[0], "peak_lat01": p.peaks[-1],
-            "string_stable": self.string_stable, "h2": p.h2,
+            "string_stable": self.string_stable, "h2": p.h2, "gap_peak": p.gap_peak,
             "equilibrium_tau": p.equilibrium_tau, "measurement_filter": p.measurement_filter,
             "sample_time": p.sample_time, "aave_head_brake": hb["aave"],
             "fuel_head_brake": hb["fuel_ml"], "min_gap_head_brake": hb["min_spacing"],

@@ -64,6 +64,7 @@ from lcc_synth.analysis.as_run import (
     law_of_gains,
 )
 from lcc_synth.analysis.as_run_h2 import as_run_h2
+from lcc_synth.analysis.transfer import hessenberg_solver
 from lcc_synth.errors import ConfigError
 from lcc_synth.synthesis.h2 import H2Plant
 
@@ -101,6 +102,10 @@ class DynamicsSettings:
         Seed of the random starts.
     penalty : float
         ``rho`` of the exact penalty (> 0).
+    gap_bound : float or None
+        Bound on the CAV's gap response as a multiple of the first start's (>= 1; ``None``:
+        none): ``max_w |s_0(jw) / v_h(jw)|`` of the continuous-limit loop, the spacing the CAV
+        gives up per m/s of a head speed change (a head brake's minimum gap).
     """
 
     sample_times: tuple[float, ...] = (0.1,)
@@ -113,6 +118,7 @@ class DynamicsSettings:
     maxfev: int = 600
     seed: int = 0
     penalty: float = 1e3
+    gap_bound: float | None = None
 
     def __post_init__(self) -> None:
         def bad(name: str, rng: str, value) -> ConfigError:
@@ -143,6 +149,9 @@ class DynamicsSettings:
                 raise bad(name, f"an integer >= {lo}", v)
         if not (math.isfinite(self.penalty) and self.penalty > 0):
             raise bad("penalty", "a number > 0", self.penalty)
+        gb = self.gap_bound
+        if gb is not None and not (math.isfinite(gb) and gb >= 1.0):
+            raise bad("gap_bound", "a multiple >= 1 of the first start's gap response", gb)
 
     @property
     def grid(self) -> np.ndarray:
@@ -156,7 +165,8 @@ class AsRunPoint:
 
     ``gains``: the gain on its pattern by state name; ``peaks`` / ``peak_omegas``: the grid
     peak of ``|Gamma|`` and its frequency (rad/s) at each latency of the settings; ``h2``: the
-    continuous-limit as-run H2 norm (``inf`` if unstable).
+    continuous-limit as-run H2 norm (``inf`` if unstable); ``gap_peak``: ``max_w |s_0 / v_h|``
+    (s) of the continuous-limit loop on the grid.
     """
 
     gains: dict[str, float]
@@ -167,6 +177,7 @@ class AsRunPoint:
     peaks: tuple[float, ...]
     peak_omegas: tuple[float, ...]
     h2: float
+    gap_peak: float = math.nan
 
     @property
     def peak(self) -> float:
@@ -252,11 +263,14 @@ def evaluate_point(
     h2 = as_run_h2(cont, plant.Bw, plant.Q, plant.r)
     if h2 is None or not math.isfinite(h2):
         return None
+    c_gap = np.zeros(cont.A.shape[0])
+    c_gap[cont.states.index("s_0")] = 1.0
+    gap = float(np.max(np.abs(hessenberg_solver(cont.A, cont.h, c_gap)(1j * w))))
     names = plant.state_names
     return AsRunPoint(
         {names[i]: float(g[i]) for i in np.flatnonzero(g)}, float(equilibrium_tau),
         float(measurement_filter), float(sample_time), tuple(st.latencies), tuple(peaks),
-        tuple(at), float(h2),
+        tuple(at), float(h2), gap,
     )  # fmt: skip
 
 
@@ -304,14 +318,16 @@ def _search(plant, mask, g0, tau0, tf0, st, bound, extra=()):
         raise ConfigError("as_run_dynamics", "the initial controller's as-run loop is unstable: "
                           "start from a stabilising design")  # fmt: skip
     J0 = first.h2
+    gap_max = None if st.gap_bound is None else st.gap_bound * first.gap_peak
 
     def objective(x, T):
         p = point(x, T)
         if p is None:
             return _BARRIER
+        gap = 0.0 if gap_max is None else max(0.0, p.gap_peak / gap_max - 1.0) ** 2
         if bound is None:
-            return p.peak
-        excess = sum(max(0.0, pk - bound) ** 2 for pk in p.peaks)
+            return p.peak + st.penalty * gap
+        excess = gap + sum(max(0.0, pk - bound) ** 2 for pk in p.peaks)
         return p.h2 / J0 + st.penalty * excess
 
     best, best_f, unstable, history, k = None, math.inf, 0, [], 0
