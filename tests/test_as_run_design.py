@@ -27,7 +27,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lcc_synth.analysis.as_run import as_run_loop, as_run_report, law_of_gains
+from lcc_synth.analysis.as_run import (
+    as_run_loop,
+    as_run_report,
+    equilibrium_slope,
+    law_of_gains,
+)
 from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.comparison import load_suite
 from lcc_synth.experiments.controller_tables import controller_from_table
@@ -36,6 +41,7 @@ from lcc_synth.synthesis.as_run_dynamics import (
     DynamicsSettings,
     design_dynamics,
     evaluate_point,
+    gap_response,
     lowest_peak,
 )
 from lcc_synth.synthesis.h2 import Weights, make_plant
@@ -104,6 +110,20 @@ def test_point_peaks_are_those_of_the_exact_loop(design_problem):
         # the grid peak is a lower bound of the exact supremum, within the grid's resolution
         assert peak <= rep.gamma_peak + 1e-12
         assert peak > rep.gamma_peak - 1e-3
+
+
+def test_gap_response_settles_at_the_equilibrium_spacing_slope(design_problem):
+    plant, _, g = design_problem
+    law = law_of_gains(plant.model, plant.gains(g))
+    loop = as_run_loop(plant.model, law, None, 0.0, 1.0, 0.238)
+    # closed form: after a head speed change dv the CAV's gap moves by s_e'(v*) dv
+    z = gap_response(loop, [1e-6])[0]
+    assert z.real == pytest.approx(equilibrium_slope(plant.model), rel=1e-8)
+    assert abs(z.imag) < 1e-4  # O(w): the lag of the gap behind the speed change
+    p = evaluate_point(plant, g, 1.0, 0.238, 0.1)
+    assert p.gap_peak >= equilibrium_slope(plant.model)
+    with pytest.raises(ConfigError, match="continuous"):
+        gap_response(as_run_loop(plant.model, law, 0.1, 0.0, 1.0, 0.238), [0.1])
 
 
 def test_search_meets_its_bound_or_reports_and_never_worsens_the_start(design_problem):

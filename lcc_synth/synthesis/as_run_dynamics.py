@@ -57,6 +57,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lcc_synth.analysis.as_run import (
+    AsRunLoop,
     AsRunReport,
     NotRepresentable,
     as_run_loop,
@@ -72,6 +73,7 @@ __all__ = [
     "DynamicsSettings",
     "AsRunPoint",
     "DynamicDesign",
+    "gap_response",
     "evaluate_point",
     "design_dynamics",
     "lowest_peak",
@@ -237,6 +239,18 @@ def _loops(plant: H2Plant, g: np.ndarray, tau: float, tf: float, T: float | None
     return [as_run_loop(plant.model, law, T, lat, tau, tf) for lat in lats]
 
 
+def gap_response(loop: AsRunLoop, omega) -> np.ndarray:
+    """``s_0(jw) / v_h(jw)`` (s) of a continuous-limit loop (``sample_time = None``): the CAV's
+    spacing error per m/s of head velocity. With the equilibrium estimated it tends to the
+    slope ``s_e'(v*)`` of the equilibrium spacing as ``w -> 0`` (the CAV settles at its new
+    equilibrium gap)."""
+    if loop.sample_time is not None:
+        raise ConfigError("loop", "the gap response is of the continuous-limit loop")
+    c = np.zeros(loop.A.shape[0])
+    c[loop.states.index("s_0")] = 1.0
+    return hessenberg_solver(loop.A, loop.h, c)(1j * np.asarray(omega, float))
+
+
 def evaluate_point(
     plant: H2Plant,
     gains: np.ndarray,
@@ -263,9 +277,7 @@ def evaluate_point(
     h2 = as_run_h2(cont, plant.Bw, plant.Q, plant.r)
     if h2 is None or not math.isfinite(h2):
         return None
-    c_gap = np.zeros(cont.A.shape[0])
-    c_gap[cont.states.index("s_0")] = 1.0
-    gap = float(np.max(np.abs(hessenberg_solver(cont.A, cont.h, c_gap)(1j * w))))
+    gap = float(np.max(np.abs(gap_response(cont, w))))
     names = plant.state_names
     return AsRunPoint(
         {names[i]: float(g[i]) for i in np.flatnonzero(g)}, float(equilibrium_tau),
