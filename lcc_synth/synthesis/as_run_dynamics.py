@@ -31,10 +31,12 @@ Method
 ------
 Non-smooth optimisation of a fixed-structure controller from many starts, in the spirit of
 hinfstruct / systune: the peak of ``|Gamma|`` is a max over frequencies (not differentiable
-where the arg max jumps) and the estimator's and filter's time constants enter the loop
-through ``e^{-T/tau}``, so the search is derivative-free: scipy's Nelder-Mead (adaptive
-simplex) on the exact penalty ``J / J_0 + rho sum_l max(0, peak_l - bound)^2`` (``rho = 1e3``;
-the box and an unstable loop give a constant barrier value). The feasible-direction descent of
+where the arg max jumps), and gradients with respect to ``tau`` and ``tau_f`` would mean
+differentiating the exact sampled loop (ZOH, filter, delay line); with 8 variables and 26 ms
+per evaluation a derivative-free search is affordable. So: scipy's Nelder-Mead (adaptive
+simplex) on the quadratic penalty ``J / J_0 + rho sum_l max(0, peak_l - bound)^2`` (``rho =
+1e3``; with ``gap_bound`` also ``rho max(0, gap / gap_max - 1)^2``; the box and an unstable
+loop give a constant barrier value). The feasible-direction descent of
 :mod:`lcc_synth.synthesis.as_run` needs the dynamics fixed (its gradient is that of a static
 output feedback) and cannot move ``tau``, ``tau_f``, ``T``. :func:`lowest_peak` minimises
 ``max_l peak_l`` itself from the same starts: the lowest peak the structure reaches (the
@@ -126,7 +128,7 @@ class DynamicsSettings:
     seed : int
         Seed of the random starts.
     penalty : float
-        ``rho`` of the exact penalty (> 0).
+        ``rho`` of the quadratic penalty (> 0).
     gap_bound : float or None
         Bound on the CAV's gap response as a multiple of the first start's (>= 1; ``None``:
         none): ``max_w |s_0(jw) / v_h(jw)|`` of the continuous-limit loop, the spacing the CAV
