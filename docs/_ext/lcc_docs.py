@@ -42,6 +42,8 @@ EXAMPLE_ARGS = {
     # gallery's 42.2 s, without them 2.7 s (2026-12-02, 2-core machine at a load of 1); the
     # whole table is in docs/guide/benchmark.md
     "ring_sugiyama.py": ["--controllers", "all_hdv,follower_stopper,h2"],
+    # default: 4 starts x 400 evaluations per bound, 12 for the lowest peak (minutes)
+    "as_run_front.py": ["--starts", "1", "--maxfev", "30", "--cert-starts", "2"],
 }
 
 #: Links of the included Markdown files -> their pages in the documentation.

@@ -16,6 +16,7 @@ Submodules: :mod:`.style` (palette, names, rc settings), :mod:`.simulation` (run
 """
 
 from lcc_synth.figures.analysis import (
+    plot_as_run_front,
     plot_control_energy,
     plot_gamma_curves,
     plot_pareto_front,
@@ -53,6 +54,7 @@ __all__ = [
     "vehicle_style",
     "vehicle_styles",
     "plot_pareto_front",
+    "plot_as_run_front",
     "plot_control_energy",
     "plot_profiles",
     "plot_gamma_curves",

@@ -266,3 +266,49 @@ def plot_pareto_front(pareto, h2_full: float, path: str | Path, title: str | Non
     _legend_below(fig, [ax], ncols=3)
     ax.set_title(title or "Sparsity-promoting H2 design")
     return _save(fig, path, dpi=120)
+
+
+def plot_as_run_front(points, path: str | Path, title: str | None = None) -> Path:
+    """The as-run trade-off (:func:`lcc_synth.experiments.as_run_front.as_run_front`): peak
+    ``|Gamma|`` as run (the larger of latency 0 and 0.1 s) against head_brake's AAVE, minimum
+    gap and CAV 1 s jerk, one panel each; points that needed emergency braking or collided
+    (head_brake or heterogeneous) are crosses, string-stable ones filled, today's ``h2`` black.
+
+    Parameters
+    ----------
+    points : list of FrontPoint
+        Its ``name``, ``point.peak``, ``string_stable`` and ``values()``.
+    path : str or Path
+        Output PNG.
+    """
+    from matplotlib.lines import Line2D
+
+    plt = _pyplot()
+    path = Path(path)
+    cols = (("aave_head_brake", "AAVE head_brake (m/s)"),
+            ("min_gap_head_brake", "minimum gap head_brake (m)"),
+            ("jerk1s_head_brake", "CAV max 1 s jerk head_brake (m/s³)"))  # fmt: skip
+    fig, axes = plt.subplots(1, 3, figsize=(11, 4.2), constrained_layout=True)
+    green = PALETTE.controllers[0]
+    for ax, (key, label) in zip(axes, cols, strict=True):
+        for k, p in enumerate(points):
+            v = p.values()
+            bad = (v["aeb_head_brake"] > 0 or v["aeb_heterogeneous"] > 0
+                   or any(r.get("collided") for r in p.rows.values()))  # fmt: skip
+            color = "k" if p.name == "h2" else green
+            ax.plot(p.point.peak, v[key], "x" if bad else "o", color=color,
+                    mfc=color if p.string_stable else "none", ms=7)
+            ax.annotate(p.name, (p.point.peak, v[key]), textcoords="offset points",
+                        xytext=(4, 6 if k % 2 else -10), fontsize=7)
+        ax.axvline(1.0, ls="--", color="k", lw=0.8)
+        ax.set_xlabel("peak |Γ| as run, worst of latency 0 / 0.1 s (–)")
+        ax.set_ylabel(label)
+        ax.margins(x=0.2, y=0.15)
+    handles = [Line2D([], [], ls="none", marker="o", mfc="none", color=green),
+               Line2D([], [], ls="none", marker="x", color=green),
+               Line2D([], [], ls="none", marker="o", color=green),
+               Line2D([], [], ls="--", color="k", lw=0.8)]  # fmt: skip
+    labels = ["no emergency braking", "emergency braking or a collision (either scenario)",
+              "string stable as run (exact verdict)", "|Γ| = 1"]  # fmt: skip
+    _legend_below(fig, handles, labels, ncols=4)
+    return _save(fig, path, title=title or "string10: as-run peak |Γ| vs head brake", dpi=120)

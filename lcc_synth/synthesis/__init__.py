@@ -5,8 +5,10 @@ LMI; a gain row per CAV, the ring on its invariant hyperplane), :mod:`.structure
 (sparsity-invariance convex restriction + polishing on the true H2 cost; per-CAV row patterns,
 robust multi-model descent), :mod:`.sparsity` (group-sparsity ADMM Pareto sweep; per-CAV range
 front), :mod:`.string_lmi` (bounded-real lemma, string-stable designs, one CAV),
-:mod:`.as_run` (the loop as it runs, one CAV), :mod:`.config` (``[synthesis]`` problem table,
-both vocabularies), :mod:`.design` (:func:`~.design.synthesize`, the one entry point),
+:mod:`.as_run` (the loop as it runs, one CAV), :mod:`.as_run_dynamics` (the gain with the
+estimator, filter and sample time as design variables, on the loop as it runs),
+:mod:`.config` (``[synthesis]`` problem table, both vocabularies), :mod:`.design`
+(:func:`~.design.synthesize`, the one entry point),
 :mod:`.report` (checks and report), :mod:`.gains_file` (the gains JSON file).
 
 cvxpy is imported only inside the functions that solve LMIs.
