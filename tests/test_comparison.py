@@ -320,7 +320,18 @@ def test_cli_run_json_files_and_recording(problem_file, capsys, tmp_path):
     assert code == 0
     out = capsys.readouterr().out
     doc = json.loads(out)  # exactly one JSON object on stdout
-    assert list(doc) == ["results", "provenance"]
+    assert list(doc) == ["results", "provenance", "string_stability"]
+    # every controller's as-run verdict on every layout with a head vehicle: the peak of the
+    # analysed |Γ(jω)| of the loop as run, where it is, and the verdict that peak implies
+    ss = doc["string_stability"]
+    assert set(ss) == {"tail3", "mid"}
+    for per in ss.values():
+        assert set(per) == {"all_hdv", "paper"}
+        for rep in per.values():
+            assert rep["verdict"] in {"string_stable", "string_unstable", "boundary"}
+            assert (rep["verdict"] == "string_stable") == (rep["gamma_peak"] <= 1.0 + 1e-9)
+            assert rep["gamma_peak"] >= 1.0 - 1e-9  # |Γ(0)| = 1 for every stabilising loop
+    assert ss["tail3"]["paper"]["as_run"]["equilibrium"]
     assert set(doc["results"]) == {"brake", "sine"}
     assert set(doc["results"]["sine"]) == {"all_hdv", "paper"}
     assert set(doc["results"]["sine"]["paper"]) == {*SUITE_METRICS, "collided", "failed_steps",

@@ -133,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
             return 1
         # what was computed is printed first: a file that cannot be written cannot hide it
         gamma = _gamma_lines(suite, curves, settings)
-        _print_results(args, suite, result, gamma, log, prov)
+        _print_results(args, suite, result, curves, gamma, log, prov)
         failures = _failure_lines(result)
         for line in failures:
             print(f"lcc-synth run: {line}", file=sys.stderr)  # one line each (stderr)
@@ -286,7 +286,7 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
     return result, curves, omega, (written_path(rec) if rec is not None else None), None
 
 
-def _print_results(args, suite, result, gamma, log, prov) -> None:
+def _print_results(args, suite, result, curves, gamma, log, prov) -> None:
     """The table (``--json``: the JSON document on stdout), collisions and controller
     statistics, in lines of at most :data:`~lcc_synth.cli.output.LINE_WIDTH` characters; the
     as-run |Γ| lines (``gamma``) with ``--verbose`` only (they go to a file)."""
@@ -294,7 +294,9 @@ def _print_results(args, suite, result, gamma, log, prov) -> None:
     from lcc_synth.experiments.tables import format_table, json_rows, json_safe, unsafe_lines
 
     if args.json:
-        print(json.dumps(json_safe({"results": json_rows(result.table), "provenance": prov})))
+        doc = {"results": json_rows(result.table), "provenance": prov,
+               "string_stability": _string_stability_json(curves)}  # fmt: skip
+        print(json.dumps(json_safe(doc)))
         for line in _collision_lines(result):
             _say(line, log)
         return
@@ -311,6 +313,18 @@ def _print_results(args, suite, result, gamma, log, prov) -> None:
     if args.verbose:
         for line in gamma:
             _say(line)
+
+
+def _string_stability_json(curves) -> dict:
+    """``{layout: {controller[@setting]: report}}`` of ``--json``, ``table.json`` and
+    ``details.json``: every controller's as-run string stability on every layout. A linear
+    loop's report has ``gamma_peak``, ``gamma_peak_omega`` and ``verdict`` (the analysed
+    |Γ(jω)| of the loop as run: sampling, latency, estimator, filter, described by
+    ``as_run``); a nonlinear controller's (``verdict`` ``"not_linear"``) has the simulated
+    tail/head amplitude ratios ``measured_ratio`` at ``measured_omega`` and ``gamma_peak``,
+    their maximum."""
+    return {lname: {c: rep.as_dict() for c, (_, rep) in per.items()}
+            for lname, per in curves.items()}  # fmt: skip
 
 
 def _say(line: str, file=None) -> None:
@@ -372,7 +386,8 @@ def _write_files(
     written = [
         write_markdown(result.table, out_dir / "table.md", title=_title(suite), overwrite=False),
         write_csv(result.table, out_dir / "table.csv", overwrite=False),
-        write_json(result.table, out_dir / "table.json", overwrite=False, provenance=prov),
+        write_json(result.table, out_dir / "table.json", overwrite=False, provenance=prov,
+                   string_stability=_string_stability_json(curves)),
     ]
     for lname, per in result.designs.items():
         for cname, rep in per.items():
@@ -396,10 +411,7 @@ def _write_files(
             lname: {c: rep.as_dict() for c, rep in per.items()}
             for lname, per in result.designs.items()
         },
-        "string_stability": {
-            lname: {c: rep.as_dict() for c, (_, rep) in per.items()}
-            for lname, per in curves.items()
-        },
+        "string_stability": _string_stability_json(curves),
         "controller_stats": {
             s: {c: r.controller_stats for c, r in per.items()} for s, per in result.results.items()
         },
