@@ -1,9 +1,9 @@
 """The MPC of a ``[controllers.NAME]`` problem table (``type = "mpc"``): its settings
 (:mod:`lcc_synth.mpc.settings`) and its fallback gain: another controller of the file
 (``fallback = "NAME"``), a gains file (``fallback_gains_file``) or the paper's. On a
-``kind = "platoon" | "ring"`` system it is the joint MPC of every CAV
-(:class:`~lcc_synth.mpc.joint.JointMPCController`), whose fallback gains are in the
-platoon form ``{u_i: {state: gain}}`` (default: each CAV's HDV law)."""
+``kind = "platoon" | "ring"`` system the same :class:`~lcc_synth.mpc.controller.MPCController`
+controls every CAV (:mod:`lcc_synth.mpc.joint`), and its fallback gains are in the platoon
+form ``{u_i: {state: gain}}`` (default: each CAV's HDV law)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,6 @@ from lcc_synth.controllers.gains_files import read_fallback_file
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import Gains
 from lcc_synth.mpc.controller import MPCController
-from lcc_synth.mpc.joint import JointMPCController
 from lcc_synth.mpc.settings import settings_from_table
 
 __all__ = ["mpc_controller_from_table", "build_mpc"]
@@ -96,7 +95,7 @@ def _platoon_mpc(name, settings, system, named, source, field_name, table):
         fallback, path = read_fallback_file(table, field_name, system, source)
         fb_source = str(path)
     try:
-        return JointMPCController(name, settings, system, fallback, fb_source)
+        return MPCController(name, settings, system, fallback, fb_source)
     except ConfigError as err:
         if err.field.startswith(field_name):
             raise

@@ -2,13 +2,12 @@
 prediction, the linearisation cache, re-linearisation, the warm-started solve and its
 statistics, the status codes and the pickling rule.
 
-:class:`MPCScaffold` is the base of the single-CAV MPC (:class:`~lcc_synth.mpc.controller.
-MPCController`, one input and the paper's error state of ``-m..n_model``) and of the joint MPC
-(:class:`~lcc_synth.mpc.joint.JointMPCController`, one input per CAV of a platoon or ring).
-Both use the one condensed QP of :class:`~lcc_synth.mpc.formulation.Formulation` (``nu``
-inputs); a layout supplies its prediction model (:func:`~lcc_synth.mpc.formulation.linearize`
-or :func:`~lcc_synth.mpc.joint_prediction.linearize_joint`), its state, its fallback chain and
-its history; the loop here runs each batch member's step, never raises inside it
+:class:`MPCScaffold` is the base of the one MPC (:class:`~lcc_synth.mpc.controller.
+MPCController`: the paper's error state of ``-m..n_model`` around one CAV, or one input per CAV
+of a platoon or ring). It uses the one condensed QP of :class:`~lcc_synth.mpc.formulation.
+Formulation` (``nu`` inputs); a layout supplies its prediction model (:func:`~lcc_synth.mpc.
+formulation.linearize` or :func:`~lcc_synth.mpc.joint_prediction.linearize_joint`), its state
+and its fallback arithmetic; the loop here runs each batch member's step, never raises inside it
 (an exception is counted and the member holds its last command), and keeps the step record of
 :mod:`lcc_synth.mpc.report`. Moving this code here from the two controllers changed no
 operation, so every pinned number is bit for bit the same (``tests/test_mpc*.py``).
@@ -26,9 +25,12 @@ import numpy as np
 from lcc_synth.mpc.active_set import make_solver, solver_label
 from lcc_synth.mpc.comfort import solve_prioritised
 from lcc_synth.mpc.solver import POLISH_NAMES, OSQPSolver
-from lcc_synth.mpc.step_cache import clip
+from lcc_synth.mpc.step_cache import LastValue, clip
 
-__all__ = ["STATUS_CODES", "LoopState", "MPCScaffold", "update_equilibrium", "head_prediction"]
+__all__ = [
+    "STATUS_CODES", "LoopState", "Sample", "MPCScaffold", "new_history", "update_equilibrium",
+    "head_prediction",
+]
 
 #: Per-step (per-CAV for the joint MPC) outcome codes stored in ``history()["status"]``.
 STATUS_CODES = {0: "qp", 1: "shifted_plan", 2: "static_gain", 3: "hold"}
@@ -36,11 +38,14 @@ STATUS_CODES = {0: "qp", 1: "shifted_plan", 2: "static_gain", 3: "hold"}
 
 @dataclass
 class LoopState:
-    """Solver and loop state of one batch member (a layout adds its own fields).
+    """Solver and loop state of one batch member.
 
     ``v_buf`` is the moving-average window of the reference velocity (:func:`update_equilibrium`),
     ``plan`` the last optimal inputs (the shifted-plan fallback), ``warm`` the last primal and
-    dual solution, ``past`` the applied commands, newest first (the comfort rows).
+    dual solution, ``past`` the applied commands, newest first (the comfort rows), ``u_prev``
+    the previous input the cost penalises the change from (a float for one CAV, ``(n_cav,)``
+    for a string), ``delay`` the delay register or lag state of the prediction; ``s_off``,
+    ``s_off_cols``, ``p_ref``, ``cmd_prev`` and ``s_eq`` are the one-CAV layout's.
     """
 
     solver: OSQPSolver
@@ -58,6 +63,32 @@ class LoopState:
     warm: tuple | None = None
     past: np.ndarray = field(default_factory=lambda: np.zeros(1))
     hist: dict[str, list] = field(default_factory=dict)
+    u_prev: Any = 0.0
+    delay: Any = None  # delay.StateHistory (past observed states) or lag.LagState (a_0)
+    s_off: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    s_off_cols: np.ndarray | None = None  # s_off of the modelled vehicles (state order)
+    p_ref: float = math.nan
+    cmd_prev: float = 0.0
+    s_eq: LastValue = field(default_factory=LastValue)
+
+
+@dataclass
+class Sample:
+    """What a layout observed at one sample: the QP's initial state ``x0`` and head
+    prediction ``d_model``, the head prediction ``d`` and the layout's own measurements
+    (``extra``: FD-LCC's position state and the measured spacing for one CAV; the reference
+    spacings, velocities and spacings for a string)."""
+
+    x0: np.ndarray
+    d: np.ndarray
+    d_model: np.ndarray
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def new_history() -> dict[str, list]:
+    """An empty per-step history of one batch member (what the MPC records at each sample)."""
+    return {k: [] for k in ("u", "u_model", "status", "osqp_time", "iterations", "slack", "v_eq",
+                            "v_lin", "x0", "d", "plan", "lin")}
 
 
 def update_equilibrium(mem: LoopState, v_ref: float) -> None:
