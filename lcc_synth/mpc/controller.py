@@ -499,7 +499,7 @@ class MPCController(MPCScaffold):
         c = self.settings.constraints
         self._a_min, self._a_max = lay.limits(max(c.a_min, ctx.a_min), min(c.a_max, ctx.a_max))
         self._new_record()
-        W = self._window()
+        W = self._window(self.settings.prediction.equilibrium_window)
         self._members = [lay.member(self, ctx, b, W) for b in range(ctx.batch)]
 
     def __call__(self, obs: Observation) -> np.ndarray:

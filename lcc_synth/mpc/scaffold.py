@@ -1,16 +1,20 @@
-"""What every layout's MPC shares: the sample loop, the equilibrium estimate, the head
+"""What every predictive controller shares: the sample loop, the equilibrium estimate, the head
 prediction, the linearisation cache, re-linearisation, the warm-started solve and its
 statistics, the status codes and the pickling rule.
 
-:class:`MPCScaffold` is the base of the one MPC (:class:`~lcc_synth.mpc.controller.
+:class:`SampleLoop` is the loop of every predictive controller (the MPC and DeeP-LCC,
+:class:`~lcc_synth.deeplcc.controller.DeePLCCController`): each batch member's step, the
+equilibrium's window, the warm start, the count of each solve and slack. :class:`MPCScaffold`
+is the base of the one MPC (:class:`~lcc_synth.mpc.controller.
 MPCController`: the paper's error state of ``-m..n_model`` around one CAV, or one input per CAV
 of a platoon or ring). It uses the one condensed QP of :class:`~lcc_synth.mpc.formulation.
 Formulation` (``nu`` inputs); a layout supplies its prediction model (:func:`~lcc_synth.mpc.
 formulation.linearize` or :func:`~lcc_synth.mpc.joint_prediction.linearize_joint`), its state
 and its fallback arithmetic; the loop here runs each batch member's step, never raises inside it
 (an exception is counted and the member holds its last command), and keeps the step record of
-:mod:`lcc_synth.mpc.report`. Moving this code here from the two controllers changed no
-operation, so every pinned number is bit for bit the same (``tests/test_mpc*.py``).
+:mod:`lcc_synth.mpc.report`. Moving this code here from the controllers changed no
+operation, so every pinned number is bit for bit the same (``tests/test_mpc*.py``,
+``tests/test_deeplcc*.py``).
 """
 
 from __future__ import annotations
@@ -28,8 +32,8 @@ from lcc_synth.mpc.solver import POLISH_NAMES, OSQPSolver
 from lcc_synth.mpc.step_cache import LastValue, clip
 
 __all__ = [
-    "STATUS_CODES", "LoopState", "Sample", "MPCScaffold", "new_history", "update_equilibrium",
-    "head_prediction",
+    "STATUS_CODES", "LoopState", "Sample", "SampleLoop", "MPCScaffold", "new_history",
+    "update_equilibrium", "head_prediction",
 ]
 
 #: Per-step (per-CAV for the joint MPC) outcome codes stored in ``history()["status"]``.
@@ -129,14 +133,17 @@ def head_prediction(mem: LoopState, v_ref: float, N: int, Ts: float, prediction,
     return d0, d
 
 
-class MPCScaffold:
-    """The sample loop and bookkeeping shared by every layout's MPC (module docstring).
+class SampleLoop:
+    """The sample loop and bookkeeping of every predictive controller: the MPC of every layout
+    (:class:`MPCScaffold`) and DeeP-LCC (:class:`~lcc_synth.deeplcc.controller.
+    DeePLCCController`).
 
-    A subclass sets ``name``, ``settings``, ``sample_time``, ``formulation``, ``_lin0``,
-    ``_v_hi``, ``_cache``, ``_members``, ``_ctx``, ``_st``, ``_t``, ``_shift_z``, ``_shift_y``
-    and implements ``_linearize_at(v)`` (the prediction model at ``v``), ``_feedback(model)``
-    (the fallback's ``(K, k_h)``), ``_step(b, mem, obs)`` and ``_on_error(mem)`` (the command
-    of a member whose step raised). State is real: the OSQP workspaces and the loop state.
+    A subclass sets ``name``, ``settings``, ``sample_time``, ``_v_hi``, ``_members`` (each with
+    the fields ``v_buf``, ``v_buf_n``, ``v_buf_i``, ``v_eq``, ``warm`` and ``past`` of
+    :class:`LoopState`), ``_ctx``, ``_st`` (:func:`~lcc_synth.mpc.report.new_step_record`),
+    ``_t``, ``_shift_z``, ``_shift_y`` and implements ``_step(b, mem, obs)`` and
+    ``_on_error(mem)`` (the command of a member whose step raised). State is real: the OSQP
+    workspaces and the loop state.
     """
 
     def __getstate__(self) -> dict[str, Any]:
@@ -147,7 +154,7 @@ class MPCScaffold:
         return state
 
     def toml_table(self) -> dict[str, Any]:
-        """The ``[controllers.NAME]`` table that builds this MPC."""
+        """The ``[controllers.NAME]`` table that builds this controller."""
         return self.settings.toml_table()
 
     # ---------------------------------------------------------------- shared helpers
@@ -155,9 +162,65 @@ class MPCScaffold:
     def _clip_v(self, v: float) -> float:
         return clip(v, 1.0, self._v_hi - 1.0)
 
-    def _window(self) -> int:
-        """Samples of the equilibrium's moving average."""
-        return max(1, int(round(self.settings.prediction.equilibrium_window / self.sample_time)))
+    def _window(self, seconds: float) -> int:
+        """Samples of the equilibrium's moving average over ``seconds``."""
+        return max(1, int(round(seconds / self.sample_time)))
+
+    def _warm_start(self, mem) -> tuple[Any, Any]:
+        """The member's last primal and dual solution shifted by one sample (None at first)."""
+        warm = mem.warm
+        if warm is None:
+            return None, None
+        return warm[0][self._shift_z], warm[1][self._shift_y]
+
+    def _count_solve(self, res) -> None:
+        """Count one solve in the step record: time, iterations, polish and failure status."""
+        st = self._st
+        st["solves"] += 1
+        st["osqp_time"].append(res.run_time)
+        st["iterations"].append(res.iterations)
+        pname = POLISH_NAMES.get(res.polish, str(res.polish))
+        st["polish"][pname] = st["polish"].get(pname, 0) + 1
+        if not res.ok:
+            st["qp_failures"][res.status] = st["qp_failures"].get(res.status, 0) + 1
+
+    def _note_slack(self, slack: float) -> None:
+        if slack > 1e-6:
+            self._st["slack_steps"] += 1
+            self._st["max_slack"] = max(self._st["max_slack"], slack)
+
+    # ---------------------------------------------------------------- the loop
+
+    def _run_members(self, obs, out: np.ndarray) -> None:
+        """Every batch member's step into ``out[b]``; an exception is counted and held."""
+        ctx = self._ctx
+        if ctx is None:
+            raise RuntimeError(f"{type(self).__name__}: call reset(ctx) before the first step")
+        self._t.append(float(obs.t))
+        for b in range(ctx.batch):
+            t0 = time.perf_counter()
+            mem = self._members[b]
+            try:
+                out[b] = self._step(b, mem, obs)
+            except Exception as err:  # never raise inside the loop
+                self._st["errors"] += 1
+                if len(self._st["error_messages"]) < 5:
+                    self._st["error_messages"].append(f"t={obs.t:g}: {type(err).__name__}: {err}")
+                out[b] = self._on_error(mem)
+            mem.past[1:] = mem.past[:-1]
+            mem.past[0] = out[b]
+            self._st["step_time"].append(time.perf_counter() - t0)
+        self._st["steps"] += 1
+
+
+class MPCScaffold(SampleLoop):
+    """What the MPC of every layout adds to :class:`SampleLoop`: the linearisation cache,
+    re-linearisation, the solver set-up, the comfort-prioritised solve and the description.
+
+    A subclass also sets ``formulation``, ``_lin0`` and ``_cache`` and implements
+    ``_linearize_at(v)`` (the prediction model at ``v``) and ``_feedback(model)`` (the
+    fallback's ``(K, k_h)``).
+    """
 
     def _new_solver(self, qp, u0, a_min, a_max):
         """One OSQP (or DAQP) workspace of ``qp`` at a zero state (set up once per run)."""
@@ -202,51 +265,12 @@ class MPCScaffold:
 
     def _solve(self, mem: LoopState, q, lo, hi):
         """Warm-started, comfort-prioritised solve; counts it in the step record."""
-        st = self._st
-        warm = mem.warm
-        res = solve_prioritised(
-            mem.solver, self.formulation, q, lo, hi,
-            None if warm is None else warm[0][self._shift_z],
-            None if warm is None else warm[1][self._shift_y], st,
-        )  # fmt: skip
-        st["solves"] += 1
-        st["osqp_time"].append(res.run_time)
-        st["iterations"].append(res.iterations)
-        pname = POLISH_NAMES.get(res.polish, str(res.polish))
-        st["polish"][pname] = st["polish"].get(pname, 0) + 1
-        if not res.ok:
-            st["qp_failures"][res.status] = st["qp_failures"].get(res.status, 0) + 1
-        else:
+        z0, y0 = self._warm_start(mem)
+        res = solve_prioritised(mem.solver, self.formulation, q, lo, hi, z0, y0, self._st)
+        self._count_solve(res)
+        if res.ok:
             mem.warm = (res.z, res.y)
         return res
-
-    def _note_slack(self, slack: float) -> None:
-        if slack > 1e-6:
-            self._st["slack_steps"] += 1
-            self._st["max_slack"] = max(self._st["max_slack"], slack)
-
-    # ---------------------------------------------------------------- the loop
-
-    def _run_members(self, obs, out: np.ndarray) -> None:
-        """Every batch member's step into ``out[b]``; an exception is counted and held."""
-        ctx = self._ctx
-        if ctx is None:
-            raise RuntimeError(f"{type(self).__name__}: call reset(ctx) before the first step")
-        self._t.append(float(obs.t))
-        for b in range(ctx.batch):
-            t0 = time.perf_counter()
-            mem = self._members[b]
-            try:
-                out[b] = self._step(b, mem, obs)
-            except Exception as err:  # never raise inside the loop
-                self._st["errors"] += 1
-                if len(self._st["error_messages"]) < 5:
-                    self._st["error_messages"].append(f"t={obs.t:g}: {type(err).__name__}: {err}")
-                out[b] = self._on_error(mem)
-            mem.past[1:] = mem.past[:-1]
-            mem.past[0] = out[b]
-            self._st["step_time"].append(time.perf_counter() - t0)
-        self._st["steps"] += 1
 
     def _describe(self, layout: dict[str, Any], equilibrium: dict[str, Any], qp_label: str,
                   gains: Any) -> dict[str, Any]:  # fmt: skip
