@@ -87,6 +87,7 @@ from lcc_synth.mpc.joint import StringLayout
 from lcc_synth.mpc.report import new_step_record, predicted_states, step_statistics
 from lcc_synth.mpc.scaffold import (
     STATUS_CODES,
+    Layout,
     LoopState,
     MPCScaffold,
     Sample,
@@ -100,7 +101,7 @@ from lcc_synth.mpc.step_cache import clip
 __all__ = ["MPCController", "OneCAVLayout", "layout_of", "STATUS_CODES"]
 
 
-class OneCAVLayout:
+class OneCAVLayout(Layout):
     """The paper's one CAV (``kind`` cf_lcc, fd_lcc, lcc, ccc): the error state of vehicles
     ``-m..n_model`` (module docstring, steps 1-3 and 6).
 
@@ -116,9 +117,7 @@ class OneCAVLayout:
     default_source = "paper"
 
     def __init__(self, system, settings: MPCSettings):
-        self.system = system
-        self.settings = settings
-        self.kind = system.kind
+        super().__init__(system, settings)
         self.m = system.m
         n_model = system.n if settings.n_model is None else settings.n_model
         if n_model > system.n:

@@ -78,6 +78,7 @@ from lcc_synth.mpc.comfort import jerk_bound
 from lcc_synth.mpc.formulation import Family
 from lcc_synth.mpc.joint_prediction import joint_state_weights, linearize_joint
 from lcc_synth.mpc.scaffold import (
+    Layout,
     LoopState,
     Sample,
     head_prediction,
@@ -91,7 +92,7 @@ __all__ = ["StringLayout"]
 _OUTCOME = {1: "fallback_shifted", 2: "fallback_static", 3: "fallback_hold"}
 
 
-class StringLayout:
+class StringLayout(Layout):
     """Every CAV of a platoon or ring: the state of positions ``1..N``, one input per CAV
     (module docstring).
 
@@ -108,9 +109,7 @@ class StringLayout:
     default_source = "hdv_law"
 
     def __init__(self, system, settings: MPCSettings):
-        self.system = system
-        self.settings = settings
-        self.kind = system.kind
+        super().__init__(system, settings)
         self.platoon = pl = system.platoon
         if not pl.cavs:
             raise ConfigError("system.cavs", "the MPC needs at least one CAV, got none")

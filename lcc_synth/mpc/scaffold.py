@@ -32,7 +32,7 @@ from lcc_synth.mpc.solver import POLISH_NAMES, OSQPSolver
 from lcc_synth.mpc.step_cache import LastValue, clip
 
 __all__ = [
-    "STATUS_CODES", "LoopState", "Sample", "SampleLoop", "MPCScaffold", "new_history",
+    "STATUS_CODES", "Layout", "LoopState", "Sample", "SampleLoop", "MPCScaffold", "new_history",
     "update_equilibrium", "head_prediction",
 ]
 
@@ -131,6 +131,35 @@ def head_prediction(mem: LoopState, v_ref: float, N: int, Ts: float, prediction,
         d = np.maximum(d, -v_eq)
     mem.v_ref_prev = v_ref
     return d0, d
+
+
+class Layout:
+    """What a layout of the one MPC holds: its system, settings and kind (a subclass adds its
+    prediction model and state; :class:`~lcc_synth.mpc.controller.OneCAVLayout`,
+    :class:`~lcc_synth.mpc.joint.StringLayout`).
+
+    A layout sets ``nu`` (CAVs), ``v_hi`` (the fastest valid speed), ``v_design`` (where the
+    prediction model is first linearised) and implements, for :class:`~lcc_synth.mpc.
+    controller.MPCController`: ``linearize(v)``, ``state_weights(model)``,
+    ``families(model)``, ``default_fallback(model)``, ``check_fallback(model, gains,
+    source)``, ``feedback(model, gains)``, ``check_context(ctx, name)``, ``limits(a_min,
+    a_max)``, ``member(mpc, ctx, b, W)``, ``empty_output(batch)``, ``output(out)``,
+    ``observe(mpc, b, mem, obs)`` (a :class:`Sample`), ``count_violations(mpc, sample)``,
+    ``spacing_bounds(mpc, mem, sample)``, ``jerk_bounds(sample)``, ``plan(U)``,
+    ``command(mpc, mem, sample, U)``, ``fallback(mpc, mem, sample, why)``, ``hold(mpc, mem,
+    why)``, ``failed(code)``, ``history(mpc, out, S)``, ``describe(mpc)``, ``as_dict(mpc)``
+    and ``stats(mpc, out)``.
+    """
+
+    #: one input per CAV in the history and the command (``(batch, n_cav)``)
+    joint = False
+    #: the fallback's source label when the user gives none
+    default_source = ""
+
+    def __init__(self, system, settings) -> None:
+        self.system = system
+        self.settings = settings
+        self.kind = system.kind
 
 
 class SampleLoop:
