@@ -99,7 +99,7 @@ def main() -> None:
 
     from lcc_synth.models.hdv import OVM
     from lcc_synth.models.platoon import Platoon
-    from lcc_synth.mpc.joint import JointMPCController
+    from lcc_synth.mpc import JointMPCController
     from lcc_synth.mpc.settings import MPCSettings
     from lcc_synth.problem import System
 

@@ -18,8 +18,7 @@ from lcc_synth.experiments.controller_tables import controller_from_table
 from lcc_synth.models.feedback import Gains
 from lcc_synth.models.hdv import OVM, linear_coefficients
 from lcc_synth.models.platoon import Platoon, platoon_model
-from lcc_synth.mpc import MPCController
-from lcc_synth.mpc.joint import JointMPCController
+from lcc_synth.mpc import JointMPCController, MPCController
 from lcc_synth.mpc.joint_prediction import joint_state_weights
 from lcc_synth.mpc.settings import Constraints, MPCSettings, Prediction, SolverSettings, Weights
 from lcc_synth.problem import System, system_from

@@ -28,7 +28,6 @@ from lcc_synth.controllers.baselines import BASELINE_TYPES
 from lcc_synth.controllers.gains_files import read_gains_file
 from lcc_synth.controllers.static import (
     HDVController,
-    PlatoonGainController,
     StaticGainController,
 )
 from lcc_synth.controllers.switch import SwitchedOn
@@ -181,5 +180,5 @@ def _platoon_controller(name: str, table, system, ctype: str, field: str, source
         gains = Gains.from_table(raw, model, T.get(table, "semantics", field), f"{field}.gains")
     else:
         gains, _ = read_gains_file(table, field, system, source)
-    return PlatoonGainController(name, gains, model, _sample_time(table, field, ctype),
-                                 T.get(table, "measurement_filter", field))  # fmt: skip
+    return StaticGainController(name, gains, model, _sample_time(table, field, ctype),
+                                measurement_filter=T.get(table, "measurement_filter", field))

@@ -4,11 +4,12 @@ The simulator evaluates their :class:`LinearLaw` inside its compiled loop (no Py
 step); ``__call__`` evaluates the same law for any other caller.
 
 Several CAVs (a mixed platoon or a ring): :class:`HDVController` drives every CAV with its own
-HDV law (its slot's parameters), and :class:`PlatoonGainController` applies one row of a
-:class:`~lcc_synth.models.feedback.Gains` per CAV. Its gains are on the platoon model's
-states ``s_i, v_i`` of positions ``i``: position ``i`` is array column ``i`` of an open platoon
-and ``i - 1`` on a ring, and every spacing error is taken from that vehicle's own equilibrium
-spacing at ``v*`` (the model linearises each vehicle at its own equilibrium).
+HDV law (its slot's parameters), and the one :class:`StaticGainController` applies one row of
+a :class:`~lcc_synth.models.feedback.Gains` per CAV (``PlatoonGainController`` is another name
+of the same class). Gains of a platoon or ring are on the platoon model's states ``s_i, v_i``
+of positions ``i``: position ``i`` is array column ``i`` of an open platoon and ``i - 1`` on a
+ring, and every spacing error is taken from that vehicle's own equilibrium spacing at ``v*``
+(the model linearises each vehicle at its own equilibrium).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import numpy as np
 
 from lcc_synth.controllers.base import ControlContext, Observation
 from lcc_synth.errors import ConfigError
+from lcc_synth.models.feedback import PAPER_CAVS
 from lcc_synth.models.hdv import free_speed
 
 __all__ = [
@@ -225,16 +227,20 @@ class HDVController(_LinearController):
 
 
 class StaticGainController(_LinearController):
-    """Static state feedback of eq. (23) on the CAV's observation.
+    """Static state feedback of eq. (23) of every CAV of a layout on its observation: the
+    paper's one CAV, or row ``k`` of the gains as CAV ``cavs[k]``'s command on the platoon
+    model's state errors (a platoon or ring, see the module docstring).
 
     Parameters
     ----------
     name : str
     gains : lcc_synth.models.feedback.Gains
         Gains keyed by state name and their semantics (``added`` keeps the CAV's nonlinear
-        HDV law towards the vehicle ahead and adds the gains; ``replace`` uses them alone).
-    model : lcc_synth.models.linear.LCCModel
-        The linear model the gains are written for (checked: every name must be a state).
+        HDV law towards the vehicle ahead and adds the gains, plus ``kh`` times the head's
+        velocity error for a platoon's rows; ``replace`` uses them alone).
+    model : lcc_synth.models.linear.LCCModel or lcc_synth.models.platoon.PlatoonModel
+        The linear model the gains are written for (checked: its CAVs, every name a state;
+        a platoon's CAV positions and ring flag are checked against the scenario's).
     sample_time : float, optional
         Controller period (s); default every simulation step.
     equilibrium : {"fixed", "estimated"}
@@ -252,7 +258,8 @@ class StaticGainController(_LinearController):
         model's equilibrium spacing; ``v_hat`` is clipped into the model's valid range
         (1 %..99 % of ``v_max`` for the OVM, of ``v0`` for the IDM). While the vehicle ahead
         cruises at exactly ``v*`` both options give the same run, bit for bit. Not for
-        ``fd_lcc`` (no vehicle ahead).
+        ``fd_lcc`` (no vehicle ahead), nor for a platoon or ring (the estimate follows one
+        CAV's predecessor).
     equilibrium_tau : float
         Time constant (s, > 0) of the estimate; default 1.0. Only with ``"estimated"``.
     measurement_filter : float
@@ -287,6 +294,12 @@ class StaticGainController(_LinearController):
                     "equilibrium_tau", 'only applies with equilibrium = "estimated"'
                 )
         else:
+            if gains.cavs != PAPER_CAVS:
+                raise ConfigError(
+                    "equilibrium",
+                    f"must be \"fixed\" for kind = {model.kind!r} (the estimate follows one "
+                    "CAV's predecessor)",
+                )
             if model.kind == "fd_lcc":
                 raise ConfigError(
                     "equilibrium",
@@ -309,6 +322,8 @@ class StaticGainController(_LinearController):
         self.measurement_filter = float(mf)
 
     def _law(self, ctx: ControlContext) -> LinearLaw:
+        if self.gains.cavs != PAPER_CAVS:
+            return self._rows_law(ctx)
         if ctx.n_cav != 1 or ctx.ring:
             raise ConfigError(
                 f"controllers.{self.name}",
@@ -335,72 +350,14 @@ class StaticGainController(_LinearController):
             v_bounds=(0.01 * v_lim, 0.99 * v_lim),
         )
 
-    def describe(self) -> dict[str, Any]:
-        out = {
-            "type": "static",
-            "kind": self.model.kind,
-            "semantics": self.gains.semantics,
-            "gains": dict(self.gains.gains),
-            "sample_time": self.sample_time,
-            "equilibrium": self.equilibrium,
-            "measurement_filter": self.measurement_filter,
-        }
-        if self.equilibrium == "estimated":
-            out["equilibrium_tau"] = self.equilibrium_tau
-        return out
-
-    def toml_table(self) -> dict[str, Any]:
-        """The ``[controllers.NAME]`` table that builds this controller (``type = "static"``,
-        the gains inline: a ``gains_file`` controller is written with the gains it read)."""
-        out = self.describe()
-        if out["measurement_filter"] == 0.0:
-            del out["measurement_filter"]  # the default: off
-        return out
-
-    def as_dict(self) -> dict[str, Any]:
-        """Name, :meth:`StaticGainController.describe` and the model's layout."""
-        return {"name": self.name, "m": self.model.m, "n": self.model.n, **self.describe()}
-
-class PlatoonGainController(_LinearController):
-    """Static feedback of every CAV of a mixed platoon or ring: row ``k`` of the gains is CAV
-    ``cavs[k]``'s command on the platoon model's state errors (see the module docstring).
-
-    Parameters
-    ----------
-    name : str
-    gains : lcc_synth.models.feedback.Gains
-        ``"replace"``: ``u = K x`` is the CAV's whole command; ``"added"``: the CAV keeps its
-        own nonlinear HDV law towards its predecessor and adds ``K x`` (plus ``kh`` times the
-        head's velocity error).
-    model : lcc_synth.models.platoon.PlatoonModel
-        The platoon the gains are written for (its CAV positions and ring flag are checked
-        against the scenario's).
-    sample_time : float, optional
-        Controller period (s); default every simulation step.
-    measurement_filter : float
-        As :class:`StaticGainController` (0: off).
-    """
-
-    def __init__(self, name: str, gains, model, sample_time: float | None = None,
-                 measurement_filter: float = 0.0):  # fmt: skip
-        gains.input_feedback(model)  # checks the CAVs and the state count
-        mf = measurement_filter
-        if isinstance(mf, bool) or not isinstance(mf, int | float) or not 0.0 <= mf < np.inf:
-            raise ConfigError(
-                "measurement_filter", f"must be a number of seconds >= 0 (0: off), got {mf!r}"
-            )
-        self.name = name
-        self.gains = gains
-        self.model = model
-        self.sample_time = sample_time
-        self.measurement_filter = float(mf)
-
     def columns(self) -> tuple[int, ...]:
-        """Array column of every position 1..N (``i`` open, ``i - 1`` on the ring)."""
+        """Array column of every position 1..N of a platoon's gains (``i`` open, ``i - 1`` on
+        the ring)."""
         off = 1 if self.model.ring else 0
         return tuple(i - off for i in range(1, self.model.platoon.size + 1))
 
-    def _law(self, ctx: ControlContext) -> LinearLaw:
+    def _rows_law(self, ctx: ControlContext) -> LinearLaw:
+        """The law of a platoon's or ring's gains: one row per CAV."""
         cols = self.columns()
         want = tuple(cols[i - 1] for i in self.model.cavs)
         nv = len(cols) + (0 if self.model.ring else 1)
@@ -425,23 +382,34 @@ class PlatoonGainController(_LinearController):
         )  # fmt: skip
 
     def describe(self) -> dict[str, Any]:
-        return {
+        out = {
             "type": "static",
-            "kind": "ring" if self.model.ring else "platoon",
+            "kind": self.model.kind,
             "semantics": self.gains.semantics,
             "gains": self.gains.as_table(),
             "sample_time": self.sample_time,
-            "equilibrium": "fixed",
+            "equilibrium": self.equilibrium,
             "measurement_filter": self.measurement_filter,
         }
+        if self.equilibrium == "estimated":
+            out["equilibrium_tau"] = self.equilibrium_tau
+        return out
 
     def toml_table(self) -> dict[str, Any]:
-        """The ``[controllers.NAME]`` table that builds this controller (gains inline)."""
+        """The ``[controllers.NAME]`` table that builds this controller (``type = "static"``,
+        the gains inline: a ``gains_file`` controller is written with the gains it read)."""
         out = self.describe()
         if out["measurement_filter"] == 0.0:
-            del out["measurement_filter"]
+            del out["measurement_filter"]  # the default: off
         return out
 
     def as_dict(self) -> dict[str, Any]:
-        """Name, :meth:`PlatoonGainController.describe` and the CAV positions."""
-        return {"name": self.name, "cavs": list(self.model.cavs), **self.describe()}
+        """Name, :meth:`StaticGainController.describe` and the model's layout (``m``, ``n``
+        of the paper's one CAV; the CAV positions of a platoon or ring)."""
+        if self.gains.cavs != PAPER_CAVS:
+            return {"name": self.name, "cavs": list(self.model.cavs), **self.describe()}
+        return {"name": self.name, "m": self.model.m, "n": self.model.n, **self.describe()}
+
+
+#: The same class as :class:`StaticGainController` (a platoon's or ring's gains).
+PlatoonGainController = StaticGainController

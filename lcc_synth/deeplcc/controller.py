@@ -41,7 +41,6 @@ acceleration is the input (as in the data).
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -56,19 +55,17 @@ from lcc_synth.deeplcc.settings import DeePLCCSettings
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import CarFollowingModel, free_speed
 from lcc_synth.mpc.report import new_step_record, step_statistics
+from lcc_synth.mpc.scaffold import STATUS_CODES, SampleLoop, update_equilibrium
 from lcc_synth.mpc.settings import paper_fallback_gains
-from lcc_synth.mpc.solver import POLISH_NAMES, OSQPSolver
+from lcc_synth.mpc.solver import OSQPSolver
 from lcc_synth.synthesis.h2 import single_thread_blas
 
 __all__ = ["DeePLCCController", "STATUS_CODES"]
 
-#: Per-step outcome codes stored in ``history()["status"]`` (as the MPC's).
-STATUS_CODES = {0: "qp", 1: "shifted_plan", 2: "static_gain", 3: "hold"}
-
-
 @dataclass
 class _Member:
-    """Solver and loop state of one batch member."""
+    """Solver and loop state of one batch member (the fields :class:`~lcc_synth.mpc.scaffold.
+    SampleLoop` and :func:`~lcc_synth.mpc.scaffold.update_equilibrium` use, plus the rings)."""
 
     solver: OSQPSolver
     s_off: np.ndarray
@@ -76,11 +73,11 @@ class _Member:
     vel: np.ndarray  # (Tini + 1, nv) absolute velocities, oldest first
     spc: np.ndarray  # (Tini + 1, n_c) absolute CAV spacings
     u: np.ndarray  # (Tini, n_c) applied accelerations u_{t-Tini} .. u_{t-1}
+    past: np.ndarray  # (1, n_c) the last applied command
     started: bool = False
     v_buf_n: int = 0
     v_buf_i: int = 0
     v_eq: float = 0.0
-    cmd_prev: np.ndarray | None = None
     plan: np.ndarray | None = None
     plan_age: int = 0
     warm: tuple | None = None
@@ -106,8 +103,9 @@ def _set_up(data: DataSet, settings: DeePLCCSettings, nv: int, n_c: int,
     return excitation, reduced
 
 
-class DeePLCCController:
-    """DeeP-LCC on one data set (module docstring).
+class DeePLCCController(SampleLoop):
+    """DeeP-LCC on one data set (module docstring), on the MPC's sample loop
+    (:class:`~lcc_synth.mpc.scaffold.SampleLoop`).
 
     Parameters
     ----------
@@ -190,13 +188,6 @@ class DeePLCCController:
         self._t: list[float] = []
         self.force_failure = False  # test hook: every solve reports a failure
 
-    def __getstate__(self) -> dict[str, Any]:
-        """Picklable without the run state (OSQP workspaces); call :meth:`reset` after."""
-        state = dict(self.__dict__)
-        state["_members"] = []
-        state["_ctx"] = None
-        return state
-
     # ---------------------------------------------------------------- protocol
 
     def reset(self, ctx: ControlContext) -> None:
@@ -217,7 +208,7 @@ class DeePLCCController:
         self._st["exact_solves"] = 0
         self._t = []
         Tini = self.settings.t_ini
-        Wn = max(1, int(round(self.settings.equilibrium_window / self.sample_time)))
+        Wn = self._window(self.settings.equilibrium_window)
         self._members = []
         n_w = self.qp.n_w
         for b in range(ctx.batch):
@@ -228,35 +219,23 @@ class DeePLCCController:
             s_off = np.nan_to_num(s_off, nan=0.0)[list(self.cavs)]
             mem = _Member(solver, s_off, np.zeros(Wn), np.zeros((Tini + 1, self.nv)),
                           np.zeros((Tini + 1, self.n_c)), np.zeros((Tini, self.n_c)),
-                          v_eq=float(ctx.v_star[b]))  # fmt: skip
+                          np.zeros((1, self.n_c)), v_eq=float(ctx.v_star[b]))  # fmt: skip
             mem.hist = {k: [] for k in ("u", "status", "v_eq", "slack", "plan")}
             self._members.append(mem)
 
     def __call__(self, obs: Observation) -> np.ndarray:
-        ctx = self._ctx
-        if ctx is None:
-            raise RuntimeError("DeePLCCController: call reset(ctx) before the first step")
-        out = np.zeros((ctx.batch, self.n_c))
-        self._t.append(float(obs.t))
-        for b, mem in enumerate(self._members):
-            t0 = time.perf_counter()
-            try:
-                out[b] = self._step(b, mem, obs)
-            except Exception as err:  # never raise inside the loop
-                self._st["errors"] += 1
-                if len(self._st["error_messages"]) < 5:
-                    self._st["error_messages"].append(f"t={obs.t:g}: {type(err).__name__}: {err}")
-                out[b] = self._hold(mem)
-                self._record(mem, out[b], 3, None, 0.0)
-            mem.cmd_prev = out[b].copy()
-            self._st["step_time"].append(time.perf_counter() - t0)
-        self._st["steps"] += 1
+        """The commands of one sample: ``(batch,)`` with one CAV, ``(batch, n_c)`` with
+        several."""
+        out = np.zeros((0 if self._ctx is None else self._ctx.batch, self.n_c))
+        self._run_members(obs, out)
         return out[:, 0] if self.n_c == 1 else out
 
-    # ---------------------------------------------------------------- one member, one step
+    def _on_error(self, mem: _Member) -> np.ndarray:
+        cmd = self._hold(mem)
+        self._record(mem, cmd, 3, None, 0.0)
+        return cmd
 
-    def _clip_v(self, v: float) -> float:
-        return float(np.clip(v, 1.0, self._v_hi - 1.0))
+    # ---------------------------------------------------------------- one member, one step
 
     def _observe(self, b: int, mem: _Member, obs: Observation) -> None:
         """Push the sample into the rings and update ``v_eq``."""
@@ -275,18 +254,10 @@ class DeePLCCController:
             mem.vel[-1] = vel
             mem.spc[:-1] = mem.spc[1:]
             mem.spc[-1] = spc
-        v_head = float(vel[0])
         if self.settings.equilibrium_mode(self.kind) == "fixed":
             mem.v_eq = float(self._ctx.v_star[b])
-        elif math.isfinite(v_head):
-            W = mem.v_buf.size
-            if mem.v_buf_n == 0:
-                mem.v_buf[:] = v_head
-                mem.v_buf_n = W
-            else:
-                mem.v_buf[mem.v_buf_i] = v_head
-            mem.v_buf_i = (mem.v_buf_i + 1) % W
-            mem.v_eq = float(mem.v_buf.mean())
+        else:
+            update_equilibrium(mem, float(vel[0]))
 
     def parameters(self, mem: _Member) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(b, y_ini, s_eq)`` of the QP from a member's rings (module docstring)."""
@@ -319,21 +290,11 @@ class DeePLCCController:
         N = self.settings.horizon
         b_w = np.tile(c.s_min + c.margin + c.t_gap * mem.v_eq - s_eq, N)
         q, lo, hi = qp.vectors(cvec, self._a_min, self._a_max, b_w)
-        warm = mem.warm
         mem.solver.force_failure = self.force_failure
-        res = mem.solver.solve(
-            q, lo, hi,
-            None if warm is None else warm[0][self._shift_z],
-            None if warm is None else warm[1][self._shift_y],
-        )  # fmt: skip
-        st["solves"] += 1
-        st["osqp_time"].append(res.run_time)
-        st["iterations"].append(res.iterations)
-        pname = POLISH_NAMES.get(res.polish, str(res.polish))
-        st["polish"][pname] = st["polish"].get(pname, 0) + 1
+        res = mem.solver.solve(q, lo, hi, *self._warm_start(mem))
+        self._count_solve(res)
         z, y = res.z, res.y
         if not res.ok:
-            st["qp_failures"][res.status] = st["qp_failures"].get(res.status, 0) + 1
             exact = self._exact_solve(q, lo, hi)
             if exact is None:
                 return self._fallback(mem, obs, b, s_eq, res.status)
@@ -342,9 +303,7 @@ class DeePLCCController:
         mem.warm = (z, y)
         plan = qp.plan(z).reshape(N, self.n_c)
         slack = float(qp.slack(z).max())
-        if slack > 1e-6:
-            st["slack_steps"] += 1
-            st["max_slack"] = max(st["max_slack"], slack)
+        self._note_slack(slack)
         mem.plan = plan
         mem.plan_age = 0
         cmd = np.clip(plan[0], self._a_min, self._a_max)
@@ -405,8 +364,7 @@ class DeePLCCController:
 
     def _hold(self, mem: _Member) -> np.ndarray:
         self._st["fallback_hold"] += 1
-        prev = mem.cmd_prev if mem.cmd_prev is not None else np.zeros(self.n_c)
-        prev = np.where(np.isfinite(prev), prev, 0.0)
+        prev = np.where(np.isfinite(mem.past[0]), mem.past[0], 0.0)
         return np.clip(prev, self._a_min, self._a_max)
 
     # ---------------------------------------------------------------- history and reports
@@ -478,10 +436,6 @@ class DeePLCCController:
         return {"type": "deep_lcc", "name": self.name, "kind": self.kind,
                 "cavs": list(self.cavs), "n_vehicles": self.nv, "data_key": self.data_key,
                 **self.settings.as_dict()}  # fmt: skip
-
-    def toml_table(self) -> dict[str, Any]:
-        """The ``[controllers.NAME]`` table that builds this controller."""
-        return self.settings.toml_table()
 
     def stats(self) -> dict[str, Any]:
         """Step and solve times (ms), fallbacks, QP failures, slack use, measured violations

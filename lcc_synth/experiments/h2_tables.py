@@ -12,7 +12,7 @@ gain ``lcc-synth synthesize`` writes for the same tables, bit for bit.
 * single-CAV kinds (``lcc``, ``cf_lcc``, ``fd_lcc``, ``ccc``): a ``type = "static"`` table
   with the kind, semantics and the gains by state name (``s_0, v_0, s_1, ...``);
 * ``kind = "platoon" | "ring"``: a ``type = "static"`` table in the platoon form that
-  :class:`~lcc_synth.controllers.static.PlatoonGainController` reads, one row per CAV
+  :class:`~lcc_synth.controllers.static.StaticGainController` reads, one row per CAV
   (``gains = {u_i: {s_j: g, v_j: g}}``, :meth:`~lcc_synth.models.feedback.Gains.as_table`
   of the report's gain; on a ring the gain is defined modulo the conserved total-spacing
   direction, as the report says).

@@ -31,6 +31,7 @@ import numpy as np
 from lcc_synth.analysis.as_run import NotRepresentable, as_run_report, law_loop
 from lcc_synth.controllers.base import ControlContext, Controller
 from lcc_synth.controllers.static import HDVController, StaticGainController
+from lcc_synth.models.feedback import PAPER_CAVS
 
 __all__ = [
     "MEASURE_AMPLITUDE",
@@ -64,7 +65,7 @@ def controller_loop(ctrl: Controller, system, dt: float = 0.01, latency: float =
     """The :class:`~lcc_synth.analysis.as_run.AsRunLoop` of ``ctrl`` on ``system`` (``None``
     when the controller is not linear). Raises ``NotRepresentable`` for a latency that is not
     a multiple of the controller's period."""
-    if isinstance(ctrl, StaticGainController):
+    if isinstance(ctrl, StaticGainController) and ctrl.gains.cavs == PAPER_CAVS:
         model = ctrl.model
     elif isinstance(ctrl, HDVController):
         model = system.linear_model(warn=False)

@@ -6,15 +6,18 @@
 - :mod:`lcc_synth.mpc.solver`: OSQP workspace (set up once), exact reference, naive rebuild.
 - :mod:`lcc_synth.mpc.scaffold`: what every layout's MPC shares (sample loop, equilibrium,
   head prediction, linearisation cache, warm-started solve, statistics, status codes).
-- :mod:`lcc_synth.mpc.controller`: the controller of the common interface, fallback chain.
-- :mod:`lcc_synth.mpc.joint_prediction`, :mod:`lcc_synth.mpc.joint`: the joint MPC of every
+- :mod:`lcc_synth.mpc.controller`: the one MPC of every layout (:class:`MPCController`), its
+  fallback chain, and the paper's one-CAV layout.
+- :mod:`lcc_synth.mpc.joint_prediction`, :mod:`lcc_synth.mpc.joint`: the string layout, every
   CAV of a platoon or ring road (``[system] kind = "platoon" | "ring"``).
 - :mod:`lcc_synth.mpc.build`: the controller of a ``[controllers.NAME]`` table.
 - :mod:`lcc_synth.mpc.report`: its step record and statistics, the safety summary of runs.
 
-One entry point builds the MPC of any layout (:func:`~lcc_synth.mpc.build.build_mpc`, or a
-``type = "mpc"`` table): the single-CAV MPC for the paper's kinds, the joint MPC of every CAV
-for ``kind = "platoon" | "ring"``; both run on :mod:`lcc_synth.mpc.scaffold`.
+One class is the MPC of any layout (:class:`MPCController`; ``JointMPCController`` is another
+name of the same class, kept for code written against the joint MPC), and one entry point
+builds it (:func:`~lcc_synth.mpc.build.build_mpc`, or a ``type = "mpc"`` table): the paper's
+one-CAV error state for the paper's kinds, the joint state of every CAV for ``kind =
+"platoon" | "ring"``; both run on :mod:`lcc_synth.mpc.scaffold`.
 
 Feature matrix (``tests/test_mpc_layouts.py`` runs every "yes" on each layout through
 :func:`~lcc_synth.mpc.build.build_mpc` and checks every refusal)::
@@ -44,8 +47,10 @@ to share the augmented state).
 
 from lcc_synth.mpc.build import build_mpc, mpc_controller_from_table
 from lcc_synth.mpc.controller import STATUS_CODES, MPCController
-from lcc_synth.mpc.joint import JointMPCController
 from lcc_synth.mpc.settings import MPCSettings, paper_fallback_gains, settings_from_table
+
+#: The same class as :class:`MPCController` (the joint MPC of a platoon or ring is the one MPC).
+JointMPCController = MPCController
 
 __all__ = [
     "MPCController",

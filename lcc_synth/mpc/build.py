@@ -1,9 +1,9 @@
 """The MPC of a ``[controllers.NAME]`` problem table (``type = "mpc"``): its settings
 (:mod:`lcc_synth.mpc.settings`) and its fallback gain: another controller of the file
 (``fallback = "NAME"``), a gains file (``fallback_gains_file``) or the paper's. On a
-``kind = "platoon" | "ring"`` system it is the joint MPC of every CAV
-(:class:`~lcc_synth.mpc.joint.JointMPCController`), whose fallback gains are in the
-platoon form ``{u_i: {state: gain}}`` (default: each CAV's HDV law)."""
+``kind = "platoon" | "ring"`` system the same :class:`~lcc_synth.mpc.controller.MPCController`
+controls every CAV (:mod:`lcc_synth.mpc.joint`), and its fallback gains are in the platoon
+form ``{u_i: {state: gain}}`` (default: each CAV's HDV law)."""
 
 from __future__ import annotations
 
@@ -11,22 +11,31 @@ from lcc_synth.controllers.gains_files import read_fallback_file
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import Gains
 from lcc_synth.mpc.controller import MPCController
-from lcc_synth.mpc.joint import JointMPCController
 from lcc_synth.mpc.settings import settings_from_table
 
 __all__ = ["mpc_controller_from_table", "build_mpc"]
 
 
-def _named_fallback(named, field_name: str) -> tuple[Gains, str]:
+def _named_fallback(named, system, field_name: str) -> tuple[Gains, str]:
     """The gain of ``fallback = "NAME"`` (as :func:`lcc_synth.experiments.spec.resolve_fallbacks`
-    inlines it) and its source label ``controller NAME``."""
+    inlines it) and its source label ``controller NAME``: ``{state: gain}`` for the paper's
+    one CAV, the platoon form ``{u_i: {state: gain}}`` for a platoon or ring."""
+    platoon = getattr(system, "platoon", None) is not None  # kind = "platoon" | "ring"
     if not isinstance(named, dict) or not isinstance(named.get("gains"), dict):
-        raise ConfigError(
-            field_name, f"names controller {named!r}, which is not a static or h2 controller"
-        )
+        raise ConfigError(field_name, "must give gains in the platoon form {u_i: {state: gain}}"
+                          if platoon else f"names controller {named!r}, which is not a static "
+                          "or h2 controller")  # fmt: skip
+    semantics = named.get("semantics", "added")
+    where = f"{field_name}.gains" if platoon else field_name
     try:
-        gains = Gains.named(named["gains"], named.get("semantics", "added"))
+        if platoon:
+            gains = Gains.from_table(named["gains"], system.linear_model(warn=False), semantics,
+                                     where)  # fmt: skip
+        else:
+            gains = Gains.named(named["gains"], semantics)
     except ConfigError as err:
+        if err.field.startswith(field_name):
+            raise
         raise ConfigError(f"{field_name}.{err.field}", err.message) from None
     return gains, f"controller {named.get('controller', '?')}"
 
@@ -49,12 +58,9 @@ def mpc_controller_from_table(name: str, table, system, source: str | None = Non
         table = dict(table)
         named = table.pop("fallback", None)  # resolved by experiments.spec.resolve_fallbacks
         settings = settings_from_table(table, field_name)
-        if getattr(system, "platoon", None) is not None:  # kind = "platoon" | "ring"
-            return _platoon_mpc(name, settings, system, named, source, field_name, table)
-        fallback = None
-        fb_source = "paper"
+        fallback, fb_source = None, None  # None: the layout's default
         if named is not None:
-            fallback, fb_source = _named_fallback(named, f"{field_name}.fallback")
+            fallback, fb_source = _named_fallback(named, system, f"{field_name}.fallback")
         if settings.fallback_gains_file:
             fallback, path = read_fallback_file(table, field_name, system, source)
             fb_source = str(path)
@@ -66,41 +72,6 @@ def mpc_controller_from_table(name: str, table, system, source: str | None = Non
             raise ConfigError(f"{field_name}.{err.field}", err.message) from None
     except ConfigError as err:
         raise err.with_source(source) if source and not err.source else err from None
-
-
-def _platoon_gains(data, model, field_name: str) -> Gains:
-    """A platoon :class:`~lcc_synth.models.feedback.Gains` from ``{"gains": {"u_i": {state:
-    gain}}, "semantics": ...}``."""
-    if not isinstance(data, dict) or not isinstance(data.get("gains"), dict):
-        raise ConfigError(field_name, "must give gains in the platoon form "
-                          "{u_i: {state: gain}}")  # fmt: skip
-    semantics = data.get("semantics", "added")
-    try:
-        return Gains.from_table(data["gains"], model, semantics, f"{field_name}.gains")
-    except ConfigError as err:
-        if err.field.startswith(field_name):
-            raise
-        raise ConfigError(f"{field_name}.{err.field}", err.message) from None
-
-
-def _platoon_mpc(name, settings, system, named, source, field_name, table):
-    """The joint MPC of every CAV of a platoon or ring (:mod:`lcc_synth.mpc.joint`); its
-    fallback rows from ``fallback = "NAME"`` or ``fallback_gains_file`` (platoon gain form),
-    else each CAV's HDV law."""
-    model = system.linear_model(warn=False)
-    fallback, fb_source = None, "hdv_law"
-    if named is not None:
-        fallback = _platoon_gains(named, model, f"{field_name}.fallback")
-        fb_source = f"controller {named.get('controller', '?')}"
-    if settings.fallback_gains_file:
-        fallback, path = read_fallback_file(table, field_name, system, source)
-        fb_source = str(path)
-    try:
-        return JointMPCController(name, settings, system, fallback, fb_source)
-    except ConfigError as err:
-        if err.field.startswith(field_name):
-            raise
-        raise ConfigError(f"{field_name}.{err.field}", err.message) from None
 
 
 def build_mpc(system, name: str = "mpc", **settings):

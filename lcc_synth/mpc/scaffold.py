@@ -1,17 +1,20 @@
-"""What every layout's MPC shares: the sample loop, the equilibrium estimate, the head
+"""What every predictive controller shares: the sample loop, the equilibrium estimate, the head
 prediction, the linearisation cache, re-linearisation, the warm-started solve and its
 statistics, the status codes and the pickling rule.
 
-:class:`MPCScaffold` is the base of the single-CAV MPC (:class:`~lcc_synth.mpc.controller.
-MPCController`, one input and the paper's error state of ``-m..n_model``) and of the joint MPC
-(:class:`~lcc_synth.mpc.joint.JointMPCController`, one input per CAV of a platoon or ring).
-Both use the one condensed QP of :class:`~lcc_synth.mpc.formulation.Formulation` (``nu``
-inputs); a layout supplies its prediction model (:func:`~lcc_synth.mpc.formulation.linearize`
-or :func:`~lcc_synth.mpc.joint_prediction.linearize_joint`), its state, its fallback chain and
-its history; the loop here runs each batch member's step, never raises inside it
+:class:`SampleLoop` is the loop of every predictive controller (the MPC and DeeP-LCC,
+:class:`~lcc_synth.deeplcc.controller.DeePLCCController`): each batch member's step, the
+equilibrium's window, the warm start, the count of each solve and slack. :class:`MPCScaffold`
+is the base of the one MPC (:class:`~lcc_synth.mpc.controller.
+MPCController`: the paper's error state of ``-m..n_model`` around one CAV, or one input per CAV
+of a platoon or ring). It uses the one condensed QP of :class:`~lcc_synth.mpc.formulation.
+Formulation` (``nu`` inputs); a layout supplies its prediction model (:func:`~lcc_synth.mpc.
+formulation.linearize` or :func:`~lcc_synth.mpc.joint_prediction.linearize_joint`), its state
+and its fallback arithmetic; the loop here runs each batch member's step, never raises inside it
 (an exception is counted and the member holds its last command), and keeps the step record of
-:mod:`lcc_synth.mpc.report`. Moving this code here from the two controllers changed no
-operation, so every pinned number is bit for bit the same (``tests/test_mpc*.py``).
+:mod:`lcc_synth.mpc.report`. Moving this code here from the controllers changed no
+operation, so every pinned number is bit for bit the same (``tests/test_mpc*.py``,
+``tests/test_deeplcc*.py``).
 """
 
 from __future__ import annotations
@@ -26,9 +29,12 @@ import numpy as np
 from lcc_synth.mpc.active_set import make_solver, solver_label
 from lcc_synth.mpc.comfort import solve_prioritised
 from lcc_synth.mpc.solver import POLISH_NAMES, OSQPSolver
-from lcc_synth.mpc.step_cache import clip
+from lcc_synth.mpc.step_cache import LastValue, clip
 
-__all__ = ["STATUS_CODES", "LoopState", "MPCScaffold", "update_equilibrium", "head_prediction"]
+__all__ = [
+    "STATUS_CODES", "Layout", "LoopState", "Sample", "SampleLoop", "MPCScaffold", "new_history",
+    "update_equilibrium", "head_prediction",
+]
 
 #: Per-step (per-CAV for the joint MPC) outcome codes stored in ``history()["status"]``.
 STATUS_CODES = {0: "qp", 1: "shifted_plan", 2: "static_gain", 3: "hold"}
@@ -36,11 +42,14 @@ STATUS_CODES = {0: "qp", 1: "shifted_plan", 2: "static_gain", 3: "hold"}
 
 @dataclass
 class LoopState:
-    """Solver and loop state of one batch member (a layout adds its own fields).
+    """Solver and loop state of one batch member.
 
     ``v_buf`` is the moving-average window of the reference velocity (:func:`update_equilibrium`),
     ``plan`` the last optimal inputs (the shifted-plan fallback), ``warm`` the last primal and
-    dual solution, ``past`` the applied commands, newest first (the comfort rows).
+    dual solution, ``past`` the applied commands, newest first (the comfort rows), ``u_prev``
+    the previous input the cost penalises the change from (a float for one CAV, ``(n_cav,)``
+    for a string), ``delay`` the delay register or lag state of the prediction; ``s_off``,
+    ``s_off_cols``, ``p_ref``, ``cmd_prev`` and ``s_eq`` are the one-CAV layout's.
     """
 
     solver: OSQPSolver
@@ -58,6 +67,32 @@ class LoopState:
     warm: tuple | None = None
     past: np.ndarray = field(default_factory=lambda: np.zeros(1))
     hist: dict[str, list] = field(default_factory=dict)
+    u_prev: Any = 0.0
+    delay: Any = None  # delay.StateHistory (past observed states) or lag.LagState (a_0)
+    s_off: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    s_off_cols: np.ndarray | None = None  # s_off of the modelled vehicles (state order)
+    p_ref: float = math.nan
+    cmd_prev: float = 0.0
+    s_eq: LastValue = field(default_factory=LastValue)
+
+
+@dataclass
+class Sample:
+    """What a layout observed at one sample: the QP's initial state ``x0`` and head
+    prediction ``d_model``, the head prediction ``d`` and the layout's own measurements
+    (``extra``: FD-LCC's position state and the measured spacing for one CAV; the reference
+    spacings, velocities and spacings for a string)."""
+
+    x0: np.ndarray
+    d: np.ndarray
+    d_model: np.ndarray
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def new_history() -> dict[str, list]:
+    """An empty per-step history of one batch member (what the MPC records at each sample)."""
+    return {k: [] for k in ("u", "u_model", "status", "osqp_time", "iterations", "slack", "v_eq",
+                            "v_lin", "x0", "d", "plan", "lin")}
 
 
 def update_equilibrium(mem: LoopState, v_ref: float) -> None:
@@ -98,14 +133,46 @@ def head_prediction(mem: LoopState, v_ref: float, N: int, Ts: float, prediction,
     return d0, d
 
 
-class MPCScaffold:
-    """The sample loop and bookkeeping shared by every layout's MPC (module docstring).
+class Layout:
+    """What a layout of the one MPC holds: its system, settings and kind (a subclass adds its
+    prediction model and state; :class:`~lcc_synth.mpc.controller.OneCAVLayout`,
+    :class:`~lcc_synth.mpc.joint.StringLayout`).
 
-    A subclass sets ``name``, ``settings``, ``sample_time``, ``formulation``, ``_lin0``,
-    ``_v_hi``, ``_cache``, ``_members``, ``_ctx``, ``_st``, ``_t``, ``_shift_z``, ``_shift_y``
-    and implements ``_linearize_at(v)`` (the prediction model at ``v``), ``_feedback(model)``
-    (the fallback's ``(K, k_h)``), ``_step(b, mem, obs)`` and ``_on_error(mem)`` (the command
-    of a member whose step raised). State is real: the OSQP workspaces and the loop state.
+    A layout sets ``nu`` (CAVs), ``v_hi`` (the fastest valid speed), ``v_design`` (where the
+    prediction model is first linearised) and implements, for :class:`~lcc_synth.mpc.
+    controller.MPCController`: ``linearize(v)``, ``state_weights(model)``,
+    ``families(model)``, ``default_fallback(model)``, ``check_fallback(model, gains,
+    source)``, ``feedback(model, gains)``, ``check_context(ctx, name)``, ``limits(a_min,
+    a_max)``, ``member(mpc, ctx, b, W)``, ``empty_output(batch)``, ``output(out)``,
+    ``observe(mpc, b, mem, obs)`` (a :class:`Sample`), ``count_violations(mpc, sample)``,
+    ``spacing_bounds(mpc, mem, sample)``, ``jerk_bounds(sample)``, ``plan(U)``,
+    ``command(mpc, mem, sample, U)``, ``fallback(mpc, mem, sample, why)``, ``hold(mpc, mem,
+    why)``, ``failed(code)``, ``history(mpc, out, S)``, ``describe(mpc)``, ``as_dict(mpc)``
+    and ``stats(mpc, out)``.
+    """
+
+    #: one input per CAV in the history and the command (``(batch, n_cav)``)
+    joint = False
+    #: the fallback's source label when the user gives none
+    default_source = ""
+
+    def __init__(self, system, settings) -> None:
+        self.system = system
+        self.settings = settings
+        self.kind = system.kind
+
+
+class SampleLoop:
+    """The sample loop and bookkeeping of every predictive controller: the MPC of every layout
+    (:class:`MPCScaffold`) and DeeP-LCC (:class:`~lcc_synth.deeplcc.controller.
+    DeePLCCController`).
+
+    A subclass sets ``name``, ``settings``, ``sample_time``, ``_v_hi``, ``_members`` (each with
+    the fields ``v_buf``, ``v_buf_n``, ``v_buf_i``, ``v_eq``, ``warm`` and ``past`` of
+    :class:`LoopState`), ``_ctx``, ``_st`` (:func:`~lcc_synth.mpc.report.new_step_record`),
+    ``_t``, ``_shift_z``, ``_shift_y`` and implements ``_step(b, mem, obs)`` and
+    ``_on_error(mem)`` (the command of a member whose step raised). State is real: the OSQP
+    workspaces and the loop state.
     """
 
     def __getstate__(self) -> dict[str, Any]:
@@ -116,7 +183,7 @@ class MPCScaffold:
         return state
 
     def toml_table(self) -> dict[str, Any]:
-        """The ``[controllers.NAME]`` table that builds this MPC."""
+        """The ``[controllers.NAME]`` table that builds this controller."""
         return self.settings.toml_table()
 
     # ---------------------------------------------------------------- shared helpers
@@ -124,9 +191,65 @@ class MPCScaffold:
     def _clip_v(self, v: float) -> float:
         return clip(v, 1.0, self._v_hi - 1.0)
 
-    def _window(self) -> int:
-        """Samples of the equilibrium's moving average."""
-        return max(1, int(round(self.settings.prediction.equilibrium_window / self.sample_time)))
+    def _window(self, seconds: float) -> int:
+        """Samples of the equilibrium's moving average over ``seconds``."""
+        return max(1, int(round(seconds / self.sample_time)))
+
+    def _warm_start(self, mem) -> tuple[Any, Any]:
+        """The member's last primal and dual solution shifted by one sample (None at first)."""
+        warm = mem.warm
+        if warm is None:
+            return None, None
+        return warm[0][self._shift_z], warm[1][self._shift_y]
+
+    def _count_solve(self, res) -> None:
+        """Count one solve in the step record: time, iterations, polish and failure status."""
+        st = self._st
+        st["solves"] += 1
+        st["osqp_time"].append(res.run_time)
+        st["iterations"].append(res.iterations)
+        pname = POLISH_NAMES.get(res.polish, str(res.polish))
+        st["polish"][pname] = st["polish"].get(pname, 0) + 1
+        if not res.ok:
+            st["qp_failures"][res.status] = st["qp_failures"].get(res.status, 0) + 1
+
+    def _note_slack(self, slack: float) -> None:
+        if slack > 1e-6:
+            self._st["slack_steps"] += 1
+            self._st["max_slack"] = max(self._st["max_slack"], slack)
+
+    # ---------------------------------------------------------------- the loop
+
+    def _run_members(self, obs, out: np.ndarray) -> None:
+        """Every batch member's step into ``out[b]``; an exception is counted and held."""
+        ctx = self._ctx
+        if ctx is None:
+            raise RuntimeError(f"{type(self).__name__}: call reset(ctx) before the first step")
+        self._t.append(float(obs.t))
+        for b in range(ctx.batch):
+            t0 = time.perf_counter()
+            mem = self._members[b]
+            try:
+                out[b] = self._step(b, mem, obs)
+            except Exception as err:  # never raise inside the loop
+                self._st["errors"] += 1
+                if len(self._st["error_messages"]) < 5:
+                    self._st["error_messages"].append(f"t={obs.t:g}: {type(err).__name__}: {err}")
+                out[b] = self._on_error(mem)
+            mem.past[1:] = mem.past[:-1]
+            mem.past[0] = out[b]
+            self._st["step_time"].append(time.perf_counter() - t0)
+        self._st["steps"] += 1
+
+
+class MPCScaffold(SampleLoop):
+    """What the MPC of every layout adds to :class:`SampleLoop`: the linearisation cache,
+    re-linearisation, the solver set-up, the comfort-prioritised solve and the description.
+
+    A subclass also sets ``formulation``, ``_lin0`` and ``_cache`` and implements
+    ``_linearize_at(v)`` (the prediction model at ``v``) and ``_feedback(model)`` (the
+    fallback's ``(K, k_h)``).
+    """
 
     def _new_solver(self, qp, u0, a_min, a_max):
         """One OSQP (or DAQP) workspace of ``qp`` at a zero state (set up once per run)."""
@@ -171,51 +294,12 @@ class MPCScaffold:
 
     def _solve(self, mem: LoopState, q, lo, hi):
         """Warm-started, comfort-prioritised solve; counts it in the step record."""
-        st = self._st
-        warm = mem.warm
-        res = solve_prioritised(
-            mem.solver, self.formulation, q, lo, hi,
-            None if warm is None else warm[0][self._shift_z],
-            None if warm is None else warm[1][self._shift_y], st,
-        )  # fmt: skip
-        st["solves"] += 1
-        st["osqp_time"].append(res.run_time)
-        st["iterations"].append(res.iterations)
-        pname = POLISH_NAMES.get(res.polish, str(res.polish))
-        st["polish"][pname] = st["polish"].get(pname, 0) + 1
-        if not res.ok:
-            st["qp_failures"][res.status] = st["qp_failures"].get(res.status, 0) + 1
-        else:
+        z0, y0 = self._warm_start(mem)
+        res = solve_prioritised(mem.solver, self.formulation, q, lo, hi, z0, y0, self._st)
+        self._count_solve(res)
+        if res.ok:
             mem.warm = (res.z, res.y)
         return res
-
-    def _note_slack(self, slack: float) -> None:
-        if slack > 1e-6:
-            self._st["slack_steps"] += 1
-            self._st["max_slack"] = max(self._st["max_slack"], slack)
-
-    # ---------------------------------------------------------------- the loop
-
-    def _run_members(self, obs, out: np.ndarray) -> None:
-        """Every batch member's step into ``out[b]``; an exception is counted and held."""
-        ctx = self._ctx
-        if ctx is None:
-            raise RuntimeError(f"{type(self).__name__}: call reset(ctx) before the first step")
-        self._t.append(float(obs.t))
-        for b in range(ctx.batch):
-            t0 = time.perf_counter()
-            mem = self._members[b]
-            try:
-                out[b] = self._step(b, mem, obs)
-            except Exception as err:  # never raise inside the loop
-                self._st["errors"] += 1
-                if len(self._st["error_messages"]) < 5:
-                    self._st["error_messages"].append(f"t={obs.t:g}: {type(err).__name__}: {err}")
-                out[b] = self._on_error(mem)
-            mem.past[1:] = mem.past[:-1]
-            mem.past[0] = out[b]
-            self._st["step_time"].append(time.perf_counter() - t0)
-        self._st["steps"] += 1
 
     def _describe(self, layout: dict[str, Any], equilibrium: dict[str, Any], qp_label: str,
                   gains: Any) -> dict[str, Any]:  # fmt: skip

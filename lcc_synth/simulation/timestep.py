@@ -196,13 +196,13 @@ def loop_matrix(controller, scenario) -> tuple[np.ndarray, str] | None:
     (see the module docstring); ``None`` when its gains are for another string (the simulator
     reports that)."""
     from lcc_synth.controllers.static import StaticGainController
-    from lcc_synth.models.feedback import Gains, closed_loop, input_feedback
+    from lcc_synth.models.feedback import PAPER_CAVS, Gains, closed_loop, input_feedback
     from lcc_synth.models.linear import model_from_hdv
 
     name = getattr(controller, "name", "?")
     if scenario.cavs is not None:
         return _platoon_loop(controller, scenario, name)
-    if isinstance(controller, StaticGainController):
+    if isinstance(controller, StaticGainController) and controller.gains.cavs == PAPER_CAVS:
         model, gains = controller.model, controller.gains
         if (model.m, model.n) != (scenario.m, scenario.n):
             return None
@@ -223,11 +223,11 @@ def _platoon_loop(controller, scenario, name: str) -> tuple[np.ndarray, str] | N
     the ring on its invariant hyperplane, where the conserved total spacing does not move)."""
     from dataclasses import replace
 
-    from lcc_synth.controllers.static import PlatoonGainController
-    from lcc_synth.models.feedback import Gains
+    from lcc_synth.controllers.static import StaticGainController
+    from lcc_synth.models.feedback import PAPER_CAVS, Gains
     from lcc_synth.models.platoon import Platoon, platoon_model
 
-    if isinstance(controller, PlatoonGainController):
+    if isinstance(controller, StaticGainController) and controller.gains.cavs != PAPER_CAVS:
         model, gains = controller.model, controller.gains
         what = f"the closed loop of controller {name!r}"
     else:
