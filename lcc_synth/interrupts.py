@@ -38,7 +38,7 @@ from typing import Any
 from lcc_synth.errors import Interrupted
 
 __all__ = ["CLEANUP_DEADLINE", "POLL_S", "handling", "held_signals", "interrupted", "deliver",
-           "call_in_child"]
+           "interruption_behind", "call_in_child"]
 
 #: Seconds the clean-up after a signal may take before the process exits regardless.
 CLEANUP_DEADLINE = 20.0
@@ -51,6 +51,26 @@ _STATE: dict[str, Any] = {"signum": None, "in_child": False, "active": False}
 def interrupted() -> int | None:
     """The signal that stopped this run (``None`` if none arrived)."""
     return _STATE["signum"]
+
+
+def interruption_behind(err: BaseException) -> Interrupted | None:
+    """The :class:`~lcc_synth.errors.Interrupted` that ``err`` stands for, else ``None``.
+
+    A signal's exception can surface wrapped: when the handler raises while native code is
+    about to return (a numba kernel's dispatcher), Python reports ``SystemError: ... returned
+    a result with an exception set`` caused by it (seen in CI on ``run``, 1 run in ~20). This
+    looks for it along ``__cause__`` / ``__context__``, and under :func:`handling`, once a
+    signal has arrived, any error counts as its consequence."""
+    seen: set[int] = set()
+    e: BaseException | None = err
+    while e is not None and id(e) not in seen:
+        if isinstance(e, Interrupted):
+            return e
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    if _STATE["active"] and _STATE["signum"] is not None:
+        return Interrupted(_STATE["signum"])
+    return None
 
 
 def _watchdog(signum: int) -> None:

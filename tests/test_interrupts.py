@@ -4,12 +4,13 @@ for bit and raises its errors here; outside the command's signal handling it nev
 from __future__ import annotations
 
 import os
+import signal
 
 import numpy as np
 import pytest
 
-from lcc_synth.errors import ConfigError
-from lcc_synth.interrupts import call_in_child, handling
+from lcc_synth.errors import ConfigError, Interrupted
+from lcc_synth.interrupts import call_in_child, handling, interruption_behind
 
 
 def _pid_and_eig(a):
@@ -38,3 +39,38 @@ def test_outside_the_command_it_runs_in_process():
     forever for Clarabel's thread pool (module docstring)."""
     pid, _ = call_in_child(_pid_and_eig, np.eye(3))
     assert pid == os.getpid()
+
+
+def _wrapped_stop(args):
+    """What a numba kernel's dispatcher raises when the signal handler fires as it returns."""
+    try:
+        raise Interrupted(signal.SIGINT)
+    except Interrupted as err:
+        msg = "CPUDispatcher(<function k>) returned a result with an exception set"
+        raise SystemError(msg) from err
+
+
+def test_a_signal_wrapped_by_native_code_still_stops_the_command(monkeypatch, capsys):
+    """CI caught ``run`` exiting 1 with a traceback: SIGINT arrived as a numba kernel returned
+    and surfaced as a ``SystemError`` caused by :class:`Interrupted`. It is a stop: 130, one
+    line."""
+    import lcc_synth.cli.simulate as simulate
+    from lcc_synth.cli.main import main
+
+    monkeypatch.setattr(simulate, "run", _wrapped_stop)
+    assert main(["simulate", "problems/paper_table2.toml"]) == 128 + signal.SIGINT
+    err = capsys.readouterr().err
+    assert err.strip().splitlines() == ["lcc-synth simulate: interrupted by SIGINT"]
+
+
+def test_an_error_without_a_signal_behind_it_is_not_a_stop(monkeypatch):
+    import lcc_synth.cli.simulate as simulate
+    from lcc_synth.cli.main import main
+
+    def fails(args):
+        raise SystemError("native failure")
+
+    assert interruption_behind(SystemError("x")) is None
+    monkeypatch.setattr(simulate, "run", fails)
+    with pytest.raises(SystemError, match="native failure"):
+        main(["simulate", "problems/paper_table2.toml"])

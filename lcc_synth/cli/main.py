@@ -26,6 +26,7 @@ import sys
 
 from lcc_synth.cli.arguments import add_quiet, check_options
 from lcc_synth.errors import ConfigError, FileError, Interrupted
+from lcc_synth.interrupts import interruption_behind
 
 COMMANDS = ("run", "analyze", "regions", "simulate", "synthesize", "sweep", "review", "calibrate")
 
@@ -97,6 +98,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"lcc-synth {args.command}: interrupted", file=sys.stderr)
         return 130
+    except Exception as err:  # a signal's exception wrapped by native code: still a stop
+        stop = interruption_behind(err)
+        if stop is None:
+            raise
+        print(f"lcc-synth {args.command}: interrupted by {stop.signame}", file=sys.stderr)
+        return 128 + stop.signum
     finally:
         set_quiet(False)
 

@@ -280,10 +280,11 @@ def _rate(x) -> str:
 
 
 def _status(err: BaseException) -> str:
-    from lcc_synth.errors import Interrupted
+    from lcc_synth.interrupts import interruption_behind
 
-    if isinstance(err, Interrupted):
-        return f"interrupted by {err.signame}"
+    stop = interruption_behind(err)
+    if stop is not None:
+        return f"interrupted by {stop.signame}"
     if isinstance(err, KeyboardInterrupt):
         return "interrupted"
     return f"failed: {type(err).__name__}: {err}"

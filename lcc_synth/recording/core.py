@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.errors import ConfigError
+from lcc_synth.interrupts import interruption_behind
 
 APP_ID = "lcc_synth"
 #: Road view: metres of screen height per m/s of velocity error (the 2D view keeps aspect 1:1).
@@ -167,7 +168,7 @@ def open_recording(
         outcome = err
         if not isinstance(err, GeneratorExit):  # GeneratorExit: the block was abandoned
             what = type(err).__name__ + (f": {err}" if str(err) else "")
-            stop = isinstance(err, KeyboardInterrupt)
+            stop = isinstance(err, KeyboardInterrupt) or interruption_behind(err) is not None
             how = f"**interrupted** by `{what}`" if stop else f"**failed**: `{what}`"
             record_text(
                 rec,
