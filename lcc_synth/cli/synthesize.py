@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     written, error = [], None
     try:  # a file that cannot be written (a full disk) does not hide the report printed below
         if rrd is not None:
-            if rep.per_cav:
+            if platoon:
                 rrd = record_platoon_synthesis_file(rrd, rep, args.overwrite, prov)
             else:
                 rrd = record_synthesis_file(rrd, rep, spec.system, args.overwrite, prov)
