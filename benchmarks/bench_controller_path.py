@@ -57,8 +57,7 @@ window = [0.0, 1.0]
 """
 
 _TABLE_TYPES = ("h2", "static", "mpc")
-_OBJECTS = ("Gains", "SynthesisSpec", "PlatoonSynthesisSpec",
-            "SynthesisReport", "PlatoonReport", "MPCSettings")  # fmt: skip
+_OBJECTS = ("Gains", "SynthesisSpec", "SynthesisReport", "MPCSettings")
 
 
 def _is_table(v) -> bool:

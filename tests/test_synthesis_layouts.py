@@ -122,3 +122,50 @@ def test_single_cav_features_name_the_key_and_the_layout(layout, extra, field, d
         spec_from_problem(_problem(layout, design, extra))
     assert err.value.field == field
     assert f"kind = {kind!r}" in err.value.message
+
+
+#: The keys of ``lcc-synth synthesize --json`` per layout, in order, as printed before the two
+#: report types became one (captured from the CLI; the JSON must not change).
+ONE_CAV_KEYS = ["problem", "design", "kind", "m", "n", "v_star", "semantics", "weights",
+                "disturbances", "pattern", "state_names", "K", "gains", "input_K", "input_kh",
+                "check", "h2_lmi_bound", "h2_restriction", "h2_unstructured", "solver",
+                "polish", "baseline", "pareto", "timings", "notes", "as_run"]
+PER_CAV_KEYS = ["problem", "design", "kind", "size", "cavs", "ring", "v_star", "circumference",
+                "semantics", "weights", "disturbances", "patterns", "comm_range",
+                "state_names", "K", "gains", "input_K", "input_kh", "check",
+                "h2_unstructured", "conserved", "stages", "polish", "robust", "pareto",
+                "timings", "notes"]  # fmt: skip
+
+
+@pytest.mark.parametrize("layout", list(LAYOUTS))
+def test_one_spec_and_one_report_type_keep_each_layouts_json(layout):
+    import pickle
+
+    from lcc_synth.synthesis.config import SynthesisSpec
+    from lcc_synth.synthesis.report import UNSET, SynthesisReport
+
+    spec = spec_from_problem(_problem(layout, "structured"))
+    rep = synthesize(spec)
+    assert type(spec) is SynthesisSpec and type(rep) is SynthesisReport
+    one_cav = layout == "one_cav_string"
+    assert rep.per_cav is not one_cav
+    d = rep.as_dict()
+    assert list(d) == (ONE_CAV_KEYS if one_cav else PER_CAV_KEYS)
+    assert UNSET not in d.values()
+    # the CLI designs in a child process: the report crosses it unchanged, UNSET included
+    back = pickle.loads(pickle.dumps(rep))
+    assert back == rep and back.as_dict() == d
+    assert (back.m is UNSET) is not one_cav and (back.cavs is UNSET) is one_cav
+    assert "UNSET" not in repr(rep)
+
+
+@pytest.mark.parametrize("layout", list(LAYOUTS))
+def test_spec_of_every_layout_round_trips_through_its_toml(layout):
+    from dataclasses import replace
+
+    extra = "[synthesis.sparsity]\nmax_loss = 0.05" if layout != "one_cav_string" else ""
+    for design in ("structured", "sparsity"):
+        spec = spec_from_problem(_problem(layout, design, extra if design == "sparsity" else ""))
+        back = spec_from_problem(Problem(Path("back.toml"), tomllib.loads(spec.to_toml())))
+        assert replace(back, source=spec.source) == spec
+        assert back.max_loss == (0.05 if extra and design == "sparsity" else 0.01)

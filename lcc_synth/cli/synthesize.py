@@ -35,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
         record_synthesis_file,
         recording_path,
     )
-    from lcc_synth.synthesis.config import PlatoonSynthesisSpec, spec_from_problem
+    from lcc_synth.synthesis.config import spec_from_problem
     from lcc_synth.synthesis.design import synthesize
     from lcc_synth.synthesis.gains_file import write_gains
     from lcc_synth.synthesis.report import format_report
@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
             "problems/synth_cf_lcc_pattern.toml)", src,
         )  # fmt: skip
     spec = spec_from_problem(problem)
-    platoon = isinstance(spec, PlatoonSynthesisSpec)
+    platoon = spec.system.platoon is not None  # a gain row per CAV
     if args.figure and (platoon or spec.design != "sparsity"):
         why = (f"not available for kind = {spec.system.kind!r} yet" if platoon else
                f"only design = 'sparsity' draws a Pareto front; this one is {spec.design!r}")

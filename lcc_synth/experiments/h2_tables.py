@@ -61,8 +61,8 @@ def synthesize_table(
     tuple
         ``(static_table, report)``: a ``type = "static"`` controller table holding the
         synthesised gain (plain data) and the
-        :class:`~lcc_synth.synthesis.report.SynthesisReport` (platoon / ring:
-        :class:`~lcc_synth.synthesis.report.PlatoonReport`).
+        :class:`~lcc_synth.synthesis.report.SynthesisReport` (platoon / ring: a gain row per
+        CAV).
 
     Raises
     ------

@@ -222,7 +222,8 @@ _PLATOON_BULK = ("state_names", "K", "gains", "input_K", "input_kh", "conserved"
 
 def record_platoon_synthesis(rec: Any, rep: Any) -> None:
     """Record a platoon or ring synthesis report
-    (:class:`~lcc_synth.synthesis.report.PlatoonReport`) under ``/synthesis/<problem>/``.
+    (:class:`~lcc_synth.synthesis.report.SynthesisReport`, a gain row per CAV) under
+    ``/synthesis/<problem>/``.
 
     Per CAV input ``u_<col>``: ``<u_col>/gains`` (``BarChart`` of its row of ``K`` on every
     state, in state order) and ``<u_col>/report`` (its gains, heard positions and input

@@ -1,6 +1,7 @@
-"""The ``[synthesis]`` table of a problem file (``lcc-synth synthesize``), both vocabularies:
-one CAV (``m, n, pattern``: :class:`SynthesisSpec`) and a platoon or ring (``size, cavs,
-comm_range``: :class:`PlatoonSynthesisSpec`); :func:`synthesis_spec` reads either.
+"""The ``[synthesis]`` table of a problem file (``lcc-synth synthesize``) in both vocabularies,
+one CAV (``m, n, pattern``) and a platoon or ring (``size, cavs, comm_range``), read by
+:func:`synthesis_spec` into the one :class:`SynthesisSpec` (``PlatoonSynthesisSpec`` is
+another name of it).
 
 One CAV (``[system] kind = "cf_lcc" | "fd_lcc" | "lcc" | "ccc"``):
 
@@ -133,32 +134,93 @@ DESIGNS = declared("synthesis").key("design").choices
 
 
 @dataclass(frozen=True, repr=False)
+class RobustSettings(Record):
+    """``[synthesis.robust]``: the sampled member set and the objective.
+
+    Attributes
+    ----------
+    samples, seed : int
+    objective : {"mean", "worst"}
+    ranges : dict
+        HDV parameter name -> ``(lo, hi)`` of its uniform draw (per vehicle and member).
+    """
+
+    samples: int = 20
+    seed: int = 0
+    objective: str = "mean"
+    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, repr=False, kw_only=True)
 class SynthesisSpec(Record):
-    """A parsed synthesis problem."""
+    """A parsed ``[synthesis]`` problem of any layout (one CAV, a platoon or a ring).
+
+    The fields every layout reads come first; the others keep their defaults on the layouts
+    they do not apply to (:func:`synthesis_spec` refuses their keys there).
+
+    Attributes
+    ----------
+    name, system, design, semantics, weights, tol, max_iter, source
+        Every layout. ``method``: ``"riccati"`` | ``"lmi"`` | ``"direct"`` (a platoon or ring:
+        ``"riccati"`` for ``full_state``, else ``"direct"``).
+    sparsity : dict
+        ``[synthesis.sparsity]``: every key for one CAV, ``max_loss`` only for a platoon or
+        ring.
+    pattern : tuple of int or None
+        One CAV: the vehicles heard besides the CAV (the paper's indexing); ``None``: all.
+    cross_check, band, string_gamma, polish_steps, string_margin, baseline, as_run, cav_lag
+        One CAV only (the full-state cross-check, the LMI restriction's band, the string-aware
+        design, the baseline gains, the as-run design, the CAV's actuator lag).
+    patterns : dict or None
+        Platoon / ring: CAV position -> sorted heard positions (the CAV included); ``None``:
+        full information.
+    comm_range : int or None
+        Platoon / ring: the communication range the patterns came from (``None``: lists or
+        full).
+    robust : RobustSettings or None
+        Platoon / ring: ``[synthesis.robust]``.
+    """
 
     name: str
     system: System
     design: str
     semantics: str
     weights: Weights
-    pattern: tuple[int, ...] | None  # None = every vehicle
     method: str
-    cross_check: bool = True
     tol: float = 1e-7
     max_iter: int = 500
-    band: int = 4
     sparsity: dict[str, Any] = field(default_factory=dict)
+    source: str | None = None
+    pattern: tuple[int, ...] | None = None  # None = every vehicle
+    cross_check: bool = True
+    band: int = 4
     string_gamma: float = 1.0
     polish_steps: int = 200
     string_margin: float = 1e-4
     baseline: tuple[str, Gains] | None = None
-    source: str | None = None
     as_run: Any = None  # lcc_synth.synthesis.as_run.AsRunSettings
     cav_lag: float = 0.0  # the CAV's actuator lag (s), lcc_synth.synthesis.lag_design
+    patterns: dict[int, tuple[int, ...]] | None = None
+    comm_range: int | None = None
+    robust: RobustSettings | None = None
+
+    @property
+    def max_loss(self) -> float:
+        """``[synthesis.sparsity] max_loss``: the chosen point's H2 loss bound."""
+        return self.sparsity["max_loss"]
 
     def toml_tables(self) -> dict[str, Any]:
         """``name``, ``[hdv]``, ``[system]`` and ``[synthesis]``: the tables
         :func:`spec_from_problem` reads back into an equal spec (``None``: the default)."""
+        rows = self.system.platoon is not None  # a gain row per CAV: positions, not pattern
+        t = self._platoon_table() if rows else self._one_cav_table()
+        return {"name": self.name, **system_tables(self.system), "synthesis": t}
+
+    def to_toml(self) -> str:
+        """This spec as a problem file (:meth:`toml_tables`)."""
+        return toml_text(self.toml_tables())
+
+    def _one_cav_table(self) -> dict[str, Any]:
         t: dict[str, Any] = {
             "design": self.design,
             "semantics": self.semantics,
@@ -183,11 +245,37 @@ class SynthesisSpec(Record):
                 "equilibrium": "fixed" if self.as_run.equilibrium_tau is None else "estimated",
                 **asdict(self.as_run),
             }
-        return {"name": self.name, **system_tables(self.system), "synthesis": t}
+        return t
 
-    def to_toml(self) -> str:
-        """This spec as a problem file (:meth:`toml_tables`)."""
-        return toml_text(self.toml_tables())
+    def _platoon_table(self) -> dict[str, Any]:
+        t: dict[str, Any] = {
+            "design": self.design,
+            "semantics": self.semantics,
+            "method": self.method,
+            "tol": self.tol,
+            "max_iter": self.max_iter,
+            "weights": {k: v for k, v in asdict(self.weights).items()
+                        if k not in ("position", "q_p")},  # fmt: skip
+        }
+        if self.comm_range is not None:
+            t["comm_range"] = self.comm_range
+        if self.patterns is not None:
+            base = (comm_range_pattern(self.system.platoon, self.comm_range)
+                    if self.comm_range is not None else {})  # fmt: skip
+            own = {f"u_{i}": list(v) for i, v in self.patterns.items() if base.get(i) != v}
+            if own:
+                t["patterns"] = own
+        if self.design == "sparsity":
+            t["sparsity"] = {"max_loss": self.max_loss}
+        if self.robust is not None:
+            rb = self.robust
+            t["robust"] = {"samples": rb.samples, "seed": rb.seed, "objective": rb.objective,
+                           **{k: list(v) for k, v in rb.ranges.items()}}  # fmt: skip
+        return t
+
+
+#: The spec of a platoon or ring synthesis: the same type as one CAV's (kept for imports).
+PlatoonSynthesisSpec = SynthesisSpec
 
 
 def _pattern(table: dict, system: System) -> tuple[int, ...] | None:
@@ -245,10 +333,9 @@ def _as_run(t: dict, system: System, design: str):
     )
 
 
-def spec_from_problem(problem: Problem) -> SynthesisSpec | PlatoonSynthesisSpec:
-    """Parse the ``[hdv]``, ``[system]`` and ``[synthesis]`` tables of a problem file (a
-    :class:`PlatoonSynthesisSpec` for ``kind = "platoon"``
-    or ``"ring"``)."""
+def spec_from_problem(problem: Problem) -> SynthesisSpec:
+    """Parse the ``[hdv]``, ``[system]`` and ``[synthesis]`` tables of a problem file into a
+    :class:`SynthesisSpec` (every layout)."""
     src = str(problem.path)
     try:
         check_top_level(problem.data)
@@ -261,7 +348,7 @@ def spec_from_problem(problem: Problem) -> SynthesisSpec | PlatoonSynthesisSpec:
 
 def synthesis_spec(
     name: str, system: System, table: dict[str, Any], source: str | None = None
-) -> SynthesisSpec | PlatoonSynthesisSpec:
+) -> SynthesisSpec:
     """The spec of a ``[synthesis]`` table for an already parsed ``system``.
 
     Parameters
@@ -394,82 +481,6 @@ PLATOON_DESIGNS = ("full_state", "structured", "sparsity")
 _NOT_FOR_PLATOONS = ("cross_check", "band", "string", "baseline", "as_run")
 
 
-@dataclass(frozen=True, repr=False)
-class RobustSettings(Record):
-    """``[synthesis.robust]``: the sampled member set and the objective.
-
-    Attributes
-    ----------
-    samples, seed : int
-    objective : {"mean", "worst"}
-    ranges : dict
-        HDV parameter name -> ``(lo, hi)`` of its uniform draw (per vehicle and member).
-    """
-
-    samples: int = 20
-    seed: int = 0
-    objective: str = "mean"
-    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
-
-
-@dataclass(frozen=True, repr=False)
-class PlatoonSynthesisSpec(Record):
-    """A parsed platoon / ring synthesis problem.
-
-    Attributes
-    ----------
-    patterns : dict or None
-        CAV position -> sorted heard positions (the CAV included); ``None``: full information.
-    comm_range : int or None
-        The communication range the patterns came from (``None``: lists or full).
-    """
-
-    name: str
-    system: System
-    design: str
-    semantics: str
-    weights: Weights
-    patterns: dict[int, tuple[int, ...]] | None
-    comm_range: int | None
-    tol: float = 1e-7
-    max_iter: int = 500
-    robust: RobustSettings | None = None
-    source: str | None = None
-    max_loss: float = 0.01
-
-    def toml_tables(self) -> dict[str, Any]:
-        """``name``, ``[hdv]``, ``[system]`` and ``[synthesis]``: the tables
-        :func:`~lcc_synth.synthesis.config.spec_from_problem` reads back into an equal spec."""
-        t: dict[str, Any] = {
-            "design": self.design,
-            "semantics": self.semantics,
-            "method": "riccati" if self.design == "full_state" else "direct",
-            "tol": self.tol,
-            "max_iter": self.max_iter,
-            "weights": {k: v for k, v in asdict(self.weights).items()
-                        if k not in ("position", "q_p")},  # fmt: skip
-        }
-        if self.comm_range is not None:
-            t["comm_range"] = self.comm_range
-        if self.patterns is not None:
-            base = (comm_range_pattern(self.system.platoon, self.comm_range)
-                    if self.comm_range is not None else {})  # fmt: skip
-            own = {f"u_{i}": list(v) for i, v in self.patterns.items() if base.get(i) != v}
-            if own:
-                t["patterns"] = own
-        if self.design == "sparsity":
-            t["sparsity"] = {"max_loss": self.max_loss}
-        if self.robust is not None:
-            rb = self.robust
-            t["robust"] = {"samples": rb.samples, "seed": rb.seed, "objective": rb.objective,
-                           **{k: list(v) for k, v in rb.ranges.items()}}  # fmt: skip
-        return {"name": self.name, **system_tables(self.system), "synthesis": t}
-
-    def to_toml(self) -> str:
-        """This spec as a problem file (:meth:`toml_tables`)."""
-        return toml_text(self.toml_tables())
-
-
 def comm_range_pattern(platoon: Platoon, R: int) -> dict[int, tuple[int, ...]]:
     """Each CAV's heard positions for communication range ``R``: the ``R`` vehicles ahead,
     the ``R`` behind and itself (ring: wrapping around, at most every vehicle once; open
@@ -579,7 +590,7 @@ def _single_cav_only(field: str, what: str, kind: str) -> ConfigError:
                        "riccati / direct)")  # fmt: skip
 
 
-def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> PlatoonSynthesisSpec:
+def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> SynthesisSpec:
     """Parse ``[synthesis]`` (already key-checked) for a platoon or ring ``system``."""
     T = declared("synthesis")
     for key in _NOT_FOR_PLATOONS:
@@ -623,5 +634,8 @@ def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> Plat
     tol = T.get(t, "tol", "synthesis")
     max_iter = T.get(t, "max_iter", "synthesis")
     robust = _robust(t, system)
-    return PlatoonSynthesisSpec(name, system, design, semantics, weights, patterns, R, tol,
-                                max_iter, robust, src, max_loss)  # fmt: skip
+    method = "riccati" if design == "full_state" else "direct"
+    return SynthesisSpec(name=name, system=system, design=design, semantics=semantics,
+                         weights=weights, method=method, tol=tol, max_iter=max_iter,
+                         sparsity={"max_loss": max_loss}, source=src, patterns=patterns,
+                         comm_range=R, robust=robust)  # fmt: skip

@@ -1,12 +1,13 @@
 """Run a synthesis problem on any layout: :func:`synthesize` is the one entry point.
 
-One CAV (:class:`~lcc_synth.synthesis.config.SynthesisSpec`): dispatch on the design
-(full-state Riccati / LMI, structured, sparsity, string-stable, optionally as run), check the
-result, build the :class:`~lcc_synth.synthesis.report.SynthesisReport`.
+Every layout reads one :class:`~lcc_synth.synthesis.config.SynthesisSpec` and gives one
+:class:`~lcc_synth.synthesis.report.SynthesisReport`.
 
-A platoon or a ring (:class:`~lcc_synth.synthesis.config.PlatoonSynthesisSpec`): per-CAV
-patterns, the design stages, the robust multi-model design, the checks and the
-:class:`~lcc_synth.synthesis.report.PlatoonReport`. Stages (each reported with its true H2 norm
+One CAV: dispatch on the design (full-state Riccati / LMI, structured, sparsity,
+string-stable, optionally as run), check the result, build the report.
+
+A platoon or a ring: per-CAV patterns, the design stages, the robust multi-model design, the
+checks and the report with a gain row per CAV. Stages (each reported with its true H2 norm
 and wall time):
 
 * ``riccati`` -- the full-information optimum (CARE on the reduced plant); ``design =
@@ -30,7 +31,7 @@ import numpy as np
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import input_feedback
 from lcc_synth.resources import format_bytes, progress, require_memory
-from lcc_synth.synthesis.config import PlatoonSynthesisSpec, SynthesisSpec, robust_members
+from lcc_synth.synthesis.config import SynthesisSpec, robust_members
 from lcc_synth.synthesis.h2 import (
     H2Plant,
     PlatoonPlant,
@@ -48,7 +49,6 @@ from lcc_synth.synthesis.h2 import (
 )
 from lcc_synth.synthesis.lag_design import lag_note
 from lcc_synth.synthesis.report import (
-    PlatoonReport,
     SynthesisReport,
     check_gain,
     check_platoon_gain,
@@ -155,17 +155,16 @@ def baseline_check(spec: SynthesisSpec, plant: H2Plant) -> dict:
 
 
 @single_thread_blas
-def synthesize(spec: SynthesisSpec | PlatoonSynthesisSpec) -> SynthesisReport | PlatoonReport:
+def synthesize(spec: SynthesisSpec) -> SynthesisReport:
     """Synthesise the gain of ``spec`` and check it: the one entry point of every layout (a
-    platoon / ring spec gives a :class:`~lcc_synth.synthesis.report.PlatoonReport`, a gain row
-    per CAV).
+    platoon / ring spec gives a report with a gain row per CAV).
 
     Raises
     ------
     SynthesisError
         Solver failure, infeasibility, a non-stabilising result or a failed cross-check.
     """
-    if isinstance(spec, PlatoonSynthesisSpec):  # kind = "platoon" | "ring": several CAVs
+    if spec.system.platoon is not None:  # kind = "platoon" | "ring": a gain row per CAV
         return _synthesize_platoon(spec)
     t_start = time.perf_counter()
     model = spec.system.linear_model(warn=False)
@@ -425,7 +424,7 @@ def robust_design(
                "method": res.method, "temperatures": list(ROBUST_TEMPERATURES)}  # fmt: skip
 
 
-def _robust_stage(spec: PlatoonSynthesisSpec, plant: PlatoonPlant, K_nom, mask):
+def _robust_stage(spec: SynthesisSpec, plant: PlatoonPlant, K_nom, mask):
     rb = spec.robust
     members = robust_members(spec.system, rb)
     plants = [make_platoon_plant(_model(p), spec.semantics, spec.weights) for p in members]
@@ -447,7 +446,7 @@ def _model(platoon):
     return platoon_model(platoon, warn=False)
 
 
-def _synthesize_platoon(spec: PlatoonSynthesisSpec) -> PlatoonReport:
+def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
     """Synthesise and check the gain of a platoon / ring ``spec``.
 
     Raises
@@ -531,7 +530,7 @@ def _synthesize_platoon(spec: PlatoonSynthesisSpec) -> PlatoonReport:
     pat = {f"u_{i}": sorted({v for v in range(1, model.platoon.size + 1)
                              if mask[k, model.block(v)].any()})
            for k, i in enumerate(model.cavs)}  # fmt: skip
-    return PlatoonReport(
+    return SynthesisReport(
         problem=spec.name,
         design=spec.design,
         kind=spec.system.kind,

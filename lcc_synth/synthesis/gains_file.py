@@ -48,7 +48,7 @@ from lcc_synth.models.linear import KINDS, model_from_hdv
 from lcc_synth.models.platoon import PLATOON_KINDS
 from lcc_synth.problem import warn_large_gains
 from lcc_synth.schema.readers import read_json
-from lcc_synth.synthesis.report import PlatoonReport, SynthesisReport, _jsonable
+from lcc_synth.synthesis.report import SynthesisReport, _jsonable
 
 __all__ = ["gains_document", "write_gains", "read_gains", "REQUIRED_KEYS",
            "PLATOON_REQUIRED_KEYS", "platoon_gains_document"]
@@ -60,7 +60,7 @@ PLATOON_REQUIRED_KEYS = ("kind", "size", "cavs", "ring", "semantics", "state_nam
                          "gains", "h2_true")  # fmt: skip
 
 
-def platoon_gains_document(rep: PlatoonReport) -> dict[str, Any]:
+def platoon_gains_document(rep: SynthesisReport) -> dict[str, Any]:
     """The gains-file JSON object of a platoon / ring synthesis report."""
     c = rep.check
     doc = {
@@ -190,9 +190,10 @@ def _platoon_gains(doc: dict[str, Any], model, label: str) -> Gains:
     return Gains(np.array(rows, float), tuple(cavs), tuple(names), doc["semantics"])
 
 
-def gains_document(rep: SynthesisReport | PlatoonReport) -> dict[str, Any]:
-    """The gains-file JSON object of a synthesis report."""
-    if isinstance(rep, PlatoonReport):
+def gains_document(rep: SynthesisReport) -> dict[str, Any]:
+    """The gains-file JSON object of a synthesis report (a row per CAV: the platoon / ring
+    form, :func:`platoon_gains_document`)."""
+    if rep.per_cav:
         return platoon_gains_document(rep)
     c = rep.check
     doc = {
@@ -227,7 +228,7 @@ def gains_document(rep: SynthesisReport | PlatoonReport) -> dict[str, Any]:
 
 
 def write_gains(
-    path: str | Path, rep: SynthesisReport | PlatoonReport, overwrite: bool = True
+    path: str | Path, rep: SynthesisReport, overwrite: bool = True
 ) -> Path:
     """Write the gains file of ``rep`` to ``path`` atomically (parent directories created;
     :func:`lcc_synth.outputs.write_text`; an existing file is replaced only with

@@ -13,20 +13,21 @@ full state (open platoon), and turns an unusable result (non-finite, unstable) i
 keeps the conserved total-spacing eigenvalue 0 (``max_real_eig_full``): it is reported, never
 counted as instability.
 
-:func:`format_report` prints either report (:class:`SynthesisReport`, :class:`PlatoonReport`);
-``as_dict`` gives the JSON form of ``lcc-synth synthesize --json``.
+:class:`SynthesisReport` is the one report of every layout (``PlatoonReport`` is another name
+of it): fields of one layout only are :data:`UNSET` on the others and left out of ``as_dict``,
+the JSON form of ``lcc-synth synthesize --json``. :func:`format_report` prints it.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 import numpy as np
 
 from lcc_synth.analysis.string_stability import verdict_text
-from lcc_synth.models.records import Record
+from lcc_synth.models.records import Record, short
 from lcc_synth.synthesis.h2 import (
     STABILITY_TOL,
     H2Plant,
@@ -43,6 +44,7 @@ __all__ = [
     "evaluate_gain",
     "check_gain",
     "SynthesisReport",
+    "UNSET",
     "format_report",
     "PlatoonCheck",
     "check_platoon_gain",
@@ -112,41 +114,121 @@ def check_gain(plant: H2Plant, g: np.ndarray, what: str, details: dict | None = 
     return chk
 
 
-@dataclass(repr=False)
+class _Unset:
+    """The value of a report field that its layout does not have (:data:`UNSET`)."""
+
+    __slots__ = ()
+
+    def __repr__(self) -> str:
+        return "UNSET"
+
+    def __reduce__(self) -> str:  # one object across pickling (reports cross processes)
+        return "UNSET"
+
+
+#: A field of :class:`SynthesisReport` that the report's layout does not have: left out of
+#: :meth:`SynthesisReport.as_dict` (so ``null`` in the JSON always means a value of None).
+UNSET: Any = _Unset()
+
+
+@dataclass(repr=False, kw_only=True)
 class SynthesisReport(Record):
-    """Result of ``lcc-synth synthesize``: the gain, how it was found and its checks."""
+    """Result of ``lcc-synth synthesize`` on any layout: the gain, how it was found and its
+    checks.
+
+    One report type serves one CAV (a string of ``m`` HDVs ahead and ``n`` behind, the paper's
+    indexing), a platoon behind a head vehicle and a ring (``cavs`` positions from the head).
+    The fields every layout has come first; a field of one layout only is :data:`UNSET` on the
+    others and :meth:`as_dict` leaves it out, so ``lcc-synth synthesize --json`` prints the
+    layout's own keys.
+
+    Attributes
+    ----------
+    problem, design, kind : str
+        The problem's name, ``[synthesis] design`` and the model's kind.
+    m, n : int
+        One CAV: the HDVs ahead and behind.
+    size, cavs, ring, circumference
+        Platoon / ring: the vehicles, the CAV positions (1-based from the head), closed road,
+        and the ring's length (``None`` for an open platoon).
+    pattern : list of int
+        One CAV: the vehicles heard besides the CAV (the paper's indexing).
+    patterns, comm_range
+        Platoon / ring: ``{"u_i": [positions heard]}`` and the range they came from.
+    K, gains, input_K, input_kh
+        One CAV: ``K`` on ``state_names``, ``gains`` ``{state: gain}``, the CAV's whole input
+        ``u = input_K x + input_kh v_h``. Platoon / ring: a row per CAV (``cavs`` order),
+        ``gains`` in :meth:`~lcc_synth.models.feedback.Gains.as_table` form, ``input_kh`` a
+        number per CAV.
+    check : GainCheck or PlatoonCheck
+        The checks of the gain (:func:`check_gain`, :func:`check_platoon_gain`).
+    h2_lmi_bound, h2_restriction, solver, baseline, as_run
+        One CAV: the LMI bound and the LMI gain's true H2, the solver's figures, the baseline
+        gains' checks, the as-run design's information.
+    conserved, stages, robust
+        Platoon / ring: the ring's conserved direction ``c``, each stage's true H2 and time,
+        the per-member figures of a robust design.
+    pareto : list of dict or None
+        ``design = "sparsity"``: the Pareto front (one CAV) or the greedy range front.
+    """
 
     problem: str
     design: str
     kind: str
-    m: int
-    n: int
+    m: int = UNSET
+    n: int = UNSET
+    size: int = UNSET
+    cavs: list[int] = UNSET
+    ring: bool = UNSET
     v_star: float
+    circumference: float | None = UNSET
     semantics: str
     weights: dict[str, Any]
     disturbances: list[str]
-    pattern: list[int]
+    pattern: list[int] = UNSET
+    patterns: dict[str, list[int]] = UNSET
+    comm_range: int | None = UNSET
     state_names: list[str]
-    K: list[float]
-    gains: dict[str, float]
-    input_K: list[float]
-    input_kh: float
-    check: GainCheck
-    h2_lmi_bound: float | None = None
-    h2_restriction: float | None = None
+    K: list[float] | list[list[float]]
+    gains: dict[str, float] | dict[str, dict[str, float]]
+    input_K: list[float] | list[list[float]]
+    input_kh: float | list[float]
+    check: GainCheck | PlatoonCheck
+    h2_lmi_bound: float | None = UNSET
+    h2_restriction: float | None = UNSET
     h2_unstructured: float | None = None
-    solver: dict[str, Any] = field(default_factory=dict)
+    solver: dict[str, Any] = UNSET
+    conserved: list[float] | None = UNSET
+    stages: list[dict[str, Any]] = UNSET
     polish: dict[str, Any] = field(default_factory=dict)
-    baseline: dict[str, Any] | None = None
+    baseline: dict[str, Any] | None = UNSET
+    robust: dict[str, Any] | None = UNSET
     pareto: list[dict[str, Any]] | None = None
     timings: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
-    as_run: dict[str, Any] | None = None  # lcc_synth.synthesis.as_run.as_run_design's info
+    as_run: dict[str, Any] | None = UNSET  # lcc_synth.synthesis.as_run.as_run_design's info
+
+    @property
+    def per_cav(self) -> bool:
+        """Is the gain a row per CAV (a platoon or ring report, ``cavs`` set)?"""
+        return self.cavs is not UNSET
 
     def as_dict(self) -> dict[str, Any]:
-        d = asdict(self)
+        """The JSON form (``lcc-synth synthesize --json``): every field of the layout, in
+        field order, :data:`UNSET` fields left out, non-finite numbers as ``None``."""
+        d = {f.name: getattr(self, f.name) for f in fields(self)}
+        d = {k: v for k, v in d.items() if v is not UNSET}
         d["check"] = self.check.as_dict()
         return _jsonable(d)
+
+    def __repr__(self) -> str:
+        parts = (f"{f.name}={short(getattr(self, f.name))}" for f in fields(self)
+                 if getattr(self, f.name) is not UNSET)  # fmt: skip
+        return f"{type(self).__name__}({', '.join(parts)})"
+
+
+#: The report of a platoon or ring synthesis: the same type as one CAV's (kept for imports).
+PlatoonReport = SynthesisReport
 
 
 def _jsonable(x):
@@ -172,9 +254,9 @@ def _fmt(x, spec=".6g") -> str:
     return format(x, spec)
 
 
-def format_report(rep: SynthesisReport | PlatoonReport) -> str:
+def format_report(rep: SynthesisReport) -> str:
     """Human-readable report of a synthesis (one CAV, or a platoon / ring: a row per CAV)."""
-    if isinstance(rep, PlatoonReport):
+    if rep.per_cav:
         return _format_platoon_report(rep)
     c = rep.check
     lines = [
@@ -297,52 +379,7 @@ def check_platoon_gain(plant: PlatoonPlant, K: np.ndarray, what: str = "design")
     return PlatoonCheck(math.sqrt(ev.J), mre, True, sub, mre_full, m.conserved_mode)
 
 
-@dataclass(repr=False)
-class PlatoonReport(Record):
-    """Result of ``lcc-synth synthesize`` for a platoon or ring.
-
-    ``K`` has one row per CAV (``cavs`` order) on ``state_names``; ``gains`` is the same in
-    :meth:`~lcc_synth.models.feedback.Gains.as_table` form; ``input_K`` / ``input_kh``
-    the CAVs' whole inputs ``u = input_K x + input_kh v_h`` under the semantics. ``stages``
-    lists each stage's true H2 and time; ``robust`` the per-member figures; ``pareto`` the
-    range front of ``design = "sparsity"``.
-    """
-
-    problem: str
-    design: str
-    kind: str
-    size: int
-    cavs: list[int]
-    ring: bool
-    v_star: float
-    circumference: float | None
-    semantics: str
-    weights: dict[str, Any]
-    disturbances: list[str]
-    patterns: dict[str, list[int]]
-    comm_range: int | None
-    state_names: list[str]
-    K: list[list[float]]
-    gains: dict[str, dict[str, float]]
-    input_K: list[list[float]]
-    input_kh: list[float]
-    check: PlatoonCheck
-    h2_unstructured: float
-    conserved: list[float] | None = None
-    stages: list[dict[str, Any]] = field(default_factory=list)
-    polish: dict[str, Any] = field(default_factory=dict)
-    robust: dict[str, Any] | None = None
-    pareto: list[dict[str, Any]] | None = None
-    timings: dict[str, float] = field(default_factory=dict)
-    notes: list[str] = field(default_factory=list)
-
-    def as_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["check"] = self.check.as_dict()
-        return _jsonable(d)
-
-
-def _format_platoon_report(rep: PlatoonReport) -> str:
+def _format_platoon_report(rep: SynthesisReport) -> str:
     """Human-readable report of a platoon / ring synthesis."""
     c = rep.check
     road = (f"ring of {rep.size} (circumference {rep.circumference:.6g} m)" if rep.ring
