@@ -275,7 +275,8 @@ def control_energy(model: System | LCCModel | PlatoonModel, horizon: float):
     :class:`~lcc_synth.analysis.energy.EnergyReport` (``lambda_min``, ``trace_inv``...).
     :func:`lcc_synth.analysis.energy.energy_report`; a numerically singular Gramian raises
     :class:`~lcc_synth.analysis.energy.NumericallySingularError`. ``model``: a
-    :class:`System` or its linear model."""
+    :class:`System` or its linear model, of any layout (a ring: on the hyperplane its total
+    spacing keeps)."""
     from lcc_synth.analysis.energy import energy_report
 
     return energy_report(_linear(model), horizon)
