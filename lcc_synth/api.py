@@ -216,12 +216,13 @@ def model(
                   circumference=circumference, vehicle_length=vehicle_length).linear_model()
 
 
-def _linear(model: Any) -> LCCModel | PlatoonModel:
+def _linear(model: Any, warn: bool = True) -> LCCModel | PlatoonModel:
     """The linear model of ``model``: a System's (:meth:`~lcc_synth.problem.System.linear_model`)
     or the model itself."""
-    if isinstance(model, System):
-        return model.linear_model()
-    if isinstance(model, LCCModel | PlatoonModel):
+    linear = getattr(model, "linear_model", None)  # a System's; a linear model is its own
+    if callable(linear):
+        return linear(warn=warn)
+    if hasattr(model, "state_names") and hasattr(model, "cavs"):
         return model
     raise ConfigError(
         "model", "must be a System (lcc.system(...), lcc.ring(...)) or its linear model "
@@ -274,7 +275,8 @@ def control_energy(model: System | LCCModel | PlatoonModel, horizon: float):
     :class:`~lcc_synth.analysis.energy.EnergyReport` (``lambda_min``, ``trace_inv``...).
     :func:`lcc_synth.analysis.energy.energy_report`; a numerically singular Gramian raises
     :class:`~lcc_synth.analysis.energy.NumericallySingularError`. ``model``: a
-    :class:`System` or its linear model."""
+    :class:`System` or its linear model, of any layout (a ring: on the hyperplane its total
+    spacing keeps)."""
     from lcc_synth.analysis.energy import energy_report
 
     return energy_report(_linear(model), horizon)
@@ -319,7 +321,7 @@ def gains(
     if isinstance(values, str | Path):
         from lcc_synth.synthesis.gains_file import read_gains
 
-        is_system = isinstance(model, System)
+        is_system = callable(getattr(model, "linear_model", None))
         values = read_gains(values, system=model if is_system else None,
                             model=None if is_system else model)[0]
     if isinstance(values, Gains):
@@ -334,15 +336,8 @@ def gains(
     if semantics is None:
         raise ConfigError("semantics", 'must be given with gains: "added" (the CAV\'s HDV law plus '
                           'the gains, eq. 23) or "replace" (the gains are the whole command)')
-    platoon = model.linear_model(warn=False) if isinstance(model, System) else model
-    if isinstance(platoon, PlatoonModel):
-        return Gains.from_table(dict(values), platoon, semantics)
-    if any(isinstance(v, Mapping) for v in values.values()):
-        raise ConfigError(
-            "model", "per-CAV gain tables ({'u_3': {...}}) are for a platoon or ring: give "
-            "model=lcc.system(size=..., cavs=[...]) (or lcc.ring(...))",
-        )
-    return Gains.named(dict(values), semantics)
+    return Gains.from_mapping(dict(values), None if model is None else _linear(model, warn=False),
+                              semantics)  # fmt: skip
 
 
 def _stated(gain: Any, model: LCCModel | PlatoonModel) -> Gains:
@@ -522,7 +517,7 @@ def static_controller(
     ``system.kind``; e.g. ``"cf_lcc"`` gains on an ``fd_lcc`` string with a head vehicle, as
     in Table II); ``**run``: ``sample_time``, ``equilibrium``, ``equilibrium_tau``,
     ``measurement_filter``. :func:`lcc_synth.controllers.registry.build_controller`."""
-    g = gains(gain, semantics, system if system.platoon is not None else None)
+    g = gains(gain, semantics, system)
     table = {"type": "static", "kind": kind or system.kind, "semantics": g.semantics,
              "gains": g.as_table(), **run}  # fmt: skip
     return _controller(name, table, system)

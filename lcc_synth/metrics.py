@@ -714,11 +714,9 @@ def metrics_from(
         t_end = scenario.t_start + scenario.steps * scenario.dt
         check_window(window, scenario.t_start, t_end, scenario.dt, f"{f}.window")
     vehicles = table.raw(mt, "vehicles")
-    P = getattr(system, "platoon", None)
-    where = None if P is None else (P.size, bool(P.ring))
     if isinstance(vehicles, list):
         for v in vehicles:
-            vehicle_column(v, system.m, system.n, f"{f}.vehicles", where)
+            vehicle_column(v, system.m, system.n, f"{f}.vehicles", system.numbering)
         vehicles = tuple(vehicles)
     elif vehicles not in VEHICLE_SETS:
         raise ConfigError(

@@ -192,11 +192,27 @@ class System:
         return float(self.hdv.equilibrium_spacing(self.v_star))
 
     @property
+    def ring(self) -> bool:
+        """Whether the road is a ring (``kind = "ring"``); the paper's strings are open."""
+        return self.platoon is not None and self.platoon.ring
+
+    @property
+    def numbering(self) -> tuple[int, bool] | None:
+        """How the vehicles of this layout are named: ``(size, ring)`` when by position
+        ``1..size`` (a platoon or ring), ``None`` when by the paper's index ``-m..n`` from the
+        CAV (:func:`lcc_synth.simulation.perturbations.vehicle_column` reads either)."""
+        return None if self.platoon is None else (self.platoon.size, self.platoon.ring)
+
+    @property
+    def vehicle_length(self) -> float:
+        """Length (m) of every vehicle: the platoon's or ring's ``vehicle_length``, 0 for the
+        paper's strings (point vehicles)."""
+        return 0.0 if self.platoon is None else self.platoon.vehicle_length
+
+    @property
     def columns(self) -> int:
         """Vehicles the simulator runs: ``m + n + 2`` (the head included), ``size`` on a ring."""
-        if self.platoon is not None and self.platoon.ring:
-            return self.platoon.size
-        return self.m + self.n + 2
+        return self.platoon.size if self.ring else self.m + self.n + 2
 
     def linear_model(self, warn: bool = True) -> LCCModel | PlatoonModel:
         """The linearised model of this system (homogeneous for the paper's kinds; each

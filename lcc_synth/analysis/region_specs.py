@@ -95,9 +95,10 @@ def region_specs_from(
     from lcc_synth.schema import declared
 
     try:
-        if model.kind == "fd_lcc":
+        if model.kind == "fd_lcc" or tuple(model.cavs) != (0,):
             raise ConfigError(
-                "system.kind", "region maps need a head vehicle (lcc, cf_lcc or ccc), not fd_lcc"
+                "system.kind", "region maps (Figs. 7-8) vary one CAV's gains behind a head "
+                f"vehicle (lcc, cf_lcc or ccc), not {model.kind}"
             )
         R = declared("regions")
         opts = declared("").get(data, "regions", "")

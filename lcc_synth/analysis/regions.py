@@ -260,6 +260,12 @@ def affine_polynomials(model: LCCModel, vehicle: int, gains=None):
     Coefficients are in *ascending* powers, all padded to the degree of ``den``.
     ``gains`` is a :class:`~lcc_synth.models.feedback.Gains` or input feedback ``(K, kh)``.
     """
+    if tuple(model.cavs) != (0,):
+        raise ConfigError(
+            "model", "region maps (Figs. 7-8) vary the paper's gains mu_i, k_i of one CAV on "
+            "HDV i: give a one-CAV model with a head vehicle (kind lcc, cf_lcc or ccc), got "
+            f"kind = {model.kind!r} with CAVs at {list(model.cavs)}",
+        )
     if vehicle == 0 or vehicle not in model.vehicles:
         allowed = [i for i in model.vehicles if i != 0]
         raise ConfigError("vehicle", f"must be one of {allowed} (an HDV), got {vehicle!r}")

@@ -95,8 +95,7 @@ def synthesize_table(
         "type": "static",
         "kind": rep.kind,
         "semantics": rep.semantics,
-        "gains": {k: dict(v) for k, v in rep.gains.items()} if system.platoon is not None
-        else dict(rep.gains),
+        "gains": {k: dict(v) if isinstance(v, Mapping) else v for k, v in rep.gains.items()},
     }
     for key in STATIC_RUN_KEYS:
         if key in table:

@@ -154,6 +154,24 @@ class Gains(Record):
                    PAPER_CAVS, tuple(str(k) for k in items), semantics)  # fmt: skip
 
     @classmethod
+    def from_mapping(
+        cls, values: Mapping, model=None, semantics: str = "added", field: str = "gains"
+    ) -> Gains:
+        """A gain from its mapping on ``model``'s layout, the one reading of both forms: the
+        paper's ``{state: gain}`` (:meth:`named`) without a model or on a one-CAV model
+        (``cavs = (0,)``), the per-CAV table ``{"u_3": {...}}`` (:meth:`from_table`) on a
+        platoon or ring (errors name ``field``). A per-CAV table without a platoon or ring is
+        a ConfigError naming ``model``."""
+        if model is not None and tuple(model.cavs) != PAPER_CAVS:
+            return cls.from_table(values, model, semantics, field)
+        if any(isinstance(v, Mapping) for v in values.values()):
+            raise ConfigError(
+                "model", "per-CAV gain tables ({'u_3': {...}}) are for a platoon or ring: give "
+                "model=lcc.system(size=..., cavs=[...]) (or lcc.ring(...))",
+            )
+        return cls.named(values, semantics)
+
+    @classmethod
     def from_paper(
         cls, mu: Mapping[int, float], k: Mapping[int, float], semantics: str = "added"
     ) -> Gains:

@@ -112,6 +112,12 @@ class LCCModel(Record):
         """No conserved mode: ``None``."""
         return None
 
+    def invariant_basis(self) -> np.ndarray:
+        """The identity ``(nx, nx)``: the dynamics of an open string keep every direction (a
+        ring's keep the hyperplane of :meth:`PlatoonModel.invariant_basis
+        <lcc_synth.models.platoon.PlatoonModel.invariant_basis>`)."""
+        return np.eye(self.nx)
+
     @property
     def vehicle_coefficients(self) -> tuple[LinearCoefficients, ...]:
         """The ``coefficients`` in the order of :attr:`vehicles`."""

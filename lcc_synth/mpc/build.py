@@ -18,21 +18,17 @@ __all__ = ["mpc_controller_from_table", "build_mpc"]
 
 def _named_fallback(named, system, field_name: str) -> tuple[Gains, str]:
     """The gain of ``fallback = "NAME"`` (as :func:`lcc_synth.experiments.spec.resolve_fallbacks`
-    inlines it) and its source label ``controller NAME``: ``{state: gain}`` for the paper's
-    one CAV, the platoon form ``{u_i: {state: gain}}`` for a platoon or ring."""
-    platoon = getattr(system, "platoon", None) is not None  # kind = "platoon" | "ring"
+    inlines it) and its source label ``controller NAME``, read in the form of the system's
+    layout (:meth:`~lcc_synth.models.feedback.Gains.from_mapping`): ``{state: gain}`` for the
+    paper's one CAV, ``{u_i: {state: gain}}`` for a platoon or ring."""
     if not isinstance(named, dict) or not isinstance(named.get("gains"), dict):
-        raise ConfigError(field_name, "must give gains in the platoon form {u_i: {state: gain}}"
-                          if platoon else f"names controller {named!r}, which is not a static "
-                          "or h2 controller")  # fmt: skip
+        raise ConfigError(field_name, f"names controller {named!r}, which is not a static or h2 "
+                          "controller (gains {state: gain} for one CAV, {u_i: {state: gain}} "
+                          "on a platoon or ring)")  # fmt: skip
     semantics = named.get("semantics", "added")
-    where = f"{field_name}.gains" if platoon else field_name
     try:
-        if platoon:
-            gains = Gains.from_table(named["gains"], system.linear_model(warn=False), semantics,
-                                     where)  # fmt: skip
-        else:
-            gains = Gains.named(named["gains"], semantics)
+        gains = Gains.from_mapping(named["gains"], system.linear_model(warn=False), semantics,
+                                   f"{field_name}.gains")  # fmt: skip
     except ConfigError as err:
         if err.field.startswith(field_name):
             raise

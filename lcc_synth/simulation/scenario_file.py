@@ -83,17 +83,15 @@ def scenario_for(
     ``"head"``; a platoon's or ring's position), and the meaning of the values in this run
     (:func:`~lcc_synth.simulation.checks.check_timing`)."""
     layout: dict[str, Any] = {"m": system.m, "n": system.n}
-    where = None
     if system.platoon is not None:
         _check_platoon_keys(system, fields.get("hdv_values"), fields.get("spacing_reference"))
         layout = _platoon_layout(system)
         fields = {**{k: v for k, v in fields.items() if k != "hdv_values"},
                   "spacing_reference": "own_equilibrium"}  # fmt: skip
-        where = (system.platoon.size, bool(system.platoon.ring))
     perturbations = tuple(perturbations)
     for i, p in enumerate(perturbations):
         vehicle_column(p.vehicle, layout["m"], layout["n"],
-                       f"scenario.perturbations[{i}].vehicle", where)  # fmt: skip
+                       f"scenario.perturbations[{i}].vehicle", system.numbering)  # fmt: skip
     out = Scenario(hdv=system.hdv, v_star=system.v_star, perturbations=perturbations,
                    **layout, **fields)  # fmt: skip
     check_timing(out)
@@ -164,11 +162,8 @@ def scenario_from(data: Mapping[str, Any], system: System, base_dir: Path | None
         raise ConfigError(
             f"{f}.perturbations", "must be an array of tables [[scenario.perturbations]]"
         )
-    where = None if system.platoon is None else (
-        system.platoon.size, bool(system.platoon.ring)
-    )
     perturbations = tuple(
-        perturbation_from_table(p, f"{f}.perturbations[{i}]", m, n, base_dir, where)
+        perturbation_from_table(p, f"{f}.perturbations[{i}]", m, n, base_dir, system.numbering)
         for i, p in enumerate(perts)
     )
     initial_state = None
@@ -215,8 +210,8 @@ def _initial_from_data(
     if not idx:
         raise ConfigError(f, '"data" takes the initial state from a recording: add a '
                           '[[scenario.perturbations]] entry with type = "trajectory"')
-    length = system.platoon.vehicle_length if system.platoon is not None else 0.0
-    if system.platoon is None or system.platoon.ring or not length > 0:
+    length = system.vehicle_length
+    if system.ring or not length > 0:  # the paper's strings: point vehicles (length 0)
         raise ConfigError(f, '"data" needs [system] kind = "platoon" with vehicle_length > 0 '
                           "(recorded headways are front to front: spacing = headway - "
                           "vehicle_length)")
