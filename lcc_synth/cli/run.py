@@ -69,8 +69,10 @@ def _names(value: str | None) -> list[str] | None:
     return None if value is None else value.split(",")
 
 
-def _blueprint(suite, controllers, gamma_cases, design_names):
-    """One tab per scenario (the recording module's simulation layout), plus analysis."""
+def _blueprint(suite, controllers, gamma_cases, design_names, road=None):
+    """One tab per scenario (the recording module's simulation layout), plus analysis.
+    ``road``: ``{scenario: road bounds}`` (:func:`lcc_synth.recording.layout.road_bounds` of
+    its runs, merged), known once the runs are done; without it the road views fit the data."""
     import rerun.blueprint as rrb
 
     from lcc_synth.experiments.comparison import applies
@@ -82,8 +84,8 @@ def _blueprint(suite, controllers, gamma_cases, design_names):
         ctrls = [c for c in controllers if applies(suite.controllers[c], ss.layout, sname)]
         mpc = [c for c in ctrls if suite.controllers[c].get("type") == "mpc"]
         t = ss.scenario.times()  # each tab's plots open on its own run (not the longest)
-        box = simulation_blueprint(sname, ctrls or controllers, mpc,
-                                   {"time": (float(t[0]), float(t[-1]))}).root_container
+        ranges = {"time": (float(t[0]), float(t[-1])), **(road or {}).get(sname, {})}
+        box = simulation_blueprint(sname, ctrls or controllers, mpc, ranges).root_container
         box.name = ss.title or sname
         tabs.append(box)
     if gamma_cases:
@@ -209,6 +211,7 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
         written_path,
     )
     from lcc_synth.recording.context import context_markdown
+    from lcc_synth.recording.layout import merge_ranges, road_bounds
     from lcc_synth.resources import progress_bar
     from lcc_synth.synthesis.gains_file import gains_document
 
@@ -228,6 +231,7 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
     else:
         recording = nullcontext(None)
     result, curves, omega, rec = None, {}, np.logspace(*_OMEGA), None
+    road: dict = {}  # {scenario: road-view bounds of every run recorded}
     try:
         with recording as rec:
             if rec is not None:
@@ -241,6 +245,7 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
                 if rec is None:
                     return
                 history = ctrl.history() if hasattr(ctrl, "history") else None
+                road[sname] = merge_ranges(road.get(sname, {}), road_bounds(res))
                 record_simulation(
                     rec, res, sname, controller=cname, metrics=row, decimate=every,
                     mpc_history=history or None,
@@ -253,6 +258,9 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
                 if rec is not None:
                     set_status(rec, "failed", "\n".join(_failure_lines(result)))
                 return None, {}, omega, None, None
+            if rec is not None:  # the layout as opened, now with road views around every run
+                rec.send_blueprint(_blueprint(suite, ctrl_names, gamma_cases, design_names, road),
+                                   make_active=True, make_default=True)  # fmt: skip
             t0 = time.perf_counter()
             todo = [(lname, suffix, dt, lat, c, k) for lname, rows in settings.items()
                     for suffix, dt, lat, snames in rows

@@ -102,11 +102,11 @@ def plot_ranges(result: Any) -> dict[str, Any]:
             if key == "spacing":
                 lo = max(lo, -5.0)
             out[key] = _span(lo, hi)
-    out.update(_road_bounds(result))
+    out.update(road_bounds(result))
     return out
 
 
-def _road_bounds(result: Any) -> dict[str, Any]:
+def road_bounds(result: Any) -> dict[str, Any]:
     """``road_x``, ``road_y``: the bounds of every vehicle's point in the road view over the
     whole run (:func:`lcc_synth.recording.simulation.record_simulation`: x m from the CAV, y
     the scaled velocity error, up = faster; a ring: the circle with its radial offsets), so
@@ -212,10 +212,11 @@ def simulation_blueprint(
     """Default layout of a simulation recording.
 
     Left: one row per quantity (velocity, spacing, acceleration), one time-series view per
-    controller side by side. Right: the road view of every controller, the CAV command of all
-    controllers overlaid, the comparison metrics and each controller's description; for the
-    MPC controllers named in ``mpc``, tabs with their solve times / status and their predicted
-    velocities.
+    controller side by side. Right: the road views (one tab per controller, the first open;
+    visual bounds ``ranges["road_x"]``, ``ranges["road_y"]``: :func:`road_bounds`), the CAV
+    command of all controllers overlaid, the comparison metrics and each controller's
+    description; for the MPC controllers named in ``mpc``, tabs with their solve times / status
+    and their predicted velocities.
 
     Every time-series view opens on the whole run. ``ranges`` (:func:`plot_ranges`) fixes the
     opening time span (each view's own x axis: :func:`_time_views`) and y ranges; without it
@@ -262,19 +263,19 @@ def simulation_blueprint(
         row_shares=[1, 3, 3, 3],
         name="time series",
     )
-    road_bounds = (rrb.VisualBounds2D(x_range=ranges["road_x"], y_range=ranges["road_y"])
+    bounds = (rrb.VisualBounds2D(x_range=ranges["road_x"], y_range=ranges["road_y"])
                    if "road_x" in ranges and "road_y" in ranges else None)  # fmt: skip
-    road = rrb.Vertical(
+    # one tab per controller, the whole road column's height each (stacked, four views were
+    # 45 px tall: see the module's notes); bounds from the data, so every vehicle stays inside
+    road = rrb.Tabs(
         *[
-            rrb.Spatial2DView(
-                origin=f"/{s}/{c}/road",
-                name=f"{c}: road (x m from CAV; up: faster)",
-                visual_bounds=road_bounds,
-            )
+            rrb.Spatial2DView(origin=f"/{s}/{c}/road", name=f"{c}: road",
+                              visual_bounds=bounds)
             for c in ctrls
         ],
-        name="road",
-    )
+        name="road (x m from the CAV; up: faster)",
+        active_tab=0,
+    )  # fmt: skip
     u_cmd = rrb.TimeSeriesView(
         origin=f"/{s}",
         contents=[f"+ /{s}/{c}/cav/**" for c in ctrls],
