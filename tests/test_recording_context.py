@@ -459,7 +459,7 @@ def assert_road_views_hold_every_vehicle(path, controllers):
 
 
 def test_the_road_view_holds_every_vehicle_over_the_run(head_brake):
-    """Issue 33's last defect: stacked road views were 45 px tall. The road is one tab per
+    """Stacked road views were 45 px tall (the dots under a pixel). The road is one tab per
     controller, opening on bounds that contain every recorded position (the CAV and the head
     during the brake too); its dots are sized in UI points (a zoom never shrinks them to
     nothing), the CAV's and the head's larger than the HDVs'."""

@@ -25,6 +25,22 @@ would hide part of the run. So the plots keep the whole run; the time panel belo
 ``time`` timeline, the whole width) carries the seconds, hovering a curve shows its time, and a
 view maximised (its expand button) gets 10 s labels.
 
+Road views
+----------
+A 2-D view scales x and y alike and letterboxes its visual bounds (Rerun 0.41,
+``VisualBounds2D``: everything inside is visible). The road of ``mpc_head_brake`` spans
+x -227 .. 36 m and y -51 .. 114 (10 per m/s of velocity error, :func:`road_bounds`), about
+1.6 : 1. Four road views stacked in the right column (2 of its 5.5 shares) were 45 px tall
+each at 1920x1080: 0.17 px per m, the dots (1.5 m) under a pixel, the string a faint line
+(web viewer, ``benchmarks/screenshot_review.py``). The road is now one tab per controller (the
+tab strip names them; the key says the axes), the whole 2 shares: 765 x 290 px, 1.76 px per m,
+and its dots are sized in UI points (:data:`~lcc_synth.recording.simulation.ROAD_DOT_PT`: 4 px
+for an HDV, 7 px for the CAV, whatever the zoom). The command view keeps its 1.5 of 5.5 (its
+legend) and the reports their 2. ``run`` sends its layout before any result, without road
+bounds (the viewer then fits the data it has, and vehicles left the frame during an event),
+and sends it again once the runs are done, each scenario's road bounds merged over its runs
+(``lcc_synth.cli.run``): a minimum and a maximum per run, no second pass over the data.
+
 The time cursor
 ---------------
 The blueprint sets the time panel's state, timeline, play state and time selection
