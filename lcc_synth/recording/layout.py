@@ -36,10 +36,12 @@ each at 1920x1080: 0.17 px per m, the dots (1.5 m) under a pixel, the string a f
 tab strip names them; the key says the axes), the whole 2 shares: 765 x 290 px, 1.76 px per m,
 and its dots are sized in UI points (:data:`~lcc_synth.recording.simulation.ROAD_DOT_PT`: 4 px
 for an HDV, 7 px for the CAV, whatever the zoom). The command view keeps its 1.5 of 5.5 (its
-legend) and the reports their 2. ``run`` sends its layout before any result, without road
-bounds (the viewer then fits the data it has, and vehicles left the frame during an event),
-and sends it again once the runs are done, each scenario's road bounds merged over its runs
-(``lcc_synth.cli.run``): a minimum and a maximum per run, no second pass over the data.
+legend) and the reports their 2. ``run`` sent its layout before any result, without road
+bounds (the viewer fitted the data it had; vehicles left the frame during an event). It now
+sends it once, when its runs are done however they end (``lcc_synth.cli.run``; its recording
+is a file, not watched live), each scenario's road bounds merged over the runs recorded: a
+minimum and a maximum per run, no second pass over the data. Sending it at the start and
+again at the end cost 2.06 MB more on the showcase's 7.17 MB (a layout is 740 small chunks).
 
 The time cursor
 ---------------
