@@ -384,3 +384,99 @@ def test_every_time_plot_names_its_unit(head_brake):
     assert [t for t in titles if not units.search(t)] == []
     key = summarize_recording(head_brake).texts["/mpc_head_brake/key"]
     assert "x axes: simulated time t (s)" in key
+
+
+def road_views(path):
+    """``{space_origin: VisualBounds2D range or None}`` of every road view of the blueprint the
+    viewer opens (the last one sent: the latest ``log_time``), and ``{entity: (container kind,
+    number of views)}`` of the containers holding them."""
+    reader = RrdReader(path)
+    stores = []
+    for bp in reader.blueprints():
+        values, last = {}, 0
+        for ch in reader.stream(store=bp):
+            rb = ch.to_record_batch()
+            entity = (rb.schema.metadata or {}).get(b"rerun:entity_path", b"").decode()
+            if "log_time" in rb.schema.names:  # nanoseconds since the epoch
+                ns = rb.column("log_time").cast("int64").to_numpy(zero_copy_only=False)
+                last = max(last, int(ns.max()))
+            fields = values.setdefault(entity, {})
+            for name in rb.schema.names:
+                if ":" in name:
+                    fields[name.split(":", 1)[1]] = rb.column(name).to_pylist()[-1]
+        stores.append((last, values))
+    values = max(stores, key=lambda s: s[0])[1]
+    views = {e: d["space_origin"][0] for e, d in values.items()
+             if d.get("class_identifier") == ["2D"] and d["space_origin"][0].endswith("/road")}
+    bounds = {origin: (values.get(f"{e}/VisualBounds2D", {}).get("range") or [None])[0]
+              for e, origin in views.items()}  # fmt: skip
+    holders = {e: (d["container_kind"], len(d["contents"])) for e, d in values.items()
+               if any(f"view/{v.split('/')[-1]}" in (d.get("contents") or []) for v in views)}
+    return bounds, holders
+
+
+def road_points(path):
+    """``{entity: (k, 2) array}``: every road position recorded (all rows, all vehicles), and
+    ``{entity: radii}`` of its dots."""
+    import numpy as np
+
+    points, radii = {}, {}
+    for ch in RrdReader(path).stream():
+        rb = ch.to_record_batch()
+        entity = (rb.schema.metadata or {}).get(b"rerun:entity_path", b"").decode()
+        if not entity.endswith("/road"):
+            continue
+        if "Points2D:positions" in rb.schema.names:
+            rows = [r for r in rb.column("Points2D:positions").to_pylist() if r]
+            if rows:
+                xy = np.array([p for r in rows for p in r], dtype=float)
+                points[entity] = np.vstack([points.get(entity, np.empty((0, 2))), xy])
+        if "Points2D:radii" in rb.schema.names:
+            radii[entity] = rb.column("Points2D:radii").to_pylist()[-1]
+    return points, radii
+
+
+def assert_road_views_hold_every_vehicle(path, controllers):
+    """Every road view of the opening blueprint has visual bounds that contain every vehicle
+    position recorded for it over the whole run, and the views are tabs (one per controller)."""
+    bounds, holders = road_views(path)
+    points, _ = road_points(path)
+    assert set(bounds) == set(points)  # a view for every recorded road, and only those
+    assert {c for o in bounds for c in [o.split("/")[2]]} == set(controllers)
+    for origin, box in bounds.items():
+        assert box is not None, f"{origin}: no visual bounds"
+        xy = points[origin]
+        assert len(xy) > 10 and xy[:, 1].max() > xy[:, 1].min()  # frames of a moving string
+        (x0, x1), (y0, y1) = box["x_range"], box["y_range"]
+        assert x0 <= xy[:, 0].min() and xy[:, 0].max() <= x1, origin
+        assert y0 <= xy[:, 1].min() and xy[:, 1].max() <= y1, origin
+    import rerun.blueprint.components as bpc
+
+    # one tab per road view, each the whole column's height (stacked views were 45 px tall)
+    assert {kind[0] for kind, _ in holders.values()} == {bpc.ContainerKind.Tabs.value}
+    assert sum(n for _, n in holders.values()) == len(bounds)
+    return bounds
+
+
+def test_the_road_view_holds_every_vehicle_over_the_run(head_brake):
+    """Stacked road views were 45 px tall (the dots under a pixel). The road is one tab per
+    controller, opening on bounds that contain every recorded position (the CAV and the head
+    during the brake too); its dots are sized in UI points (a zoom never shrinks them to
+    nothing), the CAV's and the head's larger than the HDVs'."""
+    import numpy as np
+    import rerun.blueprint.components as bpc
+
+    from lcc_synth.recording.simulation import ROAD_DOT_PT
+
+    problem = tomllib.loads((PROBLEMS / "mpc_head_brake.toml").read_text())
+    assert_road_views_hold_every_vehicle(head_brake, problem["controllers"])
+    _, holders = road_views(head_brake)
+    tabs = [bpc.ContainerKind.Tabs.value]
+    assert list(holders.values()) == [(tabs, len(problem["controllers"]))]
+    _, radii = road_points(head_brake)
+    for entity, r in radii.items():
+        r = -np.asarray(r)  # Rerun stores UI points as negative radii
+        assert (r > 0).all(), entity
+        assert len(r) == problem["system"]["m"] + problem["system"]["n"] + 2, entity
+        head, cav = r[0], r[problem["system"]["m"] + 1]  # head, HDVs ahead, the CAV, ...
+        assert r.min() == ROAD_DOT_PT and cav == r.max() > head > r.min(), entity

@@ -122,3 +122,18 @@ def test_every_tab_plots_its_own_run(recorded):
         end = ends[origin.split("/")[1]]
         assert link == [bpc.LinkAxis.Independent.value], origin
         assert view_range == [{"start": 0, "end": round(end * 1e9)}], origin
+
+
+def test_every_road_view_holds_its_runs(recorded):
+    """``run`` sends its layout once, when the runs are done (however they end), each
+    scenario's road views bounded around every vehicle of its runs (without bounds the vehicles
+    sat as a line at the view's edge and left it during the event). One layout only: each
+    costs about 2 MB of the showcase's recording (740 small blueprint chunks)."""
+    from rerun.chunk import RrdReader
+    from test_recording_context import assert_road_views_hold_every_vehicle
+
+    _, rrd = recorded
+    assert len(list(RrdReader(rrd).blueprints())) == 1
+    bounds = assert_road_views_hold_every_vehicle(rrd, ["all_hdv", "paper"])
+    assert {o.split("/")[1] for o in bounds} == {"brake", "sine"}
+    assert "/sine/paper/road" not in bounds  # only_scenarios: not run there, no view

@@ -69,8 +69,10 @@ def _names(value: str | None) -> list[str] | None:
     return None if value is None else value.split(",")
 
 
-def _blueprint(suite, controllers, gamma_cases, design_names):
-    """One tab per scenario (the recording module's simulation layout), plus analysis."""
+def _blueprint(suite, controllers, gamma_cases, design_names, road=None):
+    """One tab per scenario (the recording module's simulation layout), plus analysis.
+    ``road``: ``{scenario: road bounds}`` (:func:`lcc_synth.recording.layout.road_bounds` of
+    its runs, merged), known once the runs are done; without it the road views fit the data."""
     import rerun.blueprint as rrb
 
     from lcc_synth.experiments.comparison import applies
@@ -82,8 +84,8 @@ def _blueprint(suite, controllers, gamma_cases, design_names):
         ctrls = [c for c in controllers if applies(suite.controllers[c], ss.layout, sname)]
         mpc = [c for c in ctrls if suite.controllers[c].get("type") == "mpc"]
         t = ss.scenario.times()  # each tab's plots open on its own run (not the longest)
-        box = simulation_blueprint(sname, ctrls or controllers, mpc,
-                                   {"time": (float(t[0]), float(t[-1]))}).root_container
+        ranges = {"time": (float(t[0]), float(t[-1])), **(road or {}).get(sname, {})}
+        box = simulation_blueprint(sname, ctrls or controllers, mpc, ranges).root_container
         box.name = ss.title or sname
         tabs.append(box)
     if gamma_cases:
@@ -209,6 +211,7 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
         written_path,
     )
     from lcc_synth.recording.context import context_markdown
+    from lcc_synth.recording.layout import merge_ranges, road_bounds
     from lcc_synth.resources import progress_bar
     from lcc_synth.synthesis.gains_file import gains_document
 
@@ -221,64 +224,73 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
         f"{lname}.{c}" for lname in suite.layouts_used() for c, t in suite.controllers.items()
         if t.get("type") == "h2"
     ]
-    if rrd is not None:
-        bp = _blueprint(suite, ctrl_names, gamma_cases, design_names)
-        recording = open_recording(rrd, suite.name, blueprint=bp, scenario=suite.name,
+    if rrd is not None:  # its layout is sent at the end, with the road views' bounds
+        recording = open_recording(rrd, suite.name, scenario=suite.name,
                                    overwrite=bool(getattr(args, "overwrite", False)))
     else:
         recording = nullcontext(None)
     result, curves, omega, rec = None, {}, np.logspace(*_OMEGA), None
+    road: dict = {}  # {scenario: road-view bounds of every run recorded}
     try:
         with recording as rec:
-            if rec is not None:
-                record_provenance(rec, prov)
-                for sname in suite.scenarios:  # each tab's context document, as simulate's
-                    record_text(rec, f"/{entity_name(sname)}/context",
-                                context_markdown(scenario_context(suite, sname),
-                                                 time_panel=False))  # fmt: skip
-
-            def on_result(sname, cname, res, row, ctrl):
-                if rec is None:
-                    return
-                history = ctrl.history() if hasattr(ctrl, "history") else None
-                record_simulation(
-                    rec, res, sname, controller=cname, metrics=row, decimate=every,
-                    mpc_history=history or None,
-                )
-
-            result = run_suite(suite, progress=not args.quiet, on_result=on_result)
-            if not result.results or not any(result.results.values()):
-                for line in _failure_lines(result):
-                    print(f"lcc-synth run: {line}", file=sys.stderr)
+            try:
                 if rec is not None:
-                    set_status(rec, "failed", "\n".join(_failure_lines(result)))
-                return None, {}, omega, None, None
-            t0 = time.perf_counter()
-            todo = [(lname, suffix, dt, lat, c, k) for lname, rows in settings.items()
-                    for suffix, dt, lat, snames in rows
-                    for c, k in result.controllers[lname].items()
-                    if any(applies(suite.controllers[c], lname, s) for s in snames)]
-            curves = {lname: {} for lname in settings}
-            # one count per controller and setting: a measured (not linear) one takes seconds
-            with progress_bar(len(todo), "string stability as run", not args.quiet,
-                              unit="curve") as bar:  # fmt: skip
-                for lname, suffix, dt, lat, c, k in todo:
-                    bar.set_postfix_str(f"{lname}/{c}{suffix}")
-                    per = gamma_curves({c: k}, suite.layouts[lname], omega, dt, lat)
-                    curves[lname].update({f"{n}{suffix}": v for n, v in per.items()})
-                    bar.update(1)
-            result.timings["string_stability"] = time.perf_counter() - t0
-            if rec is not None:
-                for lname, per in curves.items():
-                    for cname, (mag, rep) in per.items():
-                        w, m = (rep.omega, rep.ratio) if hasattr(rep, "ratio") else (omega, mag)
-                        record_gamma(rec, f"{lname}.{cname}", w, m, rep.as_dict())
-                for lname, per in result.designs.items():
-                    for cname, rep in per.items():
-                        record_gains(rec, f"{lname}.{cname}", gains_document(rep))
-                failures = _failure_lines(result)
-                if failures:
-                    set_status(rec, "partial", "\n".join(failures))
+                    record_provenance(rec, prov)
+                    for sname in suite.scenarios:  # each tab's context document, as simulate's
+                        record_text(rec, f"/{entity_name(sname)}/context",
+                                    context_markdown(scenario_context(suite, sname),
+                                                     time_panel=False))  # fmt: skip
+
+                def on_result(sname, cname, res, row, ctrl):
+                    if rec is None:
+                        return
+                    history = ctrl.history() if hasattr(ctrl, "history") else None
+                    road[sname] = merge_ranges(road.get(sname, {}), road_bounds(res))
+                    record_simulation(
+                        rec, res, sname, controller=cname, metrics=row, decimate=every,
+                        mpc_history=history or None,
+                    )
+
+                result = run_suite(suite, progress=not args.quiet, on_result=on_result)
+                if not result.results or not any(result.results.values()):
+                    for line in _failure_lines(result):
+                        print(f"lcc-synth run: {line}", file=sys.stderr)
+                    if rec is not None:
+                        set_status(rec, "failed", "\n".join(_failure_lines(result)))
+                    return None, {}, omega, None, None
+                t0 = time.perf_counter()
+                todo = [(lname, suffix, dt, lat, c, k) for lname, rows in settings.items()
+                        for suffix, dt, lat, snames in rows
+                        for c, k in result.controllers[lname].items()
+                        if any(applies(suite.controllers[c], lname, s) for s in snames)]
+                curves = {lname: {} for lname in settings}
+                # one count per controller and setting: a measured (not linear) one takes seconds
+                with progress_bar(len(todo), "string stability as run", not args.quiet,
+                                  unit="curve") as bar:  # fmt: skip
+                    for lname, suffix, dt, lat, c, k in todo:
+                        bar.set_postfix_str(f"{lname}/{c}{suffix}")
+                        per = gamma_curves({c: k}, suite.layouts[lname], omega, dt, lat)
+                        curves[lname].update({f"{n}{suffix}": v for n, v in per.items()})
+                        bar.update(1)
+                result.timings["string_stability"] = time.perf_counter() - t0
+                if rec is not None:
+                    for lname, per in curves.items():
+                        for cname, (mag, rep) in per.items():
+                            w, m = (rep.omega, rep.ratio) if hasattr(rep, "ratio") else (omega, mag)
+                            record_gamma(rec, f"{lname}.{cname}", w, m, rep.as_dict())
+                    for lname, per in result.designs.items():
+                        for cname, rep in per.items():
+                            record_gains(rec, f"{lname}.{cname}", gains_document(rep))
+                    failures = _failure_lines(result)
+                    if failures:
+                        set_status(rec, "partial", "\n".join(failures))
+            finally:  # the layout, sent once however the run ends (make_default: the one
+                # the viewer opens): its road views bounded around every run recorded
+                if rec is not None:
+                    rec.send_blueprint(
+                        _blueprint(suite, ctrl_names, gamma_cases, design_names, road),
+                        make_active=True, make_default=True,
+                    )
     except FileError as err:  # the recording could not be written: the results still count
         if result is None:
             raise

@@ -25,6 +25,24 @@ would hide part of the run. So the plots keep the whole run; the time panel belo
 ``time`` timeline, the whole width) carries the seconds, hovering a curve shows its time, and a
 view maximised (its expand button) gets 10 s labels.
 
+Road views
+----------
+A 2-D view scales x and y alike and letterboxes its visual bounds (Rerun 0.41,
+``VisualBounds2D``: everything inside is visible). The road of ``mpc_head_brake`` spans
+x -227 .. 36 m and y -51 .. 114 (10 per m/s of velocity error, :func:`road_bounds`), about
+1.6 : 1. Four road views stacked in the right column (2 of its 5.5 shares) were 45 px tall
+each at 1920x1080: 0.17 px per m, the dots (1.5 m) under a pixel, the string a faint line
+(web viewer, ``benchmarks/screenshot_review.py``). The road is now one tab per controller (the
+tab strip names them; the key says the axes), the whole 2 shares: 765 x 290 px, 1.76 px per m,
+and its dots are sized in UI points (:data:`~lcc_synth.recording.simulation.ROAD_DOT_PT`: 4 px
+for an HDV, 7 px for the CAV, whatever the zoom). The command view keeps its 1.5 of 5.5 (its
+legend) and the reports their 2. ``run`` sent its layout before any result, without road
+bounds (the viewer fitted the data it had; vehicles left the frame during an event). It now
+sends it once, when its runs are done however they end (``lcc_synth.cli.run``; its recording
+is a file, not watched live), each scenario's road bounds merged over the runs recorded: a
+minimum and a maximum per run, no second pass over the data. Sending it at the start and
+again at the end cost 2.06 MB more on the showcase's 7.17 MB (a layout is 740 small chunks).
+
 The time cursor
 ---------------
 The blueprint sets the time panel's state, timeline, play state and time selection
@@ -102,11 +120,11 @@ def plot_ranges(result: Any) -> dict[str, Any]:
             if key == "spacing":
                 lo = max(lo, -5.0)
             out[key] = _span(lo, hi)
-    out.update(_road_bounds(result))
+    out.update(road_bounds(result))
     return out
 
 
-def _road_bounds(result: Any) -> dict[str, Any]:
+def road_bounds(result: Any) -> dict[str, Any]:
     """``road_x``, ``road_y``: the bounds of every vehicle's point in the road view over the
     whole run (:func:`lcc_synth.recording.simulation.record_simulation`: x m from the CAV, y
     the scaled velocity error, up = faster; a ring: the circle with its radial offsets), so
@@ -212,10 +230,11 @@ def simulation_blueprint(
     """Default layout of a simulation recording.
 
     Left: one row per quantity (velocity, spacing, acceleration), one time-series view per
-    controller side by side. Right: the road view of every controller, the CAV command of all
-    controllers overlaid, the comparison metrics and each controller's description; for the
-    MPC controllers named in ``mpc``, tabs with their solve times / status and their predicted
-    velocities.
+    controller side by side. Right: the road views (one tab per controller, the first open;
+    visual bounds ``ranges["road_x"]``, ``ranges["road_y"]``: :func:`road_bounds`), the CAV
+    command of all controllers overlaid, the comparison metrics and each controller's
+    description; for the MPC controllers named in ``mpc``, tabs with their solve times / status
+    and their predicted velocities.
 
     Every time-series view opens on the whole run. ``ranges`` (:func:`plot_ranges`) fixes the
     opening time span (each view's own x axis: :func:`_time_views`) and y ranges; without it
@@ -262,19 +281,19 @@ def simulation_blueprint(
         row_shares=[1, 3, 3, 3],
         name="time series",
     )
-    road_bounds = (rrb.VisualBounds2D(x_range=ranges["road_x"], y_range=ranges["road_y"])
+    bounds = (rrb.VisualBounds2D(x_range=ranges["road_x"], y_range=ranges["road_y"])
                    if "road_x" in ranges and "road_y" in ranges else None)  # fmt: skip
-    road = rrb.Vertical(
+    # one tab per controller, the whole road column's height each (stacked, four views were
+    # 45 px tall: see the module's notes); bounds from the data, so every vehicle stays inside
+    road = rrb.Tabs(
         *[
-            rrb.Spatial2DView(
-                origin=f"/{s}/{c}/road",
-                name=f"{c}: road (x m from CAV; up: faster)",
-                visual_bounds=road_bounds,
-            )
+            rrb.Spatial2DView(origin=f"/{s}/{c}/road", name=f"{c}: road",
+                              visual_bounds=bounds)
             for c in ctrls
         ],
-        name="road",
-    )
+        name="road (x m from the CAV; up: faster)",
+        active_tab=0,
+    )  # fmt: skip
     u_cmd = rrb.TimeSeriesView(
         origin=f"/{s}",
         contents=[f"+ /{s}/{c}/cav/**" for c in ctrls],

@@ -85,6 +85,23 @@ AEB_SERIES = "AEB active (every controller)"
 RING_V_SCALE = 0.02
 
 
+#: Road view: radius (UI points, pixels at 100 % scaling, whatever the zoom) of an HDV's dot,
+#: and how much it grows per unit of the vehicle's line width (:func:`vehicle_style`: 1 for an
+#: HDV, 2.5 the head, 3 a CAV): HDVs 4, the head 6.25, a CAV 7 points. Radii in metres (1.5 m,
+#: before) drew a dot of 0.5 px in a road view 45 px tall and 3 px in one 300 px tall.
+ROAD_DOT_PT = 4.0
+ROAD_DOT_PT_PER_WIDTH = 1.5
+#: Road view: width (UI points) of the equilibrium line (zero velocity error).
+ROAD_LINE_PT = 1.0
+
+
+def road_radii(widths) -> np.ndarray:
+    """Radii (UI points) of the road view's dots for vehicles of line widths ``widths``: the
+    CAVs and the head larger than the HDVs. Logged through Rerun's ``Radius.ui_points``."""
+    w = np.asarray(widths, dtype=np.float32)
+    return ROAD_DOT_PT + ROAD_DOT_PT_PER_WIDTH * np.maximum(w - 1.0, 0.0)
+
+
 #: Entity (under ``/<scenario>/``) of the trajectories a scenario replays.
 RECORDED_ENTITY = "recorded"
 
@@ -348,7 +365,8 @@ def record_simulation(
     xy = xy_all[idx]
     rec.log(
         f"{base}/road",
-        rr.Points2D.from_fields(colors=colors, radii=[1.5] * nv, labels=names, show_labels=False),
+        rr.Points2D.from_fields(colors=colors, labels=names, show_labels=False,
+                                radii=rr.components.Radius.ui_points(road_radii(widths))),
         static=True,
     )
     import pyarrow as pa
@@ -369,7 +387,8 @@ def record_simulation(
         strip = [[[x_lo - 5.0, 0.0], [x_hi + 5.0, 0.0]]]
     rec.log(
         f"{base}/road/equilibrium",
-        rr.LineStrips2D(strip, colors=[(90, 90, 90)], radii=0.2),
+        rr.LineStrips2D(strip, colors=[(90, 90, 90)],
+                        radii=rr.components.Radius.ui_points(ROAD_LINE_PT)),
         static=True,
     )
 
