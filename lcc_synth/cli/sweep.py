@@ -92,6 +92,38 @@ def _client(args, into: dict) -> None:
     into["client"] = Client(into["cluster"])
 
 
+def _start_client(args, into: dict):
+    """Start :func:`_client` in a thread (``into["starting"]``); return ``connect()``, which
+    waits for it and returns the client or raises what the start raised.
+
+    The local cluster's workers start (2-4 s, mostly their imports, in their own processes)
+    while the calling thread synthesises the controllers; the thread stores the cluster and
+    the client in ``into`` as soon as each exists, so the caller's clean-up (after joining
+    ``into["starting"]``) closes whatever was made, also after an interrupt of the synthesis.
+    """
+    import threading
+
+    failed: list[BaseException] = []
+
+    def start() -> None:
+        try:
+            _client(args, into)
+        except BaseException as err:  # handed to the caller's thread by connect()
+            failed.append(err)
+
+    thread = threading.Thread(target=start, name="lcc-sweep-cluster-start", daemon=True)
+    into["starting"] = thread
+    thread.start()
+
+    def connect():
+        thread.join()
+        if failed:
+            raise failed[0]
+        return into["client"]
+
+    return connect
+
+
 def _lock(directory) -> int:
     """An exclusive lock on the results directory for this run (two runs resuming the same
     directory would write over each other); released when the process ends."""
@@ -193,14 +225,18 @@ def run(args: argparse.Namespace) -> int:
 
         where = args.scheduler or f"a local cluster of {estimate.workers} workers"
         notice("sweep", f"starting the Dask client on {where}")  # 2-10 s here, before any bar
-        with held_signals():
-            _client(args, handles)
-        if args.scheduler and estimate.seconds > LONG_S:
-            threads = sum(handles["client"].nthreads().values()) or 1
-            again = estimate_sweep(spec, threads, rrd is not None)
-            notice("sweep", f"estimate: {again.describe()}")
-        result = run_sweep(spec, client=handles["client"], progress=progress, done=done,
-                           on_task=writer.on_task)  # fmt: skip
+        connect = None
+        if args.scheduler:
+            with held_signals():
+                _client(args, handles)
+            if estimate.seconds > LONG_S:
+                threads = sum(handles["client"].nthreads().values()) or 1
+                again = estimate_sweep(spec, threads, rrd is not None)
+                notice("sweep", f"estimate: {again.describe()}")
+        else:  # the local workers start while this thread synthesises the controllers
+            connect = _start_client(args, handles)
+        result = run_sweep(spec, client=handles.get("client"), progress=progress, done=done,
+                           on_task=writer.on_task, connect=connect)  # fmt: skip
     except SynthesisError as err:
         _keep(writer, done, args, out_dir, start, "failed: synthesis")
         print(f"lcc-synth sweep: synthesis failed: {err}", file=sys.stderr)
@@ -209,6 +245,8 @@ def run(args: argparse.Namespace) -> int:
         _keep(writer, done, args, out_dir, start, _status(err))
         raise
     finally:
+        if "starting" in handles:  # a cluster still starting: it exists before it is stopped
+            handles["starting"].join()
         stop_cluster(handles.get("cluster"), handles.get("client"), now=result is None)
 
     failure = None
