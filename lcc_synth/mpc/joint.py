@@ -99,10 +99,6 @@ class _Member(LoopState):
 
     u_prev: np.ndarray | None = None
     delay: Any = None  # delay.StateHistory (past observed states) with prediction.delay
-    # every vehicle's equilibrium spacing at the velocity ``s_ref_v`` (the last ``v_eq``,
-    # clipped): recomputed only when it changes, as ``step_cache.LastValue`` does for one
-    s_ref_v: float = math.nan
-    s_ref: np.ndarray | None = None
 
 
 class JointMPCController(MPCScaffold):
@@ -269,10 +265,7 @@ class JointMPCController(MPCScaffold):
             update_equilibrium(mem, v_ref)
         v_eq = mem.v_eq
         ve = self._clip_v(v_eq)
-        if ve != mem.s_ref_v or mem.s_ref is None:  # NaN never matches: recomputed (raises)
-            mem.s_ref = np.array([float(h.equilibrium_spacing(ve)) for h in self.platoon.hdv])
-            mem.s_ref_v = ve
-        s_ref = mem.s_ref.copy()  # the ring shifts it below; the cached values stay
+        s_ref = np.array([float(h.equilibrium_spacing(ve)) for h in self.platoon.hdv])
         if self.ring:  # spacing errors summing to zero (module docstring, step 2)
             s_ref += np.mean(s - s_ref)
         x = np.empty(2 * s.size)
