@@ -192,6 +192,37 @@ def test_local_cluster_equals_serial(problem_file, client, serial):
     assert res.summary == serial.summary
 
 
+def test_connect_gives_the_client_after_the_synthesis(problem_file, client, serial,
+                                                      monkeypatch):
+    """``connect`` (the CLI starts its cluster while the controllers are synthesised) is
+    called once, after the controllers exist, and its client gives the serial samples; what
+    it raises comes out of run_sweep unchanged."""
+    import lcc_synth.experiments.comparison as comparison
+
+    calls = []
+    prepare = comparison.prepare_controllers
+
+    def prepared(*args, **kwargs):
+        calls.append("synthesis")
+        return prepare(*args, **kwargs)
+
+    def connect():
+        calls.append("connect")
+        return client
+
+    monkeypatch.setattr(comparison, "prepare_controllers", prepared)
+    res = run_sweep(load_sweep(problem_file, batch_size=2), progress=False, connect=connect)
+    assert calls == ["synthesis", "connect"]
+    assert res.info["scheduler"].startswith("tcp://127.0.0.1")
+    _assert_same_samples(res.samples, serial.samples)
+
+    def refused():
+        raise ConfigError("--scheduler", "cannot connect (test)")
+
+    with pytest.raises(ConfigError, match="cannot connect"):
+        run_sweep(load_sweep(problem_file, count=1), progress=False, connect=refused)
+
+
 def test_worker_death_loses_nothing(problem_file, client, serial):
     """Kill a worker process while tasks run: Dask recomputes its tasks elsewhere."""
     spec = load_sweep(problem_file, batch_size=1)

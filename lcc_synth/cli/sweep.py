@@ -92,6 +92,38 @@ def _client(args, into: dict) -> None:
     into["client"] = Client(into["cluster"])
 
 
+def _start_client(args, into: dict):
+    """Start :func:`_client` in a thread (``into["starting"]``); return ``connect()``, which
+    waits for it and returns the client or raises what the start raised.
+
+    The local cluster's workers start (2-4 s, mostly their imports, in their own processes)
+    while the calling thread synthesises the controllers; the thread stores the cluster and
+    the client in ``into`` as soon as each exists, so the caller's clean-up (after joining
+    ``into["starting"]``) closes whatever was made, also after an interrupt of the synthesis.
+    """
+    import threading
+
+    failed: list[BaseException] = []
+
+    def start() -> None:
+        try:
+            _client(args, into)
+        except BaseException as err:  # handed to the caller's thread by connect()
+            failed.append(err)
+
+    thread = threading.Thread(target=start, name="lcc-sweep-cluster-start", daemon=True)
+    into["starting"] = thread
+    thread.start()
+
+    def connect():
+        thread.join()
+        if failed:
+            raise failed[0]
+        return into["client"]
+
+    return connect
+
+
 def _lock(directory) -> int:
     """An exclusive lock on the results directory for this run (two runs resuming the same
     directory would write over each other); released when the process ends."""
@@ -123,6 +155,7 @@ def _settings(args, partial):
 
 def run(args: argparse.Namespace) -> int:
     import os
+    import threading
     from datetime import UTC, datetime
 
     from lcc_synth.errors import ConfigError, FileError
@@ -193,14 +226,18 @@ def run(args: argparse.Namespace) -> int:
 
         where = args.scheduler or f"a local cluster of {estimate.workers} workers"
         notice("sweep", f"starting the Dask client on {where}")  # 2-10 s here, before any bar
-        with held_signals():
-            _client(args, handles)
-        if args.scheduler and estimate.seconds > LONG_S:
-            threads = sum(handles["client"].nthreads().values()) or 1
-            again = estimate_sweep(spec, threads, rrd is not None)
-            notice("sweep", f"estimate: {again.describe()}")
-        result = run_sweep(spec, client=handles["client"], progress=progress, done=done,
-                           on_task=writer.on_task)  # fmt: skip
+        connect = None
+        if args.scheduler:
+            with held_signals():
+                _client(args, handles)
+            if estimate.seconds > LONG_S:
+                threads = sum(handles["client"].nthreads().values()) or 1
+                again = estimate_sweep(spec, threads, rrd is not None)
+                notice("sweep", f"estimate: {again.describe()}")
+        else:  # the local workers start while this thread synthesises the controllers
+            connect = _start_client(args, handles)
+        result = run_sweep(spec, client=handles.get("client"), progress=progress, done=done,
+                           on_task=writer.on_task, connect=connect)  # fmt: skip
     except SynthesisError as err:
         _keep(writer, done, args, out_dir, start, "failed: synthesis")
         print(f"lcc-synth sweep: synthesis failed: {err}", file=sys.stderr)
@@ -209,63 +246,74 @@ def run(args: argparse.Namespace) -> int:
         _keep(writer, done, args, out_dir, start, _status(err))
         raise
     finally:
-        stop_cluster(handles.get("cluster"), handles.get("client"), now=result is None)
+        if "starting" in handles:  # a cluster still starting: it exists before it is stopped
+            handles["starting"].join()
+        if result is None:
+            stop_cluster(handles.get("cluster"), handles.get("client"), now=True)
 
-    failure = None
-    notice("sweep", "writing the results" + ("" if args.no_figures else " and the figure"))
+    # the workers close (1-3 s) while this thread writes the results, the figure and the
+    # recordings; every way out of run() waits for them
+    stopping = threading.Thread(target=stop_cluster, name="lcc-sweep-cluster-stop",
+                                args=(handles.get("cluster"), handles.get("client")))
+    stopping.start()
     try:
-        doc = complete_doc(spec, result)
-        writer.complete(done, doc)
-        if not args.no_figures:
-            from lcc_synth.figures import plot_sweep_distributions
-
-            with writing(out_dir / f"distributions.{args.format}", overwrite=True) as png:
-                plot_sweep_distributions(
-                    result.samples, png.tmp, metrics=SWEEP_METRICS,
-                    title=f"{spec.name}: {spec.count} scenarios (box 25-75 %, whiskers 5-95 %, "
-                    "dot = mean)",
-                )
-    except FileError as err:
-        failure = err
-    except BaseException as err:  # interrupted while writing: keep what is on disk usable
-        _keep(writer, done, args, out_dir, start, _status(err))
-        raise
-    info = result.info
-    if args.json:
-        print(json.dumps(doc))
-    else:
-        print(
-            f"{spec.name}: {spec.count} scenarios x {len(result.summary)} controllers, "
-            f"seed {spec.seed}, {info['tasks']} tasks of <= {spec.batch_size}; mean [p5, p95]"
-        )
-        print(format_summary(result.summary))
-    print(
-        f"time: {info['wall_time_s']:.1f} s on {info['scheduler']} "
-        f"({_rate(info['scenarios_per_s'])} scenarios/s, {_rate(info['runs_per_s'])} "
-        f"scenario-controller runs/s); synthesis {info['synthesis_time_s']:.1f} s",
-        file=log,
-    )
-    if failure is None:
-        print(f"results: {out_dir}", file=log)
-    failed = _failure_lines(result.summary)
-    for line in failed:
-        print(f"lcc-synth sweep: {line}", file=sys.stderr)
-    sys.stdout.flush()
-    if rrd is not None:
+        failure = None
+        notice("sweep", "writing the results" + ("" if args.no_figures else " and the figure"))
         try:
-            _record(rrd, spec, result, doc.get("provenance"), "\n".join(failed))
+            doc = complete_doc(spec, result)
+            writer.complete(done, doc)
+            if not args.no_figures:
+                from lcc_synth.figures import plot_sweep_distributions
+
+                with writing(out_dir / f"distributions.{args.format}", overwrite=True) as png:
+                    plot_sweep_distributions(
+                        result.samples, png.tmp, metrics=SWEEP_METRICS,
+                        title=f"{spec.name}: {spec.count} scenarios (box 25-75 %, whiskers 5-95 %, "
+                        "dot = mean)",
+                    )
         except FileError as err:
-            if failure is None:
-                raise
-            print(f"lcc-synth sweep: the recording was not written either: {err}",
-                  file=sys.stderr)  # fmt: skip
-    if failure is not None:
-        if writer.written > 0:
-            print(f"lcc-synth sweep: {out_dir} keeps the partial results of {writer.written} of "
-                  f"{spec.count} scenarios", file=sys.stderr)  # fmt: skip
-        raise failure
-    os.close(lock)
-    return 1 if failed else 0
+            failure = err
+        except BaseException as err:  # interrupted while writing: keep what is on disk usable
+            _keep(writer, done, args, out_dir, start, _status(err))
+            raise
+        info = result.info
+        if args.json:
+            print(json.dumps(doc))
+        else:
+            print(
+                f"{spec.name}: {spec.count} scenarios x {len(result.summary)} controllers, "
+                f"seed {spec.seed}, {info['tasks']} tasks of <= {spec.batch_size}; mean [p5, p95]"
+            )
+            print(format_summary(result.summary))
+        print(
+            f"time: {info['wall_time_s']:.1f} s on {info['scheduler']} "
+            f"({_rate(info['scenarios_per_s'])} scenarios/s, {_rate(info['runs_per_s'])} "
+            f"scenario-controller runs/s); synthesis {info['synthesis_time_s']:.1f} s",
+            file=log,
+        )
+        if failure is None:
+            print(f"results: {out_dir}", file=log)
+        failed = _failure_lines(result.summary)
+        for line in failed:
+            print(f"lcc-synth sweep: {line}", file=sys.stderr)
+        sys.stdout.flush()
+        if rrd is not None:
+            try:
+                _record(rrd, spec, result, doc.get("provenance"), "\n".join(failed))
+            except FileError as err:
+                if failure is None:
+                    raise
+                print(f"lcc-synth sweep: the recording was not written either: {err}",
+                      file=sys.stderr)  # fmt: skip
+        if failure is not None:
+            if writer.written > 0:
+                print(f"lcc-synth sweep: {out_dir} keeps the partial results of "
+                      f"{writer.written} of {spec.count} scenarios", file=sys.stderr)  # fmt: skip
+            raise failure
+        os.close(lock)
+        return 1 if failed else 0
+    finally:
+        stopping.join()
 
 
 def _failure_lines(summary) -> list[str]:

@@ -436,6 +436,7 @@ def run_sweep(
     retries: int = 3,
     done: SweepProgress | None = None,
     on_task: Callable[[SweepProgress], None] | None = None,
+    connect: Callable[[], Any] | None = None,
 ) -> SweepResult:
     """Run the sweep: synthesise ``h2`` controllers here, then every task on ``client``.
 
@@ -455,6 +456,10 @@ def run_sweep(
         or fails); one that holds finished tasks (an interrupted sweep) runs only the others.
     on_task : callable, optional
         ``on_task(done)`` after each finished task (in this thread).
+    connect : callable, optional
+        ``connect()`` returns the client, called once the controllers are synthesised and
+        built (instead of ``client``): the CLI starts its local cluster meanwhile (the
+        workers' start, 2-4 s, overlaps the synthesis, 1-4 s; the results are the same).
 
     Raises
     ------
@@ -492,6 +497,8 @@ def run_sweep(
     except ConfigError as err:
         raise err.with_source(spec.source) if spec.source else err from None
 
+    if connect is not None:
+        client = connect()
     done = SweepProgress.new(spec) if done is None else done
     done.check(spec)
     done.set_tables(tables)
