@@ -54,6 +54,7 @@ from lcc_synth.deeplcc.qp import DeepQP, ExactSolver, formulate
 from lcc_synth.deeplcc.settings import DeePLCCSettings
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import CarFollowingModel, free_speed
+from lcc_synth.mpc.formulation import error_bound, spacing_families
 from lcc_synth.mpc.report import new_step_record, step_statistics
 from lcc_synth.mpc.scaffold import STATUS_CODES, SampleLoop, update_equilibrium
 from lcc_synth.mpc.settings import paper_fallback_gains
@@ -163,12 +164,17 @@ class DeePLCCController(SampleLoop):
                               f"{self.sample_time} s")  # fmt: skip
         Tini, N = settings.t_ini, settings.horizon
         t0 = time.perf_counter()
-        W = spacing_rows(N, self.p, [c - 1 for c in self.cavs], settings.constraints.t_gap)
+        c = settings.constraints
+        # the paper's target bounds the spacing error alone (t_gap 0), on both sides
+        self._fams = spacing_families(0, 0, 0, c)
+        W = spacing_rows(N, self.p, [col - 1 for col in self.cavs],
+                         c.t_gap if c.spacing == "safe" else 0.0)
         self.excitation: ExcitationReport
         self.reduced: ReducedQP
         self.excitation, self.reduced = _set_up(data, settings, self.nv, self.n_c, W)
         w = settings.weights
-        self.qp: DeepQP = formulate(self.reduced, w.slack, w.slack_quadratic)
+        self.qp: DeepQP = formulate(self.reduced, w.slack, w.slack_quadratic,
+                                    upper=c.spacing != "safe")
         self.data = data
         self.spacing_rows = W
         self.setup_time = time.perf_counter() - t0
@@ -277,19 +283,29 @@ class DeePLCCController(SampleLoop):
         c = self.settings.constraints
         v_c = np.asarray(obs.velocity[b], float)[list(self.cavs)]
         s_c = mem.spc[-1]
+        bvec, y_ini, s_eq = self.parameters(mem)
         with np.errstate(invalid="ignore"):
-            viol = np.nanmax(c.s_min + c.t_gap * v_c - s_c, initial=-np.inf)
+            if c.spacing == "safe":
+                viol = np.nanmax(c.s_min + c.t_gap * v_c - s_c, initial=-np.inf)
+            else:  # the spacing error from s_eq (module docstring, step 4)
+                err = s_c - s_eq
+                lo, hi = c.spacing_error
+                viol = np.nanmax(np.maximum(lo - err, err - hi), initial=-np.inf)
         if viol > 1e-6:
             st["violation_steps"] += 1
             st["max_violation"] = max(st["max_violation"], float(viol))
-        bvec, y_ini, s_eq = self.parameters(mem)
         if not (np.all(np.isfinite(bvec)) and np.all(np.isfinite(y_ini))):
             return self._fallback(mem, obs, b, s_eq, "nonfinite_state")
         red, qp = self.reduced, self.qp
         cvec = red.Cb @ bvec + red.Cy @ y_ini
         N = self.settings.horizon
-        b_w = np.tile(c.s_min + c.margin + c.t_gap * mem.v_eq - s_eq, N)
-        q, lo, hi = qp.vectors(cvec, self._a_min, self._a_max, b_w)
+        if c.spacing == "safe":
+            b_w = np.tile(c.s_min + c.margin + c.t_gap * mem.v_eq - s_eq, N)
+            q, lo, hi = qp.vectors(cvec, self._a_min, self._a_max, b_w)
+        else:  # y's spacing errors are from s_eq: constant bounds (mpc.formulation.error_bound)
+            b_w = np.full(qp.n_w, error_bound(self._fams[0], c.margin))
+            b_up = np.full(qp.n_up, error_bound(self._fams[1], c.margin))
+            q, lo, hi = qp.vectors(cvec, self._a_min, self._a_max, b_w, b_up)
         mem.solver.force_failure = self.force_failure
         res = mem.solver.solve(q, lo, hi, *self._warm_start(mem))
         self._count_solve(res)
@@ -421,7 +437,7 @@ class DeePLCCController(SampleLoop):
                                "CasADi, built once",
                 "g_columns": self.data_columns,
                 "variables": self.qp.n_var,
-                "constraints": 3 * self.qp.n_w,
+                "constraints": self.qp.qp.A.shape[0],
                 "setup_time_s": self.setup_time,
                 "solver": f"osqp {osqp.__version__}",
             },

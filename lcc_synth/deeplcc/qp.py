@@ -63,6 +63,9 @@ class DeepQP:
         Future inputs (= spacing rows = slacks), ``N n_c``.
     n_beta : int
         Rank of ``S``.
+    n_up : int
+        Upper spacing rows ``-v_w + sigma_up >= b_up`` and their slacks (``n_w`` with
+        ``constraints.spacing = "equilibrium"``, else 0).
     """
 
     qp: QPMatrices
@@ -71,21 +74,28 @@ class DeepQP:
     Gc: np.ndarray
     n_w: int
     n_beta: int
+    n_up: int = 0
 
     @property
     def n_var(self) -> int:
         """Number of decision variables."""
-        return 2 * self.n_w + self.n_beta
+        return 2 * self.n_w + self.n_beta + self.n_up
 
-    def vectors(self, c: np.ndarray, a_min: float, a_max: float, b_w: np.ndarray):
-        """``(q, l, u)`` of OSQP for ``c`` and the spacing bounds ``b_w`` (``(n_w,)``)."""
-        n = self.n_w
+    def vectors(self, c: np.ndarray, a_min: float, a_max: float, b_w: np.ndarray,
+                b_up: np.ndarray | None = None):  # fmt: skip
+        """``(q, l, u)`` of OSQP for ``c`` and the spacing bounds ``b_w`` (``(n_w,)``) and,
+        with upper rows, ``b_up`` (``(n_up,)``; ``-inf`` disables a row)."""
+        n, nu = self.n_w, self.n_up
         off = self.Gc @ c
-        lo = np.empty(3 * n)
-        hi = np.empty(3 * n)
+        lo = np.empty(3 * n + 2 * nu)
+        hi = np.empty(3 * n + 2 * nu)
         lo[:n], hi[:n] = a_min, a_max
         lo[n:2 * n], hi[n:2 * n] = b_w, np.inf
-        lo[2 * n:], hi[2 * n:] = 0.0, np.inf
+        lo[2 * n:3 * n], hi[2 * n:3 * n] = 0.0, np.inf
+        if nu:
+            lo[3 * n:3 * n + nu] = -np.inf if b_up is None else b_up
+            hi[3 * n:3 * n + nu] = np.inf
+            lo[3 * n + nu:], hi[3 * n + nu:] = 0.0, np.inf
         return self.Qc @ c + self.q0, lo - off, hi - off
 
     def plan(self, x: np.ndarray) -> np.ndarray:
@@ -103,13 +113,23 @@ class DeepQP:
         N = n // n_c
         k = np.minimum(np.arange(N) + 1, N - 1)
         base = (k[:, None] * n_c + np.arange(n_c)[None, :]).ravel()
-        z = np.concatenate([base, n + np.arange(self.n_beta), n + self.n_beta + base])
-        y = np.concatenate([base, base + n, base + 2 * n])
-        return z, y
+        z = [base, n + np.arange(self.n_beta), n + self.n_beta + base]
+        y = [base, base + n, base + 2 * n]
+        if self.n_up:
+            z.append(2 * n + self.n_beta + base)
+            y += [base + 3 * n, base + 4 * n]
+        return np.concatenate(z), np.concatenate(y)
 
 
-def formulate(red: ReducedQP, slack: float, slack_quadratic: float) -> DeepQP:
-    """Build the QP of the module docstring with CasADi and extract its matrices once."""
+def formulate(red: ReducedQP, slack: float, slack_quadratic: float,
+              upper: bool = False) -> DeepQP:  # fmt: skip
+    """Build the QP of the module docstring with CasADi and extract its matrices once.
+
+    ``upper`` adds the upper spacing rows ``-v_w + sigma_up >= b_up`` with their own slacks
+    (the same l1 and quadratic penalty): the spacing-error bound of
+    ``constraints.spacing = "equilibrium"`` is two-sided (the rows ``v_w`` are then the
+    spacing errors ``s~`` alone).
+    """
     import casadi as ca
 
     G = red.B @ red.B.T
@@ -129,15 +149,21 @@ def formulate(red: ReducedQP, slack: float, slack_quadratic: float) -> DeepQP:
                                                      float(np.linalg.norm(G, 2)))  # fmt: skip
     Sh = V[:, keep] * np.sqrt(s[keep])
     nb = Sh.shape[1]
-    nz = 2 * n + nb
+    n_up = n if upper else 0
+    nz = 2 * n + nb + n_up
     x = ca.MX.sym("x", nz)
     c = ca.MX.sym("c", 2 * n)
-    vu, beta, sigma = x[:n], x[n:n + nb], x[n + nb:]
+    vu, beta = x[:n], x[n:n + nb]
+    sigma = x[n + nb:n + nb + n] if upper else x[n + nb:]
     du = vu - c[:n]
     cost = (0.5 * ca.dot(du, ca.DM(Gi) @ du) + 0.5 * ca.dot(beta, beta)
             + slack * ca.sum1(sigma) + slack_quadratic * ca.dot(sigma, sigma))  # fmt: skip
     vw = c[n:] + ca.DM(K) @ du + (ca.DM(Sh) @ beta if nb else 0)
     g = ca.vertcat(vu, vw + sigma, sigma)
+    if upper:
+        sig_up = x[n + nb + n:]
+        cost = cost + slack * ca.sum1(sig_up) + slack_quadratic * ca.dot(sig_up, sig_up)
+        g = ca.vertcat(g, -vw + sig_up, sig_up)
     H, grad = ca.hessian(cost, x)
     grad0 = ca.substitute(grad, x, ca.DM.zeros(nz))
     fun = ca.Function("deep_qp", [x, c], [H, ca.jacobian(g, x), ca.jacobian(g, c),
@@ -147,7 +173,7 @@ def formulate(red: ReducedQP, slack: float, slack_quadratic: float) -> DeepQP:
     A = sp.csc_matrix(An)
     empty = np.zeros((0, 0))
     qp = QPMatrices(P, A, empty, empty, np.zeros(0), np.zeros(0))
-    return DeepQP(qp, q0.reshape(-1), Qcn, Gcn, n, nb)
+    return DeepQP(qp, q0.reshape(-1), Qcn, Gcn, n, nb, n_up)
 
 
 class ExactSolver:

@@ -23,6 +23,8 @@
     s_min = 5.0                # s >= s_min + t_gap v, absolute metres, every CAV
     t_gap = 0.8
     margin = 0.1
+    spacing = "safe"           # or "equilibrium": the DeeP-LCC paper's spacing-error bound
+    spacing_error = [-15.0, 20.0]   # lo <= s - s*(v_eq) <= hi (m), both soft
 
     [controllers.deep_lcc.solver]        # OSQP, as the MPC's, but max_iter = 200 and
     exact = true               # then DAQP (exact active set) before the fallback chain
@@ -47,7 +49,7 @@ from typing import Any
 from lcc_synth.deeplcc.data import DataSettings
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.records import Record
-from lcc_synth.mpc.settings import SolverSettings
+from lcc_synth.mpc.settings import SolverSettings, check_spacing_target
 from lcc_synth.schema import declared
 from lcc_synth.schema.controllers import DEEP_MAX_ITER
 
@@ -70,13 +72,17 @@ class DeepWeights(Record):
 
 @dataclass(frozen=True, repr=False)
 class DeepConstraints(Record):
-    """Hard acceleration bounds and the soft absolute safe spacing of every CAV."""
+    """Hard acceleration bounds and the soft spacing bound of every CAV: the absolute safe
+    spacing (``spacing = "safe"``) or the paper's bound on the spacing error from ``s*(v_eq)``
+    (``"equilibrium"``), as the MPC's :class:`~lcc_synth.mpc.settings.Constraints`."""
 
     a_min: float = -5.0
     a_max: float = 2.0
     s_min: float = 5.0
     t_gap: float = 0.8
     margin: float = 0.1
+    spacing: str = "safe"
+    spacing_error: tuple[float, float] = (-15.0, 20.0)
 
 
 @dataclass(frozen=True, repr=False)
@@ -102,6 +108,7 @@ class DeePLCCSettings(Record):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ConfigError(name, f"must be an integer >= 1, got {v!r}")
+        check_spacing_target(c.spacing, c.spacing_error, "constraints")
 
     @property
     def sample_time(self) -> float:
@@ -118,6 +125,7 @@ class DeePLCCSettings(Record):
         """JSON-serialisable view."""
         out = asdict(self)
         out["data"].pop("field", None)
+        out["constraints"]["spacing_error"] = list(self.constraints.spacing_error)
         return out
 
     def toml_table(self) -> dict[str, Any]:
@@ -148,6 +156,8 @@ def deep_settings_from_table(table: Mapping[str, Any], field_name: str) -> DeePL
         return {k: t.get(raw, k, f"{f}.{sub}") for k in t.names}
 
     c = read("constraints")
+    c["spacing_error"] = tuple(c["spacing_error"])
+    check_spacing_target(c["spacing"], c["spacing_error"], f"{f}.constraints")
     if not c["a_min"] < 0 < c["a_max"]:
         raise ConfigError(f"{f}.constraints.a_min", "need a_min < 0 < a_max, got "
                           f"[{c['a_min']}, {c['a_max']}]")  # fmt: skip

@@ -80,7 +80,9 @@ from lcc_synth.mpc.formulation import (
     Formulation,
     Linearization,
     check_horizon,
+    error_bound,
     linearize,
+    spacing_families,
     state_weights,
 )
 from lcc_synth.mpc.joint import StringLayout
@@ -145,7 +147,7 @@ class OneCAVLayout(Layout):
         fams = []
         if c.spacing_ahead:
             b = model.block(0)
-            fams.append(Family(0, b.start, b.start + 1, c.t_gap, c.s_min))
+            fams += spacing_families(0, b.start, b.start + 1, c)
         for i in c.behind:
             if i > self.n_model:
                 raise ConfigError(
@@ -236,15 +238,22 @@ class OneCAVLayout(Layout):
         if mem.delay is not None:
             x = mem.delay.push(x, d0, s_eq, v_eq, obs=obs, b=b, u_prev=float(mem.past[0]))
         v0 = float(obs.velocity[b, cav])
-        return Sample(x, d, d_model, {"xi": xi, "s_eq": s_eq, "s0": s0, "v0": v0})
+        return Sample(x, d, d_model, {"xi": xi, "s_eq": s_eq, "s0": s0, "v0": v0,
+                                      "s_off0": float(mem.s_off[m + 1])})
 
     def count_violations(self, mpc: MPCController, o: Sample) -> None:
-        """The measured violation of the absolute spacing to the vehicle ahead."""
+        """The measured violation of the bound on the spacing to the vehicle ahead (absolute,
+        or of the spacing error from ``s_eq`` with ``constraints.spacing = "equilibrium"``)."""
         st = mpc._st
         c = self.settings.constraints
         s0, v0 = o.extra["s0"], o.extra["v0"]
         if c.spacing_ahead and math.isfinite(s0) and math.isfinite(v0):
-            viol = c.s_min + c.t_gap * v0 - s0
+            if c.spacing == "safe":
+                viol = c.s_min + c.t_gap * v0 - s0
+            else:
+                lo, hi = c.spacing_error
+                err = s0 - o.extra["s_eq"] - o.extra["s_off0"]
+                viol = max(lo - err, err - hi)
             if viol > 1e-6:
                 st["violation_steps"] += 1
                 st["max_violation"] = max(st["max_violation"], viol)
@@ -254,7 +263,18 @@ class OneCAVLayout(Layout):
         v_eq = mem.v_eq
         s_eq, s0, x0, d = o.extra["s_eq"], o.extra["s0"], o.x0, o.d
         out = np.empty((len(mpc._families), N))
+        margin = self.settings.constraints.margin
         for f, fam in enumerate(mpc._families):
+            if fam.bound != "safe":  # spacing error from s_eq (+ offset): x[s] for all but FD-LCC
+                gap = 0.0
+                if self.kind == "fd_lcc":
+                    if not math.isfinite(s0):
+                        out[f] = -np.inf
+                        continue
+                    drift = np.cumsum(d) * mpc.sample_time
+                    gap = s_eq + o.extra["s_off0"] - (s0 - x0[0] + drift)
+                out[f] = error_bound(fam, margin, gap)
+                continue
             base = fam.s_min + self.settings.constraints.margin + fam.t_gap * v_eq
             if fam.vehicle == 0 and self.kind == "fd_lcc":
                 if not math.isfinite(s0):

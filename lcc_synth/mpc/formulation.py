@@ -77,6 +77,8 @@ from lcc_synth.mpc.settings import MPCSettings
 
 __all__ = [
     "Family",
+    "spacing_families",
+    "error_bound",
     "Linearization",
     "QPMatrices",
     "Formulation",
@@ -90,9 +92,15 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Family:
-    """One soft spacing constraint family ``x_k[s] - t_gap * x_k[v] + e >= bound`` (k = 1..N).
+    """One soft spacing constraint family ``sign (x_k[s] - t_gap * x_k[v]) + e >= bound``
+    (k = 1..N).
 
-    ``vehicle`` is the paper's index (0 = the CAV's spacing to the vehicle ahead).
+    ``vehicle`` is the paper's index (0 = the CAV's spacing to the vehicle ahead; a position
+    of a platoon or ring). ``bound`` is ``"safe"`` (the absolute ``s >= s_min + t_gap v``,
+    ``sign`` 1) or one side of the bound on the spacing error from the equilibrium spacing
+    (``constraints.spacing = "equilibrium"``): ``"error_min"`` (``s - s*(v_eq) >= s_min``,
+    ``sign`` 1) and ``"error_max"`` (``s - s*(v_eq) <= s_min``, ``sign`` -1), both with
+    ``t_gap = 0``.
     """
 
     vehicle: int
@@ -100,6 +108,46 @@ class Family:
     v_index: int
     t_gap: float
     s_min: float
+    bound: str = "safe"
+
+    @property
+    def sign(self) -> float:
+        """1 for a lower bound, -1 for the upper bound ``error_max``."""
+        return -1.0 if self.bound == "error_max" else 1.0
+
+
+def spacing_families(vehicle: int, s_index: int, v_index: int, constraints) -> list[Family]:
+    """The families bounding a CAV's own spacing ahead, as ``constraints.spacing`` selects.
+
+    ``"safe"``: one family, ``s >= s_min + t_gap v`` (absolute). ``"equilibrium"``: the
+    DeeP-LCC paper's bound (Wang et al., IEEE T-CST 2023, its simulations: -15 and 20 m)
+    ``lo <= s - s*(v_eq) <= hi`` with ``[lo, hi] = constraints.spacing_error``: two families
+    on the spacing error alone. The state's spacing error is measured from the layout's
+    reference spacing at ``v_eq`` (the HDV model's equilibrium spacing, the OVM's ``s*(v)``),
+    so their right-hand sides are the constants of :func:`error_bound` and the bound moves
+    with ``v_eq`` through the state.
+    """
+    c = constraints
+    if c.spacing == "safe":
+        return [Family(vehicle, s_index, v_index, c.t_gap, c.s_min)]
+    lo, hi = c.spacing_error
+    return [Family(vehicle, s_index, v_index, 0.0, float(lo), "error_min"),
+            Family(vehicle, s_index, v_index, 0.0, float(hi), "error_max")]
+
+
+def error_bound(fam: Family, margin: float, gap=0.0):
+    """Right-hand side ``b`` of a spacing-error family (``error_min`` or ``error_max``).
+
+    ``gap`` is the target spacing minus the spacing the state's zero stands for
+    (``s*(v_eq) - (s - x[s])``; 0 when the state's spacing error is measured from the
+    target, an array over the horizon for FD-LCC). The row ``sign x[s] + e >= b`` then reads
+    ``x[s] - gap >= lo + margin`` or ``x[s] - gap <= hi - margin``.
+    """
+    if fam.bound == "error_min":
+        return fam.s_min + margin + gap
+    if fam.bound == "error_max":
+        return -(fam.s_min - margin + gap)
+    raise ValueError(f"family {fam.bound!r} is not a spacing-error bound")
 
 
 @dataclass(frozen=True, eq=False)
@@ -429,8 +477,9 @@ class Formulation:
         rows_u = [ca.horzcat(ca.vertcat(*au), ca.MX(NU, FN))]
         rows_p = [ca.vertcat(*ap)]
         for f, fam in enumerate(self.families):
+            sg = fam.sign
             cfam = ca.DM(ca.Sparsity.triplet(1, nx, [0, 0], [fam.s_index, fam.v_index]),
-                         [1.0, -fam.t_gap])  # fmt: skip
+                         [sg, -sg * fam.t_gap])  # fmt: skip
             slack = ca.DM(ca.Sparsity.triplet(N, FN, list(range(N)),
                                               [f * N + k for k in range(N)]), 1.0)  # fmt: skip
             rows_u.append(ca.horzcat(ca.vertcat(*[cfam @ Xu[k] for k in range(1, N + 1)]), slack))

@@ -75,7 +75,7 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import Gains
 from lcc_synth.models.hdv import free_speed
 from lcc_synth.mpc.comfort import jerk_bound
-from lcc_synth.mpc.formulation import Family
+from lcc_synth.mpc.formulation import Family, error_bound, spacing_families
 from lcc_synth.mpc.joint_prediction import joint_state_weights, linearize_joint
 from lcc_synth.mpc.scaffold import (
     Layout,
@@ -140,9 +140,9 @@ class StringLayout(Layout):
 
     def families(self, model) -> list[Family]:
         c = self.settings.constraints
-        return [
-            Family(i, 2 * i - 2, 2 * i - 1, c.t_gap, c.s_min) for i in self.positions
-        ] if c.spacing_ahead else []
+        if not c.spacing_ahead:
+            return []
+        return [f for i in self.positions for f in spacing_families(i, 2 * i - 2, 2 * i - 1, c)]
 
     def default_fallback(self, model) -> Gains:
         return Gains.zero(model, "added")
@@ -227,7 +227,8 @@ class StringLayout(Layout):
         return Sample(x, d, d, {"s_ref": s_ref, "v": v, "s": s})
 
     def count_violations(self, mpc, o: Sample) -> None:
-        """The measured violation of each CAV's absolute spacing bound."""
+        """The measured violation of each CAV's spacing bound (absolute, or of its spacing
+        error from ``s_ref`` with ``constraints.spacing = "equilibrium"``)."""
         c = self.settings.constraints
         if not c.spacing_ahead:
             return
@@ -235,7 +236,11 @@ class StringLayout(Layout):
         pos = np.asarray(self.positions) - 1
         v, s = o.extra["v"], o.extra["s"]
         with np.errstate(invalid="ignore"):
-            viol = c.s_min + c.t_gap * v[pos] - s[pos]
+            if c.spacing == "safe":
+                viol = c.s_min + c.t_gap * v[pos] - s[pos]
+            else:
+                err = s[pos] - o.extra["s_ref"][pos]
+                viol = np.maximum(c.spacing_error[0] - err, err - c.spacing_error[1])
         for k in np.flatnonzero(viol > 1e-6):
             pc = mpc._per_cav[k]
             pc["violation_steps"] += 1
@@ -248,6 +253,9 @@ class StringLayout(Layout):
         s_ref = o.extra["s_ref"]
         fb = np.empty((len(mpc._families), self.settings.horizon))
         for f, fam in enumerate(mpc._families):
+            if fam.bound != "safe":  # the spacing error x[s] = s - s_ref (step 2)
+                fb[f] = error_bound(fam, c.margin)
+                continue
             fb[f] = fam.s_min + c.margin + fam.t_gap * mem.v_eq - s_ref[fam.vehicle - 1]
         return fb
 

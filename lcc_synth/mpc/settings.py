@@ -35,6 +35,9 @@ A problem file selects the MPC with a controller table (every key optional)::
     jerk_scale = 0.9           # comfort: |a_k - a_{k-W}| <= jerk_scale * ISO 15622 limit at the
                                #   CAV's speed * W Ts (0 = off; yields to the spacing bounds)
     jerk_window = 1.0          # W Ts (s): 1 s = ISO 15622's average, sample_time = per step
+    spacing = "safe"           # the CAVs' own spacing bound: "safe" (s_min + t_gap v above) or
+                               #   "equilibrium": the DeeP-LCC paper's bound on the spacing ERROR
+    spacing_error = [-15.0, 20.0]   # from the equilibrium spacing s*(v_eq) (m; "equilibrium" only)
 
     [controllers.mpc.prediction]
     head = "constant"          # "constant": head velocity held; "accel": its measured
@@ -78,6 +81,8 @@ __all__ = [
     "Prediction",
     "SolverSettings",
     "MPCSettings",
+    "SPACING_TARGETS",
+    "check_spacing_target",
     "settings_from_table",
 ]
 
@@ -85,6 +90,7 @@ HEAD_PREDICTIONS = ("constant", "accel")
 INPUT_ON = ("total", "model")
 EQUILIBRIA = ("moving_average", "fixed")
 SOLVER_METHODS = ("osqp", "daqp")
+SPACING_TARGETS = ("safe", "equilibrium")
 
 
 @dataclass(frozen=True, repr=False)
@@ -109,7 +115,16 @@ class Weights(Record):
 
 @dataclass(frozen=True, repr=False)
 class Constraints(Record):
-    """Hard input bounds and soft absolute spacing bounds."""
+    """Hard input bounds and soft spacing bounds.
+
+    ``spacing`` selects the bound on each CAV's own spacing ahead: ``"safe"`` (the default),
+    the absolute ``s >= s_min + t_gap v``; ``"equilibrium"``, the DeeP-LCC paper's bound on
+    the spacing error from the equilibrium spacing of the estimated equilibrium velocity,
+    ``spacing_error[0] <= s - s*(v_eq) <= spacing_error[1]`` (Wang et al., IEEE T-CST 2023,
+    Sec. VI: -15 and 20 m), both sides soft and ``margin`` tighter, ``s_min`` and ``t_gap``
+    unused. It moves the bound with ``v_eq`` (:func:`~lcc_synth.mpc.formulation.
+    spacing_families`); the bounds ``behind`` stay absolute.
+    """
 
     a_min: float = -5.0
     a_max: float = 2.0
@@ -122,6 +137,8 @@ class Constraints(Record):
     t_gap_behind: float = 0.8
     jerk_scale: float = 0.9
     jerk_window: float = 1.0
+    spacing: str = "safe"
+    spacing_error: tuple[float, float] = (-15.0, 20.0)
 
 
 @dataclass(frozen=True, repr=False)
@@ -193,6 +210,7 @@ class MPCSettings(Record):
         """JSON-serialisable view."""
         out = asdict(self)
         out["constraints"]["behind"] = list(self.constraints.behind)
+        out["constraints"]["spacing_error"] = list(self.constraints.spacing_error)
         if isinstance(self.prediction.delay, tuple):
             out["prediction"]["delay"] = list(self.prediction.delay)
         return out
@@ -210,6 +228,30 @@ def _pos(value: float, name: str, strict: bool = False) -> None:
     ok = ok and (value > 0 if strict else value >= 0)
     if not ok:
         raise ConfigError(name, f"must be {'> 0' if strict else '>= 0'}, got {value!r}")
+
+
+def check_spacing_target(spacing: Any, spacing_error: Any, prefix: str) -> None:
+    """Check ``spacing`` and ``spacing_error`` of a constraints table (the MPC's and
+    DeeP-LCC's); ``prefix`` is the table's dotted path (``"...constraints"``).
+
+    Raises
+    ------
+    ConfigError
+        ``spacing`` not one of :data:`SPACING_TARGETS`, or ``spacing_error`` not two finite
+        numbers ``[lo, hi]`` with ``lo < 0 < hi`` (the equilibrium itself must satisfy it).
+    """
+    import math
+
+    if spacing not in SPACING_TARGETS:
+        raise ConfigError(f"{prefix}.spacing",
+                          f"must be one of {list(SPACING_TARGETS)}, got {spacing!r}")
+    e = spacing_error
+    ok = isinstance(e, tuple | list) and len(e) == 2 and all(
+        isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x) for x in e)
+    if not ok or not e[0] < 0.0 < e[1]:
+        raise ConfigError(f"{prefix}.spacing_error",
+                          "must be [lo, hi] in metres with lo < 0 < hi (the bounds on s - s*(v_eq)"
+                          f", e.g. the DeeP-LCC paper's [-15, 20]), got {e!r}")
 
 
 def validate(s: MPCSettings, field_prefix: str = "") -> None:
@@ -262,6 +304,7 @@ def validate(s: MPCSettings, field_prefix: str = "") -> None:
             )
     if len(set(c.behind)) != len(c.behind):
         raise ConfigError(f"{pre}constraints.behind", f"has duplicates: {list(c.behind)}")
+    check_spacing_target(c.spacing, c.spacing_error, f"{pre}constraints")
     p = s.prediction
     if p.head not in HEAD_PREDICTIONS:
         raise ConfigError(
@@ -337,6 +380,8 @@ def settings_from_table(table: Mapping[str, Any], field_name: str) -> MPCSetting
                     raise ConfigError(f"{f}.prediction.delay",
                                       f"must be a number (s) or a list of numbers, got {tau!r}")
                 values[k] = tuple(tau) if isinstance(tau, list) else tau
+            elif k == "spacing_error":
+                values[k] = tuple(t.get(raw, k, f"{f}.{sub}"))
             else:
                 values[k] = t.get(raw, k, f"{f}.{sub}")
         return cls(**values)

@@ -127,6 +127,13 @@ MPC_WEIGHTS = Table(
          "convex).", 1.0, lo=0.0)),
     variant=_MPC,
 )
+_SPACING = Key("spacing", "string", "Bound on each CAV's own spacing ahead: safe (absolute, "
+               "s >= s_min + t_gap v) or equilibrium (the DeeP-LCC paper's: spacing_error on "
+               "s - s*(v_eq), the equilibrium spacing of the estimated velocity).", "safe",
+               choices=("safe", "equilibrium"))
+_SPACING_ERROR = Key("spacing_error", "number list", 'Bounds [lo, hi] on s - s*(v_eq), lo < 0 '
+                     '< hi (spacing = "equilibrium" only; the paper: [-15, 20]).',
+                     [-15.0, 20.0], length=2, unit="m")
 MPC_CONSTRAINTS = Table(
     f"{_C}.constraints", "MPC bounds: hard acceleration, soft spacing, ISO 15622 comfort.", _CMDS,
     (Key("a_min", "number", "Hard lower bound on the CAV's total acceleration.", -5.0,
@@ -145,7 +152,8 @@ MPC_CONSTRAINTS = Table(
      Key("jerk_scale", "number", "|a_k - a_{k-W}| <= jerk_scale * ISO 15622 limit * W Ts "
          "(0: off).", 0.9, lo=0.0, hi=1.0),
      Key("jerk_window", "number", "W Ts, in [sample_time, 10] when jerk_scale > 0 (1 s: ISO "
-         "15622's average).", 1.0, lo=0.0, lo_open=True, unit="s")),
+         "15622's average).", 1.0, lo=0.0, lo_open=True, unit="s"),
+     _SPACING, _SPACING_ERROR),
     variant=_MPC,
 )
 MPC_PREDICTION = Table(
@@ -225,7 +233,7 @@ DEEP_LCC_WEIGHTS = Table(
     variant=_DEEP,
 )
 DEEP_LCC_CONSTRAINTS = Table(
-    f"{_C}.constraints", "DeeP-LCC bounds: hard acceleration, soft absolute safe spacing of "
+    f"{_C}.constraints", "DeeP-LCC bounds: hard acceleration, soft spacing of "
     "every CAV (as the MPC's).", _CMDS,
     (Key("a_min", "number", "Hard lower bound on every CAV acceleration.", -5.0, unit="m/s²"),
      Key("a_max", "number", "Hard upper bound on it.", 2.0, unit="m/s²"),
@@ -233,7 +241,8 @@ DEEP_LCC_CONSTRAINTS = Table(
          lo=0.0, unit="m"),
      Key("t_gap", "number", "Time gap of that bound.", 0.8, lo=0.0, unit="s"),
      Key("margin", "number", "The QP enforces the bound this much tighter.", 0.1, lo=0.0,
-         unit="m")),
+         unit="m"),
+     _SPACING, _SPACING_ERROR),
     variant=_DEEP,
 )
 #: DeeP-LCC's OSQP iteration limit: past it the exact active-set solve takes over.
