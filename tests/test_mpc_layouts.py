@@ -62,6 +62,7 @@ OPTIONS = {
     "head_accel": {"prediction": {"head": "accel"}},
     "fixed_equilibrium": {"prediction": {"equilibrium": "fixed"}},
     "delay": {"prediction": {"delay": 0.3}},
+    "equilibrium_spacing": {"constraints": {"spacing": "equilibrium"}},
 }
 #: (option, layout) -> the key a ConfigError names (the rest of the matrix works)
 REFUSED = {

@@ -17,7 +17,10 @@ At every sample (the data's ``dt``; the simulator holds the command in between):
 4. **QP** (:mod:`lcc_synth.deeplcc.qp`) on the exact reduction of the QP in ``g``, solved by
    OSQP (one workspace per batch member set up at :meth:`reset`, vectors updated per step,
    warm start from the shifted previous solution, status checked:
-   :class:`lcc_synth.mpc.solver.OSQPSolver`).
+   :class:`lcc_synth.mpc.solver.OSQPSolver`). The spacing bound of every CAV is the absolute
+   safe spacing, or with ``constraints.spacing = "equilibrium"`` the paper's ``lo <= s -
+   s_eq <= hi`` on its spacing error (the rows of ``y`` with no time gap, plus upper rows:
+   :func:`lcc_synth.deeplcc.qp.formulate`).
 5. **Exact re-solve.** When OSQP stops unsolved (``max_iter`` = 200 by default), the same QP
    is solved by DAQP, an exact active-set solver (:class:`lcc_synth.deeplcc.qp.ExactSolver`);
    ``solver.exact = false`` skips it. Measured on the two-CAV platoon brake

@@ -19,7 +19,10 @@ pseudo-inverse; the minimum-norm ``beta`` is optimal). Decision vector
          c_w + K (v_u - c_u) + S^1/2 beta + sigma >= s_min + margin + t_gap v_eq - s_eq
          sigma >= 0                                             (soft, absolute metres)
 
-so the bound is ``s >= s_min + margin + t_gap v`` with ``s = s_eq + s~``, ``v = v_eq + v~`` (the
+(with ``constraints.spacing = "equilibrium"``: ``t_gap = 0``, ``v_w`` the spacing errors
+from ``s_eq``, the lower bound ``lo + margin`` and upper rows ``-v_w + sigma_up >= -(hi -
+margin)`` with their own slacks, :func:`formulate`'s ``upper``), so the bound is
+``s >= s_min + margin + t_gap v`` with ``s = s_eq + s~``, ``v = v_eq + v~`` (the
 MPC's definition, :class:`lcc_synth.mpc.settings.Constraints`), its l1 penalty exact. Only the
 vectors change between steps (``c`` is affine in the measured past); the Hessian, the
 constraint matrix and the maps of ``c`` into ``q`` and the bounds are extracted from the

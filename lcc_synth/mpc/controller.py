@@ -48,6 +48,9 @@ for one CAV of the paper's kinds (:class:`~lcc_synth.mpc.joint.StringLayout` sta
    ``constraints.margin`` tighter (default 0.1 m: covers the mismatch between the exact ZOH
    prediction and the simulator's Euler steps), soft with an exact l1 penalty (FD-LCC: ``s_0``
    predicted from the measured spacing, the vehicle ahead moving with the head prediction).
+   ``constraints.spacing = "equilibrium"`` replaces it by the DeeP-LCC paper's two-sided
+   bound on the spacing error, ``lo <= s_0 - s_eq <= hi`` (``constraints.spacing_error``,
+   both soft, ``margin`` tighter; :func:`~lcc_synth.mpc.formulation.spacing_families`).
 6. **Fallback chain** when the QP is not solved (status other than ``solved``, non-finite
    data, any exception): the previous plan shifted by one step (while it lasts), else a static
    gain (another controller of the file, ``fallback = "h2"`` in ``problems/showcase.toml``; or
@@ -640,8 +643,9 @@ class MPCController(MPCScaffold):
         Times are in milliseconds: ``step_time_ms`` is the whole controller step of one batch
         member (state, QP update and solve, fallback), ``osqp_time_ms`` OSQP's own run time.
         ``violation_steps`` / ``max_violation_m`` compare the MEASURED spacing with
-        ``s_min + t_gap v_i`` at every sample; ``slack_steps`` / ``max_slack_m`` are the
-        predicted violations the QP accepted. A string's fallback counters count CAV-samples,
+        ``s_min + t_gap v_i`` (``constraints.spacing = "equilibrium"``: the spacing error from
+        the reference spacing with ``spacing_error``) at every sample; ``slack_steps`` /
+        ``max_slack_m`` are the predicted violations the QP accepted. A string's fallback counters count CAV-samples,
         and ``per_cav`` gives for each ``u_i`` its fallback counts, their reasons (OSQP
         status, ``nonfinite_state``, ``error``) and its measured violations.
         """

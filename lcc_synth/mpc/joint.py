@@ -32,7 +32,9 @@ single-CAV MPC (:mod:`lcc_synth.mpc.solver`). Per sample:
    ``prediction.head = "accel"``), as today; ring: no head.
 4. **QP**: each CAV's hard acceleration limits, each CAV's ABSOLUTE soft safe spacing
    ``s_i >= s_min + t_gap v_i`` (``constraints.margin`` tighter, exact l1 + small quadratic
-   slack), ISO 15622 comfort rows per CAV yielding to the spacing
+   slack; ``constraints.spacing = "equilibrium"``: the DeeP-LCC paper's ``lo <= s_i - s_ref,i
+   <= hi`` instead, :func:`~lcc_synth.mpc.formulation.spacing_families`), ISO 15622 comfort
+   rows per CAV yielding to the spacing
    (:func:`~lcc_synth.mpc.comfort.solve_prioritised`).
 5. **Fallback chain, per CAV**, when the QP is not solved: the previous plan shifted by one
    step (while it lasts), else the CAV's static fallback row (a :class:`~lcc_synth.models.
