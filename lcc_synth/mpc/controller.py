@@ -645,8 +645,8 @@ class MPCController(MPCScaffold):
         ``violation_steps`` / ``max_violation_m`` compare the MEASURED spacing with
         ``s_min + t_gap v_i`` (``constraints.spacing = "equilibrium"``: the spacing error from
         the reference spacing with ``spacing_error``) at every sample; ``slack_steps`` /
-        ``max_slack_m`` are the predicted violations the QP accepted. A string's fallback counters count CAV-samples,
-        and ``per_cav`` gives for each ``u_i`` its fallback counts, their reasons (OSQP
+        ``max_slack_m`` are the predicted violations the QP accepted. A string's fallback
+        counters count CAV-samples, and ``per_cav`` gives for each ``u_i`` its fallback counts, their reasons (OSQP
         status, ``nonfinite_state``, ``error``) and its measured violations.
         """
         return self.layout.stats(self, step_statistics(self._st))
