@@ -646,7 +646,8 @@ class MPCController(MPCScaffold):
         ``s_min + t_gap v_i`` (``constraints.spacing = "equilibrium"``: the spacing error from
         the reference spacing with ``spacing_error``) at every sample; ``slack_steps`` /
         ``max_slack_m`` are the predicted violations the QP accepted. A string's fallback
-        counters count CAV-samples, and ``per_cav`` gives for each ``u_i`` its fallback counts, their reasons (OSQP
-        status, ``nonfinite_state``, ``error``) and its measured violations.
+        counters count CAV-samples, and ``per_cav`` gives for each ``u_i`` its fallback
+        counts, their reasons (OSQP status, ``nonfinite_state``, ``error``) and its measured
+        violations.
         """
         return self.layout.stats(self, step_statistics(self._st))
