@@ -7,8 +7,9 @@ evaluated here at the controller's recorded ``v_eq``, and the spacings the simul
 measured. The QP's spacing rows, evaluated on a random input plan with the prediction model
 simulated in numpy (not the CasADi condensation), must be the distance of the predicted
 ABSOLUTE spacing to ``s*(v_eq) + lo + margin`` (lower rows) and from ``s*(v_eq) + hi -
-margin`` (upper rows), on one CAV, a two-CAV platoon and the ring (whose reference spacings
-are ``s*(v_eq)`` shifted by the mean measured offset, so that they sum to the circumference).
+margin`` (upper rows), on one CAV (CF-LCC, and FD-LCC whose spacing is predicted from the
+measured one), a two-CAV platoon and the ring (whose reference spacings are ``s*(v_eq)``
+shifted by the mean measured offset, so that they sum to the circumference).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 BRAKE = ROOT / "problems" / "mpc_head_brake.toml"
 PLATOON = ROOT / "problems" / "platoon_deeplcc_brake.toml"
 RING = ROOT / "problems" / "ring_stop_and_go.toml"
+FD = ROOT / "problems" / "mpc_table2_fd.toml"
 PAPER = {"spacing": "equilibrium", "spacing_error": [-15.0, 20.0]}
 
 
@@ -71,7 +73,6 @@ def _check_rows(ctrl, res, calls, samples, cav_cols, s_target, s_index):
     N, NU = form.N, form.n_input
     A = mem.qp.A.toarray()
     rng = np.random.default_rng(5)
-    dt = res.dt
     checked = []
     for k in samples:
         _, lo, _ = calls[k]
@@ -79,7 +80,7 @@ def _check_rows(ctrl, res, calls, samples, cav_cols, s_target, s_index):
         z = np.concatenate([U, np.zeros(form.nz - NU)])
         r = A @ z - lo
         X = mem.lin.predict(h["x0"][0, k], h["d"][0, k], U)
-        i = int(round(h["t"][k] / dt))
+        i = int(np.argmin(np.abs(res.t - h["t"][k])))
         for j, (col, si) in enumerate(zip(cav_cols, s_index, strict=True)):
             s_meas = float(res.spacing[0, i, col])
             target = s_target(k, i)[j]
@@ -111,6 +112,24 @@ def test_one_cav_rows_follow_the_ovm_equilibrium_spacing_of_v_eq():
 
     t = _check_rows(ctrl, res, calls, samples, [m + 1], target, [s_idx])
     assert t.max() - t.min() > 3.0, t  # the bound moved with v_eq
+
+
+def test_fd_lcc_rows_predict_the_spacing_from_the_measured_one():
+    """FD-LCC (``problems/mpc_table2_fd.toml``: fixed v* = 15 m/s, the head cruising ahead,
+    vehicle 1 braking behind): the state has no spacing of the CAV; its predicted spacing is
+    the measured one plus the CAV's predicted displacement from the reference (``-p_0``), and
+    the rows bound that against ``s*(15) = 20 m``."""
+    table = copy.deepcopy(load_problem(FD).data["controllers"]["mpc"])
+    table.pop("fallback", None)
+    table.setdefault("constraints", {}).update(PAPER)
+    spec, ctrl, res, calls = _closed_loop(FD, table, 25.0)
+    i_s = [int(np.argmin(np.abs(res.t - t))) for t in ctrl.history()["t"]]
+    assert np.all(res.velocity[0, i_s, 0] == spec.system.v_star)  # head error d = 0: no drift
+
+    def target(k, i):
+        return [ovm_spacing(spec.system.hdv, spec.system.v_star)]
+
+    _check_rows(ctrl, res, calls, range(195, 250, 6), [1], target, [0])
 
 
 def test_two_cav_platoon_rows_use_each_cavs_own_equilibrium_spacing():
