@@ -92,8 +92,8 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Family:
-    """One soft spacing constraint family ``sign (x_k[s] - t_gap * x_k[v]) + e >= bound``
-    (k = 1..N).
+    """One soft spacing constraint family ``sign (x_k[s] - t_gap * x_k[v]) + e_k >= b_k``
+    (k = 1..N; ``b_k`` from the layout's ``spacing_bounds``).
 
     ``vehicle`` is the paper's index (0 = the CAV's spacing to the vehicle ahead; a position
     of a platoon or ring). ``bound`` is ``"safe"`` (the absolute ``s >= s_min + t_gap v``,
