@@ -5,7 +5,7 @@ Head vehicle yellow, CAV blue, HDVs grey (the colours of the Rerun recordings,
 :data:`PALETTE`'s ``controllers`` colours, which are never blue or yellow, baselines grey.
 
 Figures that must tell every vehicle apart (the profiles of ``lcc-synth run``) use
-:func:`vehicle_styles`: the head yellow, each CAV its own colour (:data:`Palette.cavs`, the
+:func:`vehicle_styles`: the head yellow, each CAV its own colour (``Palette.cavs``, the
 first the recordings' blue) and marker (:data:`CAV_MARKERS`), the HDVs a sequential colormap
 (:data:`HDV_COLORMAP`, dark purple at the front to orange at the back, never yellow or blue)
 by position behind the head. :func:`curve_styles` gives the |Γ| curves one colour per
@@ -189,7 +189,7 @@ def curve_styles(labels) -> dict:
     """``{label: matplotlib keywords}`` of |Γ| curves: one colour per controller (the part of
     the label before ``" @ "``, :func:`controller_colors`), a setting after ``" @ "`` dotted in
     the same colour; each measured controller (``measured`` in the keywords' caller) gets its
-    own marker from :data:`POINT_MARKERS` in the order of the labels (a pure function)."""
+    own marker from ``POINT_MARKERS`` in the order of the labels (a pure function)."""
     base = {label: label.split(" @ ")[0] for label in labels}
     colors = controller_colors(dict.fromkeys(base.values()))
     out = {}

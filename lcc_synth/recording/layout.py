@@ -237,7 +237,7 @@ def simulation_blueprint(
     and their predicted velocities.
 
     Every time-series view opens on the whole run. ``ranges`` (:func:`plot_ranges`) fixes the
-    opening time span (each view's own x axis: :func:`_time_views`) and y ranges; without it
+    opening time span (each view's own x axis: ``_time_views``) and y ranges; without it
     the x axes are linked on the viewer's default (the data up to 60 s long, else the cursor
     +- 30 s) and y fits the data. The per-vehicle plots hide their legends (12 series
     would cover the curves; hovering names a curve); a one-line key above them

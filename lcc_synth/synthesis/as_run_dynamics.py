@@ -27,8 +27,8 @@ The sample time is a discrete choice: a latency that is not a multiple of ``T`` 
 loop (:class:`~lcc_synth.analysis.as_run.NotRepresentable`), so the candidates must divide
 every latency; each candidate is searched on its own.
 
-Method
-------
+Method of the dynamic design
+----------------------------
 Non-smooth optimisation of a fixed-structure controller from many starts, in the spirit of
 hinfstruct / systune: the peak of ``|Gamma|`` is a max over frequencies (not differentiable
 where the arg max jumps), and gradients with respect to ``tau`` and ``tau_f`` would mean
