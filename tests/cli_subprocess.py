@@ -1,9 +1,15 @@
-"""The real ``lcc-synth`` command in a subprocess, for the tests of failure paths.
+"""The real ``lcc-synth`` command in a subprocess, for the tests of failure paths, and the
+problem text the tests share.
 
 ``run_cli`` runs it to the end; ``start_cli`` starts it and returns the ``Popen`` (to send a
 signal at a chosen moment). Both run the installed console script (``lcc-synth``), the way a
 user does, from a working directory of the test's choosing, with Rerun's analytics off and a
-non-interactive matplotlib; ``PYTHONPATH`` (a worktree's package) is passed on.
+non-interactive matplotlib (:func:`cli_env`, unless the test passes its own environment); the
+package they import is always this checkout's (its root first on ``PYTHONPATH``, also in an
+environment the test passes), never another worktree's installed one.
+
+``PAPER_HDV`` is the ``[hdv]`` table of the paper's OVM drivers that the tests' short problem
+files start from.
 """
 
 from __future__ import annotations
@@ -19,6 +25,17 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 PROBLEMS = REPO / "problems"
 
+#: The paper's OVM drivers (Sec. V: alpha = 0.6, beta = 0.9, s_st = 5 m, s_go = 35 m,
+#: v_max = 30 m/s) as a problem file's ``[hdv]`` table.
+PAPER_HDV = """[hdv]
+model = "ovm"
+alpha = 0.6
+beta = 0.9
+s_st = 5.0
+s_go = 35.0
+v_max = 30.0
+"""
+
 
 def cli_command() -> list[str]:
     """The console script next to this interpreter (the venv's), else ``python -m``."""
@@ -32,10 +49,18 @@ def cli_command() -> list[str]:
 
 
 def cli_env(**extra: str) -> dict[str, str]:
+    """This process's environment with Rerun's analytics off, matplotlib non-interactive,
+    unbuffered output, then ``extra``."""
     env = dict(os.environ)
     env.update(RERUN_ANALYTICS="0", MPLBACKEND="Agg", PYTHONUNBUFFERED="1")
     env.update(extra)
     return env
+
+
+def _this_checkout(env: dict[str, str]) -> dict[str, str]:
+    """``env`` with this checkout's root first on ``PYTHONPATH``."""
+    rest = [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p and p != str(REPO)]
+    return {**env, "PYTHONPATH": os.pathsep.join([str(REPO), *rest])}
 
 
 def run_cli(
@@ -44,18 +69,19 @@ def run_cli(
 ) -> subprocess.CompletedProcess:  # fmt: skip
     """``lcc-synth ARGS`` to the end; text output captured."""
     return subprocess.run(
-        [*cli_command(), *map(str, args)], cwd=cwd, env=env or cli_env(), capture_output=True,
-        text=True, timeout=timeout, preexec_fn=preexec_fn,
+        [*cli_command(), *map(str, args)], cwd=cwd, env=_this_checkout(env or cli_env()),
+        capture_output=True, text=True, timeout=timeout, preexec_fn=preexec_fn,
     )  # fmt: skip
 
 
 def start_cli(
-    args: Sequence[str], cwd: str | Path, env: dict | None = None
-) -> subprocess.Popen:
+    args: Sequence[str], cwd: str | Path, env: dict | None = None,
+    preexec_fn: Callable[[], None] | None = None,
+) -> subprocess.Popen:  # fmt: skip
     """``lcc-synth ARGS`` started (stdout and stderr piped, text)."""
     return subprocess.Popen(
-        [*cli_command(), *map(str, args)], cwd=cwd, env=env or cli_env(),
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        [*cli_command(), *map(str, args)], cwd=cwd, env=_this_checkout(env or cli_env()),
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=preexec_fn,
     )  # fmt: skip
 
 

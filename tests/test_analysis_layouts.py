@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_subprocess import PAPER_HDV
 from exact_rank import kalman_rank, observability_rank
 
 from lcc_synth.analysis.controllability import (
@@ -334,14 +335,7 @@ def test_gains_of_either_vocabulary_give_the_same_string_report():
 # --------------------------------------------------------------------------------------------
 
 FIG9_AS_PLATOON = """
-[hdv]
-model = "ovm"
-alpha = 0.6
-beta = 0.9
-s_st = 5.0
-s_go = 35.0
-v_max = 30.0
-
+""" + PAPER_HDV + """
 [system]
 kind = "platoon"
 size = 5

@@ -7,8 +7,6 @@ import os
 import re
 import signal
 import socket
-import subprocess
-import sys
 import time
 import urllib.request
 
@@ -16,6 +14,8 @@ import numpy as np
 import pytest
 
 pytest.importorskip("rerun")
+
+from cli_subprocess import start_cli
 
 from lcc_synth import recording as R  # noqa: E402
 from lcc_synth.cli import review  # noqa: E402
@@ -108,13 +108,7 @@ def test_web_viewer_serves_on_localhost_and_stops_on_ctrl_c(rrd, display, tmp_pa
         if os.path.exists(f"/tmp/.X11-unix/X{display[1:]}"):
             pytest.skip(f"an X server runs on {display}")
         env["DISPLAY"] = display
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "lcc_synth.cli.main", "review", str(rrd)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        env=env,
-        text=True,
-    )
+    proc = start_cli(["review", rrd], cwd=tmp_path, env=env)
     try:
         line = proc.stdout.readline()  # blocks until the viewer listens (or fails)
         m = re.search(r"open (http://127\.0\.0\.1:(\d+)/\?url=\S+127\.0\.0\.1%3A(\d+)\S+)", line)

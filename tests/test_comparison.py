@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_subprocess import PAPER_HDV
 
 from lcc_synth.cli.main import main
 from lcc_synth.errors import ConfigError
@@ -37,14 +38,7 @@ from lcc_synth.simulation.engine import simulate
 SHORT = """
 name = "short_suite"
 
-[hdv]
-model = "ovm"
-alpha = 0.6
-beta = 0.9
-s_st = 5.0
-s_go = 35.0
-v_max = 30.0
-
+""" + PAPER_HDV + """
 [metrics]
 window = [5.0, 20.0]
 

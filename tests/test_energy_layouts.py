@@ -12,14 +12,10 @@ gains: a platoon or ring is refused with one error naming the field, in the API 
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 import scipy.linalg as sla
+from cli_subprocess import run_cli
 from scipy.integrate import quad_vec, solve_ivp
 
 from lcc_synth.analysis.energy import (
@@ -34,7 +30,6 @@ from lcc_synth.models.hdv import OVM
 from lcc_synth.models.linear import model_from_hdv
 from lcc_synth.models.platoon import Platoon, platoon_model
 
-ROOT = Path(__file__).resolve().parents[1]
 HDV = OVM(alpha=0.6, beta=0.9, v_max=30.0, s_st=5.0, s_go=35.0)
 T = 10.0
 
@@ -170,11 +165,7 @@ def test_regions_command_on_a_platoon_or_ring_file_is_one_error(tmp_path, kind):
         f'name = "{kind}"\n[hdv]\nmodel = "ovm"\n[system]\nkind = "{kind}"\nsize = 5\n'
         'cavs = [1, 3]\nv_star = 15.0\n[maps.a]\nvehicle = 2\n'
     )
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "RERUN_ANALYTICS": "0", "MPLBACKEND": "Agg"}
-    out = subprocess.run(
-        [sys.executable, "-m", "lcc_synth.cli.main", "regions", str(problem), "--no-record",
-         "-q"], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120,
-    )  # fmt: skip
+    out = run_cli(["regions", problem, "--no-record", "-q"], cwd=tmp_path, timeout=120)
     assert out.returncode == 2, out.stderr
     lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
     assert any("system.kind" in ln and kind in ln for ln in lines), out.stderr

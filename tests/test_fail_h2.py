@@ -11,19 +11,11 @@ from __future__ import annotations
 import json
 
 import pytest
-from cli_subprocess import one_line_error, rrd_verifies, run_cli
+from cli_subprocess import PAPER_HDV, one_line_error, rrd_verifies, run_cli
 
 from lcc_synth.recording import summarize_recording
 
-HDV = """
-[hdv]
-model = "ovm"
-alpha = 0.6
-beta = 0.9
-s_st = 5.0
-s_go = 35.0
-v_max = 30.0
-"""
+HDV = "\n" + PAPER_HDV
 #: A string-stable design hearing only HDV 1 of m = n = 2: the LMI is infeasible.
 H2 = """
 type = "h2"

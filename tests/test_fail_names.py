@@ -9,21 +9,14 @@ part of a path, and :func:`lcc_synth.outputs.child` refuses a name that leaves i
 from __future__ import annotations
 
 import pytest
-from cli_subprocess import run_cli
+from cli_subprocess import PAPER_HDV, run_cli
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.outputs import child, path_part
 
 SUITE = """
 name = "../../names"
-[hdv]
-model = "ovm"
-alpha = 0.6
-beta = 0.9
-s_st = 5.0
-s_go = 35.0
-v_max = 30.0
-[layouts."x/../../../victim"]
+""" + PAPER_HDV + """[layouts."x/../../../victim"]
 kind = "cf_lcc"
 m = 0
 n = 2

@@ -12,6 +12,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+from cli_subprocess import start_cli
 
 from lcc_synth.cli.main import main
 
@@ -102,11 +103,9 @@ def test_ctrl_c_exits_130_in_one_line(tmp_path):
     """Ctrl-C while the MPC runs, at two moments (most of the run is inside OSQP solves, where
     a signal late in a converging solve used to be swallowed: 8 of 32 tries ran to the end)."""
     p = _mutate(tmp_path, "mpc_head_brake.toml", r"^duration = .*$", "duration = 3000.0")
-    env = {**os.environ, "RERUN_ANALYTICS": "0", "PYTHONPATH": str(ROOT)}
     for delay in (5.0, 6.5):
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "lcc_synth.cli.main", "simulate", str(p), "--no-record"],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path,
+        proc = start_cli(
+            ["simulate", p, "--no-record"], cwd=tmp_path,
             # a shell's background job ignores SIGINT and a child inherits that: restore it
             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
         )  # fmt: skip

@@ -8,6 +8,7 @@ from __future__ import annotations
 import tomllib
 
 import pytest
+from cli_subprocess import PAPER_HDV
 
 from lcc_synth.cli.main import main
 from lcc_synth.experiments.comparison import load_suite
@@ -17,14 +18,7 @@ SUITE = """
 name = "tiny_suite"
 description = "Two short scenarios on one string, for the recording's context documents."
 
-[hdv]
-model = "ovm"
-alpha = 0.6
-beta = 0.9
-s_st = 5.0
-s_go = 35.0
-v_max = 30.0
-
+""" + PAPER_HDV + """
 [layouts.tail2]
 kind = "cf_lcc"
 m = 0

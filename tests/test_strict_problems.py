@@ -9,13 +9,12 @@ warn; every shipped problem file still loads with every command that reads it.
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
 import time
 import warnings
 from pathlib import Path
 
 import pytest
+from cli_subprocess import run_cli
 
 from lcc_synth.cli.main import main
 from lcc_synth.errors import ConfigError, ImplausibleValueWarning
@@ -213,10 +212,7 @@ def test_malformed_file_in_a_subprocess(cmd, case, tmp_path):
     mutate = next(c[1] for c in COMMON + SYSTEM if c[0] == case)
     path = _write(tmp_path, cmd, mutate)
     t0 = time.perf_counter()
-    proc = subprocess.run(
-        [sys.executable, "-m", "lcc_synth.cli.main", cmd, str(path), *BASES[cmd][1]],
-        capture_output=True, text=True, timeout=60, cwd=tmp_path,
-    )
+    proc = run_cli([cmd, path, *BASES[cmd][1]], cwd=tmp_path, timeout=60)
     assert time.perf_counter() - t0 < 20.0
     assert proc.returncode == 2, proc.stderr
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
@@ -386,11 +382,7 @@ def test_huge_gain_warning_on_stderr_of_the_cli(tmp_path):
     path = tmp_path / "cases.toml"
     base = (PROBLEMS / "paper_fig9_cases.toml").read_text()
     path.write_text(base + "\n[cases.huge]\ngains = { s_1 = 1e12 }\n")
-    proc = subprocess.run(
-        [sys.executable, "-m", "lcc_synth.cli.main", "analyze", str(path), "--no-record",
-         "--json"],
-        capture_output=True, text=True, timeout=120, cwd=tmp_path,
-    )
+    proc = run_cli(["analyze", path, "--no-record", "--json"], cwd=tmp_path, timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert "ImplausibleValueWarning" in proc.stderr and "cases.huge.gains.s_1" in proc.stderr
     assert "Traceback" not in proc.stderr

@@ -11,6 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from cli_subprocess import PAPER_HDV
 
 from lcc_synth.cli.main import main
 from lcc_synth.errors import ConfigError
@@ -28,14 +29,7 @@ from lcc_synth.simulation.engine import simulate
 SWEEP = """
 name = "small_sweep"
 
-[hdv]
-model = "ovm"
-alpha = 0.6
-beta = 0.9
-s_st = 5.0
-s_go = 35.0
-v_max = 30.0
-
+""" + PAPER_HDV + """
 [system]
 kind = "cf_lcc"
 m = 0

@@ -21,10 +21,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_subprocess import PROBLEMS, run_cli
 
 from lcc_synth.experiments.sweep import load_sweep, run_sweep
 
-ROOT = Path(__file__).parents[1]
 DASK = Path(sys.executable).parent / "dask"
 
 #: Slow (deselected by a plain ``pytest``, run in CI): the sweep on a local Dask cluster equals
@@ -53,7 +53,7 @@ type = "mpc"
 
 
 def _problem(tmp: Path) -> Path:
-    text = (ROOT / "problems" / "sweep_robustness.toml").read_text()
+    text = (PROBLEMS / "sweep_robustness.toml").read_text()
     head = text[: text.index("[sweep]")].replace("duration = 40.0", "duration = 20.0")
     head = head.replace("window = [5.0, 40.0]", "window = [5.0, 20.0]")
     path = tmp / "sweep_small.toml"
@@ -136,11 +136,8 @@ def _same(a, b) -> None:
 def test_cli_sweep_on_an_external_cluster_equals_the_local_run(cluster, local, tmp_path):
     address, _ = cluster
     path, ref = local
-    out = subprocess.run(
-        [sys.executable, "-m", "lcc_synth.cli.main", "sweep", str(path), "--scheduler", address,
-         "--json", "--no-figures", "--no-progress", "--out", str(tmp_path / "res")],
-        capture_output=True, text=True, timeout=600, cwd=tmp_path,
-    )  # fmt: skip
+    out = run_cli(["sweep", path, "--scheduler", address, "--json", "--no-figures",
+                   "--no-progress", "--out", tmp_path / "res"], cwd=tmp_path, timeout=600)
     assert out.returncode == 0, out.stderr[-2000:]
     doc = json.loads(out.stdout)
     assert doc["sweep"]["scheduler"] == address and doc["sweep"]["tasks"] == 8

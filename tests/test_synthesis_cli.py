@@ -4,26 +4,16 @@ file running in the nonlinear simulator against the paper's gains (Table II scen
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_subprocess import PAPER_HDV, PROBLEMS
 
 from lcc_synth.cli.main import main
 from lcc_synth.synthesis.gains_file import REQUIRED_KEYS, read_gains
 
-ROOT = Path(__file__).resolve().parents[1]
-PROBLEMS = ROOT / "problems"
-
 BASE = """
-[hdv]
-model = "ovm"
-alpha = 0.6
-beta = 0.9
-s_st = 5.0
-s_go = 35.0
-v_max = 30.0
-
+""" + PAPER_HDV + """
 [system]
 kind = "{kind}"
 m = {m}

@@ -20,7 +20,6 @@ dict of the (homogeneous) HDV model for the paper's kinds and the per-vehicle li
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from functools import partial
@@ -242,7 +241,8 @@ def _print_human(doc: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lcc_synth.errors import ConfigError, FileError
+    from lcc_synth.cli.output import write_and_report
+    from lcc_synth.errors import ConfigError
     from lcc_synth.outputs import check_file
     from lcc_synth.provenance import provenance
     from lcc_synth.recording import record_analysis_file, recording_path
@@ -257,8 +257,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(
             "--png", "needs [cases.NAME] tables on a system with a head vehicle", doc["file"]
         )
-    written, error = [], None
-    try:  # a file that cannot be written (a full disk) does not hide the report printed below
+
+    def write(written: list[str]) -> None:
         if rrd is not None:
             import numpy as np
 
@@ -267,9 +267,9 @@ def run(args: argparse.Namespace) -> int:
                 name: (omega, np.abs(gamma(omega)), rep.as_dict())
                 for name, (gamma, rep, _label) in extra["reports"].items()
             }
-            rrd = record_analysis_file(rrd, doc["problem"], gamma=curves, summary=doc,
-                                       overwrite=args.overwrite, provenance=prov)  # fmt: skip
-            print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
+            path = record_analysis_file(rrd, doc["problem"], gamma=curves, summary=doc,
+                                        overwrite=args.overwrite, provenance=prov)  # fmt: skip
+            print(f"recording: {path} (lcc-synth review {path})", file=sys.stderr)
         if args.png:
             import numpy as np
 
@@ -282,16 +282,9 @@ def run(args: argparse.Namespace) -> int:
                 curves[label] = (mag, rep)
             title = f"{doc['problem']}: head-to-tail |Gamma(jw)| (Fig. 9)"
             written.append(str(plot_gamma_curves(curves, omega, args.png, title=title)))
-    except FileError as err:
-        error = err
-    doc["written"] = written
-    if args.json:
-        print(json.dumps({**doc, "provenance": prov}))
-    else:
-        _print_human(doc)
-        for w in written:
-            print(f"wrote {w}")
-    if error is not None:
-        print(f"lcc-synth analyze: error: {error}", file=sys.stderr)
-        return 1
-    return 0
+
+    return write_and_report(
+        "analyze", args.json, write,
+        lambda written, ok: {**doc, "written": written, "provenance": prov},
+        lambda: _print_human(doc),
+    )  # fmt: skip

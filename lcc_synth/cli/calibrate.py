@@ -4,8 +4,6 @@
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 import time
 
 HELP = "calibrate OVM / IDM drivers on a recorded platoon (an NGSIM-style trajectory CSV)"
@@ -48,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from lcc_synth.calibration.fit import calibrate
     from lcc_synth.calibration.report import format_report
-    from lcc_synth.errors import FileError
+    from lcc_synth.cli.output import write_and_report
     from lcc_synth.outputs import check_file
     from lcc_synth.resources import notice
     from lcc_synth.schema.trajectories import read_trajectory
@@ -64,21 +62,15 @@ def run(args: argparse.Namespace) -> int:
 
     cal = calibrate(traj, args.model, args.length, args.starts, args.seed, args.substeps,
                     progress)  # fmt: skip
-    written, error = [], None
-    if args.out:
-        from lcc_synth.calibration.problem import write_problem
 
-        try:
+    def write(written: list[str]) -> None:
+        if args.out:
+            from lcc_synth.calibration.problem import write_problem
+
             written.append(str(write_problem(args.out, cal, traj, args.overwrite)))
-        except FileError as err:
-            error = err
-    if args.json:
-        print(json.dumps({"ok": error is None, **cal.as_dict(), "written": written}))
-    else:
-        print(format_report(cal))
-        for w in written:
-            print(f"wrote {w}")
-    if error is not None:
-        print(f"lcc-synth calibrate: error: {error}", file=sys.stderr)
-        return 1
-    return 0
+
+    return write_and_report(
+        "calibrate", args.json, write,
+        lambda written, ok: {"ok": ok, **cal.as_dict(), "written": written},
+        lambda: print(format_report(cal)),
+    )  # fmt: skip

@@ -3,15 +3,23 @@
 The ``--json`` documents are the machine face and keep every digit; what a person reads goes
 through :func:`text_table` and :func:`sig`: times with 3 significant digits (``0.350 ms``,
 ``5.41 ms``), counts as integers, no Python or JSON literals among the rows.
+
+:func:`write_and_report` is the one ending of the commands that compute a report and then write
+files of it (``analyze``, ``calibrate``, ``regions``, ``synthesize``): the files are written
+through :mod:`lcc_synth.outputs` by the command's own writer, and a file that cannot be written
+(a full disk) does not hide the report, which is printed first; its error is one stderr line and
+exit status 1.
 """
 
 from __future__ import annotations
 
+import json
 import math
-from collections.abc import Mapping, Sequence
+import sys
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
-__all__ = ["LINE_WIDTH", "sig", "text_table", "controller_stats_lines"]
+__all__ = ["LINE_WIDTH", "sig", "text_table", "controller_stats_lines", "write_and_report"]
 
 
 def sig(value: Any, digits: int = 3) -> str:
@@ -105,3 +113,55 @@ def controller_stats_lines(
         lines.append("MPC solver (step time per batch member, ms; iterations median / max):")
         lines += text_table(_MPC_HEADER, rows, width)
     return lines + other
+
+
+def write_and_report(
+    command: str,
+    as_json: bool,
+    write: Callable[[list[str]], None],
+    document: Callable[[list[str], bool], Mapping[str, Any]],
+    report: Callable[[], None],
+) -> int:
+    """Write a command's files, print its result, and give its exit status.
+
+    Parameters
+    ----------
+    command
+        The command's name, for the error line (``lcc-synth COMMAND: error: ...``).
+    as_json
+        ``--json``: print ``document`` as one JSON object; else call ``report`` and print
+        ``wrote PATH`` for each file written.
+    write
+        Writes the files (through :mod:`lcc_synth.outputs`), appending the path of each file
+        written to the list it is given, in order; may raise
+        :class:`~lcc_synth.errors.FileError`, which stops the writing (the files written before
+        it stay listed).
+    document
+        ``document(written, ok)``: the JSON object (``ok``: no file failed).
+    report
+        Prints the text report.
+
+    Returns
+    -------
+    int
+        0, or 1 after a file that could not be written (its one line on stderr, after the
+        report).
+    """
+    from lcc_synth.errors import FileError
+
+    written: list[str] = []
+    error: FileError | None = None
+    try:  # a file that cannot be written (a full disk) does not hide the report printed below
+        write(written)
+    except FileError as err:
+        error = err
+    if as_json:
+        print(json.dumps(document(written, error is None)))
+    else:
+        report()
+        for w in written:
+            print(f"wrote {w}")
+    if error is None:
+        return 0
+    print(f"lcc-synth {command}: error: {error}", file=sys.stderr)
+    return 1

@@ -8,7 +8,6 @@ and, for a map with a ``baseline``, how much string-stable area it gains over th
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
 from lcc_synth.cli.arguments import add_problem_arguments, add_recording
@@ -36,7 +35,8 @@ def run(args: argparse.Namespace) -> int:
     import time
 
     from lcc_synth.analysis.region_specs import expansion, region_specs_from, run_region_specs
-    from lcc_synth.errors import ConfigError, FileError
+    from lcc_synth.cli.output import write_and_report
+    from lcc_synth.errors import ConfigError
     from lcc_synth.outputs import check_file
     from lcc_synth.problem import load_problem, system_from
     from lcc_synth.provenance import provenance
@@ -86,36 +86,44 @@ def run(args: argparse.Namespace) -> int:
             entry["baseline"] = specs[name].baseline
             entry["expansion"] = expansion(rm, maps[specs[name].baseline])
         doc["maps"][name] = entry
-    written, error = [], None
-    try:  # a file that cannot be written (a full disk) does not hide the report printed below
+
+    def write(written: list[str]) -> None:
         if rrd is not None:
             reports = {n: {k: v for k, v in e.items() if k != "labels"}
                        for n, e in doc["maps"].items()}  # fmt: skip
-            rrd = record_analysis_file(rrd, prob.name, regions=maps, region_reports=reports,
-                                       summary=doc, overwrite=args.overwrite, provenance=prov)
-            print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
+            path = record_analysis_file(rrd, prob.name, regions=maps, region_reports=reports,
+                                        summary=doc, overwrite=args.overwrite, provenance=prov)
+            print(f"recording: {path} (lcc-synth review {path})", file=sys.stderr)
         if args.png:
             from lcc_synth.figures import plot_region_maps
 
             baselines = {n: maps[s.baseline] for n, s in specs.items() if s.baseline}
             titles = {n: s.title for n, s in specs.items()}
             written.append(str(plot_region_maps(maps, args.png, baselines, titles)))
-    except FileError as err:
-        error = err
-    doc["written"] = written
-    if args.json:
-        print(json.dumps({**doc, "provenance": prov}))
-        return _failed(error)
-    print(f"{doc['problem']} ({src}): {system.kind}, m = {system.m}, n = {system.n}, "
-          f"v* = {system.v_star:g} m/s; {omega.size} frequencies in "
-          f"[{omega[0]:g}, {omega[-1]:g}] rad/s")
+
+    def report() -> None:
+        print(f"{doc['problem']} ({src}): {system.kind}, m = {system.m}, n = {system.n}, "
+              f"v* = {system.v_star:g} m/s; {omega.size} frequencies in "
+              f"[{omega[0]:g}, {omega[-1]:g}] rad/s")
+        _print_table(doc["maps"])
+        print(f"total {total:.2f} s for {sum(m.points for m in maps.values())} points")
+
+    return write_and_report(
+        "regions", args.json, write,
+        lambda written, ok: {**doc, "written": written, "provenance": prov}, report,
+    )  # fmt: skip
+
+
+def _print_table(maps: dict) -> None:
+    """The maps' rows (``doc["maps"]``: fractions, the gain against the baseline, time) and the
+    maps' points too close to call."""
     header = (
         f"{'map':<8} {'vehicle':>7} {'grid':>11} {'fixed gains':<22} {'plant st.':>9} "
         f"{'string st.':>10} {'vs baseline':<22} {'s':>6}"
     )
     print(header)
     print("-" * len(header))
-    for name, e in doc["maps"].items():
+    for name, e in maps.items():
         fixed = ", ".join(f"{k}={v:g}" for k, v in e["fixed_gains"].items()) or "-"
         vs = "-"
         if "expansion" in e:
@@ -128,21 +136,9 @@ def run(args: argparse.Namespace) -> int:
             f"{vs:<22} {e['seconds']:>6.2f}"
         )
     print("fractions of the grid; 'vs baseline': string-stable area gained / lost")
-    close = {n: e["boundary_points"] for n, e in doc["maps"].items() if e["boundary_points"]}
+    close = {n: e["boundary_points"] for n, e in maps.items() if e["boundary_points"]}
     if close:
         print(
             "too close to call (inside the rounding band, labelled 'stable'): "
             + ", ".join(f"{n} {k} points" for n, k in close.items())
         )
-    print(f"total {total:.2f} s for {sum(m.points for m in maps.values())} points")
-    for w in written:
-        print(f"wrote {w}")
-    return _failed(error)
-
-
-def _failed(error) -> int:
-    """1 after a file that could not be written (its one line on stderr), else 0."""
-    if error is None:
-        return 0
-    print(f"lcc-synth regions: error: {error}", file=sys.stderr)
-    return 1

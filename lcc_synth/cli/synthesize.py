@@ -26,7 +26,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lcc_synth.errors import ConfigError, FileError
+    from lcc_synth.cli.output import write_and_report
+    from lcc_synth.errors import ConfigError
     from lcc_synth.outputs import check_file
     from lcc_synth.problem import check_top_level, load_problem
     from lcc_synth.provenance import provenance
@@ -66,14 +67,14 @@ def run(args: argparse.Namespace) -> int:
     rep = _design(args, synthesize, spec)
     if rep is None:
         return 1
-    written, error = [], None
-    try:  # a file that cannot be written (a full disk) does not hide the report printed below
+
+    def write(written: list[str]) -> None:
         if rrd is not None:
             if platoon:
-                rrd = record_platoon_synthesis_file(rrd, rep, args.overwrite, prov)
+                path = record_platoon_synthesis_file(rrd, rep, args.overwrite, prov)
             else:
-                rrd = record_synthesis_file(rrd, rep, spec.system, args.overwrite, prov)
-            print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
+                path = record_synthesis_file(rrd, rep, spec.system, args.overwrite, prov)
+            print(f"recording: {path} (lcc-synth review {path})", file=sys.stderr)
         if args.out:
             written.append(str(write_gains(args.out, rep, args.overwrite)))
         if args.figure:
@@ -81,19 +82,12 @@ def run(args: argparse.Namespace) -> int:
 
             written.append(str(plot_pareto_front(rep.pareto, rep.h2_unstructured, args.figure,
                                                 title=rep.problem)))  # fmt: skip
-    except FileError as err:
-        error = err
-    if args.json:
-        print(json.dumps({"ok": error is None, **rep.as_dict(), "written": written,
-                          "provenance": prov}))  # fmt: skip
-    else:
-        print(format_report(rep))
-        for w in written:
-            print(f"wrote {w}")
-    if error is not None:
-        print(f"lcc-synth synthesize: error: {error}", file=sys.stderr)
-        return 1
-    return 0
+
+    return write_and_report(
+        "synthesize", args.json, write,
+        lambda written, ok: {"ok": ok, **rep.as_dict(), "written": written, "provenance": prov},
+        lambda: print(format_report(rep)),
+    )  # fmt: skip
 
 
 def _design(args: argparse.Namespace, design, spec):
