@@ -14,7 +14,8 @@ Everything here turns an existing source of truth into pages, so that nothing is
   page.
 
 Generated files go to ``docs/_generated`` (git-ignored) and are rewritten only when their text
-changes, so an incremental build stays incremental.
+changes, so an incremental build stays incremental; a file there that this version does not
+generate (a page of an older version, which Sphinx would read and warn about) is removed.
 """
 
 from __future__ import annotations
@@ -55,7 +56,12 @@ _LINKS = {
 }
 
 
+#: The files :func:`generate` wrote in this build (the others under GENERATED are stale).
+_WRITTEN: set[Path] = set()
+
+
 def _write(path: Path, text: str) -> None:
+    _WRITTEN.add(path.resolve())
     path.parent.mkdir(parents=True, exist_ok=True)
     if not path.is_file() or path.read_text() != text:
         path.write_text(text)
@@ -197,10 +203,17 @@ def cli_page() -> None:
 
 
 def generate() -> None:
-    """All generated pages (called by conf.py before Sphinx reads the sources)."""
+    """All generated pages (called by conf.py before Sphinx reads the sources); stale files of
+    an older version are removed."""
+    _WRITTEN.clear()
     cli_page()
     problem_pages()
     api_pages()
+    for path in sorted(GENERATED.rglob("*"), reverse=True):  # files first, then empty dirs
+        if path.is_file() and path.resolve() not in _WRITTEN:
+            path.unlink()
+        elif path.is_dir() and not any(path.iterdir()):
+            path.rmdir()
 
 
 # -- sphinx-gallery hooks (named by string in conf.py, so the config stays picklable) ----------
