@@ -517,6 +517,8 @@ def test_absolute_spacing_bound_opens_the_gap_when_closing_in(cache):
     assert 0 < first and margin[first:].min() > -0.05  # once reached, it is kept
 
 
+# slow: 8 s (CI runs it); the closed-loop DeeP-LCC tests of one CAV in this file stay in the default run
+@pytest.mark.slow
 def test_two_cavs_in_the_nonlinear_platoon_simulator(tmp_path):
     """problems/platoon_deeplcc_brake.toml (CAVs at 3 and 6, heterogeneous noisy HDVs) with a
     default DeeP-LCC: one command column per CAV, no collision, fuel and AAVE below all-HDV."""

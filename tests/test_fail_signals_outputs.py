@@ -27,7 +27,10 @@ def _one_line(err: str, sig: int, delay: float) -> None:
     assert lines[0].endswith(f": interrupted by {signal.Signals(sig).name}"), (delay, err)
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+# slow: SIGTERM (SIGINT checks the same clean stop)
+@pytest.mark.parametrize(
+    "sig", [signal.SIGINT, pytest.param(signal.SIGTERM, marks=pytest.mark.slow)]
+)
 def test_calibrate_out(tmp_path, sig):
     # the whole calibration of lane 2 (4 followers + pooled, 5 starts) takes >= 8 s here
     _, out, err, delay, _ = _interrupt(

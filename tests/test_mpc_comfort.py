@@ -152,6 +152,8 @@ def test_closed_loop_head_brake_keeps_the_iso_jerk_limit(problem):
     assert np.nanmax(j_off - iso15622_jerk_limit(res_off.velocity[:, :, res_off.cav])) > 0
 
 
+# slow: 7 s; the closed-loop ISO jerk tests of this file stay in the default run
+@pytest.mark.slow
 def test_closed_loop_safety_wins_over_a_strict_comfort_bound(monkeypatch):
     """A comfort bound far below ISO's (jerk_scale 0.1: 0.25-0.5 m/s^3) cannot follow the
     head's -5 m/s^2 brake safely: the MPC drops it on the steps where it would cost spacing

@@ -173,6 +173,8 @@ def test_ring_rows_use_the_reference_spacing_summing_to_the_circumference():
                 [2 * p - 2 for p in pl.cavs])
 
 
+# slow: 7 s; the pinned platoon and showcase tables guard the default as well
+@pytest.mark.slow
 def test_default_and_explicit_safe_give_the_same_run_bit_for_bit():
     """``spacing = "safe"`` (with any ``spacing_error``) is the default: same families, same
     commands and trajectories, bit for bit; the paper's target changes the run."""

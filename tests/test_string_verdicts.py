@@ -255,6 +255,8 @@ def _near_boundary_loops():
     )
 
 
+# slow: 6 s; the grid, Hamiltonian and invariance tests of this file stay in the default run
+@pytest.mark.slow
 def test_exact_reference_confirms_every_decided_verdict():
     """An exact rational reference (integer characteristic polynomials, Sturm count; see
     tests/exact_reference.py) decides the same float data: every decided verdict of both
