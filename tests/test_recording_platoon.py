@@ -12,7 +12,7 @@ import pytest
 pytest.importorskip("rerun")
 
 from rerun.chunk import RrdReader  # noqa: E402
-from test_recording import _static  # noqa: E402  (tests/ is on sys.path)
+from test_recording import _static, _views  # noqa: E402  (tests/ is on sys.path)
 
 from lcc_synth import recording as R  # noqa: E402
 from lcc_synth.experiments.spec import load_spec  # noqa: E402
@@ -139,6 +139,16 @@ def test_synthesize_records_a_two_cav_ring_design_with_its_range_front(tmp_path,
     assert report.count("| yes |") == 1 and "h2_unstructured" in report
     summary = R.summarize_recording(path)
     assert f"/synthesis/{name}/u_20/gains" in summary.entities
+    # the one synthesis blueprint: a bar chart and a report per CAV, the front's losses, the
+    # whole report; no |Gamma| view (one CAV's only)
+    assert set(_views(path)) == {
+        *{("BarChart", f"/synthesis/{name}/{c}/gains", f"{c}: gains") for c in ("u_10", "u_20")},
+        *{("TextDocument", f"/synthesis/{name}/{c}/report", f"{c}: report")
+          for c in ("u_10", "u_20")},
+        ("BarChart", f"/synthesis/{name}/pareto/loss_percent",
+         "range front: H2 loss % per greedy step"),
+        ("TextDocument", f"/synthesis/{name}/report", f"{doc['problem']}: report"),
+    }  # fmt: skip
 
 
 def test_synthesize_platoon_refuses_figure_and_records_by_default(tmp_path, monkeypatch):
