@@ -76,7 +76,8 @@ Synthesis (:func:`record_synthesis`, :func:`record_gains`) under ``/synthesis/<n
 ``gains`` (``BarChart`` of the gain on every state), ``report`` (markdown: state names, gains,
 true H2, LMI bound, verdicts, solver), ``pareto/front`` and ``pareto/patterns`` (sparsity
 designs: x = vehicles heard, y = true H2); the |Gamma| curve of the gain as above. A platoon or
-ring design (the same :func:`record_synthesis`) records each CAV's gain under
+ring design (the same :func:`record_synthesis`; ``lcc-synth run`` records its designs with
+it too, as ``<layout>.<controller>``) records each CAV's gain under
 ``/synthesis/<name>/<u_col>/`` (``gains``, ``report``), the whole report at
 ``/synthesis/<name>/report`` and its range front's H2 losses at ``pareto/loss_percent``.
 
@@ -108,6 +109,7 @@ from lcc_synth.recording.analysis import (
     record_region_map,
     record_synthesis,
     record_synthesis_file,
+    synthesis_cavs,
 )
 from lcc_synth.recording.cli import (
     SimulationRecorder,
@@ -216,6 +218,7 @@ __all__ = [
     "record_synthesis",
     "record_analysis_file",
     "record_synthesis_file",
+    "synthesis_cavs",
     "gamma_grid",
     "record_text",
     "viewer_environment",

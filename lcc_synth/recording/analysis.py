@@ -139,15 +139,16 @@ def gamma_grid(peak_omega: float | None = None, points: int = 400) -> np.ndarray
 _PLATOON_BULK = ("state_names", "K", "gains", "input_K", "input_kh", "conserved", "pareto")
 
 
-def record_synthesis(rec: Any, rep: Any, system: Any = None) -> None:
+def record_synthesis(rec: Any, rep: Any, system: Any = None, name: str | None = None) -> None:
     """Record a synthesis report of any layout
-    (:class:`~lcc_synth.synthesis.report.SynthesisReport`) under ``/synthesis/<problem>/``.
+    (:class:`~lcc_synth.synthesis.report.SynthesisReport`) under ``/synthesis/<name>/``
+    (``name``: the report's problem unless given, e.g. ``<layout>.<controller>`` in a run).
 
     One CAV: ``gains`` (``BarChart``) and ``report`` (the gains file plus solver, polish,
     baseline, timings and notes), the Pareto front of a sparsity sweep (``pareto``:
     LineStrips2D of the front and Points2D of every pattern found, x = vehicles heard, y = true
     H2); and, when ``system`` (the problem's :class:`~lcc_synth.problem.System`) is given and
-    the model has a head vehicle, ``/analysis/gamma/<problem>``: |Gamma(j omega)| of the gain.
+    the model has a head vehicle, ``/analysis/gamma/<name>``: |Gamma(j omega)| of the gain.
 
     A gain row per CAV (platoon / ring): per CAV input ``u_<col>``, ``<u_col>/gains``
     (``BarChart`` of its row of ``K`` on every state, in state order) and ``<u_col>/report``
@@ -156,10 +157,11 @@ def record_synthesis(rec: Any, rep: Any, system: Any = None) -> None:
     "sparsity"``, whose ``pareto/loss_percent`` (``BarChart``, one bar per point of the greedy
     front in order) is each point's H2 loss against the unstructured optimum, in percent.
     """
+    name = rep.problem if name is None else name
     if rep.per_cav:
-        _record_cav_rows(rec, rep)
+        _record_cav_rows(rec, rep, name)
     else:
-        _record_one_cav(rec, rep)
+        _record_one_cav(rec, rep, name)
     if _records_gamma(rep, system):
         from lcc_synth.analysis.transfer import gamma_state_space
 
@@ -168,7 +170,7 @@ def record_synthesis(rec: Any, rep: Any, system: Any = None) -> None:
         gamma = gamma_state_space(model, np.asarray(rep.input_K, float), float(rep.input_kh), omega)
         record_gamma(
             rec,
-            rep.problem,
+            name,
             omega,
             np.abs(gamma),
             {
@@ -181,18 +183,23 @@ def record_synthesis(rec: Any, rep: Any, system: Any = None) -> None:
     _flush_started(rec)
 
 
+def synthesis_cavs(reports: Mapping[str, Any]) -> dict[str, list[str]]:
+    """``{name: CAV inputs}`` of the reports ``{name: SynthesisReport}`` with a gain row per CAV:
+    the ``cavs`` of :func:`~lcc_synth.recording.layout.synthesis_blueprint`."""
+    return {name: list(rep.gains) for name, rep in reports.items() if rep.per_cav}
+
+
 def _records_gamma(rep: Any, system: Any) -> bool:
     """Does :func:`record_synthesis` record |Gamma| (one CAV with a head vehicle, ``system``
     given)?"""
     return system is not None and not rep.per_cav and rep.kind != "fd_lcc"
 
 
-def _record_one_cav(rec: Any, rep: Any) -> None:
+def _record_one_cav(rec: Any, rep: Any, name: str) -> None:
     """One CAV's gain, report and Pareto front (:func:`record_synthesis`)."""
     from lcc_synth.synthesis.gains_file import gains_document
 
     rr = _rr()
-    name = rep.problem
     doc = dict(gains_document(rep))
     for key in ("solver", "polish", "baseline", "timings", "notes"):
         value = getattr(rep, key, None)
@@ -220,17 +227,17 @@ def _record_one_cav(rec: Any, rep: Any) -> None:
             )
 
 
-def _record_cav_rows(rec: Any, rep: Any) -> None:
+def _record_cav_rows(rec: Any, rep: Any, name: str) -> None:
     """Each CAV's gain row, the whole report and the range front (:func:`record_synthesis`)."""
     rr = _rr()
-    n = entity_name(rep.problem)
+    n = entity_name(name)
     for i, (cav, row) in enumerate(rep.gains.items()):
         doc = {"state_names": list(rep.state_names), "gains": dict(row),
                "heard positions": list(rep.patterns.get(cav, [])),
                "input_kh": rep.input_kh[i]}  # fmt: skip
-        record_gains(rec, cav, doc, under=rep.problem)
+        record_gains(rec, cav, doc, under=name)
     summary = {k: v for k, v in _jsonable(rep.as_dict()).items() if k not in _PLATOON_BULK}
-    text = f"# {rep.problem}\n\n" + _mapping_markdown("report", summary)
+    text = f"# {name}\n\n" + _mapping_markdown("report", summary)
     if rep.pareto:
         loss = np.array([100.0 * p["loss"] for p in rep.pareto], dtype=np.float64)
         rec.log(f"/synthesis/{n}/pareto/loss_percent", rr.BarChart(loss, color=COLOR_HDV),
@@ -254,7 +261,7 @@ def record_synthesis_file(
     path = Path(path)
     blueprint = synthesis_blueprint(
         [rep.problem], gamma=_records_gamma(rep, system), pareto=bool(rep.pareto),
-        cavs=list(rep.gains) if rep.per_cav else (),
+        cavs=synthesis_cavs({rep.problem: rep}),
     )  # fmt: skip
     with open_recording(path, rep.problem, blueprint, overwrite=overwrite) as rec:
         if provenance is not None:

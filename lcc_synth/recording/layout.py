@@ -420,26 +420,28 @@ def analysis_blueprint(
 
 
 def synthesis_blueprint(
-    names: Sequence[str], gamma: bool = True, pareto: bool = False, cavs: Sequence[str] = ()
-):
+    names: Sequence[str], gamma: bool = True, pareto: bool = False,
+    cavs: Mapping[str, Sequence[str]] | None = None,
+):  # fmt: skip
     """Default layout of a synthesis recording, for every layout.
 
-    Per name in ``names``: the gains bar chart (``cavs`` given, a platoon or ring design: one
-    per CAV input, ``/synthesis/<name>/<u_col>/gains``), the Pareto front of a sparsity design
-    (``pareto``; a platoon's range front: its H2 loss per greedy step) and the report (then each
-    CAV's); ``gamma``: the |Gamma| curves under ``/analysis/gamma``.
+    Per name in ``names``: the gains bar chart (a name in ``cavs``, a platoon or ring design:
+    one per CAV input ``cavs[name]``, ``/synthesis/<name>/<u_col>/gains``), the Pareto front of
+    a sparsity design (``pareto``; a platoon's range front: its H2 loss per greedy step) and the
+    report (then each CAV's); ``gamma``: the |Gamma| curves under ``/analysis/gamma``.
     """
     rrb = _rrb()
     plots, reports = [], []
+    cavs = dict(cavs or {})
     for name in names:
-        n = entity_name(name)
+        n, rows = entity_name(name), cavs.get(name, ())
         plots += [
             rrb.BarChartView(origin=f"/synthesis/{n}/{entity_name(c)}/gains", name=f"{c}: gains")
-            for c in cavs
+            for c in rows
         ] or [rrb.BarChartView(origin=f"/synthesis/{n}/gains", name=f"{name}: gains")]
         reports += [
             rrb.TextDocumentView(origin=f"/synthesis/{n}/{e}report", name=f"{label}: report")
-            for e, label in [("", name)] + [(f"{entity_name(c)}/", c) for c in cavs]
+            for e, label in [("", name)] + [(f"{entity_name(c)}/", c) for c in rows]
         ]
     plots = plots or [rrb.BarChartView(origin="/synthesis")]
     if gamma:
@@ -447,7 +449,7 @@ def synthesis_blueprint(
     if pareto:
         plots += [
             rrb.BarChartView(origin=f"/synthesis/{entity_name(name)}/pareto/loss_percent",
-                             name="range front: H2 loss % per greedy step") if cavs
+                             name="range front: H2 loss % per greedy step") if name in cavs
             else rrb.Spatial2DView(origin=f"/synthesis/{entity_name(name)}/pareto",
                                    name=f"{name}: Pareto front (vehicles heard vs true H2)")
             for name in names
