@@ -82,6 +82,19 @@ def _chunks(path: Path) -> dict[str, list]:
     return out
 
 
+def _views(path: Path) -> list[tuple[str, str, str]]:
+    """(kind, origin, name) of every view of the file's blueprint, in the order logged."""
+    reader = RrdReader(path)
+    [bp] = reader.blueprints()
+    views = []
+    for ch in reader.stream(store=bp):
+        rb = ch.to_record_batch()
+        if "ViewBlueprint:space_origin" in rb.schema.names:
+            views.append(tuple(rb.column(f"ViewBlueprint:{c}").to_pylist()[-1][-1]
+                               for c in ("class_identifier", "space_origin", "display_name")))
+    return views
+
+
 def _temporal(chunks, entity: str, component: str) -> tuple[np.ndarray, list]:
     """(time in ns, values per row) of ``component`` at ``entity``, sorted by time."""
     times, values = [], []
@@ -528,6 +541,13 @@ def test_synthesize_command_records_gains_and_gamma(tmp_path, capsys):
         assert (-curve[:, 1]).max() == pytest.approx(doc["gamma_peak"], rel=1e-5)
     assert name in gamma or "/analysis/gamma/" in gamma
     assert str(path) in capsys.readouterr().err
+    # the one synthesis blueprint (a platoon's: tests/test_recording_platoon.py): the gains,
+    # the |Gamma| curves and the report (no Pareto view: a structured design)
+    assert set(_views(path)) == {
+        ("BarChart", f"/synthesis/{name}/gains", f"{problem.stem}: gains"),
+        ("2D", "/analysis/gamma", "|Γ(jω)| vs log10 ω"),
+        ("TextDocument", f"/synthesis/{name}/report", f"{problem.stem}: report"),
+    }
 
 
 def test_region_maps_and_gamma_curves_of_the_analysis_commands(tmp_path):

@@ -12,7 +12,7 @@ import pytest
 pytest.importorskip("rerun")
 
 from rerun.chunk import RrdReader  # noqa: E402
-from test_recording import _static  # noqa: E402  (tests/ is on sys.path)
+from test_recording import _static, _views  # noqa: E402  (tests/ is on sys.path)
 
 from lcc_synth import recording as R  # noqa: E402
 from lcc_synth.experiments.spec import load_spec  # noqa: E402
@@ -139,6 +139,16 @@ def test_synthesize_records_a_two_cav_ring_design_with_its_range_front(tmp_path,
     assert report.count("| yes |") == 1 and "h2_unstructured" in report
     summary = R.summarize_recording(path)
     assert f"/synthesis/{name}/u_20/gains" in summary.entities
+    # the one synthesis blueprint: a bar chart and a report per CAV, the front's losses, the
+    # whole report; no |Gamma| view (one CAV's only)
+    assert set(_views(path)) == {
+        *{("BarChart", f"/synthesis/{name}/{c}/gains", f"{c}: gains") for c in ("u_10", "u_20")},
+        *{("TextDocument", f"/synthesis/{name}/{c}/report", f"{c}: report")
+          for c in ("u_10", "u_20")},
+        ("BarChart", f"/synthesis/{name}/pareto/loss_percent",
+         "range front: H2 loss % per greedy step"),
+        ("TextDocument", f"/synthesis/{name}/report", f"{doc['problem']}: report"),
+    }  # fmt: skip
 
 
 def test_synthesize_platoon_refuses_figure_and_records_by_default(tmp_path, monkeypatch):
@@ -153,3 +163,33 @@ def test_synthesize_platoon_refuses_figure_and_records_by_default(tmp_path, monk
     assert main(["synthesize", str(problem), "--no-progress"]) == 0
     [rrd] = (tmp_path / "logs").glob("ring_n20_cr5-*.rrd")
     assert "/synthesis/ring_n20_cr5/u_20/gains" in R.summarize_recording(rrd).entities
+
+
+def test_run_records_a_platoon_design_row_per_cav(tmp_path):
+    """``lcc-synth run`` records each synthesised design with the one synthesis recorder: the
+    showcase's two-CAV platoon design gets a bar chart per CAV equal to its row of the gains
+    file the run writes (never one chart of the state gains, which a row per CAV does not
+    have), with those views in the run's "synthesised gains" tab."""
+    import json
+
+    from lcc_synth.cli.main import main
+
+    path, out = tmp_path / "run.rrd", tmp_path / "out"
+    assert main(["run", str(ROOT / "problems" / "showcase.toml"), "--scenarios", "platoon_brake",
+                 "--controllers", "h2", "--rrd", str(path), "--out", str(out), "--no-figures",
+                 "-q"]) == 0  # fmt: skip
+    [gains_file] = out.glob("*/gains_platoon8_h2.json")
+    doc = json.loads(gains_file.read_text())
+    chunks = _chunks(path)
+    name = R.entity_name("platoon8.h2")
+    assert set(doc["gains"]) == {"u_3", "u_6"} and f"/synthesis/{name}/gains" not in chunks
+    for cav, row in doc["gains"].items():
+        bars = np.array(_static(chunks, f"/synthesis/{name}/{cav}/gains", "BarChart:values")[0]
+                        ["buffer"]).ravel()  # fmt: skip
+        np.testing.assert_array_equal(bars, [row.get(s, 0.0) for s in doc["state_names"]])
+        assert np.abs(bars).max() > 0.1  # a stabilising feedback, not a chart of zeros
+    views = set(_views(path))
+    for cav in ("u_3", "u_6"):
+        assert ("BarChart", f"/synthesis/{name}/{cav}/gains", f"{cav}: gains") in views
+        assert ("TextDocument", f"/synthesis/{name}/{cav}/report", f"{cav}: report") in views
+    assert ("TextDocument", f"/synthesis/{name}/report", "platoon8.h2: report") in views

@@ -138,6 +138,13 @@ PER_CAV_KEYS = ["problem", "design", "kind", "size", "cavs", "ring", "v_star", "
                 "state_names", "K", "gains", "input_K", "input_kh", "check",
                 "h2_unstructured", "conserved", "stages", "polish", "robust", "pareto",
                 "timings", "notes"]  # fmt: skip
+#: The keys of the JSON ``check`` object per layout, in order, as printed before the two check
+#: types became one.
+ONE_CAV_CHECK_KEYS = ["h2", "max_real_eig", "max_real_eig_model", "plant_stable",
+                      "string_stable", "gamma_peak", "gamma_peak_omega", "string_verdict",
+                      "string_margin"]
+PER_CAV_CHECK_KEYS = ["h2", "max_real_eig", "stable", "subspace", "max_real_eig_full",
+                      "conserved_mode"]  # fmt: skip
 
 
 @pytest.mark.parametrize("layout", list(LAYOUTS))
@@ -145,21 +152,25 @@ def test_one_spec_and_one_report_type_keep_each_layouts_json(layout):
     import pickle
 
     from lcc_synth.synthesis.config import SynthesisSpec
-    from lcc_synth.synthesis.report import UNSET, SynthesisReport
+    from lcc_synth.synthesis.report import UNSET, GainCheck, SynthesisReport
 
     spec = spec_from_problem(_problem(layout, "structured"))
     rep = synthesize(spec)
     assert type(spec) is SynthesisSpec and type(rep) is SynthesisReport
+    assert type(rep.check) is GainCheck  # one check type too
     one_cav = layout == "one_cav_string"
     assert rep.per_cav is not one_cav
     d = rep.as_dict()
     assert list(d) == (ONE_CAV_KEYS if one_cav else PER_CAV_KEYS)
-    assert UNSET not in d.values()
+    assert list(d["check"]) == (ONE_CAV_CHECK_KEYS if one_cav else PER_CAV_CHECK_KEYS)
+    assert UNSET not in d.values() and UNSET not in d["check"].values()
     # the CLI designs in a child process: the report crosses it unchanged, UNSET included
     back = pickle.loads(pickle.dumps(rep))
     assert back == rep and back.as_dict() == d
     assert (back.m is UNSET) is not one_cav and (back.cavs is UNSET) is one_cav
-    assert "UNSET" not in repr(rep)
+    assert (back.check.gamma_peak is UNSET) is not one_cav
+    assert (back.check.subspace is UNSET) is one_cav
+    assert "UNSET" not in repr(rep) and "UNSET" not in repr(rep.check)
 
 
 @pytest.mark.parametrize("layout", list(LAYOUTS))

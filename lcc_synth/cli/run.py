@@ -69,10 +69,21 @@ def _names(value: str | None) -> list[str] | None:
     return None if value is None else value.split(",")
 
 
-def _blueprint(suite, controllers, gamma_cases, design_names, road=None):
+def _design_cavs(result) -> dict[str, list[str]]:
+    """``{<layout>.<controller>: CAV inputs}`` of the run's designs with a gain row per CAV
+    (none before the designs exist)."""
+    from lcc_synth.recording import synthesis_cavs
+
+    designs = {} if result is None else result.designs
+    return synthesis_cavs({f"{lname}.{cname}": rep for lname, per in designs.items()
+                           for cname, rep in per.items()})  # fmt: skip
+
+
+def _blueprint(suite, controllers, gamma_cases, design_names, road=None, design_cavs=None):
     """One tab per scenario (the recording module's simulation layout), plus analysis.
     ``road``: ``{scenario: road bounds}`` (:func:`lcc_synth.recording.layout.road_bounds` of
-    its runs, merged), known once the runs are done; without it the road views fit the data."""
+    its runs, merged), known once the runs are done; without it the road views fit the data.
+    ``design_cavs``: the CAV inputs of the designs with a gain row per CAV."""
     import rerun.blueprint as rrb
 
     from lcc_synth.experiments.comparison import applies
@@ -93,7 +104,7 @@ def _blueprint(suite, controllers, gamma_cases, design_names, road=None):
         box.name = "|Γ(jω)| of the linear designs"
         tabs.append(box)
     if design_names:
-        box = synthesis_blueprint(design_names).root_container
+        box = synthesis_blueprint(design_names, cavs=design_cavs).root_container
         box.name = "synthesised gains"
         tabs.append(box)
     # one time panel for every scenario: paused on the simulated time, expanded
@@ -202,10 +213,10 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
     from lcc_synth.recording import (
         entity_name,
         open_recording,
-        record_gains,
         record_gamma,
         record_provenance,
         record_simulation,
+        record_synthesis,
         record_text,
         set_status,
         written_path,
@@ -213,7 +224,6 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
     from lcc_synth.recording.context import context_markdown
     from lcc_synth.recording.layout import merge_ranges, road_bounds
     from lcc_synth.resources import progress_bar
-    from lcc_synth.synthesis.gains_file import gains_document
 
     ctrl_names = list(suite.controllers)
     gamma_cases = [
@@ -280,7 +290,7 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
                             record_gamma(rec, f"{lname}.{cname}", w, m, rep.as_dict())
                     for lname, per in result.designs.items():
                         for cname, rep in per.items():
-                            record_gains(rec, f"{lname}.{cname}", gains_document(rep))
+                            record_synthesis(rec, rep, name=f"{lname}.{cname}")
                     failures = _failure_lines(result)
                     if failures:
                         set_status(rec, "partial", "\n".join(failures))
@@ -288,7 +298,8 @@ def _simulate_and_record(args, suite, rrd, every, settings, prov):
                 # the viewer opens): its road views bounded around every run recorded
                 if rec is not None:
                     rec.send_blueprint(
-                        _blueprint(suite, ctrl_names, gamma_cases, design_names, road),
+                        _blueprint(suite, ctrl_names, gamma_cases, design_names, road,
+                                   _design_cavs(result)),
                         make_active=True, make_default=True,
                     )
     except FileError as err:  # the recording could not be written: the results still count

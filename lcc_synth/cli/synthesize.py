@@ -31,11 +31,7 @@ def run(args: argparse.Namespace) -> int:
     from lcc_synth.outputs import check_file
     from lcc_synth.problem import check_top_level, load_problem
     from lcc_synth.provenance import provenance
-    from lcc_synth.recording import (
-        record_platoon_synthesis_file,
-        record_synthesis_file,
-        recording_path,
-    )
+    from lcc_synth.recording import record_synthesis_file, recording_path
     from lcc_synth.synthesis.config import spec_from_problem
     from lcc_synth.synthesis.design import synthesize
     from lcc_synth.synthesis.gains_file import write_gains
@@ -70,10 +66,7 @@ def run(args: argparse.Namespace) -> int:
 
     def write(written: list[str]) -> None:
         if rrd is not None:
-            if platoon:
-                path = record_platoon_synthesis_file(rrd, rep, args.overwrite, prov)
-            else:
-                path = record_synthesis_file(rrd, rep, spec.system, args.overwrite, prov)
+            path = record_synthesis_file(rrd, rep, spec.system, args.overwrite, prov)
             print(f"recording: {path} (lcc-synth review {path})", file=sys.stderr)
         if args.out:
             written.append(str(write_gains(args.out, rep, args.overwrite)))

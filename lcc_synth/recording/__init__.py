@@ -76,7 +76,8 @@ Synthesis (:func:`record_synthesis`, :func:`record_gains`) under ``/synthesis/<n
 ``gains`` (``BarChart`` of the gain on every state), ``report`` (markdown: state names, gains,
 true H2, LMI bound, verdicts, solver), ``pareto/front`` and ``pareto/patterns`` (sparsity
 designs: x = vehicles heard, y = true H2); the |Gamma| curve of the gain as above. A platoon or
-ring design (:func:`record_platoon_synthesis`) records each CAV's gain under
+ring design (the same :func:`record_synthesis`; ``lcc-synth run`` records its designs with
+it too, as ``<layout>.<controller>``) records each CAV's gain under
 ``/synthesis/<name>/<u_col>/`` (``gains``, ``report``), the whole report at
 ``/synthesis/<name>/report`` and its range front's H2 losses at ``pareto/loss_percent``.
 
@@ -105,11 +106,10 @@ from lcc_synth.recording.analysis import (
     record_analysis_file,
     record_gains,
     record_gamma,
-    record_platoon_synthesis,
-    record_platoon_synthesis_file,
     record_region_map,
     record_synthesis,
     record_synthesis_file,
+    synthesis_cavs,
 )
 from lcc_synth.recording.cli import (
     SimulationRecorder,
@@ -140,7 +140,6 @@ from lcc_synth.recording.core import (
 )
 from lcc_synth.recording.layout import (
     analysis_blueprint,
-    platoon_synthesis_blueprint,
     simulation_blueprint,
     sweep_blueprint,
     synthesis_blueprint,
@@ -201,7 +200,6 @@ __all__ = [
     "sweep_blueprint",
     "record_sweep",
     "record_sweep_file",
-    "platoon_synthesis_blueprint",
     "open_recording",
     "record_provenance",
     "set_status",
@@ -220,8 +218,7 @@ __all__ = [
     "record_synthesis",
     "record_analysis_file",
     "record_synthesis_file",
-    "record_platoon_synthesis",
-    "record_platoon_synthesis_file",
+    "synthesis_cavs",
     "gamma_grid",
     "record_text",
     "viewer_environment",

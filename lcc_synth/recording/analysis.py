@@ -28,11 +28,7 @@ from lcc_synth.recording.core import (
     record_text,
     written_path,
 )
-from lcc_synth.recording.layout import (
-    analysis_blueprint,
-    platoon_synthesis_blueprint,
-    synthesis_blueprint,
-)
+from lcc_synth.recording.layout import analysis_blueprint, synthesis_blueprint
 
 
 def record_gamma(
@@ -139,20 +135,71 @@ def gamma_grid(peak_omega: float | None = None, points: int = 400) -> np.ndarray
     return omega
 
 
-def record_synthesis(rec: Any, rep: Any, system: Any = None) -> None:
-    """Record a synthesis report (``lcc_synth.synthesis.report.SynthesisReport``).
+#: Fields of a platoon report left out of its markdown report (the gains are recorded per CAV).
+_PLATOON_BULK = ("state_names", "K", "gains", "input_K", "input_kh", "conserved", "pareto")
 
-    Under ``/synthesis/<problem>/``: the gains bar chart and report (the gains file
-    plus solver, polish, baseline, timings and notes), the Pareto front of a sparsity sweep
-    (``pareto``: LineStrips2D of the front and Points2D of every pattern found, x = vehicles
-    heard, y = true H2); and, when ``system`` (the problem's :class:`~lcc_synth.problem.System`)
-    is given and the model has a head vehicle, ``/analysis/gamma/<problem>``: |Gamma(j omega)|
-    of the synthesised gain.
+
+def record_synthesis(rec: Any, rep: Any, system: Any = None, name: str | None = None) -> None:
+    """Record a synthesis report of any layout
+    (:class:`~lcc_synth.synthesis.report.SynthesisReport`) under ``/synthesis/<name>/``
+    (``name``: the report's problem unless given, e.g. ``<layout>.<controller>`` in a run).
+
+    One CAV: ``gains`` (``BarChart``) and ``report`` (the gains file plus solver, polish,
+    baseline, timings and notes), the Pareto front of a sparsity sweep (``pareto``:
+    LineStrips2D of the front and Points2D of every pattern found, x = vehicles heard, y = true
+    H2); and, when ``system`` (the problem's :class:`~lcc_synth.problem.System`) is given and
+    the model has a head vehicle, ``/analysis/gamma/<name>``: |Gamma(j omega)| of the gain.
+
+    A gain row per CAV (platoon / ring): per CAV input ``u_<col>``, ``<u_col>/gains``
+    (``BarChart`` of its row of ``K`` on every state, in state order) and ``<u_col>/report``
+    (its gains, heard positions and input gains); ``report``: the whole report but the arrays
+    (design, check, stages, notes, ...), with the range front as a table for ``design =
+    "sparsity"``, whose ``pareto/loss_percent`` (``BarChart``, one bar per point of the greedy
+    front in order) is each point's H2 loss against the unstructured optimum, in percent.
     """
+    name = rep.problem if name is None else name
+    if rep.per_cav:
+        _record_cav_rows(rec, rep, name)
+    else:
+        _record_one_cav(rec, rep, name)
+    if _records_gamma(rep, system):
+        from lcc_synth.analysis.transfer import gamma_state_space
+
+        model = system.linear_model(warn=False)
+        omega = gamma_grid(rep.check.gamma_peak_omega)
+        gamma = gamma_state_space(model, np.asarray(rep.input_K, float), float(rep.input_kh), omega)
+        record_gamma(
+            rec,
+            name,
+            omega,
+            np.abs(gamma),
+            {
+                "gamma_peak (global check)": rep.check.gamma_peak,
+                "gamma_peak_omega (rad/s)": rep.check.gamma_peak_omega,
+                "string_stable": rep.check.string_stable,
+                "plant_stable": rep.check.plant_stable,
+            },
+        )
+    _flush_started(rec)
+
+
+def synthesis_cavs(reports: Mapping[str, Any]) -> dict[str, list[str]]:
+    """``{name: CAV inputs}`` of the reports ``{name: SynthesisReport}`` with a gain row per CAV:
+    the ``cavs`` of :func:`~lcc_synth.recording.layout.synthesis_blueprint`."""
+    return {name: list(rep.gains) for name, rep in reports.items() if rep.per_cav}
+
+
+def _records_gamma(rep: Any, system: Any) -> bool:
+    """Does :func:`record_synthesis` record |Gamma| (one CAV with a head vehicle, ``system``
+    given)?"""
+    return system is not None and not rep.per_cav and rep.kind != "fd_lcc"
+
+
+def _record_one_cav(rec: Any, rep: Any, name: str) -> None:
+    """One CAV's gain, report and Pareto front (:func:`record_synthesis`)."""
     from lcc_synth.synthesis.gains_file import gains_document
 
     rr = _rr()
-    name = rep.problem
     doc = dict(gains_document(rep))
     for key in ("solver", "polish", "baseline", "timings", "notes"):
         value = getattr(rep, key, None)
@@ -178,69 +225,19 @@ def record_synthesis(rec: Any, rep: Any, system: Any = None) -> None:
                 rr.LineStrips2D([xy], colors=[COLOR_CAV], labels=["Pareto front"], radii=0.02),
                 static=True,
             )
-    if system is not None and rep.kind != "fd_lcc":
-        from lcc_synth.analysis.transfer import gamma_state_space
-
-        model = system.linear_model(warn=False)
-        omega = gamma_grid(rep.check.gamma_peak_omega)
-        gamma = gamma_state_space(model, np.asarray(rep.input_K, float), float(rep.input_kh), omega)
-        record_gamma(
-            rec,
-            name,
-            omega,
-            np.abs(gamma),
-            {
-                "gamma_peak (global check)": rep.check.gamma_peak,
-                "gamma_peak_omega (rad/s)": rep.check.gamma_peak_omega,
-                "string_stable": rep.check.string_stable,
-                "plant_stable": rep.check.plant_stable,
-            },
-        )
-    _flush_started(rec)
 
 
-def record_synthesis_file(
-    path: str | Path, rep: Any, system: Any = None, overwrite: bool = False,
-    provenance: Mapping[str, Any] | None = None,
-) -> Path:  # fmt: skip
-    """Write a synthesis recording to ``path`` (see :func:`record_synthesis`; ``provenance``
-    at ``/provenance``); returns the file written (:func:`~.core.open_recording`)."""
-    path = Path(path)
-    blueprint = synthesis_blueprint(
-        [rep.problem], gamma=system is not None and rep.kind != "fd_lcc", pareto=bool(rep.pareto)
-    )
-    with open_recording(path, rep.problem, blueprint, overwrite=overwrite) as rec:
-        if provenance is not None:
-            record_provenance(rec, provenance)
-        record_synthesis(rec, rep, system)
-    return written_path(rec) or path
-
-
-#: Fields of a platoon report left out of its markdown report (the gains are recorded per CAV).
-_PLATOON_BULK = ("state_names", "K", "gains", "input_K", "input_kh", "conserved", "pareto")
-
-
-def record_platoon_synthesis(rec: Any, rep: Any) -> None:
-    """Record a platoon or ring synthesis report
-    (:class:`~lcc_synth.synthesis.report.SynthesisReport`, a gain row per CAV) under
-    ``/synthesis/<problem>/``.
-
-    Per CAV input ``u_<col>``: ``<u_col>/gains`` (``BarChart`` of its row of ``K`` on every
-    state, in state order) and ``<u_col>/report`` (its gains, heard positions and input
-    gains); ``report``: the whole report but the arrays (design, check, stages, notes, ...),
-    with the range front as a table for ``design = "sparsity"``, whose ``pareto/loss_percent``
-    (``BarChart``, one bar per point of the greedy front in order) is each point's H2 loss
-    against the unstructured optimum, in percent.
-    """
+def _record_cav_rows(rec: Any, rep: Any, name: str) -> None:
+    """Each CAV's gain row, the whole report and the range front (:func:`record_synthesis`)."""
     rr = _rr()
-    n = entity_name(rep.problem)
+    n = entity_name(name)
     for i, (cav, row) in enumerate(rep.gains.items()):
         doc = {"state_names": list(rep.state_names), "gains": dict(row),
                "heard positions": list(rep.patterns.get(cav, [])),
                "input_kh": rep.input_kh[i]}  # fmt: skip
-        record_gains(rec, cav, doc, under=rep.problem)
+        record_gains(rec, cav, doc, under=name)
     summary = {k: v for k, v in _jsonable(rep.as_dict()).items() if k not in _PLATOON_BULK}
-    text = f"# {rep.problem}\n\n" + _mapping_markdown("report", summary)
+    text = f"# {name}\n\n" + _mapping_markdown("report", summary)
     if rep.pareto:
         loss = np.array([100.0 * p["loss"] for p in rep.pareto], dtype=np.float64)
         rec.log(f"/synthesis/{n}/pareto/loss_percent", rr.BarChart(loss, color=COLOR_HDV),
@@ -252,21 +249,24 @@ def record_platoon_synthesis(rec: Any, rep: Any) -> None:
                  "| step | ranges | vehicles heard | true H2 | loss % | chosen |\n"
                  "|---|---|---|---|---|---|\n" + "\n".join(rows))  # fmt: skip
     record_text(rec, f"/synthesis/{n}/report", text)
-    _flush_started(rec)
 
 
-def record_platoon_synthesis_file(
-    path: str | Path, rep: Any, overwrite: bool = False,
+def record_synthesis_file(
+    path: str | Path, rep: Any, system: Any = None, overwrite: bool = False,
     provenance: Mapping[str, Any] | None = None,
 ) -> Path:  # fmt: skip
-    """Write a platoon / ring synthesis recording to ``path`` (see
-    :func:`record_platoon_synthesis`); returns the file written."""
+    """Write a synthesis recording of any layout to ``path`` (see :func:`record_synthesis`;
+    ``provenance`` at ``/provenance``); returns the file written
+    (:func:`~.core.open_recording`)."""
     path = Path(path)
-    blueprint = platoon_synthesis_blueprint(rep.problem, list(rep.gains), bool(rep.pareto))
+    blueprint = synthesis_blueprint(
+        [rep.problem], gamma=_records_gamma(rep, system), pareto=bool(rep.pareto),
+        cavs=synthesis_cavs({rep.problem: rep}),
+    )  # fmt: skip
     with open_recording(path, rep.problem, blueprint, overwrite=overwrite) as rec:
         if provenance is not None:
             record_provenance(rec, provenance)
-        record_platoon_synthesis(rec, rep)
+        record_synthesis(rec, rep, system)
     return written_path(rec) or path
 
 

@@ -419,50 +419,42 @@ def analysis_blueprint(
     return rrb.Blueprint(rrb.Horizontal(*parts, column_shares=[3, 2][: len(parts)]))
 
 
-def synthesis_blueprint(names: Sequence[str], gamma: bool = True, pareto: bool = False):
-    """Default layout of a synthesis recording: gains bar charts, |Gamma| curves, the Pareto
-    front (sparsity designs) and the reports."""
+def synthesis_blueprint(
+    names: Sequence[str], gamma: bool = True, pareto: bool = False,
+    cavs: Mapping[str, Sequence[str]] | None = None,
+):  # fmt: skip
+    """Default layout of a synthesis recording, for every layout.
+
+    Per name in ``names``: the gains bar chart (a name in ``cavs``, a platoon or ring design:
+    one per CAV input ``cavs[name]``, ``/synthesis/<name>/<u_col>/gains``), the Pareto front of
+    a sparsity design (``pareto``; a platoon's range front: its H2 loss per greedy step) and the
+    report (then each CAV's); ``gamma``: the |Gamma| curves under ``/analysis/gamma``.
+    """
     rrb = _rrb()
-    plots = [
-        rrb.BarChartView(origin=f"/synthesis/{entity_name(n)}/gains", name=f"{n}: gains")
-        for n in names
-    ] or [rrb.BarChartView(origin="/synthesis")]
+    plots, reports = [], []
+    cavs = dict(cavs or {})
+    for name in names:
+        n, rows = entity_name(name), cavs.get(name, ())
+        plots += [
+            rrb.BarChartView(origin=f"/synthesis/{n}/{entity_name(c)}/gains", name=f"{c}: gains")
+            for c in rows
+        ] or [rrb.BarChartView(origin=f"/synthesis/{n}/gains", name=f"{name}: gains")]
+        reports += [
+            rrb.TextDocumentView(origin=f"/synthesis/{n}/{e}report", name=f"{label}: report")
+            for e, label in [("", name)] + [(f"{entity_name(c)}/", c) for c in rows]
+        ]
+    plots = plots or [rrb.BarChartView(origin="/synthesis")]
     if gamma:
         plots.append(rrb.Spatial2DView(origin="/analysis/gamma", name="|Γ(jω)| vs log10 ω"))
     if pareto:
         plots += [
-            rrb.Spatial2DView(
-                origin=f"/synthesis/{entity_name(n)}/pareto",
-                name=f"{n}: Pareto front (vehicles heard vs true H2)",
-            )
-            for n in names
-        ]
-    reports = [
-        rrb.TextDocumentView(origin=f"/synthesis/{entity_name(n)}/report", name=f"{n}: report")
-        for n in names
-    ] or [rrb.TextDocumentView(origin="/synthesis")]
-    return rrb.Blueprint(
-        rrb.Horizontal(rrb.Vertical(*plots), rrb.Tabs(*reports), column_shares=[3, 2])
-    )
-
-
-def platoon_synthesis_blueprint(problem: str, cavs: Sequence[str], pareto: bool = False):
-    """Default layout of a platoon / ring synthesis recording: one gains bar chart per CAV,
-    the range front (sparsity designs), the whole report and each CAV's report."""
-    rrb = _rrb()
-    n = entity_name(problem)
-    plots = [
-        rrb.BarChartView(origin=f"/synthesis/{n}/{entity_name(c)}/gains", name=f"{c}: gains")
-        for c in cavs
-    ]
-    if pareto:
-        plots.append(rrb.BarChartView(origin=f"/synthesis/{n}/pareto/loss_percent",
-                                      name="range front: H2 loss % per greedy step"))
-    reports = [rrb.TextDocumentView(origin=f"/synthesis/{n}/report", name=f"{problem}: report")]
-    reports += [
-        rrb.TextDocumentView(origin=f"/synthesis/{n}/{entity_name(c)}/report", name=f"{c}: report")
-        for c in cavs
-    ]
+            rrb.BarChartView(origin=f"/synthesis/{entity_name(name)}/pareto/loss_percent",
+                             name="range front: H2 loss % per greedy step") if name in cavs
+            else rrb.Spatial2DView(origin=f"/synthesis/{entity_name(name)}/pareto",
+                                   name=f"{name}: Pareto front (vehicles heard vs true H2)")
+            for name in names
+        ]  # fmt: skip
+    reports = reports or [rrb.TextDocumentView(origin="/synthesis")]
     return rrb.Blueprint(
         rrb.Horizontal(rrb.Vertical(*plots), rrb.Tabs(*reports), column_shares=[3, 2])
     )

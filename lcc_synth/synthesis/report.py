@@ -13,15 +13,17 @@ full state (open platoon), and turns an unusable result (non-finite, unstable) i
 keeps the conserved total-spacing eigenvalue 0 (``max_real_eig_full``): it is reported, never
 counted as instability.
 
-:class:`SynthesisReport` is the one report of every layout (``PlatoonReport`` is another name
-of it): fields of one layout only are :data:`UNSET` on the others and left out of ``as_dict``,
-the JSON form of ``lcc-synth synthesize --json``. :func:`format_report` prints it.
+Both give a :class:`GainCheck`, the one check type of every layout (``PlatoonCheck`` is another
+name of it), and :class:`SynthesisReport` is the one report of every layout (``PlatoonReport``
+is another name of it): in both, fields of one layout only are :data:`UNSET` on the others and
+left out of ``as_dict``, the JSON form of ``lcc-synth synthesize --json``. :func:`format_report`
+prints it.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -52,22 +54,96 @@ __all__ = [
 ]
 
 
-@dataclass(repr=False)
+class _Unset:
+    """The value of a check or report field that its layout does not have (:data:`UNSET`)."""
+
+    __slots__ = ()
+
+    def __repr__(self) -> str:
+        return "UNSET"
+
+    def __reduce__(self) -> str:  # one object across pickling (reports cross processes)
+        return "UNSET"
+
+
+#: A field of :class:`GainCheck` or :class:`SynthesisReport` that its layout does not have:
+#: left out of ``as_dict`` (so ``null`` in the JSON always means a value of None).
+UNSET: Any = _Unset()
+
+
+@dataclass(repr=False, kw_only=True)
 class GainCheck(Record):
-    """Everything computed from one gain."""
+    """Everything computed from one synthesised gain, for every layout (``PlatoonCheck`` is
+    another name of it).
+
+    The fields every layout has come first; a field of one layout only is :data:`UNSET` on the
+    others and :meth:`as_dict` leaves it out (as :class:`SynthesisReport` does), so the
+    ``check`` object of ``lcc-synth synthesize --json`` holds the layout's own keys.
+
+    Attributes
+    ----------
+    h2 : float
+        True H2 norm (Lyapunov; ring: on the invariant subspace).
+    max_real_eig : float
+        Largest real part of the closed-loop eigenvalues: one CAV, of the design plant; platoon
+        / ring, on ``subspace``.
+    max_real_eig_model : float
+        One CAV: the same on the full model (FD-LCC: the free position integrator is 0).
+    plant_stable, string_stable : bool or None
+        One CAV: the head-to-tail check (``None`` without a head vehicle).
+    gamma_peak, gamma_peak_omega : float or None
+        One CAV: peak ``|Gamma|`` and its frequency (rad/s).
+    string_verdict : str or None
+        One CAV: ``StringStabilityReport.verdict``.
+    string_margin : float or None
+        One CAV: ``StringStabilityReport.margin`` (relative; ``None`` when not finite).
+    stable : bool
+        Platoon / ring: the closed loop is stable on ``subspace`` (always ``True`` on a
+        returned check: :func:`check_platoon_gain` raises otherwise).
+    subspace : str
+        Platoon / ring: ``"full state"`` or the ring's invariant hyperplane.
+    max_real_eig_full : float
+        Platoon / ring: ``max_real_eig`` on the full state (ring: 0 up to round-off, the
+        conserved mode).
+    conserved_mode : str or None
+        Platoon / ring: the ring's conserved mode by name.
+    """
 
     h2: float
-    max_real_eig: float  # design plant closed loop
-    max_real_eig_model: float  # full model (FD-LCC "drop": the free position integrator is 0)
-    plant_stable: bool | None
-    string_stable: bool | None
-    gamma_peak: float | None
-    gamma_peak_omega: float | None
-    string_verdict: str | None = None  # StringStabilityReport.verdict
-    string_margin: float | None = None  # StringStabilityReport.margin (relative)
+    max_real_eig: float
+    max_real_eig_model: float = UNSET
+    plant_stable: bool | None = UNSET
+    string_stable: bool | None = UNSET
+    gamma_peak: float | None = UNSET
+    gamma_peak_omega: float | None = UNSET
+    string_verdict: str | None = UNSET
+    string_margin: float | None = UNSET
+    stable: bool = UNSET
+    subspace: str = UNSET
+    max_real_eig_full: float = UNSET
+    conserved_mode: str | None = UNSET
 
     def as_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        """Every field of the layout, in field order; :data:`UNSET` fields left out."""
+        return _set_fields(self)
+
+    def __repr__(self) -> str:
+        return _set_repr(self)
+
+
+#: The check of a platoon or ring gain: the same type as one CAV's (kept for imports).
+PlatoonCheck = GainCheck
+
+
+def _set_fields(rec: Any) -> dict[str, Any]:
+    """The fields of dataclass ``rec`` that are not :data:`UNSET`, in field order."""
+    d = {f.name: getattr(rec, f.name) for f in fields(rec)}
+    return {k: v for k, v in d.items() if v is not UNSET}
+
+
+def _set_repr(rec: Any) -> str:
+    parts = (f"{k}={short(v)}" for k, v in _set_fields(rec).items())
+    return f"{type(rec).__name__}({', '.join(parts)})"
 
 
 def evaluate_gain(plant: H2Plant, g: np.ndarray) -> GainCheck:
@@ -93,7 +169,9 @@ def evaluate_gain(plant: H2Plant, g: np.ndarray) -> GainCheck:
         peak, peak_w = float(rep.gamma_peak), float(rep.gamma_peak_omega)
         verdict = rep.verdict
         margin = float(rep.margin) if math.isfinite(rep.margin) else None
-    return GainCheck(h2, mre, mre_model, ps, ss, peak, peak_w, verdict, margin)
+    return GainCheck(h2=h2, max_real_eig=mre, max_real_eig_model=mre_model, plant_stable=ps,
+                     string_stable=ss, gamma_peak=peak, gamma_peak_omega=peak_w,
+                     string_verdict=verdict, string_margin=margin)
 
 
 def check_gain(plant: H2Plant, g: np.ndarray, what: str, details: dict | None = None) -> GainCheck:
@@ -112,23 +190,6 @@ def check_gain(plant: H2Plant, g: np.ndarray, what: str, details: dict | None = 
     if not math.isfinite(chk.h2):
         raise SynthesisError(f"{what}: the closed-loop H2 norm is not finite", details)
     return chk
-
-
-class _Unset:
-    """The value of a report field that its layout does not have (:data:`UNSET`)."""
-
-    __slots__ = ()
-
-    def __repr__(self) -> str:
-        return "UNSET"
-
-    def __reduce__(self) -> str:  # one object across pickling (reports cross processes)
-        return "UNSET"
-
-
-#: A field of :class:`SynthesisReport` that the report's layout does not have: left out of
-#: :meth:`SynthesisReport.as_dict` (so ``null`` in the JSON always means a value of None).
-UNSET: Any = _Unset()
 
 
 @dataclass(repr=False, kw_only=True)
@@ -160,7 +221,7 @@ class SynthesisReport(Record):
         ``u = input_K x + input_kh v_h``. Platoon / ring: a row per CAV (``cavs`` order),
         ``gains`` in :meth:`~lcc_synth.models.feedback.Gains.as_table` form, ``input_kh`` a
         number per CAV.
-    check : GainCheck or PlatoonCheck
+    check : GainCheck
         The checks of the gain (:func:`check_gain`, :func:`check_platoon_gain`).
     h2_lmi_bound, h2_restriction, solver, baseline, as_run
         One CAV: the LMI bound and the LMI gain's true H2, the solver's figures, the baseline
@@ -193,7 +254,7 @@ class SynthesisReport(Record):
     gains: dict[str, float] | dict[str, dict[str, float]]
     input_K: list[float] | list[list[float]]
     input_kh: float | list[float]
-    check: GainCheck | PlatoonCheck
+    check: GainCheck
     h2_lmi_bound: float | None = UNSET
     h2_restriction: float | None = UNSET
     h2_unstructured: float | None = None
@@ -216,15 +277,12 @@ class SynthesisReport(Record):
     def as_dict(self) -> dict[str, Any]:
         """The JSON form (``lcc-synth synthesize --json``): every field of the layout, in
         field order, :data:`UNSET` fields left out, non-finite numbers as ``None``."""
-        d = {f.name: getattr(self, f.name) for f in fields(self)}
-        d = {k: v for k, v in d.items() if v is not UNSET}
+        d = _set_fields(self)
         d["check"] = self.check.as_dict()
         return _jsonable(d)
 
     def __repr__(self) -> str:
-        parts = (f"{f.name}={short(getattr(self, f.name))}" for f in fields(self)
-                 if getattr(self, f.name) is not UNSET)  # fmt: skip
-        return f"{type(self).__name__}({', '.join(parts)})"
+        return _set_repr(self)
 
 
 #: The report of a platoon or ring synthesis: the same type as one CAV's (kept for imports).
@@ -329,37 +387,7 @@ def format_report(rep: SynthesisReport) -> str:
     return "\n".join(lines)
 
 
-@dataclass(repr=False)
-class PlatoonCheck(Record):
-    """Everything computed from one platoon gain.
-
-    Attributes
-    ----------
-    h2 : float
-        True H2 norm (ring: on the invariant subspace).
-    max_real_eig : float
-        Largest real part of the closed-loop eigenvalues on ``subspace``.
-    stable : bool
-    subspace : str
-        ``"full state"`` or the ring's invariant hyperplane.
-    max_real_eig_full : float
-        The same on the full state (ring: 0 up to round-off, the conserved mode).
-    conserved_mode : str or None
-        The ring's conserved mode by name.
-    """
-
-    h2: float
-    max_real_eig: float
-    stable: bool
-    subspace: str
-    max_real_eig_full: float
-    conserved_mode: str | None = None
-
-    def as_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-
-def check_platoon_gain(plant: PlatoonPlant, K: np.ndarray, what: str = "design") -> PlatoonCheck:
+def check_platoon_gain(plant: PlatoonPlant, K: np.ndarray, what: str = "design") -> GainCheck:
     """True H2 and stability of design gain ``K``; :class:`SynthesisError` when unusable."""
     K = np.asarray(K, float)
     if not np.all(np.isfinite(K)):
@@ -376,7 +404,8 @@ def check_platoon_gain(plant: PlatoonPlant, K: np.ndarray, what: str = "design")
                              f"= {mre:.3g})", {"max_real_eig": mre})  # fmt: skip
     if not ev.stable:
         raise SynthesisError(f"{what}: the closed-loop H2 norm is not finite")
-    return PlatoonCheck(math.sqrt(ev.J), mre, True, sub, mre_full, m.conserved_mode)
+    return GainCheck(h2=math.sqrt(ev.J), max_real_eig=mre, stable=True, subspace=sub,
+                     max_real_eig_full=mre_full, conserved_mode=m.conserved_mode)
 
 
 def _format_platoon_report(rep: SynthesisReport) -> str:
