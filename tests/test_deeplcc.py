@@ -517,7 +517,7 @@ def test_absolute_spacing_bound_opens_the_gap_when_closing_in(cache):
     assert 0 < first and margin[first:].min() > -0.05  # once reached, it is kept
 
 
-# slow: 8 s (CI runs it); the closed-loop DeeP-LCC tests of one CAV in this file stay in the default run
+# slow: 8 s (CI runs it); the one-CAV closed-loop DeeP-LCC tests of this file stay by default
 @pytest.mark.slow
 def test_two_cavs_in_the_nonlinear_platoon_simulator(tmp_path):
     """problems/platoon_deeplcc_brake.toml (CAVs at 3 and 6, heterogeneous noisy HDVs) with a
