@@ -38,7 +38,8 @@ from lcc_synth.models.platoon import PLATOON_KINDS
 from lcc_synth.problem import warn_large_gains
 from lcc_synth.schema import declared
 
-__all__ = ["BASIC_TYPES", "STATIC_RUN_KEYS", "build_controller", "switched_on"]
+__all__ = ["BASIC_TYPES", "STATIC_RUN_KEYS", "build_controller", "static_controller",
+           "switched_on"]
 
 #: The types :func:`build_controller` builds: the HDV law, static gains, gains files and the
 #: field's baselines.
@@ -123,43 +124,102 @@ def _build(name: str, table, system, source: str | None, field: str) -> Controll
             where = f"{field}.file"
         if ctype == "static":
             warn_large_gains(raw, f"{where}.gains")  # a gains file's: by read_gains
-        sample_time = _sample_time(table, field, ctype)
-        equilibrium = T.get(table, "equilibrium", field)
-        tau = None
-        if "equilibrium_tau" in table:
-            if equilibrium != "estimated":
-                raise ConfigError(
-                    f"{field}.equilibrium_tau", 'only applies with equilibrium = "estimated"'
-                )
-            tau = T.get(table, "equilibrium_tau", field)
-        if equilibrium == "estimated" and kind == "fd_lcc":
-            raise ConfigError(
-                f"{field}.equilibrium",
-                'must be "fixed" for fd_lcc: FD-LCC has no vehicle ahead of the CAV to '
-                "estimate the equilibrium velocity from",
-            )
-        mf = T.get(table, "measurement_filter", field)
+        run = _run_keys(table, T, field, ctype, kind)
         try:
-            gains = Gains.named(raw, semantics)
-            model = model_from_hdv(kind, system.m, system.n, system.hdv, system.v_star, warn=False)
-            ctrl = StaticGainController(name, gains, model, sample_time, equilibrium, tau, mf)
+            return _paper_controller(name, Gains.named(raw, semantics), kind, system, run)
         except ConfigError as err:
             raise ConfigError(f"{where}.{err.field}", f"{err.message} (kind {kind!r})") from None
-        return ctrl
     except ConfigError as err:
         raise err.with_source(source) if source and not err.source else err from None
+
+
+def _run_keys(table, T, field: str, ctype: str, kind: str) -> tuple:
+    """``(sample_time, equilibrium, equilibrium_tau, measurement_filter)`` of a one-CAV static
+    law: how it runs (:data:`STATIC_RUN_KEYS`)."""
+    sample_time = _sample_time(table, field, ctype)
+    equilibrium = T.get(table, "equilibrium", field)
+    tau = None
+    if "equilibrium_tau" in table:
+        if equilibrium != "estimated":
+            raise ConfigError(
+                f"{field}.equilibrium_tau", 'only applies with equilibrium = "estimated"'
+            )
+        tau = T.get(table, "equilibrium_tau", field)
+    if equilibrium == "estimated" and kind == "fd_lcc":
+        raise ConfigError(
+            f"{field}.equilibrium",
+            'must be "fixed" for fd_lcc: FD-LCC has no vehicle ahead of the CAV to '
+            "estimate the equilibrium velocity from",
+        )
+    return sample_time, equilibrium, tau, T.get(table, "measurement_filter", field)
+
+
+def _paper_controller(name: str, gains: Gains, kind: str, system, run: tuple) -> Controller:
+    """The static-gain controller of one CAV's ``gains`` on the ``kind`` model of ``system``,
+    run as ``run`` (:func:`_run_keys`)."""
+    model = model_from_hdv(kind, system.m, system.n, system.hdv, system.v_star, warn=False)
+    return StaticGainController(name, gains, model, *run)
+
+
+def static_controller(name: str, gains: Gains, table, system, source: str | None = None
+                      ) -> Controller:  # fmt: skip
+    """The static-gain controller of the gain object ``gains``, run as ``table`` says.
+
+    The controller of a gain made in memory, e.g. the one synthesised for a ``type = "h2"``
+    table (:attr:`lcc_synth.synthesis.report.SynthesisReport.gain`): the gain is used as it
+    is, the same object, not written to a table and read back. ``table`` gives only how the
+    law runs: the :data:`STATIC_RUN_KEYS` and ``start``, read as a ``type = "static"`` table
+    reads them (its other keys, e.g. the synthesis keys of an ``h2`` table, are not read). The
+    checks are those of a static table: the gain's CAVs and states must be the layout's
+    (:meth:`~lcc_synth.models.feedback.Gains.check`), a platoon or ring runs with the fixed
+    equilibrium, and gains above the plausible size warn.
+
+    Parameters
+    ----------
+    name : str
+        The controller's name (errors name ``controllers.NAME``).
+    gains : lcc_synth.models.feedback.Gains
+        The gain and its semantics, on the layout of ``system`` (one CAV: states by name from
+        the CAV; a platoon or ring: a row per CAV).
+    table : mapping
+        The controller's table (``sample_time``, ``equilibrium``, ``equilibrium_tau``,
+        ``measurement_filter``, ``start``; all optional).
+    system : lcc_synth.problem.System
+    source : str, optional
+        The problem file (errors name it).
+
+    Raises
+    ------
+    ConfigError
+        A bad run key, or a gain that is not on the layout of ``system``.
+    """
+    field = f"controllers.{name}"
+    T = declared("controllers.NAME:static")
+    run = {k: table[k] for k in STATIC_RUN_KEYS if k in table}
+    try:
+        if system.platoon is not None:
+            warn_large_gains({f"{u}.{k}": g for u, row in gains.as_table().items()
+                              for k, g in row.items()}, f"{field}.gains")  # fmt: skip
+            _fixed_equilibrium(run, T, field, system)
+            ctrl = _platoon_static(name, gains, run, system, T, "static", field)
+        else:
+            warn_large_gains(gains.gains, f"{field}.gains")
+            keys = _run_keys(run, T, field, "static", system.kind)
+            try:
+                ctrl = _paper_controller(name, gains, system.kind, system, keys)
+            except ConfigError as err:
+                raise ConfigError(f"{field}.{err.field}",
+                                  f"{err.message} (kind {system.kind!r})") from None  # fmt: skip
+    except ConfigError as err:
+        raise err.with_source(source) if source and not err.source else err from None
+    return switched_on(ctrl, table, field)
 
 
 def _platoon_controller(name: str, table, system, ctype: str, field: str, source: str | None):
     """A ``static`` or ``gains_file`` controller of a ``platoon`` / ``ring`` problem."""
     T = declared(f"controllers.NAME:{ctype}")
     model = system.linear_model(warn=False)
-    if T.get(table, "equilibrium", field) != "fixed" or "equilibrium_tau" in table:
-        raise ConfigError(
-            f"{field}.equilibrium",
-            f"must be \"fixed\" for kind = {system.kind!r} (the estimate follows one CAV's "
-            "predecessor)",
-        )
+    _fixed_equilibrium(table, T, field, system)
     if ctype == "static":
         kind = T.get(table, "kind", field, default=system.kind)
         if kind != system.kind:
@@ -180,5 +240,22 @@ def _platoon_controller(name: str, table, system, ctype: str, field: str, source
         gains = Gains.from_table(raw, model, T.get(table, "semantics", field), f"{field}.gains")
     else:
         gains, _ = read_gains_file(table, field, system, source)
-    return StaticGainController(name, gains, model, _sample_time(table, field, ctype),
+    return _platoon_static(name, gains, table, system, T, ctype, field)
+
+
+def _fixed_equilibrium(table, T, field: str, system) -> None:
+    if T.get(table, "equilibrium", field) != "fixed" or "equilibrium_tau" in table:
+        raise ConfigError(
+            f"{field}.equilibrium",
+            f"must be \"fixed\" for kind = {system.kind!r} (the estimate follows one CAV's "
+            "predecessor)",
+        )
+
+
+def _platoon_static(name: str, gains: Gains, table, system, T, ctype: str, field: str
+                    ) -> Controller:  # fmt: skip
+    """The static-gain controller of a platoon or ring gain, run as ``table`` says (its
+    fixed equilibrium checked by :func:`_fixed_equilibrium` first)."""
+    return StaticGainController(name, gains, system.linear_model(warn=False),
+                                _sample_time(table, field, ctype),
                                 measurement_filter=T.get(table, "measurement_filter", field))

@@ -326,6 +326,7 @@ def prepare_controllers(
     on_step: Callable[[str], None] | None = None,
     fallbacks: Mapping[str, Mapping[str, Any]] | None = None,
     failures: dict[str, str] | None = None,
+    gains: dict[str, Any] | None = None,
 ):
     """Controller tables of one layout, ``h2`` entries replaced by their synthesised gains and
     the MPCs' ``fallback = "NAME"`` by NAME's gain.
@@ -333,6 +334,11 @@ def prepare_controllers(
     With ``failures`` (a dict), a controller whose synthesis fails, and an MPC falling back to
     it, are left out and recorded there (``{name: why}``), so that the others still run;
     without it the :class:`~lcc_synth.synthesis.h2.SynthesisError` propagates.
+
+    With ``gains`` (a dict), the synthesised gain objects are put there (``{name: Gains}``,
+    the fallbacks' included): the objects the controllers are built from in memory
+    (:func:`lcc_synth.experiments.spec.controller_gain`, as :func:`run_suite` does), where the
+    returned tables are their plain form (result files, Dask workers).
 
     Returns ``(tables, designs)``: ``{name: table}`` with only the types of
     :data:`lcc_synth.experiments.controller_tables.CONTROLLER_TYPES`, and
@@ -360,6 +366,8 @@ def prepare_controllers(
                 failures[name] = f"synthesis failed: {err}"
                 continue
             designs[name] = rep
+            if gains is not None:
+                gains[name] = rep.gain
         tables[name] = table
     from lcc_synth.experiments.spec import drop_failed_fallbacks, resolve_fallbacks
 
@@ -451,6 +459,7 @@ def run_suite(
     import time
 
     from lcc_synth.experiments.deeplcc_runs import run_scenario, scenario_controllers
+    from lcc_synth.experiments.spec import controller_gain
     from lcc_synth.simulation.backends import check_backend
 
     for sname, ss in suite.scenarios.items():  # the simulator is installed: before any design
@@ -476,17 +485,23 @@ def run_suite(
             def starting(cname: str, lname=lname) -> None:
                 bar.set_postfix_str(f"{lname}/{cname}")
 
+            synthesised: dict[str, Any] = {}
             tables[lname], designs[lname] = prepare_controllers(
                 per_layout[lname][0], system, lname, suite.source, suite.name,
                 on_step=starting, fallbacks=per_layout[lname][1], failures=failures[lname],
+                gains=synthesised,
             )
             bar.update(len([c for c in failures[lname] if c in per_layout[lname][0]]))
             built[lname] = {}
             for cname, table in tables[lname].items():
                 starting(cname)
+                given = controller_table(suite.controllers[cname], lname)
+                gain = controller_gain(cname, given, synthesised)  # built from the object
                 try:  # deep_lcc: its settings here, its data per scenario (deeplcc_runs)
-                    built[lname][cname] = scenario_controllers({cname: dict(table)}, system,
-                                                               suite.source)[cname]
+                    built[lname][cname] = scenario_controllers(
+                        {cname: table if gain is None else given}, system, suite.source,
+                        {cname: gain},
+                    )[cname]
                 except ConfigError as err:
                     raise ConfigError(
                         f"{err.field} (layout {lname})", err.message, err.source

@@ -127,14 +127,17 @@ class ScenarioDeePLCC:
 
 
 def scenario_controllers(tables: Mapping[str, Mapping[str, Any]], system,
-                         source: str | None = None):  # fmt: skip
+                         source: str | None = None, gains: Mapping[str, Any] | None = None):
     """The controllers of a sweep or of a suite's layout: :class:`ScenarioDeePLCC` for
     ``deep_lcc`` tables, the others by
-    :func:`lcc_synth.experiments.controller_tables.controller_from_table`."""
+    :func:`lcc_synth.experiments.controller_tables.controller_from_table` (``gains``: ``{name:
+    Gains}``, the gain object each is built with, its ``gains``)."""
     from lcc_synth.experiments.controller_tables import controller_from_table
 
+    gains = gains or {}
     return {k: ScenarioDeePLCC(k, t, system, source) if t.get("type") == "deep_lcc"
-            else controller_from_table(k, dict(t), system, source) for k, t in tables.items()}
+            else controller_from_table(k, dict(t), system, source, gains=gains.get(k))
+            for k, t in tables.items()}  # fmt: skip
 
 
 def scenario_runs(scenario, ranges, start: int, stop: int, controllers) -> list:

@@ -17,8 +17,12 @@ gain ``lcc-synth synthesize`` writes for the same tables, bit for bit.
   of the report's gain; on a ring the gain is defined modulo the conserved total-spacing
   direction, as the report says).
 
-The table is plain data: it can be sent to Dask workers, and an MPC's ``fallback = "NAME"``
-inlines it (:func:`lcc_synth.experiments.spec.resolve_fallbacks`).
+The table is plain data, the form of the gain in result files (``controller_tables``) and on
+Dask workers; an MPC's ``fallback = "NAME"`` inlines it there
+(:func:`lcc_synth.experiments.spec.resolve_fallbacks`). In memory the controllers are built
+from the gain object itself, the report's :attr:`~lcc_synth.synthesis.report.SynthesisReport.
+gain` (``run``, ``simulate``: :func:`lcc_synth.experiments.spec.controller_gain`): the table is
+not read back there.
 """
 
 from __future__ import annotations
@@ -60,9 +64,10 @@ def synthesize_table(
     -------
     tuple
         ``(static_table, report)``: a ``type = "static"`` controller table holding the
-        synthesised gain (plain data) and the
+        synthesised gain (plain data; the :data:`~lcc_synth.controllers.registry.
+        STATIC_RUN_KEYS` and ``start`` as the table gives them) and the
         :class:`~lcc_synth.synthesis.report.SynthesisReport` (platoon / ring: a gain row per
-        CAV).
+        CAV), whose ``gain`` is the synthesised gain object.
 
     Raises
     ------
@@ -97,7 +102,7 @@ def synthesize_table(
         "semantics": rep.semantics,
         "gains": {k: dict(v) if isinstance(v, Mapping) else v for k, v in rep.gains.items()},
     }
-    for key in STATIC_RUN_KEYS:
+    for key in (*STATIC_RUN_KEYS, "start"):
         if key in table:
             out[key] = table[key]
     return out, rep

@@ -13,6 +13,7 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.controller_tables import controller_from_table
 from lcc_synth.experiments.h2_tables import synthesize_h2_tables
 from lcc_synth.metrics import MetricsConfig, metrics_from
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.records import Record, ValueEq, system_tables, toml_text
 from lcc_synth.problem import Problem, System, load_problem, system_from
 from lcc_synth.schema import declared
@@ -21,8 +22,8 @@ from lcc_synth.simulation.scenario import Scenario
 from lcc_synth.simulation.scenario_file import scenario_from
 from lcc_synth.simulation.timestep import check_time_step
 
-__all__ = ["SimulationSpec", "check_starts", "controllers_from", "drop_failed_fallbacks",
-           "fallback_target", "load_spec", "resolve_fallbacks"]
+__all__ = ["SimulationSpec", "check_starts", "controller_gain", "controllers_from",
+           "drop_failed_fallbacks", "fallback_target", "load_spec", "resolve_fallbacks"]
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -115,6 +116,27 @@ def _nonzero(gains: Mapping[str, Any]) -> dict[str, Any]:
             if isinstance(v, Mapping) or float(v) != 0.0}  # fmt: skip
 
 
+def controller_gain(
+    name: str, table: Mapping[str, Any], gains: Mapping[str, Gains]
+) -> Gains | None:  # fmt: skip
+    """The gain object that controller ``name`` is built with, from ``gains`` (``{name:
+    Gains}``: the gains synthesised for the ``h2`` controllers,
+    :attr:`~lcc_synth.synthesis.report.SynthesisReport.gain`), ``None`` if none.
+
+    ``table`` is the controller's table as the file states it: an ``h2`` table is built from
+    its own synthesised gain, an MPC whose ``fallback = "NAME"`` names a synthesised controller
+    from NAME's gain (:func:`lcc_synth.experiments.controller_tables.controller_from_table`'s
+    ``gains``), the same object: no table of the gain is written and read back.
+    """
+    if not isinstance(table, Mapping):
+        return None
+    if table.get("type") == "h2":
+        return gains.get(name)
+    if table.get("type") == "mpc" and isinstance(table.get("fallback"), str):
+        return gains.get(table["fallback"])
+    return None
+
+
 def resolve_fallbacks(
     tables: Mapping[str, Mapping[str, Any]], system: System, source: str | None = None
 ) -> dict[str, dict[str, Any]]:
@@ -123,9 +145,12 @@ def resolve_fallbacks(
     NAME is a ``static`` controller of the same file, or an ``h2`` one once synthesised (``run``
     and ``sweep`` replace it by a static table first). The gain becomes plain data in the MPC's
     table (``{"controller", "kind", "semantics", "gains"}``, zero gains dropped; a platoon or
-    ring: the platoon form ``{u_i: {state: gain}}`` that :mod:`lcc_synth.mpc.build` reads; Dask
-    workers need no other table) and :mod:`lcc_synth.mpc.build` makes it the MPC's static fallback:
-    applied to the MPC's own error state when the QP fails and no previous plan is left.
+    ring: the platoon form ``{u_i: {state: gain}}`` that :mod:`lcc_synth.mpc.build` reads): the
+    form written to result files and sent to Dask workers. :mod:`lcc_synth.mpc.build` makes it
+    the MPC's static fallback, applied to the MPC's own error state when the QP fails and no
+    previous plan is left. (``run`` and ``simulate`` build an MPC falling back to a synthesised
+    gain from the gain object itself, :func:`controller_gain`; this table is then only checked
+    and reported.)
 
     Raises
     ------
@@ -179,9 +204,12 @@ def controllers_from(
 ):  # fmt: skip
     """Every ``[controllers.NAME]`` table, built in file order: ``type = "h2"`` synthesised
     for ``system`` first (:func:`lcc_synth.experiments.h2_tables.synthesize_h2_tables`, the
-    code path of ``run``; problem names ``LABEL_NAME``), then the MPC fallbacks resolved. A
-    synthesised controller, and an MPC with ``fallback = "NAME"``, keep the table the file
-    states as ``source_table`` (what :meth:`SimulationSpec.toml_tables` writes back).
+    code path of ``run``; problem names ``LABEL_NAME``), then the MPC fallbacks resolved (and
+    checked, :func:`resolve_fallbacks`). A synthesised controller, and an MPC falling back to
+    one, are built from the synthesised gain object and the file's table
+    (:func:`controller_gain`). A synthesised controller, and an MPC with ``fallback = "NAME"``,
+    keep the table the file states as ``source_table`` (what :meth:`SimulationSpec.toml_tables`
+    writes back).
 
     With ``failures`` (a dict), a controller whose synthesis fails, and an MPC that falls back
     to it, are left out and recorded there (``{name: why}``); without it the error propagates.
@@ -196,8 +224,12 @@ def controllers_from(
         if failures:
             tables = drop_failed_fallbacks(tables, failures, source)
         tables = resolve_fallbacks(tables, system, source)
-        built = {name: controller_from_table(name, t, system, source, scenario)
-                 for name, t in tables.items()}  # fmt: skip
+        synthesised = {name: rep.gain for name, rep in designs.items()}
+        built = {}
+        for name, t in tables.items():
+            gain = controller_gain(name, given[name], synthesised)
+            built[name] = controller_from_table(name, t if gain is None else given[name], system,
+                                                source, scenario, gain)  # fmt: skip
         for name in designs:  # written back as stated (a reload synthesises the same gain)
             built[name].source_table = dict(given[name])
         for name, t in given.items():  # an MPC's fallback = "NAME" is written back as stated

@@ -36,8 +36,15 @@ def _named_fallback(named, system, field_name: str) -> tuple[Gains, str]:
     return gains, f"controller {named.get('controller', '?')}"
 
 
-def mpc_controller_from_table(name: str, table, system, source: str | None = None):
+def mpc_controller_from_table(name: str, table, system, source: str | None = None,
+                              fallback: Gains | None = None):  # fmt: skip
     """Build an :class:`MPCController` from a ``[controllers.NAME]`` table (``type = "mpc"``).
+
+    The MPC's ``fallback = "NAME"`` is resolved above this package: given as the gain object
+    ``fallback`` (e.g. the gain synthesised for an ``h2`` controller NAME, used as it is), or
+    inlined in the table as plain data (``{"controller", "kind", "semantics", "gains"}``, the
+    form :func:`lcc_synth.experiments.spec.resolve_fallbacks` writes for sweep workers and
+    result files), which is read here.
 
     Parameters
     ----------
@@ -48,14 +55,20 @@ def mpc_controller_from_table(name: str, table, system, source: str | None = Non
     system : lcc_synth.problem.System
     source : str, optional
         The problem file: errors name it and ``fallback_gains_file`` is relative to its folder.
+    fallback : lcc_synth.models.feedback.Gains, optional
+        The gain of the table's ``fallback = "NAME"`` (``NAME`` is its source label
+        ``controller NAME``); without it an inlined ``fallback`` table is read.
     """
     field_name = f"controllers.{name}"
     try:
         table = dict(table)
-        named = table.pop("fallback", None)  # resolved by experiments.spec.resolve_fallbacks
+        named = table.pop("fallback", None)  # resolved by the experiments layer
         settings = settings_from_table(table, field_name)
-        fallback, fb_source = None, None  # None: the layout's default
-        if named is not None:
+        fb_source = None  # None (and fallback None): the layout's default
+        if fallback is not None:
+            target = named.get("controller", "?") if isinstance(named, dict) else named
+            fb_source = f"controller {target}"
+        elif named is not None:
             fallback, fb_source = _named_fallback(named, system, f"{field_name}.fallback")
         if settings.fallback_gains_file:
             fallback, path = read_fallback_file(table, field_name, system, source)

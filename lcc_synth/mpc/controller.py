@@ -166,7 +166,7 @@ class OneCAVLayout(Layout):
 
     def check_fallback(self, model, fallback: Gains, source: str) -> None:
         try:
-            cav_feedback(model, fallback)
+            cav_feedback(model, _on_model(fallback, model))
         except ConfigError as err:
             from_file = source != "paper" and not source.startswith("controller")
             raise ConfigError(
@@ -175,7 +175,7 @@ class OneCAVLayout(Layout):
             ) from None
 
     def feedback(self, model, fallback: Gains) -> tuple[np.ndarray, float]:
-        K, kh = cav_feedback(model, fallback)
+        K, kh = cav_feedback(model, _on_model(fallback, model))
         return np.asarray(K, float), float(kh)
 
     def check_context(self, ctx: ControlContext, name: str) -> None:
@@ -389,10 +389,10 @@ class OneCAVLayout(Layout):
 
     def describe(self, mpc: MPCController) -> tuple[dict, dict, str, Any]:
         return ({"m": self.m, "n_model": self.n_model}, {},
-                "condensed, CasADi symbolic (built once)", dict(mpc.fallback.gains))  # fmt: skip
+                "condensed, CasADi symbolic (built once)", _applied(mpc.fallback))  # fmt: skip
 
     def as_dict(self, mpc: MPCController) -> dict[str, Any]:
-        return {**mpc.describe(), "fallback": dict(mpc.fallback.gains)}
+        return {**mpc.describe(), "fallback": _applied(mpc.fallback)}
 
     def stats(self, mpc: MPCController, out: dict[str, Any]) -> dict[str, Any]:
         return out
@@ -403,6 +403,25 @@ class OneCAVLayout(Layout):
 #: column of each position) and ``cav_columns``.
 LAYOUT_ATTRIBUTES = frozenset({"m", "n_model", "platoon", "ring", "positions", "columns",
                                "cav_columns"})
+
+
+def _on_model(fallback: Gains, model) -> Gains:
+    """``fallback`` on the MPC's model: without the states the model lacks whose gains are
+    zero. A gain designed on the whole string (the ``h2`` gain an MPC falls back to, on all 10
+    HDVs) runs on an MPC that predicts fewer (``n_model``) when it hears none of the others;
+    a non-zero gain on a state the model lacks stays, for :meth:`Gains.check` to name."""
+    keep = [j for j, nm in enumerate(fallback.states)
+            if nm in model.state_names or np.any(fallback.K[:, j] != 0.0)]  # fmt: skip
+    if len(keep) == len(fallback.states):
+        return fallback
+    return Gains(fallback.K[:, keep], fallback.cavs, tuple(fallback.states[j] for j in keep),
+                 fallback.semantics, fallback.kh)  # fmt: skip
+
+
+def _applied(fallback: Gains) -> dict[str, float]:
+    """The fallback's non-zero gains by state name (what :meth:`describe` shows, as the
+    platoon form of a string's MPC does)."""
+    return {nm: g for nm, g in fallback.gains.items() if g != 0.0}
 
 
 def layout_of(system, settings: MPCSettings):

@@ -367,6 +367,7 @@ def synthesize(spec: SynthesisSpec) -> SynthesisReport:
         timings=timings,
         notes=notes,
         as_run=as_run,
+        gain=gains,
     )
 
 
@@ -559,4 +560,5 @@ def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
         pareto=pareto,
         timings=timings,
         notes=notes,
+        gain=gains,
     )

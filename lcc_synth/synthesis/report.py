@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.analysis.string_stability import verdict_text
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.records import Record, short
 from lcc_synth.synthesis.h2 import (
     STABILITY_TOL,
@@ -136,8 +137,9 @@ PlatoonCheck = GainCheck
 
 
 def _set_fields(rec: Any) -> dict[str, Any]:
-    """The fields of dataclass ``rec`` that are not :data:`UNSET`, in field order."""
-    d = {f.name: getattr(rec, f.name) for f in fields(rec)}
+    """The fields of dataclass ``rec`` that are not :data:`UNSET`, in field order (an object
+    that is not plain data, ``metadata={"plain": False}``, left out)."""
+    d = {f.name: getattr(rec, f.name) for f in fields(rec) if f.metadata.get("plain", True)}
     return {k: v for k, v in d.items() if v is not UNSET}
 
 
@@ -231,6 +233,11 @@ class SynthesisReport(Record):
         the per-member figures of a robust design.
     pareto : list of dict or None
         ``design = "sparsity"``: the Pareto front (one CAV) or the greedy range front.
+    gain : lcc_synth.models.feedback.Gains
+        The synthesised gain itself (``K``, ``gains`` and ``semantics`` are its plain form):
+        the object a controller of the design is built from (a static controller, an MPC's
+        fallback), never read back from ``gains``. Not part of :meth:`as_dict` (the JSON has
+        its plain form), of the repr nor of the report's equality.
     """
 
     problem: str
@@ -268,6 +275,7 @@ class SynthesisReport(Record):
     timings: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     as_run: dict[str, Any] | None = UNSET  # lcc_synth.synthesis.as_run.as_run_design's info
+    gain: Gains | None = field(default=None, compare=False, metadata={"plain": False})
 
     @property
     def per_cav(self) -> bool:
