@@ -11,9 +11,10 @@ that build them, so that imports point one way (down):
   :func:`lcc_synth.controllers.registry.build_controller`.
 
 A gain already in memory is passed as the object, never as a table: ``gains`` is the gain
-synthesised for a ``type = "h2"`` table (:attr:`~lcc_synth.synthesis.report.SynthesisReport.
-gain`; built by :func:`lcc_synth.controllers.registry.static_controller`, the table giving
-only how it runs) or, for an MPC, the gain its ``fallback = "NAME"`` names
+synthesised for a ``type = "h2"`` table (the report's ``gain``,
+:class:`~lcc_synth.synthesis.report.SynthesisReport`; built by
+:func:`lcc_synth.controllers.registry.static_controller`, the table giving only how it runs)
+or, for an MPC, the gain its ``fallback = "NAME"`` names
 (:func:`lcc_synth.experiments.spec.controller_gain` picks it).
 
 Any type takes ``start`` (s): the controller switches on then, the CAVs driving with their HDV

@@ -20,9 +20,8 @@ gain ``lcc-synth synthesize`` writes for the same tables, bit for bit.
 The table is plain data, the form of the gain in result files (``controller_tables``) and on
 Dask workers; an MPC's ``fallback = "NAME"`` inlines it there
 (:func:`lcc_synth.experiments.spec.resolve_fallbacks`). In memory the controllers are built
-from the gain object itself, the report's :attr:`~lcc_synth.synthesis.report.SynthesisReport.
-gain` (``run``, ``simulate``: :func:`lcc_synth.experiments.spec.controller_gain`): the table is
-not read back there.
+from the gain object itself, the report's ``gain`` (``run``, ``simulate``:
+:func:`lcc_synth.experiments.spec.controller_gain`): the table is not read back there.
 """
 
 from __future__ import annotations
@@ -64,8 +63,9 @@ def synthesize_table(
     -------
     tuple
         ``(static_table, report)``: a ``type = "static"`` controller table holding the
-        synthesised gain (plain data; the :data:`~lcc_synth.controllers.registry.
-        STATIC_RUN_KEYS` and ``start`` as the table gives them) and the
+        synthesised gain (plain data; the
+        :data:`~lcc_synth.controllers.registry.STATIC_RUN_KEYS` and ``start`` as the table
+        gives them) and the
         :class:`~lcc_synth.synthesis.report.SynthesisReport` (platoon / ring: a gain row per
         CAV), whose ``gain`` is the synthesised gain object.
 
