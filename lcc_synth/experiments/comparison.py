@@ -48,6 +48,7 @@ from lcc_synth.experiments.h2_tables import synthesize_table
 from lcc_synth.experiments.suite_tables import applies, check_suite_controllers, controller_table
 from lcc_synth.experiments.tables import SUITE_METRICS, rank_failed_last
 from lcc_synth.metrics import MetricsConfig, metrics_from
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.records import Record, system_tables, toml_text
 from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
 from lcc_synth.resources import progress_bar
@@ -326,7 +327,7 @@ def prepare_controllers(
     on_step: Callable[[str], None] | None = None,
     fallbacks: Mapping[str, Mapping[str, Any]] | None = None,
     failures: dict[str, str] | None = None,
-    gains: dict[str, Any] | None = None,
+    gains: dict[str, Gains] | None = None,
 ):
     """Controller tables of one layout, ``h2`` entries replaced by their synthesised gains and
     the MPCs' ``fallback = "NAME"`` by NAME's gain.
@@ -485,7 +486,7 @@ def run_suite(
             def starting(cname: str, lname=lname) -> None:
                 bar.set_postfix_str(f"{lname}/{cname}")
 
-            synthesised: dict[str, Any] = {}
+            synthesised: dict[str, Gains] = {}
             tables[lname], designs[lname] = prepare_controllers(
                 per_layout[lname][0], system, lname, suite.source, suite.name,
                 on_step=starting, fallbacks=per_layout[lname][1], failures=failures[lname],

@@ -66,8 +66,8 @@ def mpc_controller_from_table(name: str, table, system, source: str | None = Non
         settings = settings_from_table(table, field_name)
         fb_source = None  # None (and fallback None): the layout's default
         if fallback is not None:
-            target = named.get("controller", "?") if isinstance(named, dict) else named
-            fb_source = f"controller {target}"
+            target = named.get("controller") if isinstance(named, dict) else named
+            fb_source = f"controller {target or '?'}"
         elif named is not None:
             fallback, fb_source = _named_fallback(named, system, f"{field_name}.fallback")
         if settings.fallback_gains_file:
