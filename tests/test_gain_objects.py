@@ -18,9 +18,12 @@ import pytest
 from test_mpc_controller import _ctx, _obs, _system
 from test_mpc_fallback import _command
 
+from lcc_synth.controllers.registry import static_controller
 from lcc_synth.controllers.static import StaticGainController
+from lcc_synth.controllers.switch import SwitchedOn
 from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.comparison import load_suite, run_suite
+from lcc_synth.experiments.h2_tables import synthesize_table
 from lcc_synth.experiments.spec import load_spec
 from lcc_synth.models.feedback import Gains
 from lcc_synth.mpc.build import mpc_controller_from_table
@@ -90,3 +93,43 @@ def test_a_fallback_gain_on_a_vehicle_the_mpc_does_not_predict_is_refused():
         mpc_controller_from_table("mpc", {"type": "mpc", "horizon": 5, "n_model": 3,
                                           "fallback": "paper"}, system, fallback=bad)
     assert err.value.field.startswith("controllers.mpc.fallback")
+
+
+def test_h2_switches_on_at_its_start_on_both_paths(tmp_path):
+    """``start`` of an ``h2`` table is kept: by the controller built from the object
+    (``simulate``) and in the plain table (sweeps, result files)."""
+    text = """
+[system]
+kind = "cf_lcc"
+m = 0
+n = 3
+[scenario]
+duration = 10.0
+[metrics]
+window = [0.0, 10.0]
+[controllers.h2]
+type = "h2"
+pattern = [1]
+start = 4.0
+"""
+    path = tmp_path / "h2_start.toml"
+    path.write_text(text)
+    spec = load_spec(path)
+    ctrl = spec.controllers["h2"]
+    assert isinstance(ctrl, SwitchedOn) and ctrl.start == 4.0
+    assert isinstance(ctrl.inner, StaticGainController)
+    table, rep = synthesize_table("h2", {"type": "h2", "pattern": [1], "start": 4.0},
+                                  spec.system, "t")  # fmt: skip
+    assert table["start"] == 4.0 and table["gains"] == rep.gains
+    assert ctrl.inner.gains == rep.gain  # the same design, solved again
+
+
+def test_a_gain_object_on_another_layout_names_the_controller():
+    gain = Gains.named({"s_0": 0.1, "v_5": -0.2}, "replace")  # vehicle 5: the string has 3
+    with pytest.raises(ConfigError, match="v_5") as err:
+        static_controller("h2", gain, {"type": "h2"}, _system(), "p.toml")
+    assert err.value.field.startswith("controllers.h2.gains") and err.value.source == "p.toml"
+    with pytest.raises(ConfigError) as err:
+        static_controller("h2", Gains.named({"v_0": -0.5}, "replace"),
+                          {"type": "h2", "equilibrium_tau": 1.0}, _system())  # fmt: skip
+    assert err.value.field == "controllers.h2.equilibrium_tau"

@@ -51,8 +51,8 @@ def synthesize_table(
     name : str
         The controller's name (errors name ``controllers.NAME``).
     table : mapping
-        Its table for this system (``type = "h2"``, the keys of ``[synthesis]`` and the
-        :data:`~lcc_synth.controllers.registry.STATIC_RUN_KEYS`).
+        Its table for this system (``type = "h2"``, the keys of ``[synthesis]``, the
+        :data:`~lcc_synth.controllers.registry.STATIC_RUN_KEYS` and ``start``).
     system : lcc_synth.problem.System
     label : str
         The name of the synthesis problem (the report's ``problem``).
@@ -79,7 +79,8 @@ def synthesize_table(
     from lcc_synth.synthesis.config import synthesis_spec
     from lcc_synth.synthesis.design import synthesize
 
-    synth = {k: v for k, v in table.items() if k != "type" and k not in STATIC_RUN_KEYS}
+    synth = {k: v for k, v in table.items()
+             if k not in ("type", "start") and k not in STATIC_RUN_KEYS}  # fmt: skip
     if synth.get("as_run") not in (None, False):  # design the loop the controller runs
         ar = {} if synth["as_run"] is True else dict(synth["as_run"])
         for key in STATIC_RUN_KEYS:
