@@ -27,10 +27,10 @@ passed to a function that reads tables into objects
 ``_named_fallback``). The figures depend on the problem file and the code, not on the
 machine; with the trace the path takes about 4 s here (synthesis, MPC set-up).
 
-Measured on the default path: 63 modules, 441 functions, 0 round trips of 3 to-table calls
+Measured on the default path: 63 modules, 440 functions, 0 round trips of 3 to-table calls
 (the synthesised gain goes to the static controller and to the MPC's fallback as the object,
 ``SynthesisReport.gain``; ``synthesize_table`` and ``resolve_fallbacks`` still make the plain
-tables that the result files report). Before that: 63 modules, 438 functions, 2 round trips
+tables that the result files report). Before that: 63 modules, 437 functions, 2 round trips
 (the static table read back by ``controller_from_table`` and ``build_controller``, the MPC's
 inlined fallback by ``_named_fallback`` and ``Gains.from_mapping``).
 
