@@ -387,7 +387,8 @@ def _record(rrd, spec, result, provenance=None, failed: str = "") -> None:
     rrd = record_sweep_file(rrd, spec.name, result.samples, SWEEP_SAMPLES, result.summary, info,
                             provenance=provenance, failed=failed)  # fmt: skip
     print(f"recording: {rrd} (lcc-synth review {rrd})", file=sys.stderr)
-    scenario, runs, ctrls = simulate_scenario(spec, result.tables, hard.index, progress=True)
+    scenario, runs, ctrls = simulate_scenario(spec, result.worker_tables, hard.index, progress=True,
+                                              gains=result.gains)  # fmt: skip
     view = argparse.Namespace(rrd=str(second), no_record=False, record_every="minmax")
     one = argparse.Namespace(name=f"{spec.name}_scenario{hard.index}", controllers=ctrls,
                              scenario=scenario)  # fmt: skip

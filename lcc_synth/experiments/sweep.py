@@ -27,12 +27,18 @@ draws) and returns the per-scenario metrics. Tasks run on a Dask cluster (a ``Lo
 processes by default, or any scheduler address) with retries; Dask recomputes the tasks of a
 worker that dies. A task whose input is bad (a :class:`~lcc_synth.errors.ConfigError` raised on
 the worker) is not retried: the error comes back to the client as it is. ``h2`` controllers are
-synthesised once, in the client, and ``gains_file`` controllers are read there; workers
-receive plain controller tables and build (and cache, per process and thread) the controllers
-themselves (an MPC's ``fallback_gains_file`` is read on the worker: give it a path the
-workers can read). At most a few tasks per worker thread are submitted at a time (the next one
-when one finishes): the client and the scheduler hold a bounded number of tasks whatever the
-count, and an interrupted sweep has little to cancel.
+synthesised once, in the client, and ``gains_file`` controllers are read there. Workers receive
+the synthesised gains as objects (:class:`~lcc_synth.models.feedback.Gains`, pickled with the
+task) with the tables of how each law runs, and build (and cache, per process and thread) the
+controllers with the functions ``lcc-synth run`` builds them with
+(:func:`lcc_synth.experiments.deeplcc_runs.scenario_controllers`, the gain an ``h2`` table and
+an MPC's ``fallback = "NAME"`` run with picked by
+:func:`lcc_synth.experiments.spec.controller_gain`): no gain is read back from a table there.
+The plain tables (``h2`` as its static table, fallbacks inlined) are what the results files
+hold and what a resumed sweep checks. (An MPC's ``fallback_gains_file`` is read on the worker:
+give it a path the workers can read.) At most a few tasks per worker thread are submitted at a
+time (the next one when one finishes): the client and the scheduler hold a bounded number of
+tasks whatever the count, and an interrupted sweep has little to cancel.
 
 Finished work is kept
 ---------------------
@@ -80,6 +86,7 @@ from lcc_synth.experiments.sweep_samples import (
     table_digest,
 )
 from lcc_synth.metrics import MetricsConfig, sweep_safety_rank
+from lcc_synth.models.feedback import Gains
 from lcc_synth.models.records import Record, system_tables
 from lcc_synth.problem import Problem, System, check_top_level, load_problem, system_from
 from lcc_synth.schema import declared
@@ -91,7 +98,7 @@ __all__ = [
     "SWEEP_METRICS", "SWEEP_SAMPLES", "SWEEP_COUNTS", "MAX_COUNT", "TASKS_PER_THREAD",
     "SweepSpec", "SweepResult", "SweepProgress", "load_sweep", "chunks", "scenario_metrics",
     "run_chunk", "aggregate", "run_sweep", "local_cluster", "stop_cluster", "table_digest",
-    "format_summary", "task_size",
+    "format_summary", "task_size", "worker_controllers",
 ]  # fmt: skip
 
 #: Largest ``[sweep].count`` and ``batch_size`` (declared in :mod:`lcc_synth.schema`).
@@ -300,15 +307,17 @@ def _token(*parts: Any) -> str:
     return hashlib.sha256(pickle.dumps(parts)).hexdigest()
 
 
-def _controllers(tables: Mapping[str, Mapping[str, Any]], system: System, source: str | None):
-    """Controllers of ``tables``, built once per process and thread (MPCs hold solver state)."""
+def _controllers(tables: Mapping[str, Mapping[str, Any]], system: System, source: str | None,
+                 gains: Mapping[str, Gains] | None = None):  # fmt: skip
+    """Controllers of ``tables`` and the gain objects ``gains`` (``{name: Gains}``), built once
+    per process and thread (MPCs hold solver state)."""
     from lcc_synth.experiments.deeplcc_runs import scenario_controllers as build_controllers
 
-    key = (_token(dict(tables), system, source), threading.get_ident())
+    key = (_token(dict(tables), system, source, dict(gains or {})), threading.get_ident())
     with _CACHE_LOCK:
         ctrls = _CACHE.get(key)
     if ctrls is None:
-        ctrls = build_controllers(tables, system, source)
+        ctrls = build_controllers(tables, system, source, gains)
         for c in ctrls.values():
             if hasattr(c, "history"):
                 c.record = False  # an MPC's per-step history is not needed here
@@ -326,10 +335,15 @@ def run_chunk(
     start: int,
     stop: int,
     ranges: Mapping[str, tuple[float, float]] | None = None,
+    gains: Mapping[str, Gains] | None = None,
 ) -> dict[str, Any]:
     """Simulate scenarios ``start .. stop - 1`` with every controller (one batch each; with
     ``ranges``, :attr:`SweepSpec.ranges`, each scenario alone with its drawn settings; a
     ``deep_lcc`` controller on each scenario's own data, :mod:`.deeplcc_runs`).
+
+    The controllers are those of ``tables`` built with the gain objects ``gains`` (``{name:
+    Gains}``, :func:`worker_controllers`: an ``h2`` table runs its synthesised gain, an MPC
+    falls back to the gain its ``fallback`` names), as ``lcc-synth run`` builds them.
 
     Returns ``{"start", "stop", "metrics": {controller: {metric: (stop - start,) array}},
     "fallbacks": {controller: int}, "sim_time": {controller: s}, "wall_time": s}``.
@@ -337,7 +351,7 @@ def run_chunk(
     from lcc_synth.experiments.deeplcc_runs import run_scenario, scenario_runs
 
     t0 = time.perf_counter()
-    ctrls = _controllers(tables, system, source)
+    ctrls = _controllers(tables, system, source, gains)
     runs = scenario_runs(scenario, ranges, start, stop, ctrls)  # deep_lcc: one by one
     draws = [sc.draw() for sc in runs]
     metrics, fallbacks, times = {}, {}, {}
@@ -394,11 +408,18 @@ class SweepResult:
     fallbacks : dict
         ``{controller: MPC fallback steps}``.
     tables : dict
-        Controller tables sent to the workers (``h2`` resolved to its gains).
+        The plain controller tables (``h2`` as its synthesised static table, an MPC's
+        fallback inlined): the results files' and a resumed sweep's.
     designs : dict
         ``{controller: SynthesisReport}`` of the synthesised controllers.
     info : dict
         Count, batch size, tasks, seed, scheduler, wall time, throughput.
+    worker_tables : dict
+        The tables the workers built the controllers from, with ``gains``
+        (:func:`worker_controllers`).
+    gains : dict
+        ``{controller: Gains}``: the gain object an ``h2`` controller or an MPC's fallback was
+        built with (the synthesis report's ``gain``, the same object in the client).
     """
 
     summary: dict[str, dict[str, Any]]
@@ -407,6 +428,35 @@ class SweepResult:
     tables: dict[str, dict[str, Any]]
     designs: dict[str, Any]
     info: dict[str, Any]
+    worker_tables: dict[str, dict[str, Any]] = field(default_factory=dict)
+    gains: dict[str, Gains] = field(default_factory=dict)
+
+
+def worker_controllers(
+    spec: SweepSpec, tables: Mapping[str, Mapping[str, Any]], synthesised: Mapping[str, Gains]
+) -> tuple[dict[str, dict[str, Any]], dict[str, Gains]]:
+    """What the workers build the controllers from: ``(tables, gains)``.
+
+    A controller built with a gain object (an ``h2`` table, an MPC whose ``fallback = "NAME"``
+    names an ``h2`` controller; :func:`lcc_synth.experiments.spec.controller_gain` picks it
+    from ``synthesised``, ``{name: Gains}`` of the synthesis reports) keeps its table as the
+    file gives it (how the law runs) and its gain in ``gains``, the object itself; every other
+    controller keeps its plain table of ``tables`` (:func:`run_sweep`'s, a ``gains_file``
+    already read).
+    """
+    from lcc_synth.experiments.spec import controller_gain
+    from lcc_synth.experiments.suite_tables import controller_table
+
+    out: dict[str, dict[str, Any]] = {}
+    gains: dict[str, Gains] = {}
+    for name, table in tables.items():
+        given = controller_table(spec.controllers[name], "sweep")
+        gain = controller_gain(name, given, synthesised)
+        if gain is None:
+            out[name] = dict(table)
+        else:
+            out[name], gains[name] = given, gain
+    return out, gains
 
 
 def _inline_gains_file(name: str, table: Mapping[str, Any], spec: SweepSpec) -> dict[str, Any]:
@@ -480,17 +530,19 @@ def run_sweep(
             bar.set_postfix_str(name)
             bar.update(1)
 
+        synthesised: dict[str, Gains] = {}
         tables, designs = prepare_controllers(
             spec.controllers, spec.system, "sweep", spec.source, spec.name,
-            on_step=step, fallbacks=spec.fallbacks,
+            on_step=step, fallbacks=spec.fallbacks, gains=synthesised,
         )
     t_design = time.perf_counter() - t_all
     tables = {name: _inline_gains_file(name, t, spec) for name, t in tables.items()}
+    ran_tables, gains = worker_controllers(spec, tables, synthesised)
     # fail early, in the client, on a controller that cannot be built (deep_lcc: its settings)
     from lcc_synth.experiments.deeplcc_runs import scenario_controllers as build_controllers
     from lcc_synth.simulation.backends import check_backend
     from lcc_synth.simulation.timestep import check_time_step
-    built = build_controllers(tables, spec.system, spec.source)
+    built = build_controllers(ran_tables, spec.system, spec.source, gains)
     try:  # a step too coarse for a loop, SUMO missing: error / warning here, not on the workers
         check_backend(spec.scenario)
         check_time_step(spec.scenario, built)
@@ -504,7 +556,7 @@ def run_sweep(
     done.set_tables(tables)
     parts = chunks(spec.count, spec.batch_size)
     todo = [p for p in parts if p not in done.tasks]
-    args = (spec.scenario, spec.system, tables, spec.metrics, spec.source)
+    args = (spec.scenario, spec.system, ran_tables, spec.metrics, spec.source)
     names = list(tables)
     t0 = time.perf_counter()
     with progress_bar(spec.count, "scenarios", progress) as bar:
@@ -520,12 +572,12 @@ def run_sweep(
 
         if client is None:
             for s, e in todo:
-                store(run_chunk(*args, s, e, spec.ranges))
+                store(run_chunk(*args, s, e, spec.ranges, gains))
         elif todo:
-            token = _token(args, spec.ranges)[:16]
+            token = _token(args, spec.ranges, gains)[:16]
 
             def submit(s: int, e: int):
-                return client.submit(_task, *args, s, e, spec.ranges, retries=retries,
+                return client.submit(_task, *args, s, e, spec.ranges, gains, retries=retries,
                                      pure=False, key=f"lcc-sweep-{token}-{s}-{e}")  # fmt: skip
 
             run_tasks(client, todo, submit, store)
@@ -551,7 +603,8 @@ def run_sweep(
     if len(todo) < len(parts):  # resumed: the earlier runs' share
         info["resumed_tasks"] = len(parts) - len(todo)
         info["earlier_wall_time_s"] = done.wall_time_s
-    return SweepResult(aggregate(samples, fallbacks), samples, fallbacks, tables, designs, info)
+    return SweepResult(aggregate(samples, fallbacks), samples, fallbacks, tables, designs, info,
+                       ran_tables, gains)  # fmt: skip
 
 
 def format_summary(summary: Mapping[str, Mapping[str, Any]]) -> str:

@@ -4,9 +4,10 @@
 The hardest scenario is the one with the smallest minimum spacing over every controller and
 vehicle (a collision first: its spacing reached 0); ties go to the lower scenario index, then
 to the controller listed first. Scenario ``i`` draws everything from ``(seed, i)`` only
-(:mod:`lcc_synth.experiments.sweep`), so simulating it alone, with the controller tables the
-workers ran (``h2`` gains already synthesised,
-:attr:`~lcc_synth.experiments.sweep.SweepResult.tables`), gives the run that the sweep
+(:mod:`lcc_synth.experiments.sweep`), so simulating it alone, with the controllers the
+workers ran (their tables and gain objects,
+:attr:`~lcc_synth.experiments.sweep.SweepResult.worker_tables` and ``gains``; or the plain
+tables, :attr:`~lcc_synth.experiments.sweep.SweepResult.tables`), gives the run that the sweep
 measured, bit for bit (``tests/test_sweep_review.py`` checks every metric), now with its whole
 trajectory and each MPC's solve history.
 
@@ -83,7 +84,8 @@ def hardest_scenario(samples: Mapping[str, Mapping[str, np.ndarray]]) -> Hardest
 
 
 def simulate_scenario(
-    spec: Any, tables: Mapping[str, Mapping[str, Any]], index: int, progress: bool = False
+    spec: Any, tables: Mapping[str, Mapping[str, Any]], index: int, progress: bool = False,
+    gains: Mapping[str, Any] | None = None,
 ):
     """Simulate scenario ``index`` of a sweep alone with every controller of ``tables``.
 
@@ -93,12 +95,16 @@ def simulate_scenario(
         The sweep (scenario, system, ranges, source).
     tables : mapping
         Controller tables as the workers got them
-        (:attr:`~lcc_synth.experiments.sweep.SweepResult.tables`).
+        (:attr:`~lcc_synth.experiments.sweep.SweepResult.worker_tables`, with ``gains``), or
+        the plain ones (:attr:`~lcc_synth.experiments.sweep.SweepResult.tables`).
     index : int
         Scenario index, ``0 <= index < spec.count``.
     progress : bool
         A progress bar on stderr, one count per controller
         (:func:`lcc_synth.resources.progress_bar`).
+    gains : mapping, optional
+        ``{controller: Gains}``: the gain objects the workers built controllers with
+        (:attr:`~lcc_synth.experiments.sweep.SweepResult.gains`).
 
     Returns
     -------
@@ -122,7 +128,7 @@ def simulate_scenario(
 
     if not 0 <= int(index) < spec.count:
         raise ConfigError("index", f"must be in [0, {spec.count - 1}], got {index}")
-    ctrls = scenario_controllers(tables, spec.system, spec.source)
+    ctrls = scenario_controllers(tables, spec.system, spec.source, gains)
     (scenario,) = scenario_runs(spec.scenario, spec.ranges, int(index), int(index) + 1, ctrls)
     from lcc_synth.resources import progress_bar
 
