@@ -1,12 +1,14 @@
 """A synthesised gain reaches its controllers as the object itself, never through a table.
 
-``lcc-synth run`` and ``simulate`` synthesise an ``h2`` gain and run it as a static controller
-and as an MPC's ``fallback = "h2"``. Independent truth: object identity (``is``) between the
-synthesis report's :class:`~lcc_synth.models.feedback.Gains` and the gain each controller
-holds (a gain read back from a table would be another object), with the readers of gain tables
-(``Gains.from_mapping``, ``Gains.from_table``) made to fail while the controllers are built;
-and the MPC's fallback command on a forced QP failure evaluated here, from the report's plain
-gains and the observed errors, with no library feedback code.
+``lcc-synth run``, ``simulate`` and ``sweep`` synthesise an ``h2`` gain and run it as a static
+controller and as an MPC's ``fallback = "h2"``. Independent truth: object identity (``is``)
+between the synthesis report's :class:`~lcc_synth.models.feedback.Gains` and the gain each
+controller holds (a gain read back from a table would be another object), with the readers of
+gain tables (``Gains.from_mapping``, ``Gains.from_table``) made to fail while the controllers
+are built; and the MPC's fallback command on a forced QP failure evaluated here, from the
+report's plain gains and the observed errors, with no library feedback code. A sweep's
+per-scenario samples built from the objects equal bit for bit those of its plain tables (the
+results files' form), run again with the table readers.
 """
 
 from __future__ import annotations
@@ -22,9 +24,11 @@ from lcc_synth.controllers.registry import static_controller
 from lcc_synth.controllers.static import StaticGainController
 from lcc_synth.controllers.switch import SwitchedOn
 from lcc_synth.errors import ConfigError
+from lcc_synth.experiments import sweep as sweep_module
 from lcc_synth.experiments.comparison import load_suite, run_suite
 from lcc_synth.experiments.h2_tables import synthesize_table
 from lcc_synth.experiments.spec import load_spec
+from lcc_synth.experiments.sweep import load_sweep, run_chunk, run_sweep
 from lcc_synth.models.feedback import Gains
 from lcc_synth.mpc.build import mpc_controller_from_table
 
@@ -133,3 +137,33 @@ def test_a_gain_object_on_another_layout_names_the_controller():
         static_controller("h2", Gains.named({"v_0": -0.5}, "replace"),
                           {"type": "h2", "equilibrium_tau": 1.0}, _system())  # fmt: skip
     assert err.value.field == "controllers.h2.equilibrium_tau"
+
+
+def test_sweep_workers_build_h2_and_the_mpc_fallback_from_the_synthesised_object(
+    no_gain_tables, monkeypatch
+):
+    spec = load_sweep(PROBLEMS / "sweep_robustness.toml", count=2, batch_size=1,
+                      controllers=["h2", "mpc"])  # fmt: skip
+    built, real = [], sweep_module._controllers  # what each task's run_chunk builds
+    monkeypatch.setattr(sweep_module, "_controllers",
+                        lambda *args: built.append(real(*args)) or built[-1])  # fmt: skip
+    res = run_sweep(spec, client=None, progress=False)  # the workers' task, in this process
+    gain = res.designs["h2"].gain
+    assert isinstance(gain, Gains) and res.gains["h2"] is gain and res.gains["mpc"] is gain
+    assert len(built) == 2  # two tasks, each with the synthesised object itself, twice
+    for ctrls in built:
+        assert isinstance(ctrls["h2"], StaticGainController) and ctrls["h2"].gains is gain
+        assert ctrls["mpc"].fallback is gain and ctrls["mpc"].fallback_source == "controller h2"
+    assert res.worker_tables["h2"]["type"] == "h2"  # how the law runs, the file's table
+    assert res.worker_tables["mpc"]["fallback"] == "h2"
+    # the plain tables (results files, resume) still hold the same gain, entry for entry
+    assert res.tables["h2"]["type"] == "static" and res.tables["h2"]["gains"] == res.designs[
+        "h2"].gains  # fmt: skip
+    assert res.tables["mpc"]["fallback"]["controller"] == "h2"
+    monkeypatch.undo()  # the second method: the plain tables, read by the table readers
+    plain = run_chunk(spec.scenario, spec.system, res.tables, spec.metrics, spec.source, 0,
+                      spec.count, spec.ranges)  # fmt: skip
+    for name in ("h2", "mpc"):
+        for metric, values in plain["metrics"][name].items():
+            assert np.array_equal(values, res.samples[name][metric], equal_nan=True), metric
+    assert plain["fallbacks"] == res.fallbacks
