@@ -385,7 +385,7 @@ def test_a_config_error_on_a_worker_is_not_retried_and_ends_as_one_line(
 
     calls = []
 
-    def bad(scenario, system, tables, config, source, start, stop, ranges=None):
+    def bad(scenario, system, tables, config, source, start, stop, ranges=None, gains=None):
         calls.append((start, stop))
         raise ConfigError("controllers.mpc.fallback_gains_file", "cannot read g.json", source)
 
