@@ -339,7 +339,7 @@ def prepare_controllers(
     With ``gains`` (a dict), the synthesised gain objects are put there (``{name: Gains}``,
     the fallbacks' included): the objects the controllers are built from in memory
     (:func:`lcc_synth.experiments.spec.controller_gain`, as :func:`run_suite` does), where the
-    returned tables are their plain form (result files, Dask workers).
+    returned tables are their plain form (result files).
 
     Returns ``(tables, designs)``: ``{name: table}`` with only the types of
     :data:`lcc_synth.experiments.controller_tables.CONTROLLER_TYPES`, and

@@ -17,11 +17,12 @@ gain ``lcc-synth synthesize`` writes for the same tables, bit for bit.
   of the report's gain; on a ring the gain is defined modulo the conserved total-spacing
   direction, as the report says).
 
-The table is plain data, the form of the gain in result files (``controller_tables``) and on
-Dask workers; an MPC's ``fallback = "NAME"`` inlines it there
-(:func:`lcc_synth.experiments.spec.resolve_fallbacks`). In memory the controllers are built
-from the gain object itself, the report's ``gain`` (``run``, ``simulate``:
-:func:`lcc_synth.experiments.spec.controller_gain`): the table is not read back there.
+The table is plain data, the form of the gain in result files (``controller_tables``, a
+sweep's results files); an MPC's ``fallback = "NAME"`` inlines it there
+(:func:`lcc_synth.experiments.spec.resolve_fallbacks`). The controllers are built from the gain
+object itself, the report's ``gain`` (``run``, ``simulate`` and a sweep's workers, to which the
+client ships the object: :func:`lcc_synth.experiments.spec.controller_gain`): the table is not
+read back there.
 """
 
 from __future__ import annotations

@@ -146,11 +146,11 @@ def resolve_fallbacks(
     and ``sweep`` replace it by a static table first). The gain becomes plain data in the MPC's
     table (``{"controller", "kind", "semantics", "gains"}``, zero gains dropped; a platoon or
     ring: the platoon form ``{u_i: {state: gain}}`` that :mod:`lcc_synth.mpc.build` reads): the
-    form written to result files and sent to Dask workers. :mod:`lcc_synth.mpc.build` makes it
+    form written to result files. :mod:`lcc_synth.mpc.build` makes it
     the MPC's static fallback, applied to the MPC's own error state when the QP fails and no
-    previous plan is left. (``run`` and ``simulate`` build an MPC falling back to a synthesised
-    gain from the gain object itself, :func:`controller_gain`; this table is then only checked
-    and reported.)
+    previous plan is left. (``run``, ``simulate`` and the workers of ``sweep`` build an MPC
+    falling back to a synthesised gain from the gain object itself, :func:`controller_gain`;
+    this table is then only checked and reported.)
 
     Raises
     ------

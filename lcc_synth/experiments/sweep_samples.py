@@ -98,9 +98,10 @@ def aggregate(
 
 
 def table_digest(table: Mapping[str, Any]) -> str:
-    """SHA-256 of a controller table as the workers receive it (keys sorted, floats exact),
-    to check that a resumed sweep runs the same controllers (e.g. the same synthesised
-    ``h2`` gains) as the interrupted one."""
+    """SHA-256 of a controller's plain table, the results files' form (keys sorted, floats
+    exact; an ``h2`` controller as its synthesised static table), to check that a resumed
+    sweep runs the same controllers (e.g. the same synthesised ``h2`` gains) as the
+    interrupted one."""
     from lcc_synth.experiments.tables import json_safe
 
     text = json.dumps(json_safe(dict(table)), sort_keys=True, default=repr)

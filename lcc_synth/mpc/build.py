@@ -43,8 +43,8 @@ def mpc_controller_from_table(name: str, table, system, source: str | None = Non
     The MPC's ``fallback = "NAME"`` is resolved above this package: given as the gain object
     ``fallback`` (e.g. the gain synthesised for an ``h2`` controller NAME, used as it is), or
     inlined in the table as plain data (``{"controller", "kind", "semantics", "gains"}``, the
-    form :func:`lcc_synth.experiments.spec.resolve_fallbacks` writes for sweep workers and
-    result files), which is read here.
+    form :func:`lcc_synth.experiments.spec.resolve_fallbacks` writes for result files), which
+    is read here.
 
     Parameters
     ----------
