@@ -20,6 +20,14 @@
   fork is not safe there: Clarabel's linear algebra (faer) runs on a rayon thread pool, and a
   child forked after a solve in the parent inherits the pool's state without its threads and
   waits for them forever (seen here: the first in-process solve, then a forked one, hung).
+* :func:`checkpoint`, called by the long loops (every control step of the simulator, every
+  controller built and every run of a suite, every as-run analysis), raises the signal's
+  exception again if it was lost. Python runs a handler between any two bytecodes, also in
+  Python code that a C extension calls back, and some extensions clear whatever that raises:
+  CasADi's SWIG wrappers read ``.shape`` while resolving an overload and drop the error, so a
+  signal during the MPC's symbolic set-up (a few hundred ms per controller) was swallowed and
+  ``run`` went on working until the watchdog's deadline (seen here: 7 of 60 SIGTERMs between
+  2.7 and 3.7 s into ``run``; CI's ``test_run[SIGTERM]`` failed on one).
 """
 
 from __future__ import annotations
@@ -38,7 +46,7 @@ from typing import Any
 from lcc_synth.errors import Interrupted
 
 __all__ = ["CLEANUP_DEADLINE", "POLL_S", "handling", "held_signals", "interrupted", "deliver",
-           "interruption_behind", "call_in_child"]
+           "interruption_behind", "checkpoint", "call_in_child"]
 
 #: Seconds the clean-up after a signal may take before the process exits regardless.
 CLEANUP_DEADLINE = 20.0
@@ -53,6 +61,18 @@ def interrupted() -> int | None:
     return _STATE["signum"]
 
 
+def _in_chain(err: BaseException | None) -> Interrupted | None:
+    """The :class:`~lcc_synth.errors.Interrupted` on ``err``'s ``__cause__`` /
+    ``__context__`` chain (``err`` included), else ``None``."""
+    seen: set[int] = set()
+    while err is not None and id(err) not in seen:
+        if isinstance(err, Interrupted):
+            return err
+        seen.add(id(err))
+        err = err.__cause__ or err.__context__
+    return None
+
+
 def interruption_behind(err: BaseException) -> Interrupted | None:
     """The :class:`~lcc_synth.errors.Interrupted` that ``err`` stands for, else ``None``.
 
@@ -61,16 +81,26 @@ def interruption_behind(err: BaseException) -> Interrupted | None:
     a result with an exception set`` caused by it (seen in CI on ``run``, 1 run in ~20). This
     looks for it along ``__cause__`` / ``__context__``, and under :func:`handling`, once a
     signal has arrived, any error counts as its consequence."""
-    seen: set[int] = set()
-    e: BaseException | None = err
-    while e is not None and id(e) not in seen:
-        if isinstance(e, Interrupted):
-            return e
-        seen.add(id(e))
-        e = e.__cause__ or e.__context__
+    found = _in_chain(err)
+    if found is not None:
+        return found
     if _STATE["active"] and _STATE["signum"] is not None:
         return Interrupted(_STATE["signum"])
     return None
+
+
+def checkpoint() -> None:
+    """Raise :class:`~lcc_synth.errors.Interrupted` again if a signal arrived under
+    :func:`handling` and its exception was lost on the way (see the module docstring); a no-op
+    otherwise, also in the clean-up that the signal's exception is unwinding through (an
+    ``except`` or ``finally`` block handling it). Costs one dictionary look-up when no signal
+    arrived: call it once per unit of long work (a control step, a simulation, a controller)."""
+    signum = _STATE["signum"]
+    if signum is None or not _STATE["active"]:
+        return
+    if _in_chain(sys.exc_info()[1]) is not None:  # being unwound: the clean-up is running
+        return
+    raise Interrupted(signum)
 
 
 def _watchdog(signum: int) -> None:

@@ -45,6 +45,7 @@ import scipy.sparse as sp
 
 from lcc_synth.deeplcc.hankel import ReducedQP
 from lcc_synth.errors import ConfigError
+from lcc_synth.interrupts import checkpoint
 from lcc_synth.mpc.formulation import QPMatrices
 
 __all__ = ["DeepQP", "formulate", "ExactSolver"]
@@ -172,6 +173,7 @@ def formulate(red: ReducedQP, slack: float, slack_quadratic: float,
     fun = ca.Function("deep_qp", [x, c], [H, ca.jacobian(g, x), ca.jacobian(g, c),
                                           ca.jacobian(grad0, c), grad0])  # fmt: skip
     Hn, An, Gcn, Qcn, q0 = (np.array(m) for m in fun(np.zeros(nz), np.zeros(2 * n)))
+    checkpoint()  # CasADi's wrappers drop a signal's exception (lcc_synth.interrupts)
     P = sp.csc_matrix(np.triu(0.5 * (Hn + Hn.T)))
     A = sp.csc_matrix(An)
     empty = np.zeros((0, 0))

@@ -47,6 +47,7 @@ from lcc_synth.experiments.controller_tables import CONTROLLER_TYPES, controller
 from lcc_synth.experiments.h2_tables import synthesize_table
 from lcc_synth.experiments.suite_tables import applies, check_suite_controllers, controller_table
 from lcc_synth.experiments.tables import SUITE_METRICS, rank_failed_last
+from lcc_synth.interrupts import checkpoint
 from lcc_synth.metrics import MetricsConfig, metrics_from
 from lcc_synth.models.feedback import Gains
 from lcc_synth.models.records import Record, system_tables, toml_text
@@ -495,6 +496,7 @@ def run_suite(
             bar.update(len([c for c in failures[lname] if c in per_layout[lname][0]]))
             built[lname] = {}
             for cname, table in tables[lname].items():
+                checkpoint()  # a signal lost in CasADi's set-up of the last MPC (interrupts)
                 starting(cname)
                 given = controller_table(suite.controllers[cname], lname)
                 gain = controller_gain(cname, given, synthesised)  # built from the object
@@ -534,6 +536,7 @@ def run_suite(
                     table[sname][cname] = {**dict.fromkeys(SUITE_METRICS), "collided": False,
                                            "failed_steps": 0, "failed": why}  # fmt: skip
             for cname, ctrl in runs[sname].items():
+                checkpoint()
                 bar.set_postfix_str(f"{sname}/{cname}")
                 res = run_scenario(ss.scenario, ctrl, draws)
                 row = metrics_row(res, ss.metrics)

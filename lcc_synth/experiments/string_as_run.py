@@ -31,6 +31,7 @@ import numpy as np
 from lcc_synth.analysis.as_run import NotRepresentable, as_run_report, law_loop
 from lcc_synth.controllers.base import ControlContext, Controller
 from lcc_synth.controllers.static import HDVController, StaticGainController
+from lcc_synth.interrupts import checkpoint
 from lcc_synth.models.feedback import PAPER_CAVS
 
 __all__ = [
@@ -178,6 +179,7 @@ def gamma_curves(
     omega = np.asarray(omega, dtype=float)
     out: dict[str, tuple[np.ndarray, Any]] = {}
     for name, ctrl in controllers.items():
+        checkpoint()  # a signal lost in an extension's callback (lcc_synth.interrupts)
         why = "not linear"
         try:
             loop = controller_loop(ctrl, system, dt, latency)

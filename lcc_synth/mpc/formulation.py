@@ -68,6 +68,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from lcc_synth.errors import ConfigError
+from lcc_synth.interrupts import checkpoint
 from lcc_synth.models.feedback import Gains, cav_feedback
 from lcc_synth.models.hdv import CarFollowingModel
 from lcc_synth.models.linear import LCCModel, discretize, model_from_hdv
@@ -501,6 +502,7 @@ class Formulation:
         self._fun = ca.Function(
             "mpc_qp", theta, [ca.triu(H), A, Qp, Gp, ca.MX(q0), ca.MX(g0)]
         )
+        checkpoint()  # CasADi's wrappers drop a signal's exception (lcc_synth.interrupts)
 
     def theta(self, lin) -> list:
         """Numeric arguments of the CasADi function for ``lin``."""

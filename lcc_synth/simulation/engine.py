@@ -67,6 +67,7 @@ import numpy as np
 from lcc_synth.controllers.base import ControlContext, Controller, Observation
 from lcc_synth.controllers.switch import switch_step
 from lcc_synth.errors import ConfigError
+from lcc_synth.interrupts import checkpoint
 from lcc_synth.resources import require_memory, simulation_bytes
 from lcc_synth.simulation.kernels import _advance, _observe_all
 from lcc_synth.simulation.perturbations import overrides
@@ -316,6 +317,7 @@ def simulate(
         advance(k_on, T, 1, Ks, Kv, Kp, law.hdv_law)
     else:
         for k0 in range(k_on, T, ratio):
+            checkpoint()  # a signal whose exception an extension dropped (interrupts)
             _observe_all(k0, p, v, hp, hv, L, lat, loss, obs_noise, int(sc.seed),
                          int(sc.first_index), is_cav, ring, circ,
                          obs_s, obs_v, obs_p, alive)  # fmt: skip
