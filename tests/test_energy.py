@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.linalg as sla
+from gramian_reference import quad_gramian
 from scipy.integrate import quad_vec, solve_ivp
 
 from lcc_synth.analysis.energy import (
@@ -24,15 +25,6 @@ PAPER = OVM(alpha=0.6, beta=0.9, v_max=30.0, s_st=5.0, s_go=35.0).linear_coeffic
 HET = [LinearCoefficients(0.8, 1.4, 0.7), LinearCoefficients(1.1, 1.9, 0.5)]
 
 
-def _quad_gramian(A, B, t):
-    def integrand(tau):
-        X = sla.expm(A * tau) @ B
-        return X @ X.T
-
-    W, _ = quad_vec(integrand, 0.0, t, epsabs=1e-14, epsrel=1e-12)
-    return W
-
-
 @pytest.mark.parametrize(
     ("model", "t"),
     [(fd_lcc(2, PAPER), 10.0), (fd_lcc(3, PAPER), 30.0), (cf_lcc(2, HET), 7.5)],
@@ -40,7 +32,7 @@ def _quad_gramian(A, B, t):
 )
 def test_gramian_matches_quadrature(model, t):
     W = gramian(model.A, model.B, t)
-    Wq = _quad_gramian(model.A, model.B, t)
+    Wq = quad_gramian(model.A, model.B, t)
     assert np.linalg.norm(W - Wq) <= 1e-10 * np.linalg.norm(Wq)
     lam, lam_q = np.linalg.eigvalsh(W), np.linalg.eigvalsh(Wq)
     np.testing.assert_allclose(lam[0], lam_q[0], rtol=1e-6)

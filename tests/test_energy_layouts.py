@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 import scipy.linalg as sla
 from cli_subprocess import run_cli
+from gramian_reference import quad_gramian
 from scipy.integrate import quad_vec, solve_ivp
 
 from lcc_synth.analysis.energy import (
@@ -54,20 +55,11 @@ def _kept_basis(model) -> np.ndarray:
     return sla.null_space(c[None, :])
 
 
-def _quad_gramian(A, B, t):
-    def integrand(tau):
-        X = sla.expm(A * tau) @ B
-        return X @ X.T
-
-    W, _ = quad_vec(integrand, 0.0, t, epsabs=1e-14, epsrel=1e-12)
-    return W
-
-
 @pytest.mark.parametrize("name", ["one_cav", "two_cav", "ring"])
 def test_energy_report_on_every_layout_is_the_quadrature_gramians(name):
     model = _layouts()[name]
     V = _kept_basis(model)
-    lam = np.linalg.eigvalsh(V.T @ _quad_gramian(model.A, model.B, T) @ V)
+    lam = np.linalg.eigvalsh(V.T @ quad_gramian(model.A, model.B, T) @ V)
     rep = energy_report(model, T)
     assert rep.n_states == V.shape[1] == model.nx - (1 if model.ring else 0)
     assert lam[0] > 1e-10 * lam[-1]  # controllable on the kept space: the check could fail
@@ -80,7 +72,7 @@ def test_the_ring_without_its_hyperplane_is_singular():
     """The full ring Gramian has the conserved total spacing in its null space: the report is
     of the hyperplane, whose eigenvalues are the full Gramian's without that zero."""
     model = _layouts()["ring"]
-    W = _quad_gramian(model.A, model.B, T)
+    W = quad_gramian(model.A, model.B, T)
     lam = np.linalg.eigvalsh(W)
     assert abs(lam[0]) < 1e-12 * lam[-1]
     np.testing.assert_allclose(energy_report(model, T).lambda_min, lam[1], rtol=1e-6)
