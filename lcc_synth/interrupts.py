@@ -26,8 +26,8 @@
   Python code that a C extension calls back, and some extensions clear whatever that raises:
   CasADi's SWIG wrappers read ``.shape`` while resolving an overload and drop the error, so a
   signal during the MPC's symbolic set-up (a few hundred ms per controller) was swallowed and
-  ``run`` went on working until the watchdog's deadline (seen here: 7 of 60 SIGTERMs between
-  2.7 and 3.7 s into ``run``; CI's ``test_run[SIGTERM]`` failed on one).
+  ``run`` went on working until the watchdog's deadline (seen here: at least 6 of 59 SIGTERMs
+  2.5 to 6 s into ``run``; CI's ``test_run[SIGTERM]`` failed on one; none of 60 since).
 """
 
 from __future__ import annotations
