@@ -241,3 +241,58 @@ def test_scenario_checks_the_layout_as_a_file_does():
         lcc.scenario(lcc.system(size=4, cavs=[]))
     with pytest.raises(ConfigError, match=r"^scenario\.perturbations\[0\]\.start"):
         lcc.scenario(lcc.system("fd_lcc", n=2), [lcc.Brake(vehicle=1, start=200.0)])
+
+
+# --------------------------------------------------------------------------------------------
+# The public string-stability analysis on every layout
+# --------------------------------------------------------------------------------------------
+
+_LAYOUTS = {
+    "one_cav": lambda: lcc.system("lcc", m=1, n=2),
+    "two_cav": lambda: lcc.system(size=5, cavs=[2, 4]),
+    "ring": lambda: lcc.ring(6, cavs=[6]),
+}
+
+
+def _layout_gains(name, system):
+    """Gains on every CAV's own spacing and velocity, added to its HDV law (one CAV: and the
+    tail's velocity, in the paper's vocabulary)."""
+    if name == "one_cav":
+        return lcc.gains({"s_0": 0.2, "v_0": -0.3, "v_2": 0.1}, semantics="added")
+    cavs = system.platoon.cavs
+    return lcc.gains({f"u_{c}": {f"s_{c}": 0.2, f"v_{c}": -0.3} for c in cavs},
+                     semantics="added", model=system)  # fmt: skip
+
+
+@pytest.mark.parametrize("name", list(_LAYOUTS))
+def test_public_string_stability_on_every_layout(name):
+    """``lcc.string_stability`` of a System: on the open layouts its peak of |Gamma| is the
+    peak of the head-to-tail transfer ``e_tail (jw I - A - B K)^-1 (H + B k_h)`` written out
+    here from the model's matrices and the gains' ``input_feedback`` (a dense frequency grid
+    refined around its best point; 1e-9 relative), the verdict its comparison with 1; a ring
+    has no head vehicle: one ConfigError naming ``system.kind``."""
+    system = _LAYOUTS[name]()
+    model = system.linear_model(warn=False)
+    g = _layout_gains(name, system)
+    if model.ring:
+        with pytest.raises(ConfigError) as err:
+            lcc.string_stability(system, g)
+        assert err.value.field == "system.kind" and "no head vehicle" in err.value.message
+        return
+    K, kh = g.input_feedback(model)
+    B = np.asarray(model.B, float).reshape(model.nx, -1)
+    Acl = model.A + B @ np.atleast_2d(K)
+    h = np.asarray(model.H, float).reshape(model.nx, -1)[:, 0] + B @ np.atleast_1d(kh)
+    assert model.state_names[-1] == f"v_{model.vehicles[-1]}"  # the tail's velocity
+
+    def gamma(w):
+        return np.linalg.solve(1j * w[:, None, None] * np.eye(model.nx) - Acl, h)[:, -1]
+
+    w = np.logspace(-3, 2, 4001)
+    j = int(np.argmax(np.abs(gamma(w))))
+    fine = np.linspace(w[max(j - 1, 0)], w[min(j + 1, w.size - 1)], 4001)
+    peak = max(1.0, float(np.abs(gamma(fine)).max()))
+    rep = lcc.string_stability(system, g)
+    assert rep.plant_stable and np.linalg.eigvals(Acl).real.max() < 0
+    assert rep.gamma_peak == pytest.approx(peak, rel=1e-9)
+    assert rep.verdict == ("string_stable" if peak <= 1.0 + 1e-9 else "string_unstable")

@@ -59,7 +59,8 @@ def test_hankel_is_the_block_hankel_matrix_time_major():
         assert np.array_equal(H[:, j], w[j:j + 3].ravel())
 
 
-@pytest.mark.parametrize(("n_veh", "cavs"), [(4, (1,)), (8, (3, 6))])
+@pytest.mark.parametrize(("n_veh", "cavs"), [(4, (1,)), (4, (2,)), (8, (3, 6))],
+                         ids=["one_cav_behind_head", "one_cav_hdv_ahead", "two_cav"])
 def test_fundamental_lemma_reproduces_the_linear_model_exactly(n_veh, cavs):
     rng = np.random.default_rng(1)
     model = platoon(n_veh, cavs)
