@@ -35,8 +35,8 @@ _API = (
     "Brake", "Sine", "BrakeProfile", "Profile",
     "system", "ring", "model", "controllability", "observability", "control_energy", "gains",
     "string_stability", "region_map", "h2_problem", "synthesize_h2", "hdv_controller",
-    "static_controller",
-    "mpc", "scenario", "simulate", "metrics", "aave", "fuel", "calibrate", "record",
+    "static_controller", "mpc", "deep_lcc",
+    "scenario", "simulate", "sweep", "metrics", "aave", "fuel", "calibrate", "record",
     "ProblemObjects", "Regions", "build_problem", "load_problem", "TABLE2_WINDOW",
 )  # fmt: skip
 

@@ -535,6 +535,65 @@ def mpc(system: System, name: str = "mpc", **settings: Any):
     return build_mpc(system, name, **settings)
 
 
+def deep_lcc(system: System, name: str = "deep_lcc", scenario: Scenario | None = None,
+             **settings: Any):  # fmt: skip
+    """DeeP-LCC (``type = "deep_lcc"``), the data-driven predictive controller, on ``system``.
+
+    ``**settings``: the keys of a ``[controllers.NAME]`` DeeP-LCC table (``t_ini``,
+    ``horizon``, ``weights = {...}``, ``constraints = {...}``, ``solver = {...}``,
+    ``data = {...}``; :mod:`lcc_synth.deeplcc.settings`). Its data are collected from
+    ``scenario`` (default: the nominal string of ``system``) at its first use, not here.
+    Any open layout (a one-CAV string, a platoon of several CAVs); a ring has no head vehicle
+    to drive the data and is refused. :func:`lcc_synth.deeplcc.build.build_deep_lcc`.
+
+    Examples
+    --------
+    >>> import lcc_synth as lcc
+    >>> ctrl = lcc.deep_lcc(lcc.system(size=8, cavs=[3, 6]), t_ini=20, horizon=50)
+    >>> ctrl.cavs, ctrl.sample_time, ctrl.built
+    ((3, 6), 0.05, False)
+    """
+    from lcc_synth.deeplcc.build import build_deep_lcc
+
+    return build_deep_lcc(system, name, scenario, **settings)
+
+
+def sweep(
+    problem: str | Path | Problem, count: int | None = None, *, seed: int | None = None,
+    controllers: Sequence[str] | None = None, batch_size: int | None = None,
+    client: Any = None, progress: bool = False,
+):  # fmt: skip
+    """A Monte-Carlo sweep of a sweep problem file (``lcc-synth sweep``), on any layout.
+
+    ``count``, ``seed``, ``controllers`` and ``batch_size`` override the file's
+    (:func:`lcc_synth.experiments.sweep.load_sweep`, which checks every input before any
+    work); the ``h2`` controllers are synthesised here, then the scenarios run on ``client``
+    (a ``dask.distributed.Client``) or, without one, in this process, with the same task
+    function and the same results (:func:`lcc_synth.experiments.sweep.run_sweep`).
+
+    Returns
+    -------
+    lcc_synth.experiments.sweep.SweepResult
+        ``samples`` (``{controller: {metric: (count,) array}}``), ``summary`` (mean, 5th and
+        95th percentiles), ``info`` (count, tasks, times).
+
+    Examples
+    --------
+    >>> import lcc_synth as lcc
+    >>> from pathlib import Path
+    >>> problems = Path(lcc.__file__).resolve().parents[1] / "problems"  # the repository's
+    >>> res = lcc.sweep(problems / "sweep_robustness.toml", count=4,
+    ...                 controllers=["all_hdv", "paper"])
+    >>> res.samples["all_hdv"]["aave"].round(3), int(res.samples["paper"]["collisions"].sum())
+    (array([3.043, 3.166, 3.029, 3.126]), 0)
+    """
+    from lcc_synth.experiments.sweep import load_sweep, run_sweep
+
+    spec = load_sweep(problem, count=count, batch_size=batch_size, seed=seed,
+                      controllers=controllers)  # fmt: skip
+    return run_sweep(spec, client=client, progress=progress)
+
+
 def scenario(system: System, perturbations: Sequence[Any] = (), **keys: Any) -> Scenario:
     """A :class:`Scenario` on ``system``: ``perturbations`` (:class:`Brake`, :class:`Sine`...)
     and any ``[scenario]`` field (``dt`` = 0.01, ``duration`` = 100, ``t_start``, ``a_min`` =

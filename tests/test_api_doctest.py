@@ -16,7 +16,7 @@ import lcc_synth.api as api
 #: Entry points whose docstring must hold a runnable example.
 WITH_EXAMPLES = (
     "system", "ring", "model", "controllability", "gains", "string_stability",
-    "synthesize_h2", "scenario", "simulate", "metrics", "load_problem",
+    "synthesize_h2", "deep_lcc", "scenario", "simulate", "metrics", "sweep", "load_problem",
 )  # fmt: skip
 
 

@@ -9,6 +9,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
+from cli_subprocess import run_cli
 
 from lcc_synth.controllers.base import ControlContext, Observation
 from lcc_synth.deeplcc import data as D
@@ -375,6 +376,43 @@ def test_a_string_other_than_the_datas_or_a_ring_is_a_named_error():
         ctrl.reset(ring)
 
 
+RING_DEEP = """
+[system]
+kind = "ring"
+size = 6
+cavs = [6]
+
+[controllers.deep]
+type = "deep_lcc"
+
+[scenario]
+duration = 40.0
+
+[[scenario.perturbations]]
+type = "brake"
+vehicle = 1
+"""
+
+
+def test_a_ring_is_refused_by_name_before_any_data_are_collected(tmp_path):
+    """DeeP-LCC on a ring used to fail inside its data collection with an error about a
+    ``'head'`` perturbation the user never wrote. Now the API and the CLI name the controller
+    and the reason, before any simulation (no progress bar, nothing collected)."""
+    import lcc_synth as lcc
+
+    with pytest.raises(ConfigError, match="a ring has none") as info:
+        lcc.deep_lcc(lcc.ring(6, cavs=[6]), name="deep")
+    assert info.value.field == "controllers.deep"
+    (tmp_path / "ring_deep.toml").write_text(RING_DEEP)
+    proc = run_cli(["simulate", "ring_deep.toml", "--no-record"], tmp_path)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.strip().splitlines() == [
+        "lcc-synth simulate: error: ring_deep.toml: controllers.deep: DeeP-LCC needs an open "
+        'string with a head vehicle (its external input); a ring has none: use kind = "platoon" '
+        "for an open string of the same vehicles"
+    ]
+
+
 def test_forced_failure_runs_the_shifted_plan_then_the_static_gain():
     ctrl, _ = _controller_on_linear_data(4, (1,))
     ctrl.reset(_ctx(4, (1,)))
@@ -406,9 +444,9 @@ def _brake_scenario():
 
 
 def _system():
-    from types import SimpleNamespace
+    import lcc_synth as lcc
 
-    return SimpleNamespace(kind="cf_lcc", m=0, n=10, hdv=OVM(), v_star=15.0)
+    return lcc.system("cf_lcc", n=10, hdv=OVM(), v_star=15.0)
 
 
 def test_data_cache_is_reused_and_keyed_by_what_determines_the_data(tmp_path, monkeypatch):

@@ -20,7 +20,7 @@ from __future__ import annotations
 from typing import Any
 
 from lcc_synth.controllers.base import ControlContext, Observation
-from lcc_synth.deeplcc.controller import DeePLCCController
+from lcc_synth.deeplcc.controller import NO_RING, DeePLCCController
 from lcc_synth.deeplcc.data import collection_key, load_or_collect
 from lcc_synth.deeplcc.settings import DeePLCCSettings, deep_settings_from_table
 from lcc_synth.errors import ConfigError
@@ -190,6 +190,8 @@ def deep_lcc_controller_from_table(name: str, table, system, source: str | None 
     """
     field_name = f"controllers.{name}"
     try:
+        if system.ring:  # before the data collection, whose head brake a ring cannot take
+            raise ConfigError(field_name, NO_RING)
         settings = deep_settings_from_table(dict(table), field_name)
         base = nominal_scenario(system) if scenario is None else scenario
     except ConfigError as err:

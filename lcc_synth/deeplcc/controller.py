@@ -64,7 +64,11 @@ from lcc_synth.mpc.settings import paper_fallback_gains
 from lcc_synth.mpc.solver import OSQPSolver
 from lcc_synth.synthesis.h2 import single_thread_blas
 
-__all__ = ["DeePLCCController", "STATUS_CODES"]
+__all__ = ["DeePLCCController", "NO_RING", "STATUS_CODES"]
+
+#: Why DeeP-LCC refuses a ring (its data and its prediction are driven by the head vehicle).
+NO_RING = ("DeeP-LCC needs an open string with a head vehicle (its external input); a ring "
+           "has none: use kind = \"platoon\" for an open string of the same vehicles")  # fmt: skip
 
 @dataclass
 class _Member:
@@ -202,8 +206,7 @@ class DeePLCCController(SampleLoop):
     def reset(self, ctx: ControlContext) -> None:
         """Check the string, set up one OSQP workspace per batch member."""
         if getattr(ctx, "ring", False):
-            raise ConfigError(f"controllers.{self.name}", "DeeP-LCC needs an open string with a "
-                              "head vehicle (its external input); the ring has none")  # fmt: skip
+            raise ConfigError(f"controllers.{self.name}", NO_RING)
         cavs = tuple(int(c) for c in getattr(ctx, "cavs", (ctx.m + 1,)))
         if cavs != self.cavs or ctx.n_vehicles != self.nv:
             raise ConfigError(f"controllers.{self.name}", f"the data are of a string of {self.nv} "
