@@ -188,7 +188,7 @@ def ring(
 
 
 def model(
-    kind: str | None = None,
+    kind: str | System | None = None,
     m: int | None = None,
     n: int | None = None,
     v_star: float | None = None,
@@ -204,7 +204,8 @@ def model(
     :class:`~lcc_synth.models.linear.LCCModel`: ``A``, ``B``, ``H``, ``state_names``; a
     platoon or ring: a :class:`~lcc_synth.models.platoon.PlatoonModel`).
 
-    Same parameters as :func:`system`; ``system(...).linear_model()``.
+    Same parameters as :func:`system`; ``system(...).linear_model()``. Or a :class:`System`
+    alone (``lcc.model(lcc.system(size=5, cavs=[2]))``).
 
     Examples
     --------
@@ -212,6 +213,14 @@ def model(
     >>> lcc.model("lcc", m=1, n=1).state_names
     ('s_-1', 'v_-1', 's_0', 'v_0', 's_1', 'v_1')
     """
+    if isinstance(kind, System):
+        given = [k for k, v in (("m", m), ("n", n), ("v_star", v_star), ("hdv", hdv),
+                                ("size", size), ("cavs", cavs), ("hdv_values", hdv_values),
+                                ("circumference", circumference),
+                                ("vehicle_length", vehicle_length)) if v is not None]  # fmt: skip
+        if given:
+            raise ConfigError(given[0], "give a System alone, or a kind and its parameters")
+        return kind.linear_model()
     return system(kind, m, n, v_star, hdv, size=size, cavs=cavs, hdv_values=hdv_values,
                   circumference=circumference, vehicle_length=vehicle_length).linear_model()
 

@@ -134,6 +134,23 @@ def test_single_cav_features_name_the_key_and_the_layout(layout, extra, field, d
         spec_from_problem(_problem(layout, design, extra))
     assert err.value.field == field
     assert f"kind = {kind!r}" in err.value.message
+    assert "this platoon's one CAV" not in err.value.message  # several CAVs / a ring: no hint
+
+
+def test_a_one_cav_platoon_is_told_the_string_it_is():
+    """A platoon of one CAV asking for a single-CAV design is told the ``kind = "lcc"`` string
+    it is; the hint is the truth: that string's linear model is the platoon's, bit for bit."""
+    import lcc_synth as lcc
+
+    platoon = lcc.system(size=6, cavs=[3])
+    with pytest.raises(ConfigError) as err:
+        lcc.h2_problem(platoon, design="structured", string=True)
+    assert err.value.field == "synthesis.string"
+    assert err.value.message.endswith('the string kind = "lcc", m = 2, n = 3, where it is '
+                                      "available")  # fmt: skip
+    a, b = lcc.model(platoon), lcc.model(lcc.system("lcc", m=2, n=3))
+    for X, Y in ((a.A, b.A), (a.B, b.B), (a.H, b.H)):
+        np.testing.assert_array_equal(X, Y)
 
 
 @pytest.mark.parametrize("layout", list(LAYOUTS))

@@ -583,11 +583,16 @@ def robust_members(system: System, robust: RobustSettings) -> list[Platoon]:
     return out
 
 
-def _single_cav_only(field: str, what: str, kind: str) -> ConfigError:
-    """The one error of a single-CAV feature asked of a platoon or ring (``field`` named)."""
-    return ConfigError(field, f"{what} is a single-CAV feature, not available for kind = "
-                       f"{kind!r} (its designs: {', '.join(PLATOON_DESIGNS)}; method "
-                       "riccati / direct)")  # fmt: skip
+def _single_cav_only(field: str, what: str, system: System) -> ConfigError:
+    """The one error of a single-CAV feature asked of a platoon or ring (``field`` named); an
+    open platoon of one CAV is told the ``kind = "lcc"`` string that it is."""
+    msg = (f"{what} is a single-CAV feature, not available for kind = {system.kind!r} (its "
+           f"designs: {', '.join(PLATOON_DESIGNS)}; method riccati / direct)")  # fmt: skip
+    cavs = tuple(system.platoon.cavs)
+    if not system.ring and len(cavs) == 1:
+        msg += (f"; this platoon's one CAV is the string kind = \"lcc\", m = {cavs[0] - 1}, "
+                f"n = {system.platoon.size - cavs[0]}, where it is available")  # fmt: skip
+    return ConfigError(field, msg)
 
 
 def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> SynthesisSpec:
@@ -595,13 +600,13 @@ def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> Synt
     T = declared("synthesis")
     for key in _NOT_FOR_PLATOONS:
         if key in t:
-            raise _single_cav_only(f"synthesis.{key}", f"[synthesis] {key}", system.kind)
+            raise _single_cav_only(f"synthesis.{key}", f"[synthesis] {key}", system)
     design = T.get(t, "design", "synthesis")
     if design not in PLATOON_DESIGNS:
-        raise _single_cav_only("synthesis.design", f"design = {design!r}", system.kind)
+        raise _single_cav_only("synthesis.design", f"design = {design!r}", system)
     semantics = T.get(t, "semantics", "synthesis", default="replace")
     if t.get("method") == "lmi":
-        raise _single_cav_only("synthesis.method", "method = 'lmi'", system.kind)
+        raise _single_cav_only("synthesis.method", "method = 'lmi'", system)
     T.get(t, "method", "synthesis", default="riccati" if design == "full_state" else "direct",
           choices=("riccati",) if design == "full_state" else ("direct",))  # fmt: skip
     if not system.platoon.cavs:
