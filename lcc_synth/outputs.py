@@ -85,12 +85,25 @@ def path_part(name: object, field: str = "name") -> str:
 
 def child(directory: str | Path, name: str) -> Path:
     """``directory / name`` for a file name made of :func:`path_part` pieces; refuses a name
-    with a path separator or one that resolves outside ``directory``."""
+    with a path separator or one that resolves outside ``directory``.
+
+    Raises
+    ------
+    ConfigError
+        Field ``name``: not a plain file name, or one that leaves ``directory``.
+    FileError
+        ``directory / name`` is a symbolic link pointing outside ``directory`` (e.g. planted
+        in an ``--export DIR``): it is never written through; the error names the link and
+        comes, like a full disk, after the work (exit 1, the results still printed).
+    """
     directory = Path(directory)
     if not name or os.sep in name or (os.altsep and os.altsep in name) or name in (".", ".."):
         raise ConfigError("name", f"not a plain file name: {name!r}")
     path = directory / name
     if path.resolve().parent != directory.resolve():
+        if path.is_symlink():  # a link in the directory, found when the file is written
+            raise FileError(path, f"is a symbolic link to {os.readlink(path)}, outside "
+                            f"{directory}: remove the link or write to another directory")
         raise ConfigError("name", f"{name!r} would be written outside {directory}")
     return path
 
