@@ -12,6 +12,10 @@ from __future__ import annotations
 import doctest
 
 import lcc_synth.api as api
+import lcc_synth.experiments.problem_objects as problem_objects
+
+#: The modules whose functions the flat API re-exports with their examples.
+MODULES = (api, problem_objects)
 
 #: Entry points whose docstring must hold a runnable example.
 WITH_EXAMPLES = (
@@ -22,14 +26,15 @@ WITH_EXAMPLES = (
 
 def test_every_main_entry_point_has_an_example():
     finder = doctest.DocTestFinder()
-    tests = {t.name.rsplit(".", 1)[-1]: t for t in finder.find(api, "lcc_synth.api")}
-    missing = [name for name in WITH_EXAMPLES if not tests.get(name, None) or
-               not tests[name].examples]  # fmt: skip
+    tests = {t.name: t for mod in MODULES for t in finder.find(mod, mod.__name__)}
+    missing = [name for name in WITH_EXAMPLES
+               if not any(tests.get(f"{m.__name__}.{name}") and
+                          tests[f"{m.__name__}.{name}"].examples for m in MODULES)]  # fmt: skip
     assert missing == []
 
 
 def test_the_examples_print_what_they_show():
     flags = doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE
-    result = doctest.testmod(api, optionflags=flags, verbose=False, report=True)
-    assert result.failed == 0
-    assert result.attempted >= 30
+    results = [doctest.testmod(m, optionflags=flags, verbose=False, report=True) for m in MODULES]
+    assert [r.failed for r in results] == [0, 0]
+    assert sum(r.attempted for r in results) >= 30
