@@ -76,7 +76,8 @@ def test_every_example_is_run_here():
 SLOW = {"fig5_control_energy.py", "fig7_fig8_regions.py", "fig9_frequency_response.py",
         "fig10_fig12_sec5a_profiles.py", "fig11_snapshots.py", "fig11_snapshots.py --appendix-c",
         "mpc_head_brake.py", "showcase.py", "paper_walkthrough.py", "ring_sugiyama.py",
-        "synthesis_vs_paper.py --json", "as_run_front.py"}  # fmt: skip
+        "synthesis_vs_paper.py --json", "as_run_front.py", "synthesis_vs_paper.py",
+        "sparsity_pareto.py"}  # fmt: skip
 
 
 @pytest.mark.parametrize(

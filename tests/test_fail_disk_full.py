@@ -48,6 +48,7 @@ def _stop_fill_continue(proc, disk, appeared) -> None:
         os.kill(proc.pid, signal.SIGCONT)
 
 
+@pytest.mark.slow  # CI runs it; by default: a disk filling under run's results (next test)
 def test_recording_on_a_disk_that_fills_is_one_line_not_a_hang(small_disk, tmp_path):
     rrd = small_disk / "x.rrd"
     proc = start_cli(

@@ -136,7 +136,8 @@ def test_too_little_space_is_refused_before_any_simulation(tmp_path):
         assert os.listdir(tiny) == []  # DIR not even created
 
 
-@pytest.mark.parametrize("fmt", ["csv", "parquet"])
+# slow: Parquet (CI runs it; CSV checks the same keeping of whole files by default)
+@pytest.mark.parametrize("fmt", ["csv", pytest.param("parquet", marks=pytest.mark.slow)])
 def test_a_disk_that_fills_during_the_export_keeps_whole_files_and_prints_the_table(
     fmt, small_disk, tmp_path
 ):

@@ -39,6 +39,7 @@ type = "h2"
 """
 
 
+@pytest.mark.slow  # CI runs it; by default: test_fail_export's names with ".." (the same child())
 def test_names_with_dot_dot_stay_inside_the_results_directory(tmp_path):
     work = tmp_path / "a" / "b" / "work"
     work.mkdir(parents=True)
