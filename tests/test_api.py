@@ -346,6 +346,7 @@ def test_no_api_name_is_shadowed_by_a_module():
         assert obj is getattr(api, name) and not isinstance(obj, types.ModuleType), name
 
 
+@pytest.mark.slow  # CI runs it (and the docs build runs the example); by default: README's snippet
 def test_paper_walkthrough_uses_only_the_top_level_api_and_prints_what_it_wrote(tmp_path):
     import ast
 

@@ -33,6 +33,7 @@ def _results(out_root):
     return run_dir
 
 
+@pytest.mark.slow  # CI runs it; by default: run's estimate, bars and short lines (next test)
 def test_quiet_run_prints_nothing_on_stderr_and_writes_svg(tmp_path):
     proc = run_cli([*SMALL, "--quiet", "--format", "svg", "--out", "r"], tmp_path)
     assert proc.returncode == 0, proc.stderr

@@ -538,6 +538,7 @@ def test_acceleration_limits_are_respected_and_reached(brake_runs):
     assert u.min() < -3.0 + 1e-6  # the brake needs more: the lower limit is active
 
 
+@pytest.mark.slow  # CI runs it; by default: the head brake's safe spacing (the test above)
 def test_absolute_spacing_bound_opens_the_gap_when_closing_in(cache):
     """s_min = 15 m demands s >= 15 + 0.8 v = 27 m at 15 m/s, more than s* = 20 m: the soft
     absolute bound is active from the start and the CAV opens the gap to it (an HDV-like CAV

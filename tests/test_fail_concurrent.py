@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import re
 
+import pytest
 from cli_subprocess import PROBLEMS, rrd_verifies, start_cli
 
 from lcc_synth.outputs import new_directory, publish, temporary_path
 
 
+@pytest.mark.slow  # CI runs it; by default: two exports at once (test_fail_export)
 def test_two_simulations_at_once_keep_two_whole_recordings(tmp_path):
     procs = [start_cli(["simulate", PROBLEMS / "paper_table2.toml", "--json"], cwd=tmp_path)
              for _ in range(2)]  # fmt: skip

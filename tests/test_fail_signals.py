@@ -84,10 +84,10 @@ def test_simulate(tmp_path, sig):
     _check_recording(tmp_path / "m.rrd", "mpc_head_brake", delay)
 
 
-# slow: SIGTERM (SIGINT checks the same stop of the synthesis' child process)
-@pytest.mark.parametrize(
-    "sig", [signal.SIGINT, pytest.param(signal.SIGTERM, marks=pytest.mark.slow)]
-)
+# slow (CI runs it): by default the CLI's stop is test_simulate's (above), and the child
+# process's result and errors are test_interrupts' (in-process)
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_long_synthesis(tmp_path, sig):
     """Row 14: the 402-state structured design (n = 200) spends seconds at a time inside
     LAPACK (the Riccati's QZ) and Clarabel holding the interpreter lock; it stops at once."""

@@ -203,7 +203,9 @@ def test_one_cav_joint_mpc_predicts_lag_and_delays_as_the_single_cav_mpc(m, n, p
     assert max(diffs) <= 1e-6, max(diffs)
 
 
-@pytest.mark.parametrize(("ring", "tau"), [(False, 0.4), (True, 0.45)])
+# slow: the ring (CI runs it; the two-CAV platoon checks the same prediction by default)
+@pytest.mark.parametrize(("ring", "tau"), [(False, 0.4),
+                                          pytest.param(True, 0.45, marks=pytest.mark.slow)])
 def test_joint_delay_prediction_follows_the_delay_differential_equation(ring, tau):
     """The joint MPC's delayed prediction (``prediction.delay``, :mod:`lcc_synth.mpc.delay`'s
     discretisation over the platoon's HDV rows; on the ring position 1 reacts to vehicle N)
@@ -387,7 +389,9 @@ def _per_row_dde(A, B, H, row_delay, x0, U, d, Ts, h):
     return np.array(ref).reshape(-1, nx)
 
 
-@pytest.mark.parametrize("ring", [False, True], ids=["two_cav", "ring"])
+# slow: the ring (CI runs it; the two-CAV platoon checks the same prediction by default)
+@pytest.mark.parametrize("ring", [False, pytest.param(True, marks=pytest.mark.slow)],
+                         ids=["two_cav", "ring"])
 def test_joint_prediction_with_a_delay_per_hdv_follows_the_delay_differential_equation(ring):
     """``prediction.delay`` with one delay per HDV, front to tail (one of them 0), on the
     two-CAV platoon and the ring: the joint prediction against the delay differential

@@ -174,6 +174,7 @@ def test_a_reader_that_stops_early_ends_quietly(head_brake):
     assert proc.wait(60) == 141 and "Traceback" not in err, err
 
 
+@pytest.mark.slow  # CI runs it; by default: one recording's context (the other tests here)
 def test_two_recordings_side_by_side(head_brake, tmp_path):
     """``review A.rrd B.rrd``: one file holding both under their labels, every common run's
     plots A left and B right; the data are the recordings' own (the same samples)."""

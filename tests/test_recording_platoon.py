@@ -83,6 +83,7 @@ def test_ring_road_view_is_the_circle_of_the_positions(tmp_path):
                                [[R0, 0.0], [0.0, R0]], atol=1e-9)  # fmt: skip (y negated)
 
 
+@pytest.mark.slow  # CI runs it; by default: the two-CAV ring's design recording (below)
 def test_platoon_recording_has_one_command_per_cav_and_coloured_cavs(tmp_path):
     path, results, name = _record(tmp_path, "platoon_deeplcc_brake.toml", 10.0)
     chunks = _chunks(path)

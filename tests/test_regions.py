@@ -226,6 +226,7 @@ def paper_specs(step: float):
     return model, specs
 
 
+@pytest.mark.slow  # CI runs it: every paper map twice on two frequency grids (4.5 s CPU)
 def test_paper_maps_do_not_depend_on_omega_min():
     """121 x 121 versions of all eight maps of Figs. 7-8: identical labels for omega_min =
     1e-2, 1e-3 and 1e-4 outside the boundary mask (before the curvature was exact, lowering

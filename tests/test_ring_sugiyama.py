@@ -102,6 +102,7 @@ def test_switch_step_rounds_up_to_the_controller_period():
     assert switch_step(1e9, 0.0, 0.025, 1, 24000) == 24000
 
 
+@pytest.mark.slow  # CI runs it; by default: switch_step's arithmetic (above)
 def test_switched_controller_drives_as_an_hdv_before_start_then_takes_over():
     _, sc = _bench_scenario(80.0)
     draws = sc.draw()

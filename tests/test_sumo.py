@@ -140,6 +140,7 @@ def test_difference_is_first_order():
     assert 3.5 < out[1] / out[0] < 6.5
 
 
+@pytest.mark.slow  # CI runs it; by default: SUMO's platoon cross-check (test_sumo_ring)
 @needs_sumo
 def test_sumo_head_brake_cli_json_and_ranking(tmp_path, capfd):
     """``lcc-synth simulate problems/sumo_head_brake.toml --json`` prints the usual results

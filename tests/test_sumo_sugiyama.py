@@ -155,6 +155,7 @@ def test_start_is_honoured_in_sumo():
     assert not res.aeb_active[0, pre].any() and not res.collided.any()
 
 
+@pytest.mark.slow  # CI runs it; by default: the twin's follow speed, noise and start (above)
 @needs_sumo
 def test_shipped_twin_loads_and_a_short_run_runs():
     """problems/sumo_ring_sugiyama.toml is the SUMO twin of ring_sugiyama.toml (the same ring,

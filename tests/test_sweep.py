@@ -352,6 +352,7 @@ def test_cli_sweep_json_and_files(problem_file, serial, capsys, tmp_path):
         assert f"/small_sweep_scenario{hard.index}/{c}/velocity" in entities
 
 
+@pytest.mark.slow  # CI runs it; by default: task_size's arithmetic (test_sweep_tasks)
 def test_cli_sizes_the_tasks_for_its_workers(problem_file, serial, capsys, tmp_path):
     """Without --batch-size, 4 scenarios on 1 worker run as 4 tasks of one (the file's
     batch_size = 3 is the largest task), with the serial sweep's samples, bit for bit."""
