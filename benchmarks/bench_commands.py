@@ -20,8 +20,10 @@ install  ``pip install -e ".[dev]"`` into a fresh venv (needs the package      w
 ``run`` and the sweeps run in an empty temporary directory, so their default outputs
 (``results/``, ``logs/``) land there; the tests and the docs run in the repository. The
 children see this checkout first (``PYTHONPATH``), ``RERUN_ANALYTICS=0`` and
-``MPLBACKEND=Agg``. A command still running at 10x its budget (a loaded machine) is stopped
-(its whole session) and reported over budget.
+``MPLBACKEND=Agg``, with Python's bytecode cache on and written before the first row
+(:func:`warm_bytecode`: a sandbox that sets ``PYTHONDONTWRITEBYTECODE`` made every process
+compile each edited module again). A command still running at 10x its budget (a loaded
+machine) is stopped (its whole session) and reported over budget.
 
 Every measured row is stored in ``benchmarks/commands.json`` with the UTC date, the load
 average of the machine when it started, its CPU count and the last lines of the command's
@@ -136,6 +138,10 @@ def _argv(name: str, tmp: Path) -> tuple[list[str], Path]:
 def _env() -> dict[str, str]:
     env = dict(os.environ)
     env.pop("CI", None)  # the default suite, as a user runs it
+    # Python's bytecode cache on, as on a user's machine: with PYTHONDONTWRITEBYTECODE set (this
+    # sandbox sets it) every process compiles again each module edited since its cache was
+    # last written, and the suite starts a few hundred processes
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
     env.update(RERUN_ANALYTICS="0", MPLBACKEND="Agg")
     return env
@@ -203,12 +209,15 @@ def format_table(records: Mapping[str, Mapping]) -> str:
         lines.append(f"| `{row.command}` | {_budget_text(row)} | {rec['cpu_s']:.1f} | "
                      f"{rec['wall_s']:.1f} | {within(row, rec)} | {rec['date']} |")  # fmt: skip
         load = "/".join(f"{x:.2f}" for x in rec["loadavg"])
-        notes.append(f"{name} {load} ({rec['cpus']} CPUs)")
+        ref = f", reference {rec['reference_s']:.3f} s" if "reference_s" in rec else ""
+        notes.append(f"{name} {load} ({rec['cpus']} CPUs{ref})")
     text = "\n".join(lines) + "\n"
     if notes:
         text += ("\nLoad average (1/5/15 min) of the machine when each row started: "
                  + "; ".join(notes) + ". CPU: user + system of the command and of every "
-                 "process it waited for; `python benchmarks/bench_commands.py` measures "
+                 "process it waited for. Reference: the CPU time of a fixed single-threaded "
+                 "workload just before the row (best of 3): CPU times compare only as their "
+                 "references do. `python benchmarks/bench_commands.py` measures "
                  "again.\n")  # fmt: skip
     return text
 
@@ -253,13 +262,40 @@ def _estimate(row: Row, last: Mapping | None) -> str:
     return f"about {last['wall_s']:.0f} s wall (last: {last['date']})"
 
 
+def reference_seconds() -> float:
+    """CPU seconds of a fixed single-threaded workload (a pure-Python loop of 3 million
+    multiply-adds), best of 3: how fast this machine's cores are right now. On this VM the
+    same work has taken 30 % more CPU seconds while the host was busy, so a row's CPU time
+    is read against the reference measured with it."""
+    best = float("inf")
+    for _ in range(3):
+        t0 = time.process_time()
+        acc = 0
+        for i in range(3_000_000):
+            acc += i * i
+        best = min(best, time.process_time() - t0)
+    return best
+
+
+def warm_bytecode() -> None:
+    """Write the bytecode cache of the package, the tests, the examples and the benchmarks
+    (``compileall``, not measured): every row then measures a second invocation, as a user's
+    machine runs it once the package has been imported once."""
+    import compileall
+
+    for part in ("lcc_synth", "tests", "examples", "benchmarks"):
+        compileall.compile_dir(ROOT / part, quiet=1)
+
+
 def run_rows(names: Sequence[str], records: dict[str, dict]) -> dict[str, dict]:
     """Measure ``names`` (progress on stderr); returns ``records`` with them replaced."""
     out = dict(records)
+    warm_bytecode()
     for k, name in enumerate(names, 1):
         row = ROWS[name]
         print(f"[{k}/{len(names)}] {name}: {row.command}; {_estimate(row, records.get(name))}",
               file=sys.stderr, flush=True)  # fmt: skip
+        ref = reference_seconds()
         load = list(os.getloadavg())
         with tempfile.TemporaryDirectory(prefix=f"lcc-bench-{name}-") as tmp:
             argv, cwd = _argv(name, Path(tmp))
@@ -272,7 +308,7 @@ def run_rows(names: Sequence[str], records: dict[str, dict]) -> dict[str, dict]:
             # the command's own account of its time (run: "time: controllers ...")
             rec["output_tail"] = [ln[-300:] for ln in lines[-TAIL_LINES:]]
         rec.update(date=datetime.now(UTC).strftime("%Y-%m-%d"), loadavg=load,
-                   cpus=os.cpu_count())  # fmt: skip
+                   cpus=os.cpu_count(), reference_s=ref)  # fmt: skip
         out[name] = rec
         print(f"    {name}: CPU {rec['cpu_s']:.1f} s, wall {rec['wall_s']:.1f} s; budget "
               f"{_budget_text(row)}: {within(row, rec)}", file=sys.stderr, flush=True)  # fmt: skip
@@ -296,6 +332,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     else:
         names = [n for n, r in ROWS.items() if r.default]
     records = load_records()
+    if args.update_readme and not args.table_only:
+        # the pytest row runs tests/test_readme.py: the README's block and commands.md must
+        # agree while it runs (both are written again from the new figures below)
+        _write(MD_PATH, format_table(records))
+        _write(README, replace_between_markers(README, format_table(records)))
     if not args.table_only:
         records = run_rows(names, records)
         _write(JSON_PATH, json.dumps({"rows": records}, indent=2, sort_keys=True) + "\n")

@@ -14,12 +14,14 @@ files start from.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Sequence
+import uuid
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -118,20 +120,25 @@ def rrd_verifies(path: str | Path) -> bool:
     return proc.returncode == 0
 
 
-def mount_tmpfs(path: str | Path, size: str) -> bool:
-    """Mount a fresh tmpfs of ``size`` (e.g. ``"8m"``) on the directory ``path`` (created);
-    ``False`` where this machine does not allow it (not root, no ``mount``), so that the
-    test can skip with a reason."""
-    Path(path).mkdir(parents=True, exist_ok=True)
+@contextlib.contextmanager
+def tmpfs(where: Path, options: str) -> Iterator[Path]:
+    """A fresh ``tmpfs`` mounted on the directory ``where`` (created) with ``options`` (e.g.
+    ``"size=8m"``, ``"ro,size=1m"``): a small disk that can be filled, or a read-only one.
+    Skips the test where this machine does not allow it (not root, no ``mount``); unmounted
+    afterwards."""
+    import pytest
+
+    where.mkdir(parents=True, exist_ok=True)
     if os.geteuid() != 0 or shutil.which("mount") is None:
-        return False
-    proc = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)],
-                          capture_output=True, text=True)  # fmt: skip
-    return proc.returncode == 0
-
-
-def unmount(path: str | Path) -> None:
-    subprocess.run(["umount", "-l", str(path)], capture_output=True)
+        pytest.skip("mounting a tmpfs needs root and mount(8)")
+    proc = subprocess.run(["mount", "-t", "tmpfs", "-o", options, f"lcc-{uuid.uuid4().hex[:6]}",
+                           str(where)], capture_output=True, text=True)  # fmt: skip
+    if proc.returncode != 0:
+        pytest.skip(f"mount -t tmpfs not permitted here: {proc.stderr.strip()}")
+    try:
+        yield where
+    finally:
+        subprocess.run(["umount", "-l", str(where)], capture_output=True)
 
 
 def fill(directory: str | Path) -> None:

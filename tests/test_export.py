@@ -190,7 +190,7 @@ def test_an_unwritable_export_directory_is_one_line_before_any_simulation(tmp_pa
 
 
 def test_a_read_only_export_directory_is_one_line_naming_it(tmp_path):
-    from test_fail_sweep_out import tmpfs
+    from cli_subprocess import tmpfs
 
     with tmpfs(tmp_path / "ro", "ro,size=1m") as ro:
         proc = run_cli(["simulate", PROBLEMS / "paper_table2.toml", "--no-record", "--export",

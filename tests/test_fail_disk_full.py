@@ -20,21 +20,17 @@ import pytest
 from cli_subprocess import (
     PROBLEMS,
     fill,
-    mount_tmpfs,
     one_line_error,
     start_cli,
-    unmount,
+    tmpfs,
     wait_for,
 )
 
 
 @pytest.fixture
 def small_disk(tmp_path):
-    disk = tmp_path / "disk"
-    if not mount_tmpfs(disk, "64m"):
-        pytest.skip("mounting a tmpfs needs root and mount(8) (a full disk is simulated there)")
-    yield disk
-    unmount(disk)
+    with tmpfs(tmp_path / "disk", "size=64m") as disk:  # a full disk is simulated there
+        yield disk
 
 
 def _stop_fill_continue(proc, disk, appeared) -> None:

@@ -46,14 +46,12 @@ import pytest
 from cli_subprocess import (
     PROBLEMS,
     fill,
-    mount_tmpfs,
     one_line_error,
     run_cli,
     start_cli,
-    unmount,
+    tmpfs,
     wait_for,
 )
-from test_fail_sweep_out import tmpfs
 
 import lcc_synth as lcc
 from lcc_synth.experiments.spec import load_spec
@@ -113,11 +111,8 @@ def _no_part_files(directory: Path) -> None:
 
 @pytest.fixture
 def small_disk(tmp_path):
-    disk = tmp_path / "disk"
-    if not mount_tmpfs(disk, "8m"):
-        pytest.skip("mounting a tmpfs needs root and mount(8) (a full disk is simulated there)")
-    yield disk
-    unmount(disk)
+    with tmpfs(tmp_path / "disk", "size=8m") as disk:  # a full disk is simulated there
+        yield disk
 
 
 # --- full disk ---------------------------------------------------------------------------

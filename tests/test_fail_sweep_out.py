@@ -18,13 +18,11 @@ from __future__ import annotations
 
 import contextlib
 import os
-import subprocess
 import time
-import uuid
 from pathlib import Path
 
 import pytest
-from cli_subprocess import PROBLEMS, cli_env, one_line_error, run_cli, start_cli, wait_for
+from cli_subprocess import PROBLEMS, cli_env, one_line_error, run_cli, start_cli, tmpfs, wait_for
 
 PROBLEM = PROBLEMS / "sweep_robustness.toml"
 SMALL = ["--controllers", "all_hdv,paper", "--count", "12", "--batch-size", "2", "--workers",
@@ -34,23 +32,6 @@ SMALL = ["--controllers", "all_hdv,paper", "--count", "12", "--batch-size", "2",
 def _env(tmp: Path) -> dict:
     (tmp / "tmp").mkdir(exist_ok=True)
     return cli_env(TMPDIR=str(tmp / "tmp"))
-
-
-@contextlib.contextmanager
-def tmpfs(where: Path, options: str):
-    """A ``tmpfs`` mounted at ``where`` with ``options`` (skips the test where mount is not
-    permitted); unmounted afterwards."""
-    where.mkdir(parents=True, exist_ok=True)
-    if os.geteuid() != 0:
-        pytest.skip("mounting a tmpfs needs root")
-    proc = subprocess.run(["mount", "-t", "tmpfs", "-o", options, f"lcc-{uuid.uuid4().hex[:6]}",
-                           str(where)], capture_output=True, text=True)  # fmt: skip
-    if proc.returncode != 0:
-        pytest.skip(f"mount -t tmpfs not permitted here: {proc.stderr.strip()}")
-    try:
-        yield where
-    finally:
-        subprocess.run(["umount", "-l", str(where)], capture_output=True)
 
 
 def test_unwritable_out_is_exit_2_before_any_simulation(tmp_path):
