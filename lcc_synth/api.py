@@ -2,8 +2,9 @@
 
 Every function is a documented entry point over the package function that does the work (named
 in its docstring); none re-implements it. The objects are those the problem files build, so a
-problem file and a script are two faces of one thing: :func:`load_problem` gives the CLI's
-objects, and every object here is written back to TOML by ``to_toml()`` (a round trip gives
+problem file and a script are two faces of one thing:
+:func:`~lcc_synth.experiments.problem_objects.load_problem` gives the CLI's objects, and every
+object here is written back to TOML by ``to_toml()`` (a round trip gives
 equal objects: tests/test_roundtrip.py checks every file under ``problems/``).
 
 ========================  ====================================================================
@@ -29,7 +30,9 @@ Table II metrics          :func:`metrics` (AAVE, fuel, spacing, TTC, jerk...; ``
 real drivers              :func:`~lcc_synth.calibration.fit.calibrate` (``lcc.calibrate``:
                           OVM / IDM fitted to a recorded platoon, ``lcc-synth calibrate``)
 recordings                :func:`record` (a Rerun ``.rrd`` file)
-problem files             :func:`load_problem` / :func:`build_problem` -> :class:`ProblemObjects`
+problem files             :func:`~lcc_synth.experiments.problem_objects.load_problem` /
+                          :func:`~lcc_synth.experiments.problem_objects.build_problem` ->
+                          :class:`~lcc_synth.experiments.problem_objects.ProblemObjects`
                           (``to_toml()``; ``==`` by value;
                           :mod:`lcc_synth.experiments.problem_objects`)
 ========================  ====================================================================
@@ -470,7 +473,8 @@ def synthesize_h2(system, *args: Any, **kwargs: Any):
     """Synthesise a static H2 gain (``lcc-synth synthesize``).
 
     ``system``: a :class:`System` (then the other arguments are those of :func:`h2_problem`)
-    or a spec from :func:`h2_problem` / :func:`load_problem` (``.synthesis``).
+    or a spec from :func:`h2_problem` /
+    :func:`~lcc_synth.experiments.problem_objects.load_problem` (``.synthesis``).
 
     Returns
     -------

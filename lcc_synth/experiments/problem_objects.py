@@ -150,7 +150,8 @@ def build_problem(
     """The problem file of objects built in Python: ``build_problem(...).to_toml()`` is a file
     ``lcc-synth simulate`` runs (with ``scenario`` and ``controllers``; ``metrics`` default
     :class:`MetricsConfig` (), i.e. Table II's window) and / or ``lcc-synth synthesize`` runs
-    (with ``synthesis``, from :func:`h2_problem`), which :func:`load_problem` reads back equal.
+    (with ``synthesis``, from :func:`~lcc_synth.api.h2_problem`), which :func:`load_problem`
+    reads back equal.
     With neither it holds ``[hdv]`` + ``[system]`` only."""
     sim = None
     if scenario is not None or controllers:
