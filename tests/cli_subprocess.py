@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -139,6 +140,18 @@ def tmpfs(where: Path, options: str) -> Iterator[Path]:
         yield where
     finally:
         subprocess.run(["umount", "-l", str(where)], capture_output=True)
+
+
+def stop_fill_continue(proc: subprocess.Popen, disk: Path, appeared: Callable[[], bool]) -> None:
+    """Stop ``proc`` (SIGSTOP) once ``appeared()``, :func:`fill` ``disk``, let it go on
+    (SIGCONT): a disk that fills while the command writes."""
+    assert wait_for(lambda: appeared() or proc.poll() is not None, 120, poll=0.001)
+    assert proc.poll() is None, "the command ended before its output appeared"
+    os.kill(proc.pid, signal.SIGSTOP)
+    try:
+        fill(disk)
+    finally:
+        os.kill(proc.pid, signal.SIGCONT)
 
 
 def fill(directory: str | Path) -> None:

@@ -13,17 +13,14 @@ no half file or temporary file left behind. Needs root to mount a tmpfs: skipped
 
 from __future__ import annotations
 
-import os
-import signal
-
 import pytest
 from cli_subprocess import (
     PROBLEMS,
     fill,
     one_line_error,
     start_cli,
+    stop_fill_continue,
     tmpfs,
-    wait_for,
 )
 
 
@@ -31,17 +28,6 @@ from cli_subprocess import (
 def small_disk(tmp_path):
     with tmpfs(tmp_path / "disk", "size=64m") as disk:  # a full disk is simulated there
         yield disk
-
-
-def _stop_fill_continue(proc, disk, appeared) -> None:
-    """Stop ``proc`` once ``appeared()``, fill ``disk``, let it go on."""
-    assert wait_for(lambda: appeared() or proc.poll() is not None, 120, poll=0.001)
-    assert proc.poll() is None, "the command ended before its output appeared"
-    os.kill(proc.pid, signal.SIGSTOP)
-    try:
-        fill(disk)
-    finally:
-        os.kill(proc.pid, signal.SIGCONT)
 
 
 @pytest.mark.slow  # CI runs it; by default: a disk filling under run's results (next test)
@@ -52,7 +38,7 @@ def test_recording_on_a_disk_that_fills_is_one_line_not_a_hang(small_disk, tmp_p
          "--rrd", rrd],
         cwd=tmp_path,
     )  # fmt: skip
-    _stop_fill_continue(proc, small_disk, lambda: any(small_disk.glob(".x.part-*.rrd")))
+    stop_fill_continue(proc, small_disk, lambda: any(small_disk.glob(".x.part-*.rrd")))
     out, err = proc.communicate(timeout=120)  # used to hang here forever
     assert proc.returncode == 1, err
     assert one_line_error(err), err
@@ -69,7 +55,7 @@ def test_run_results_on_a_disk_that_fills_print_the_table_first(small_disk, tmp_
          out_root, "--no-record", "--no-progress"],
         cwd=tmp_path,
     )  # fmt: skip
-    _stop_fill_continue(proc, small_disk, lambda: out_root.is_dir() and any(out_root.iterdir()))
+    stop_fill_continue(proc, small_disk, lambda: out_root.is_dir() and any(out_root.iterdir()))
     out, err = proc.communicate(timeout=300)
     assert proc.returncode == 1, err
     assert one_line_error(err), err

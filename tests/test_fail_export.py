@@ -37,7 +37,6 @@ from __future__ import annotations
 import hashlib
 import math
 import os
-import signal
 import subprocess
 from pathlib import Path
 
@@ -45,12 +44,11 @@ import numpy as np
 import pytest
 from cli_subprocess import (
     PROBLEMS,
-    fill,
     one_line_error,
     run_cli,
     start_cli,
+    stop_fill_continue,
     tmpfs,
-    wait_for,
 )
 
 import lcc_synth as lcc
@@ -147,13 +145,7 @@ def test_a_disk_that_fills_during_the_export_keeps_whole_files_and_prints_the_ta
                       "--export-format", fmt], cwd=tmp_path)  # fmt: skip
     try:
         first = out / f"paper_table2_{CONTROLLERS[0]}.{fmt}"
-        assert wait_for(lambda: first.exists() or proc.poll() is not None, 120, poll=0.001)
-        assert proc.poll() is None, "the command ended before its first file was published"
-        os.kill(proc.pid, signal.SIGSTOP)
-        try:
-            fill(small_disk)
-        finally:
-            os.kill(proc.pid, signal.SIGCONT)
+        stop_fill_continue(proc, small_disk, first.exists)
         stdout, stderr = proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:
