@@ -74,21 +74,6 @@ stabilisability, stability and the H2 norm are those of the reduced system (open
 ``V = I``). ``K`` and ``K + k c`` (any column ``k``) act identically: a ring gain is defined
 modulo the conserved direction. The value does not depend on the basis (a test rotates ``V``).
 
-Actuator lag
-------------
-With ``[synthesis] cav_lag = tau`` (``lag`` of :func:`make_plant` and
-:func:`make_platoon_plant`) the design plant gets each CAV's acceleration as a state:
-:func:`lcc_synth.models.lag.with_actuator_lag` on ``(A_d, B, H + B kh0)``, the lag fed by each
-CAV's velocity row (its whole command, the HDV law of ``"added"`` included), the states
-``a_i`` appended after the model's (one CAV: ``a_0``; a platoon or ring: one per CAV, the same
-``tau``). They carry no state weight, the acceleration noise stays on the velocity rows (after
-the actuator), and no pattern holds them: the gain reads spacings and velocities, as the
-simulator's linear laws do. On a ring the conserved direction is ``(c, 0)`` (the total spacing
-does not see the accelerations) and ``V`` gets the identity on the lag states. The
-full-information optimum then feeds back ``a_i``: it is the reported bound
-(``h2_unstructured``), and ``design = "full_state"`` is the structured design over every
-vehicle (:mod:`lcc_synth.synthesis.lag_design`).
-
 The cost and its derivatives
 ----------------------------
 With ``A_K = A_r + B_r K V``: ``A_K L + L A_K' + B_wr B_wr' = 0``,
@@ -111,6 +96,7 @@ import scipy.linalg as sla
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import SEMANTICS, Gains, input_feedback
+from lcc_synth.models.lag import with_actuator_lag
 from lcc_synth.models.linear import LCCModel
 from lcc_synth.models.platoon import PlatoonModel
 from lcc_synth.models.records import Record
@@ -397,8 +383,6 @@ def make_plant(
     H_d = H_eff[keep]
     nd = len(keep)
     if lag > 0:
-        from lcc_synth.models.lag import with_actuator_lag
-
         aug = with_actuator_lag(A, B, H_d, [list(keep).index(model.index("v_0"))], lag)
         A, B, H_d, nd = aug.A, aug.B, aug.H.ravel(), aug.nx
     Bw, w_names = disturbances(H_d, [names[i] for i in keep], nd, weights)
@@ -656,10 +640,8 @@ class PlatoonPlant:
     Ar, Br, Bwr, Qr : numpy.ndarray
         The reduced plant.
     lag : float
-        The CAVs' actuator lag ``tau`` (s; 0: none). With ``tau > 0`` the state ends with one
-        acceleration ``a_i`` per CAV (see "Actuator lag" in the module docstring): ``nx`` is
-        ``model.nx + n_cav``, ``K`` has zero columns there (no pattern holds them) and
-        :meth:`model_gain` is the gain on the model's states.
+        The CAVs' actuator lag (s; 0: none): then ``nx = model.nx + n_cav`` (the ``a_i``, zero
+        columns of ``K``; :meth:`model_gain` is ``K`` on the model's states).
     """
 
     model: PlatoonModel
@@ -687,14 +669,12 @@ class PlatoonPlant:
 
     @property
     def conserved(self) -> np.ndarray | None:
-        """The ring's conserved direction ``c`` on the plant's state (0 on the lag states:
-        the total spacing does not see the CAVs' accelerations); ``None`` on an open platoon."""
+        """The ring's conserved ``c`` on the plant's state (0 on the lag states); else None."""
         c = self.model.conserved
         return None if c is None else np.concatenate([c, np.zeros(self.nx - c.size)])
 
     def model_gain(self, K: np.ndarray) -> np.ndarray:
-        """The design gain ``K`` on the model's states (the lag states' zero columns left
-        out)."""
+        """The design gain ``K`` on the model's states (without the lag states' columns)."""
         return np.asarray(K, float).reshape(self.n_in, self.nx)[:, : self.model.nx]
 
     @property
@@ -739,8 +719,10 @@ def make_platoon_plant(
     """Build the :class:`PlatoonPlant` of ``model`` under ``semantics`` and ``weights``.
 
     ``weights.position`` / ``q_p`` (FD-LCC only) are ignored; ``weights.head`` needs a head
-    vehicle (an open platoon). ``lag`` (s, > 0): every CAV's actuator lag, one state ``a_i``
-    per CAV (module docstring, "Actuator lag"); 0: none.
+    vehicle (an open platoon). ``lag`` (s; 0: none): every CAV's actuator lag, a state ``a_i``
+    per CAV after the model's (:func:`lcc_synth.models.lag.with_actuator_lag` on the whole
+    command, the HDV law of "added" too), unweighted, in no pattern, the identity in a ring's
+    ``V`` (:mod:`lcc_synth.synthesis.lag_design`).
 
     Raises
     ------
@@ -759,9 +741,7 @@ def make_platoon_plant(
     H_eff = (model.H + model.B @ kh0[:, None]).ravel()
     names = model.state_names
     V = model.invariant_basis()
-    if lag > 0:  # the lag on each CAV's whole command (its HDV law too under "added")
-        from lcc_synth.models.lag import with_actuator_lag
-
+    if lag > 0:
         aug = with_actuator_lag(A, B, H_eff, [model.index(f"v_{i}") for i in model.cavs], lag,
                                 names)  # fmt: skip
         A, B, H_eff = aug.A, aug.B, aug.H.ravel()

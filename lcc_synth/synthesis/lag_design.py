@@ -38,8 +38,8 @@ A platoon or ring (:func:`lcc_synth.synthesis.design.synthesize`'s platoon stage
   (:func:`lcc_synth.synthesis.report.check_platoon_gain`).
 
 A one-CAV open platoon (``cavs = [m + 1]``) and ``kind = "lcc"`` with the same ``m, n`` have
-the same lagged plant bit for bit, and their designs agree to the polishing tolerance
-(``tests/test_lag_platoon.py``).
+the same lagged plant bit for bit, and their designs agree to round-off (measured 5e-15: the
+same start and Newton steps; ``tests/test_lag_platoon.py``).
 
 Measured figures: ``docs/guide/lag.md`` and ``tests/test_actuator_lag.py``.
 """
