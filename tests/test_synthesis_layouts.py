@@ -126,7 +126,6 @@ def test_structured_keeps_the_pattern_and_reports_its_true_h2_on_every_layout(la
     ("", "synthesis.design", "string_stable"),
     ('method = "lmi"', "synthesis.method", "structured"),
     ('method = "lmi"', "synthesis.method", "full_state"),
-    ("cav_lag = 0.2", "synthesis.cav_lag", "structured"),
 ])  # fmt: skip
 def test_single_cav_features_name_the_key_and_the_layout(layout, extra, field, design):
     kind = "platoon" if layout == "two_cav_platoon" else "ring"

@@ -37,9 +37,10 @@ SYNTHESIS = Table(
             True),
         Key("tol", "number", "Polishing tolerance (relative gradient norm).", 1e-7, lo=0.0,
             hi=1e-2, lo_open=True),
-        Key("cav_lag", "number", "The CAV's first-order actuator lag tau in the design plant "
-            "(state a_0, not fed back; full_state, structured, string_stable; 0: none).", 0.0,
-            lo=0.0, unit="s"),
+        Key("cav_lag", "number", "The CAVs' first-order actuator lag tau in the design plant "
+            "(a state a_i per CAV, not fed back; full_state, structured, string_stable; "
+            "platoon / ring: full_state, structured, robust; 0: none).", 0.0, lo=0.0,
+            unit="s"),
         Key("max_iter", "integer", "Polishing iterations.", 500, lo=1, hi=100000),
         Key("band", "integer", "structured lmi: coupling range (vehicles) of the non-heard "
             "block of X in the convex restriction (wider = tighter).", 4, lo=0, hi=50),

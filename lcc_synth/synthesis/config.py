@@ -74,6 +74,8 @@ A platoon or a ring (``[system] kind = "platoon" | "ring"``):
     semantics = "replace"     # default "replace" (u = K x is the CAV's whole acceleration)
     comm_range = 5            # every CAV hears the R vehicles ahead and the R behind it
                               # (itself included; the ring wraps around); 0 = decentralised
+    cav_lag = 0.0             # every CAV's actuator lag tau (s) in the plant, a state a_i per
+                              # CAV (lag_design.py); full_state, structured, robust
     tol = 1e-7
     max_iter = 500
 
@@ -168,9 +170,12 @@ class SynthesisSpec(Record):
         ring.
     pattern : tuple of int or None
         One CAV: the vehicles heard besides the CAV (the paper's indexing); ``None``: all.
-    cross_check, band, string_gamma, polish_steps, string_margin, baseline, as_run, cav_lag
+    cross_check, band, string_gamma, polish_steps, string_margin, baseline, as_run
         One CAV only (the full-state cross-check, the LMI restriction's band, the string-aware
-        design, the baseline gains, the as-run design, the CAV's actuator lag).
+        design, the baseline gains, the as-run design).
+    cav_lag : float
+        Every layout: the CAVs' actuator lag ``tau`` (s) in the design plant (0: none;
+        :mod:`lcc_synth.synthesis.lag_design`).
     patterns : dict or None
         Platoon / ring: CAV position -> sorted heard positions (the CAV included); ``None``:
         full information.
@@ -267,6 +272,8 @@ class SynthesisSpec(Record):
                 t["patterns"] = own
         if self.design == "sparsity":
             t["sparsity"] = {"max_loss": self.max_loss}
+        if self.cav_lag:
+            t["cav_lag"] = self.cav_lag
         if self.robust is not None:
             rb = self.robust
             t["robust"] = {"samples": rb.samples, "seed": rb.seed, "objective": rb.objective,
@@ -371,7 +378,6 @@ def synthesis_spec(
     T = declared("synthesis")
     T.check(t, "synthesis")
     if system.platoon is not None:
-        check_lag_design(T.get(t, "cav_lag", "synthesis"), "", None, system.kind)
         return platoon_spec(name, system, t, source)
     for key in ("comm_range", "patterns", "robust"):
         if key in t:
@@ -450,8 +456,7 @@ def synthesis_spec(
             raise ConfigError(f"synthesis.baseline.{err.field}", err.message) from None
         baseline = (bname, gains)
     as_run = _as_run(t, system, design)
-    cav_lag = check_lag_design(T.get(t, "cav_lag", "synthesis"), design, as_run,
-                               system.kind)  # fmt: skip
+    cav_lag = check_lag_design(T.get(t, "cav_lag", "synthesis"), design, as_run)
     return SynthesisSpec(
         cav_lag=cav_lag,
         as_run=as_run,
@@ -639,8 +644,9 @@ def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> Synt
     tol = T.get(t, "tol", "synthesis")
     max_iter = T.get(t, "max_iter", "synthesis")
     robust = _robust(t, system)
+    cav_lag = check_lag_design(T.get(t, "cav_lag", "synthesis"), design, None)
     method = "riccati" if design == "full_state" else "direct"
     return SynthesisSpec(name=name, system=system, design=design, semantics=semantics,
                          weights=weights, method=method, tol=tol, max_iter=max_iter,
                          sparsity={"max_loss": max_loss}, source=src, patterns=patterns,
-                         comm_range=R, robust=robust)  # fmt: skip
+                         comm_range=R, robust=robust, cav_lag=cav_lag)  # fmt: skip

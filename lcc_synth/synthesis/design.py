@@ -11,7 +11,9 @@ checks and the report with a gain row per CAV. Stages (each reported with its tr
 and wall time):
 
 * ``riccati`` -- the full-information optimum (CARE on the reduced plant); ``design =
-  "full_state"`` returns it, checked against the Lyapunov evaluation of the same gain;
+  "full_state"`` returns it, checked against the Lyapunov evaluation of the same gain (with
+  ``cav_lag``: the bound of a gain that feeds back the ``a_i``, and ``full_state`` is the
+  start and polish below over every vehicle: :mod:`~lcc_synth.synthesis.lag_design`);
 * ``start`` -- a stabilising gain with the patterns (truncated Riccati modulo ``c``, or the
   penalty continuation: :func:`~lcc_synth.synthesis.structured.initial_gain`);
 * ``polish`` -- Newton / BFGS descent on the true H2 with the patterns' mask;
@@ -428,7 +430,8 @@ def robust_design(
 def _robust_stage(spec: SynthesisSpec, plant: PlatoonPlant, K_nom, mask):
     rb = spec.robust
     members = robust_members(spec.system, rb)
-    plants = [make_platoon_plant(_model(p), spec.semantics, spec.weights) for p in members]
+    plants = [make_platoon_plant(_model(p), spec.semantics, spec.weights, spec.cav_lag)
+              for p in members]  # fmt: skip
     nominal = member_stats(plants, K_nom)
     nominal["h2_nominal"] = platoon_h2(plant, K_nom)
     K, info = robust_design(plants, K_nom, mask, rb.objective, spec.tol, spec.max_iter)
@@ -458,7 +461,7 @@ def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
     """
     t_start = time.perf_counter()
     model = spec.system.linear_model(warn=False)
-    plant = make_platoon_plant(model, spec.semantics, spec.weights)
+    plant = make_platoon_plant(model, spec.semantics, spec.weights, spec.cav_lag)
     progress(f"synthesis: {spec.design} design, {plant.nx} states ({spec.system.kind}, CAVs "
              f"{list(model.cavs)})")  # fmt: skip
     timings: dict[str, float] = {}
@@ -471,6 +474,8 @@ def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
             "of the invariant hyperplane c x = 0, and each CAV's gain row is defined modulo c "
             "(K and K + k c act identically there)"
         )
+    if spec.cav_lag > 0:
+        notes.append(lag_note(spec))
     t0 = time.perf_counter()
     progress("synthesis: Riccati (full-information optimum)")
     K_ric, J_ric, _ = platoon_riccati(plant)
@@ -490,7 +495,7 @@ def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
         notes.append(f"chosen ranges: fewest heard vehicles with H2 within "
                      f"{100 * spec.max_loss:g}% of the full-information optimum (greedy "
                      "per-CAV range front)")  # fmt: skip
-    elif spec.design == "full_state" or mask.all():
+    elif mask.all():  # full information (never with a lag: no pattern holds the a_i)
         K = K_ric
         h_lyap = platoon_h2(plant, K)
         rel = abs(h_lyap - h2_star) / h2_star
@@ -547,7 +552,7 @@ def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
         patterns=pat,
         comm_range=spec.comm_range,
         state_names=list(model.state_names),
-        K=K.tolist(),
+        K=plant.model_gain(K).tolist(),
         gains=gains.as_table(),
         input_K=Ku.tolist(),
         input_kh=kh.tolist(),

@@ -96,6 +96,7 @@ import scipy.linalg as sla
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import SEMANTICS, Gains, input_feedback
+from lcc_synth.models.lag import with_actuator_lag
 from lcc_synth.models.linear import LCCModel
 from lcc_synth.models.platoon import PlatoonModel
 from lcc_synth.models.records import Record
@@ -382,8 +383,6 @@ def make_plant(
     H_d = H_eff[keep]
     nd = len(keep)
     if lag > 0:
-        from lcc_synth.models.lag import with_actuator_lag
-
         aug = with_actuator_lag(A, B, H_d, [list(keep).index(model.index("v_0"))], lag)
         A, B, H_d, nd = aug.A, aug.B, aug.H.ravel(), aug.nx
     Bw, w_names = disturbances(H_d, [names[i] for i in keep], nd, weights)
@@ -640,6 +639,9 @@ class PlatoonPlant:
         Basis of the invariant subspace (identity for an open platoon).
     Ar, Br, Bwr, Qr : numpy.ndarray
         The reduced plant.
+    lag : float
+        The CAVs' actuator lag (s; 0: none): then ``nx = model.nx + n_cav`` (the ``a_i``, zero
+        columns of ``K``; :meth:`model_gain` is ``K`` on the model's states).
     """
 
     model: PlatoonModel
@@ -658,11 +660,22 @@ class PlatoonPlant:
     Br: np.ndarray
     Bwr: np.ndarray
     Qr: np.ndarray
+    lag: float = 0.0
 
     @property
     def nx(self) -> int:
-        """Number of (full) states."""
+        """Number of (full) states (the lag states included)."""
         return self.A.shape[0]
+
+    @property
+    def conserved(self) -> np.ndarray | None:
+        """The ring's conserved ``c`` on the plant's state (0 on the lag states); else None."""
+        c = self.model.conserved
+        return None if c is None else np.concatenate([c, np.zeros(self.nx - c.size)])
+
+    def model_gain(self, K: np.ndarray) -> np.ndarray:
+        """The design gain ``K`` on the model's states (without the lag states' columns)."""
+        return np.asarray(K, float).reshape(self.n_in, self.nx)[:, : self.model.nx]
 
     @property
     def n_in(self) -> int:
@@ -681,7 +694,7 @@ class PlatoonPlant:
 
     def gains(self, K: np.ndarray) -> Gains:
         """The :class:`Gains` (semantics of the plant) of design gain ``K``."""
-        return Gains.on(self.model, np.asarray(K, float), self.semantics)
+        return Gains.on(self.model, self.model_gain(K), self.semantics)
 
     def input_feedback(self, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(Ku, ku_h)``: the CAV inputs ``u = Ku x + ku_h v_h`` of design gain ``K``."""
@@ -695,17 +708,21 @@ class PlatoonPlant:
 def _reduced(p: PlatoonPlant, V: np.ndarray) -> PlatoonPlant:
     return PlatoonPlant(
         p.model, p.semantics, p.weights, p.A, p.B, p.Bw, p.Q, p.r, p.w_names, p.K0, p.kh0, V,
-        V.T @ p.A @ V, V.T @ p.B, V.T @ p.Bw, V.T @ p.Q @ V,
+        V.T @ p.A @ V, V.T @ p.B, V.T @ p.Bw, V.T @ p.Q @ V, p.lag,
     )  # fmt: skip
 
 
 def make_platoon_plant(
-    model: PlatoonModel, semantics: str = "replace", weights: Weights | None = None
-) -> PlatoonPlant:
+    model: PlatoonModel, semantics: str = "replace", weights: Weights | None = None,
+    lag: float = 0.0,
+) -> PlatoonPlant:  # fmt: skip
     """Build the :class:`PlatoonPlant` of ``model`` under ``semantics`` and ``weights``.
 
     ``weights.position`` / ``q_p`` (FD-LCC only) are ignored; ``weights.head`` needs a head
-    vehicle (an open platoon).
+    vehicle (an open platoon). ``lag`` (s; 0: none): every CAV's actuator lag, a state ``a_i``
+    per CAV after the model's (:func:`lcc_synth.models.lag.with_actuator_lag` on the whole
+    command, the HDV law of "added" too), unweighted, in no pattern, the identity in a ring's
+    ``V`` (:mod:`lcc_synth.synthesis.lag_design`).
 
     Raises
     ------
@@ -720,24 +737,32 @@ def make_platoon_plant(
         raise ConfigError("synthesis.weights.head", "a ring has no head vehicle: set it to 0")
     K0, kh0 = Gains.zero(model, semantics).input_feedback(model)
     A = model.A + model.B @ K0
+    B = model.B.copy()
     H_eff = (model.H + model.B @ kh0[:, None]).ravel()
     names = model.state_names
-    Bw, w_names = disturbances(H_eff, names, model.nx, weights)
+    V = model.invariant_basis()
+    if lag > 0:
+        aug = with_actuator_lag(A, B, H_eff, [model.index(f"v_{i}") for i in model.cavs], lag,
+                                names)  # fmt: skip
+        A, B, H_eff = aug.A, aug.B, aug.H.ravel()
+        V = sla.block_diag(V, np.eye(aug.nx - aug.nx0))
+    nd = A.shape[0]
+    Bw, w_names = disturbances(H_eff, names, nd, weights)
     if Bw is None:
         raise ConfigError("synthesis.weights", "head and accel disturbance weights are both 0 "
                           "(or the head disturbance reaches no state): nothing to design for")
     cav_states = {f"s_{i}" for i in model.cavs}
     q = np.array([weights.cav_spacing if nm in cav_states
-                  else (weights.q_s if nm.startswith("s_") else weights.q_v) for nm in names])
+                  else (weights.q_s if nm.startswith("s_") else weights.q_v) for nm in names]
+                 + [0.0] * (nd - model.nx))  # fmt: skip
     Q = np.diag(q)
     if weights.q_a > 0:
         hdv_v = [model.index(f"v_{i}") for i in range(1, model.platoon.size + 1)
                  if i not in model.cavs]  # fmt: skip
         Ca = A[hdv_v]
         Q = Q + weights.q_a * (Ca.T @ Ca)
-    V = model.invariant_basis()
-    full = PlatoonPlant(model, semantics, weights, A, model.B.copy(), Bw, Q, float(weights.r),
-                        tuple(w_names), K0, kh0, V, A, model.B, Bw, Q)  # fmt: skip
+    full = PlatoonPlant(model, semantics, weights, A, B, Bw, Q, float(weights.r),
+                        tuple(w_names), K0, kh0, V, A, B, Bw, Q, float(lag))  # fmt: skip
     return _reduced(full, V) if model.ring else full
 
 

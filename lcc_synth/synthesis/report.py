@@ -91,13 +91,15 @@ class GainCheck(Record):
     max_real_eig_model : float
         One CAV: the same on the full model (FD-LCC: the free position integrator is 0).
     plant_stable, string_stable : bool or None
-        One CAV: the head-to-tail check (``None`` without a head vehicle).
+        One CAV, and an open platoon designed with ``cav_lag`` (its lagged loop): the
+        head-to-tail check (``None`` without a head vehicle).
     gamma_peak, gamma_peak_omega : float or None
-        One CAV: peak ``|Gamma|`` and its frequency (rad/s).
+        The same layouts: peak ``|Gamma|`` and its frequency (rad/s).
     string_verdict : str or None
-        One CAV: ``StringStabilityReport.verdict``.
+        The same layouts: ``StringStabilityReport.verdict``.
     string_margin : float or None
-        One CAV: ``StringStabilityReport.margin`` (relative; ``None`` when not finite).
+        The same layouts: ``StringStabilityReport.margin`` (relative; ``None`` when not
+        finite).
     stable : bool
         Platoon / ring: the closed loop is stable on ``subspace`` (always ``True`` on a
         returned check: :func:`check_platoon_gain` raises otherwise).
@@ -412,8 +414,17 @@ def check_platoon_gain(plant: PlatoonPlant, K: np.ndarray, what: str = "design")
                              f"= {mre:.3g})", {"max_real_eig": mre})  # fmt: skip
     if not ev.stable:
         raise SynthesisError(f"{what}: the closed-loop H2 norm is not finite")
+    string = {}
+    if plant.lag > 0 and not m.ring:  # the lagged loop's head-to-tail check
+        from lcc_synth.analysis.lag_string import lag_string_stability
+
+        rep = lag_string_stability(m, *plant.input_feedback(K), plant.lag)
+        string = {"plant_stable": bool(rep.plant_stable), "string_stable": bool(rep.string_stable),
+                  "gamma_peak": float(rep.gamma_peak),
+                  "gamma_peak_omega": float(rep.gamma_peak_omega), "string_verdict": rep.verdict,
+                  "string_margin": float(rep.margin) if math.isfinite(rep.margin) else None}
     return GainCheck(h2=math.sqrt(ev.J), max_real_eig=mre, stable=True, subspace=sub,
-                     max_real_eig_full=mre_full, conserved_mode=m.conserved_mode)
+                     max_real_eig_full=mre_full, conserved_mode=m.conserved_mode, **string)
 
 
 def _format_platoon_report(rep: SynthesisReport) -> str:
@@ -443,6 +454,12 @@ def _format_platoon_report(rep: SynthesisReport) -> str:
         + (f" (full state {_fmt(c.max_real_eig_full, '.3g')}: the conserved mode)"
            if rep.ring else ""),
     ]  # fmt: skip
+    if c.string_verdict is not UNSET:  # an open platoon with the lag: its lagged loop
+        lines.append(f"peak |Gamma| (lagged)   : {_fmt(c.gamma_peak, '.9f')} at w = "
+                     f"{_fmt(c.gamma_peak_omega, '.4g')} rad/s -> "
+                     + verdict_text(c.string_verdict)
+                     + (f" (margin {c.string_margin:.3g})" if c.string_margin is not None
+                        else ""))  # fmt: skip
     for s in rep.stages:
         lines.append(f"stage {s['stage']:<22s}: H2 {_fmt(s['h2'])}  ({s['time']:.3f} s)")
     if rep.polish:

@@ -762,7 +762,7 @@ def descend(
 def _shift_modulo_c(plant: PlatoonPlant, K: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """Ring: add to each row the multiple of ``c`` that minimises its part off the pattern
     (the closed loop is unchanged); open platoon: ``K``."""
-    c = plant.model.conserved
+    c = plant.conserved
     if c is None:
         return K
     K = K.copy()
