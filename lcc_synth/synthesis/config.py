@@ -117,6 +117,7 @@ from lcc_synth.problem import Problem, System, check_top_level, system_from, war
 from lcc_synth.schema import declared
 from lcc_synth.synthesis.h2 import Weights
 from lcc_synth.synthesis.lag_design import check_lag_design
+from lcc_synth.synthesis.robust_string import check_robust_string
 
 __all__ = [
     "DESIGNS",
@@ -240,6 +241,11 @@ class SynthesisSpec(Record):
             "string": {"gamma": self.string_gamma, "polish_steps": self.polish_steps,
                        "margin": self.string_margin},  # fmt: skip
         }
+        if self.robust is not None:  # the keys of the other designs do not combine with it
+            for key in ("cross_check", "band", "sparsity", "string"):
+                del t[key]
+            t["robust"] = _robust_table(self.robust)
+            return t
         if self.baseline is not None:
             bname, gains = self.baseline
             t["baseline"] = {"name": bname, "semantics": gains.semantics, "gains": gains.gains}
@@ -275,10 +281,14 @@ class SynthesisSpec(Record):
         if self.cav_lag:
             t["cav_lag"] = self.cav_lag
         if self.robust is not None:
-            rb = self.robust
-            t["robust"] = {"samples": rb.samples, "seed": rb.seed, "objective": rb.objective,
-                           **{k: list(v) for k, v in rb.ranges.items()}}  # fmt: skip
+            t["robust"] = _robust_table(self.robust)
         return t
+
+
+def _robust_table(rb: RobustSettings) -> dict[str, Any]:
+    """``[synthesis.robust]`` of ``rb`` (every layout)."""
+    return {"samples": rb.samples, "seed": rb.seed, "objective": rb.objective,
+            **{k: list(v) for k, v in rb.ranges.items()}}  # fmt: skip
 
 
 #: The spec of a platoon or ring synthesis: the same type as one CAV's (kept for imports).
@@ -379,7 +389,7 @@ def synthesis_spec(
     T.check(t, "synthesis")
     if system.platoon is not None:
         return platoon_spec(name, system, t, source)
-    for key in ("comm_range", "patterns", "robust"):
+    for key in ("comm_range", "patterns"):
         if key in t:
             T.get(t, key, "synthesis")  # a value out of range: that error first
             raise ConfigError(f"synthesis.{key}", f"only kind = 'platoon' or 'ring' has one "
@@ -392,11 +402,16 @@ def synthesis_spec(
             "synthesis.semantics", "fd_lcc has no vehicle ahead to follow: use 'replace'"
         )
     pattern = _pattern(t, system)
-    if design == "full_state":
+    robust = None
+    if T.get(t, "robust", "synthesis"):  # the one-CAV platoon's robust design (robust_string.py)
+        method = check_robust_string(t, system, design, semantics, pattern)
+        robust = _robust(t, system)
+        T.get(t, "method", "synthesis", default=method, choices=(method,))
+    elif design == "full_state":
         method = T.get(t, "method", "synthesis", default="riccati", choices=("riccati", "lmi"))
     else:
         method = T.get(t, "method", "synthesis", default="lmi", choices=("lmi", "direct"))
-    cross_check = T.get(t, "cross_check", "synthesis")
+    cross_check = T.get(t, "cross_check", "synthesis") and robust is None
     tol = T.get(t, "tol", "synthesis")
     max_iter = T.get(t, "max_iter", "synthesis")
     band = T.get(t, "band", "synthesis")
@@ -477,6 +492,7 @@ def synthesis_spec(
         string_margin=string_margin,
         baseline=baseline,
         source=source,
+        robust=robust,
     )
 
 

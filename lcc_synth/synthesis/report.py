@@ -383,6 +383,7 @@ def format_report(rep: SynthesisReport) -> str:
                 else ""
             )
         )
+    lines += _robust_lines(rep)
     if rep.pareto:
         lines.append("Pareto sweep (vehicles heard besides the CAV -> true H2 after polishing):")
         lines.append(f"  {'#':>2s}  {'H2':>10s}  {'front':>5s}  vehicles")
@@ -395,6 +396,22 @@ def format_report(rep: SynthesisReport) -> str:
         lines.append("time: " + ", ".join(f"{k} {v:.3f} s" for k, v in rep.timings.items()))
     lines += [f"note: {s}" for s in rep.notes]
     return "\n".join(lines)
+
+
+def _robust_lines(rep: SynthesisReport) -> list[str]:
+    """The per-member summary of a robust design (every layout; none without one)."""
+    if rep.robust is UNSET or not rep.robust:
+        return []
+    r = rep.robust
+    lines = [f"robust ({r['objective']}, {r['samples']} members, seed {r['seed']}, "
+             f"ranges {r['ranges']}):"]  # fmt: skip
+    for key in ("nominal_design", "robust_design"):
+        s = r[key]
+        lines.append(f"  {key:<15s}: mean H2 {_fmt(s['mean_h2'])}, worst {_fmt(s['worst_h2'])}"
+                     f", best {_fmt(s['best_h2'])}, stable on {s['n_stable']}/{r['samples']}")
+    lines.append(f"  robust gain on the nominal model: H2 {_fmt(rep.check.h2)} (nominal design "
+                 f"{_fmt(r['nominal_design']['h2_nominal'])})")  # fmt: skip
+    return lines
 
 
 def check_platoon_gain(plant: PlatoonPlant, K: np.ndarray, what: str = "design") -> GainCheck:
@@ -465,16 +482,7 @@ def _format_platoon_report(rep: SynthesisReport) -> str:
     if rep.polish:
         lines.append("polish: " + ", ".join(f"{k}={_fmt(v) if isinstance(v, float) else v}"
                                              for k, v in rep.polish.items()))
-    if rep.robust:
-        r = rep.robust
-        lines.append(f"robust ({r['objective']}, {r['samples']} members, seed {r['seed']}, "
-                     f"ranges {r['ranges']}):")  # fmt: skip
-        for key in ("nominal_design", "robust_design"):
-            s = r[key]
-            lines.append(f"  {key:<15s}: mean H2 {_fmt(s['mean_h2'])}, worst {_fmt(s['worst_h2'])}"
-                         f", best {_fmt(s['best_h2'])}, stable on {s['n_stable']}/{r['samples']}")
-        lines.append(f"  robust gain on the nominal model: H2 {_fmt(c.h2)} (nominal design "
-                     f"{_fmt(r['nominal_design']['h2_nominal'])})")  # fmt: skip
+    lines += _robust_lines(rep)
     if rep.pareto:
         lines.append("range front (greedy per CAV: ranges -> vehicles heard, true H2, loss):")
         for p in rep.pareto:
