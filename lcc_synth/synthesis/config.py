@@ -64,6 +64,18 @@ One CAV (``[system] kind = "cf_lcc" | "fd_lcc" | "lcc" | "ccc"``):
     semantics = "replace"
     gains = { v_0 = -0.5, s_1 = -0.2, v_1 = 0.05, s_2 = -0.1, v_2 = 0.05 }
 
+    [synthesis.robust]        # optional, lcc / cf_lcc / ccc: one gain for sampled HDV
+                              # parameter sets, the keys of the platoon's table below
+                              # (robust_string.py)
+
+``[synthesis.robust]`` on one CAV runs the platoon's robust design on the string's one-CAV
+platoon (``lcc_synth.synthesis.robust_string``): designs ``full_state`` and ``structured``
+(method ``riccati`` / ``direct``), the CAV's whole command designed and written in the file's
+``semantics`` (``"added"``: minus the CAV's nominal HDV law, the same closed loop). Refused with
+a ConfigError naming the key: ``kind = "fd_lcc"`` (no head vehicle), the keys ``cross_check``,
+``band``, ``string``, ``sparsity``, ``as_run``, ``baseline``, ``method = "lmi"``, ``cav_lag > 0``,
+and ``semantics = "added"`` with ``m = 0`` or a ``pattern`` without vehicle -1.
+
 A platoon or a ring (``[system] kind = "platoon" | "ring"``):
 
 .. code-block:: toml
@@ -98,8 +110,8 @@ A platoon or a ring (``[system] kind = "platoon" | "ring"``):
 Neither comm_range nor patterns: every CAV hears every vehicle (the full-information optimum).
 The single-CAV keys ``pattern`` (other than "all"), ``cross_check``, ``band``, ``sparsity``
 (but ``max_loss``), ``string``, ``baseline`` and ``as_run`` do not apply: a ConfigError names the
-key and the layout (``kind``); the platoon keys ``comm_range``, ``patterns`` and ``robust`` are
-refused for one CAV the same way.
+key and the layout (``kind``); the platoon keys ``comm_range`` and ``patterns`` are refused for
+one CAV the same way (``robust`` applies to both: see above).
 """
 
 from __future__ import annotations
@@ -184,7 +196,8 @@ class SynthesisSpec(Record):
         Platoon / ring: the communication range the patterns came from (``None``: lists or
         full).
     robust : RobustSettings or None
-        Platoon / ring: ``[synthesis.robust]``.
+        ``[synthesis.robust]``: a platoon or ring, or one CAV behind a head vehicle (run on its
+        one-CAV platoon, :mod:`lcc_synth.synthesis.robust_string`).
     """
 
     name: str
@@ -580,7 +593,9 @@ def _robust(t: dict, system: System) -> RobustSettings | None:
 
 
 def robust_members(system: System, robust: RobustSettings) -> list[Platoon]:
-    """The sampled platoons: every vehicle's ``ranges`` parameters drawn uniformly and
+    """The sampled platoons of a platoon or ring ``system`` (a one-CAV string: of
+    :func:`lcc_synth.synthesis.robust_string.string_platoon`): every vehicle's ``ranges``
+    parameters drawn uniformly and
     independently per member (``numpy.random.default_rng(seed)``, vehicle-major order);
     the other parameters those of the nominal vehicle. A ring keeps the nominal ``v*`` (or
     the given circumference)."""

@@ -50,13 +50,13 @@ from lcc_synth.synthesis.h2 import (
     single_thread_blas,
 )
 from lcc_synth.synthesis.lag_design import lag_note
-from lcc_synth.synthesis.robust_string import robust_string_design
 from lcc_synth.synthesis.report import (
     SynthesisReport,
     check_gain,
     check_platoon_gain,
     evaluate_gain,
 )
+from lcc_synth.synthesis.robust_string import robust_string_design
 from lcc_synth.synthesis.sparsity import range_pareto, sparsity_sweep
 from lcc_synth.synthesis.string_lmi import string_aware_h2
 from lcc_synth.synthesis.structured import (
@@ -170,7 +170,7 @@ def synthesize(spec: SynthesisSpec) -> SynthesisReport:
     if spec.system.platoon is not None:  # kind = "platoon" | "ring": a gain row per CAV
         return _synthesize_platoon(spec)
     if spec.robust is not None:  # one CAV: the robust design of its one-CAV platoon
-        return robust_string_design(spec)
+        return robust_string_design(spec, _synthesize_platoon)
     t_start = time.perf_counter()
     model = spec.system.linear_model(warn=False)
     plant = make_plant(model, spec.semantics, spec.weights, spec.cav_lag)

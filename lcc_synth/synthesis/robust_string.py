@@ -46,16 +46,17 @@ the one-CAV report, on the nominal model; its H2 equals the platoon report's to 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.models.feedback import Gains
 from lcc_synth.models.platoon import Platoon
 from lcc_synth.problem import System
 from lcc_synth.schema import declared
-from lcc_synth.synthesis.h2 import make_plant
+from lcc_synth.synthesis.h2 import SynthesisError, make_plant
 from lcc_synth.synthesis.report import SynthesisReport, check_gain
 
 __all__ = ["ROBUST_STRING_DESIGNS", "string_platoon", "check_robust_string",
@@ -130,20 +131,20 @@ def check_robust_string(
     return "riccati" if design == "full_state" else "direct"
 
 
-def robust_string_design(spec) -> SynthesisReport:
+def robust_string_design(
+    spec, design_platoon: Callable[[Any], SynthesisReport]
+) -> SynthesisReport:
     """Run the robust design of the one-CAV string ``spec`` (a
     :class:`~lcc_synth.synthesis.config.SynthesisSpec` with ``robust`` set, checked by
-    :func:`check_robust_string`) on its one-CAV platoon and report it in the string's names
-    and semantics (the module docstring).
+    :func:`check_robust_string`) on its one-CAV platoon with ``design_platoon`` (the platoon
+    design of :func:`lcc_synth.synthesis.design.synthesize`) and report it in the string's
+    names and semantics (the module docstring).
 
     Raises
     ------
     lcc_synth.synthesis.SynthesisError
         As the platoon design does (no stabilising gain, a nominal gain unstable on a member).
     """
-    from lcc_synth.synthesis.config import SynthesisSpec
-    from lcc_synth.synthesis.design import design_gain_of, synthesize
-
     t_start = time.perf_counter()
     system = spec.system
     psys = string_platoon(system)
@@ -151,20 +152,20 @@ def robust_string_design(spec) -> SynthesisReport:
     patterns = None
     if spec.pattern is not None:
         patterns = {cav: tuple(sorted({v + cav for v in spec.pattern} | {cav}))}
-    pspec = SynthesisSpec(name=spec.name, system=psys, design=spec.design, semantics="replace",
-                          weights=spec.weights, method=spec.method, tol=spec.tol,
-                          max_iter=spec.max_iter, sparsity={"max_loss": 0.01},
-                          source=spec.source, patterns=patterns, robust=spec.robust)
-    prep = synthesize(pspec)
+    pspec = replace(spec, system=psys, semantics="replace", pattern=None, patterns=patterns,
+                    sparsity={"max_loss": 0.01}, cross_check=False)  # the platoon's keys
+    prep = design_platoon(pspec)
     K = np.asarray(prep.K, float)[0]  # the CAV's whole command, in the string's state order
     model = system.linear_model(warn=False)
     whole = make_plant(model, "replace", spec.weights)
     chk = check_gain(whole, K, f"robust {spec.design} design")
     if spec.semantics == "replace":
         plant, g = whole, K
-    else:  # "added": minus the CAV's nominal HDV law
+    else:  # "added": minus the CAV's nominal HDV law (m >= 1: no head feed-through)
         plant = make_plant(model, spec.semantics, spec.weights)
-        g = design_gain_of(plant, Gains.on(model, K, "replace"))
+        if plant.kh0 != whole.kh0:  # pragma: no cover - check_robust_string refuses m = 0
+            raise SynthesisError("robust design: 'added' changes the head-velocity feed-through")
+        g = K - plant.K0
     gains = plant.gains(g)
     K_in, kh_in = whole.input_feedback(K)
     heard = sorted(p - cav for p in prep.patterns[f"u_{cav}"])
