@@ -4,7 +4,9 @@ Every layout reads one :class:`~lcc_synth.synthesis.config.SynthesisSpec` and gi
 :class:`~lcc_synth.synthesis.report.SynthesisReport`.
 
 One CAV: dispatch on the design (full-state Riccati / LMI, structured, sparsity,
-string-stable, optionally as run), check the result, build the report.
+string-stable, optionally as run), check the result, build the report; with
+``[synthesis.robust]`` the platoon design below on the string's one-CAV platoon
+(:mod:`~lcc_synth.synthesis.robust_string`).
 
 A platoon or a ring: per-CAV patterns, the design stages, the robust multi-model design, the
 checks and the report with a gain row per CAV. Stages (each reported with its true H2 norm

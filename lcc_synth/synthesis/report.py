@@ -230,9 +230,12 @@ class SynthesisReport(Record):
     h2_lmi_bound, h2_restriction, solver, baseline, as_run
         One CAV: the LMI bound and the LMI gain's true H2, the solver's figures, the baseline
         gains' checks, the as-run design's information.
-    conserved, stages, robust
-        Platoon / ring: the ring's conserved direction ``c``, each stage's true H2 and time,
-        the per-member figures of a robust design.
+    conserved, stages
+        Platoon / ring: the ring's conserved direction ``c``, each stage's true H2 and time.
+    robust
+        The per-member figures of a robust design (``[synthesis.robust]``: a platoon or ring,
+        or one CAV designed on its one-CAV platoon, :mod:`lcc_synth.synthesis.robust_string`);
+        ``None`` without one on a platoon or ring.
     pareto : list of dict or None
         ``design = "sparsity"``: the Pareto front (one CAV) or the greedy range front.
     gain : lcc_synth.models.feedback.Gains
