@@ -57,24 +57,25 @@ def _spec(system: str, synthesis: str, robust: str = ROBUST):
 
 
 @cache
-def _string(kind: str, semantics: str):
-    """The robust structured design of the string ``kind`` (spec, report), once a session."""
+def _string(kind: str, semantics: str, design: str = "structured"):
+    """The robust design of the string ``kind`` (spec, report), once a session."""
     system, _, _, pattern = STRINGS[kind]
-    spec = _spec(system, f'design = "structured"\nsemantics = "{semantics}"\n{pattern}')
+    pattern = pattern if design == "structured" else ""
+    spec = _spec(system, f'design = "{design}"\nsemantics = "{semantics}"\n{pattern}')
     return spec, synthesize(spec)
 
 
 @cache
-def _platoon(kind: str, robust: bool = True):
+def _platoon(kind: str, robust: bool = True, design: str = "structured"):
     """The same problem written as the one-CAV platoon (positions from the head)."""
     _, m, n, pattern = STRINGS[kind]
     cav = m + 1
     heard = ""
-    if pattern:
+    if pattern and design == "structured":
         vehicles = tomllib.loads(pattern)["pattern"]
         heard = f"[synthesis.patterns]\nu_{cav} = {[v + cav for v in vehicles]}\n"
     system = f'kind = "platoon"\nsize = {m + n + 1}\ncavs = [{cav}]'
-    spec = _spec(system, f'design = "structured"\nsemantics = "replace"\n{heard}',
+    spec = _spec(system, f'design = "{design}"\nsemantics = "replace"\n{heard}',
                  ROBUST if robust else "")
     return synthesize(spec)
 
@@ -89,9 +90,12 @@ def _law(m: int, n: int) -> np.ndarray:
     return law
 
 
-@pytest.mark.parametrize(("kind", "semantics"), [("lcc", "replace"), ("cf_lcc", "replace"),
-                                                 ("ccc", "added"), ("lcc", "added")])
-def test_robust_string_gain_is_the_one_cav_platoons(kind, semantics):
+@pytest.mark.parametrize(("kind", "semantics", "design"), [
+    ("lcc", "replace", "structured"), ("cf_lcc", "replace", "structured"),
+    ("ccc", "added", "structured"), ("lcc", "added", "structured"),
+    ("cf_lcc", "replace", "full_state"),
+])  # fmt: skip
+def test_robust_string_gain_is_the_one_cav_platoons(kind, semantics, design):
     """The string's gain equals the platoon's robust gain on the same vehicles: bit for bit in
     "replace" (the same numbers, renamed); in "added" after adding back the CAV's nominal HDV
     law (one subtraction and one addition of three coefficients: 1e-12, measured 0 to 1e-16).
@@ -99,8 +103,8 @@ def test_robust_string_gain_is_the_one_cav_platoons(kind, semantics):
     assert tomllib.loads(PAPER_HDV)["hdv"] == {"model": "ovm", **{
         k: getattr(OVM(), k) for k in ("alpha", "beta", "s_st", "s_go", "v_max")}}
     _, m, n, _ = STRINGS[kind]
-    spec, rep = _string(kind, semantics)
-    prep = _platoon(kind)
+    spec, rep = _string(kind, semantics, design)
+    prep = _platoon(kind, design=design)
     whole = np.asarray(prep.K[0], float)
     names = [f"{x}_{i}" for i in range(-m, n + 1) for x in "sv"]
     assert rep.state_names == names and rep.kind == kind and (rep.m, rep.n) == (m, n)
@@ -207,6 +211,9 @@ LCC = 'kind = "lcc"\nm = 1\nn = 2'
     (LCC, 'design = "sparsity"', ROBUST, "synthesis.design", ("full_state", "structured")),
     (LCC, 'method = "lmi"', ROBUST, "synthesis.method", ("direct",)),
     (LCC, "as_run = true", ROBUST, "synthesis.as_run", ("drop it",)),
+    (LCC, "cav_lag = 0.2", ROBUST, "synthesis.cav_lag", ("actuator lag",)),
+    (LCC, 'design = "structured"\nmethod = "riccati"', ROBUST, "synthesis.method",
+     ("direct",)),
     ('kind = "cf_lcc"\nn = 3', 'semantics = "added"', ROBUST, "synthesis.semantics",
      ("m = 0", "replace")),
     (LCC, 'semantics = "added"\npattern = [1]', ROBUST, "synthesis.pattern", ("-1",)),
