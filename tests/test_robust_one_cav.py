@@ -57,16 +57,16 @@ def _spec(system: str, synthesis: str, robust: str = ROBUST):
 
 
 @cache
-def _string(kind: str, semantics: str, design: str = "structured"):
+def _string(kind: str, semantics: str, design: str = "structured", lag: str = ""):
     """The robust design of the string ``kind`` (spec, report), once a session."""
     system, _, _, pattern = STRINGS[kind]
     pattern = pattern if design == "structured" else ""
-    spec = _spec(system, f'design = "{design}"\nsemantics = "{semantics}"\n{pattern}')
+    spec = _spec(system, f'design = "{design}"\nsemantics = "{semantics}"\n{pattern}\n{lag}')
     return spec, synthesize(spec)
 
 
 @cache
-def _platoon(kind: str, robust: bool = True, design: str = "structured"):
+def _platoon(kind: str, robust: bool = True, design: str = "structured", lag: str = ""):
     """The same problem written as the one-CAV platoon (positions from the head)."""
     _, m, n, pattern = STRINGS[kind]
     cav = m + 1
@@ -75,7 +75,7 @@ def _platoon(kind: str, robust: bool = True, design: str = "structured"):
         vehicles = tomllib.loads(pattern)["pattern"]
         heard = f"[synthesis.patterns]\nu_{cav} = {[v + cav for v in vehicles]}\n"
     system = f'kind = "platoon"\nsize = {m + n + 1}\ncavs = [{cav}]'
-    spec = _spec(system, f'design = "{design}"\nsemantics = "replace"\n{heard}',
+    spec = _spec(system, f'design = "{design}"\nsemantics = "replace"\n{lag}\n{heard}',
                  ROBUST if robust else "")
     return synthesize(spec)
 
@@ -90,21 +90,25 @@ def _law(m: int, n: int) -> np.ndarray:
     return law
 
 
-@pytest.mark.parametrize(("kind", "semantics", "design"), [
-    ("lcc", "replace", "structured"), ("cf_lcc", "replace", "structured"),
-    ("ccc", "added", "structured"), ("lcc", "added", "structured"),
-    ("cf_lcc", "replace", "full_state"),
+@pytest.mark.parametrize(("kind", "semantics", "design", "lag"), [
+    ("lcc", "replace", "structured", ""), ("cf_lcc", "replace", "structured", ""),
+    ("ccc", "added", "structured", ""), ("lcc", "added", "structured", ""),
+    ("cf_lcc", "replace", "full_state", ""), ("lcc", "added", "structured", "cav_lag = 0.3"),
 ])  # fmt: skip
-def test_robust_string_gain_is_the_one_cav_platoons(kind, semantics, design):
+def test_robust_string_gain_is_the_one_cav_platoons(kind, semantics, design, lag):
     """The string's gain equals the platoon's robust gain on the same vehicles: bit for bit in
     "replace" (the same numbers, renamed); in "added" after adding back the CAV's nominal HDV
     law (one subtraction and one addition of three coefficients: 1e-12, measured 0 to 1e-16).
-    The member statistics are the platoon report's."""
+    The member statistics are the platoon report's; with ``cav_lag`` (every member lagged)
+    too, and the check is of the lagged loop."""
     assert tomllib.loads(PAPER_HDV)["hdv"] == {"model": "ovm", **{
         k: getattr(OVM(), k) for k in ("alpha", "beta", "s_st", "s_go", "v_max")}}
     _, m, n, _ = STRINGS[kind]
-    spec, rep = _string(kind, semantics, design)
-    prep = _platoon(kind, design=design)
+    spec, rep = _string(kind, semantics, design, lag)
+    prep = _platoon(kind, design=design, lag=lag)
+    if lag:  # in the design: the check is of the lagged loop, not the lag-free one
+        assert spec.cav_lag == 0.3 and any("lag" in note for note in rep.notes)
+        assert rep.check.h2 != pytest.approx(_string(kind, semantics, design)[1].check.h2)
     whole = np.asarray(prep.K[0], float)
     names = [f"{x}_{i}" for i in range(-m, n + 1) for x in "sv"]
     assert rep.state_names == names and rep.kind == kind and (rep.m, rep.n) == (m, n)
@@ -211,7 +215,6 @@ LCC = 'kind = "lcc"\nm = 1\nn = 2'
     (LCC, 'design = "sparsity"', ROBUST, "synthesis.design", ("full_state", "structured")),
     (LCC, 'method = "lmi"', ROBUST, "synthesis.method", ("direct",)),
     (LCC, "as_run = true", ROBUST, "synthesis.as_run", ("drop it",)),
-    (LCC, "cav_lag = 0.2", ROBUST, "synthesis.cav_lag", ("actuator lag",)),
     (LCC, 'design = "structured"\nmethod = "riccati"', ROBUST, "synthesis.method",
      ("direct",)),
     ('kind = "cf_lcc"\nn = 3', 'semantics = "added"', ROBUST, "synthesis.semantics",

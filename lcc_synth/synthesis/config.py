@@ -73,8 +73,9 @@ platoon (``lcc_synth.synthesis.robust_string``): designs ``full_state`` and ``st
 (method ``riccati`` / ``direct``), the CAV's whole command designed and written in the file's
 ``semantics`` (``"added"``: minus the CAV's nominal HDV law, the same closed loop). Refused with
 a ConfigError naming the key: ``kind = "fd_lcc"`` (no head vehicle), the keys ``cross_check``,
-``band``, ``string``, ``sparsity``, ``as_run``, ``baseline``, ``method = "lmi"``, ``cav_lag > 0``,
-and ``semantics = "added"`` with ``m = 0`` or a ``pattern`` without vehicle -1.
+``band``, ``string``, ``sparsity``, ``as_run``, ``baseline``, ``method = "lmi"``, and
+``semantics = "added"`` with ``m = 0`` or a ``pattern`` without vehicle -1 (``cav_lag`` works:
+every member lagged).
 
 A platoon or a ring (``[system] kind = "platoon" | "ring"``):
 

@@ -32,7 +32,9 @@ written that way and are refused with a ConfigError naming the field:
 ``kind = "fd_lcc"`` has no head vehicle (the CAV drives freely at the front), so it is not a
 one-CAV platoon: refused (use ``cf_lcc``). The designs are ``full_state`` (the Riccati start)
 and ``structured`` (the platoon's start and Newton polish, ``method = "direct"``); the keys of
-the LMI, sparsity, string-stable, as-run, lag and baseline designs are refused with robust.
+the LMI, sparsity, string-stable, as-run and baseline designs are refused with robust.
+``cav_lag`` runs as on the platoon (every member lagged,
+:mod:`~lcc_synth.synthesis.lag_design`); the check is then of the string's lagged loop.
 
 Numerical limits
 ----------------
@@ -58,7 +60,6 @@ import numpy as np
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.platoon import Platoon
 from lcc_synth.problem import System
-from lcc_synth.schema import declared
 from lcc_synth.synthesis.h2 import SynthesisError, make_plant
 from lcc_synth.synthesis.report import SynthesisReport, check_gain
 
@@ -103,8 +104,7 @@ def check_robust_string(
     ------
     ConfigError
         Naming the field: the kind, the design, a key of another design, ``method = "lmi"``,
-        a non-zero ``cav_lag``, or ``semantics = "added"`` where its HDV law cannot be
-        subtracted.
+        or ``semantics = "added"`` where its HDV law cannot be subtracted.
     """
     string_platoon(system)  # the kind first
     what = "[synthesis.robust] on a one-CAV string"
@@ -119,9 +119,6 @@ def check_robust_string(
         raise ConfigError("synthesis.method", f"{what} descends on the true H2 from the Riccati "
                           "or direct start: use method = 'direct' (structured) or 'riccati' "
                           "(full_state), or leave it out")  # fmt: skip
-    T = declared("synthesis")
-    if T.get(t, "cav_lag", "synthesis"):
-        raise ConfigError("synthesis.cav_lag", f"{what} has no actuator lag: use 0")
     if semantics == "added" and system.m == 0:
         raise ConfigError("synthesis.semantics", f"{what} designs the CAV's whole command; with "
                           "no HDV ahead (m = 0) the HDV law of 'added' feeds the head velocity "
@@ -160,17 +157,19 @@ def robust_string_design(
     prep = design_platoon(pspec)
     K = np.asarray(prep.K, float)[0]  # the CAV's whole command, in the string's state order
     model = system.linear_model(warn=False)
-    whole = make_plant(model, "replace", spec.weights)
-    chk = check_gain(whole, K, f"robust {spec.design} design")
+    lag = [0.0] if spec.cav_lag > 0 else []  # the lag state a_0 is in no gain
+    whole = make_plant(model, "replace", spec.weights, spec.cav_lag)
+    g_whole = np.append(K, lag)
+    chk = check_gain(whole, g_whole, f"robust {spec.design} design")
     if spec.semantics == "replace":
-        plant, g = whole, K
+        plant, g = whole, g_whole
     else:  # "added": minus the CAV's nominal HDV law (m >= 1: no head feed-through)
-        plant = make_plant(model, spec.semantics, spec.weights)
+        plant = make_plant(model, spec.semantics, spec.weights, spec.cav_lag)
         if plant.kh0 != whole.kh0:  # pragma: no cover - check_robust_string refuses m = 0
             raise SynthesisError("robust design: 'added' changes the head-velocity feed-through")
-        g = K - plant.K0
+        g = np.append(K - plant.K0, lag)
     gains = plant.gains(g)
-    K_in, kh_in = whole.input_feedback(K)
+    K_in, kh_in = whole.input_feedback(g_whole)
     heard = sorted(p - cav for p in prep.patterns[f"u_{cav}"])
     notes = [f"robust design on the one-CAV platoon kind = 'platoon', size = {psys.platoon.size},"
              f" cavs = [{cav}] (vehicle i of the string is position i + {cav}): the CAV's "
