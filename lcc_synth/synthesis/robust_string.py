@@ -9,7 +9,8 @@ linear models have the same ``A``, ``B``, ``H`` bit for bit (eq. 9, 11, 14;
 (:func:`lcc_synth.synthesis.design.robust_design`: descent on the mean or smooth worst true H2
 over the sampled members, from the nominal structured design) run on that platoon, one
 pipeline for both vocabularies: :func:`robust_string_design` builds the platoon spec, runs
-:func:`lcc_synth.synthesis.design.synthesize` on it and reports the result in the string's own
+the platoon design of :func:`lcc_synth.synthesis.design.synthesize` (which dispatches a robust
+one-CAV spec here) on it and reports the result in the string's own
 names (``s_-1``, ``v_1`` ...), pattern and semantics, with the platoon report's per-member
 statistics (``robust``).
 
