@@ -456,7 +456,7 @@ def h2_problem(
         ``accel`` = 1, ``head`` = 0 ... when absent; see :class:`lcc_synth.synthesis.h2.Weights`).
     **options
         Any other ``[synthesis]`` key (``semantics``, ``method``, ``tol``, ``string = {...}``,
-        ``sparsity = {...}``, ``baseline = {...}``, ``as_run = {...}``).
+        ``sparsity = {...}``, ``baseline = {...}``, ``as_run = {...}``, ``robust = {...}``).
 
     Validated by :func:`lcc_synth.synthesis.config.spec_from_problem`, as a problem file (errors
     name ``<python>`` and the dotted field).

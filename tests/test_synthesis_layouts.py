@@ -5,9 +5,9 @@ Each layout goes through the same calls (``spec_from_problem`` -> ``synthesize``
 the model matrices alone with scipy: the Riccati optimum (CARE) for ``design = "full_state"``
 and the Lyapunov H2 norm of the reported whole-input gain for every design (the ring on its
 invariant hyperplane ``c x = 0``, whose basis is scipy's null space of ``c``); ``design =
-"sparsity"`` on every layout too, and the robust design of several CAVs on each sampled member.
-The features that exist only for one CAV (or only for several) raise one ConfigError naming the
-key and the layout.
+"sparsity"`` on every layout too, and the robust design of several CAVs on each sampled member
+(one CAV's: tests/test_robust_one_cav.py). The features that exist only for one CAV (or only
+for several) raise one ConfigError naming the key and the layout.
 """
 
 from __future__ import annotations
@@ -285,8 +285,13 @@ def test_robust_gain_is_stable_on_every_member_and_beats_the_nominal_on_every_la
     assert np.mean(h_rob) <= np.mean(h_nom) * (1 + 1e-9)
 
 
-def test_robust_design_on_one_cav_names_the_key():
+def test_robust_design_on_one_cav_is_read_for_its_one_cav_platoon():
+    """One CAV behind a head vehicle reads ``[synthesis.robust]`` too (designed on its one-CAV
+    platoon: tests/test_robust_one_cav.py); the platoon vocabulary's keys stay refused."""
+    spec = spec_from_problem(_problem("one_cav_string", "structured", _ROBUST))
+    assert (spec.robust.samples, spec.robust.seed, spec.method) == (4, 3, "direct")
+    assert spec.pattern == (1, 2) and spec.system.platoon is None
     with pytest.raises(ConfigError) as err:
-        spec_from_problem(_problem("one_cav_string", "structured", _ROBUST))
-    assert err.value.field == "synthesis.robust"
+        spec_from_problem(_problem("one_cav_string", "structured", "comm_range = 1"))
+    assert err.value.field == "synthesis.comm_range"
     assert "kind = 'cf_lcc'" in err.value.message

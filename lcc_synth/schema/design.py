@@ -57,8 +57,8 @@ SYNTHESIS = Table(
             hi=10000),
         Key("patterns", "table", "platoon, ring (structured): per-CAV heard positions "
             "[synthesis.patterns] (override comm_range).", {}),
-        Key("robust", "table", "platoon, ring: one gain for sampled HDV parameter sets "
-            "[synthesis.robust].", {}),
+        Key("robust", "table", "platoon, ring, and lcc / cf_lcc / ccc (full_state, "
+            "structured): one gain for sampled HDV parameter sets [synthesis.robust].", {}),
     ),
 )
 
@@ -72,7 +72,8 @@ PATTERNS = Table(
 
 ROBUST = Table(
     "synthesis.robust",
-    "platoon, ring: the robust multi-model design over sampled HDV parameters (OVM).",
+    "platoon, ring, and one CAV behind a head vehicle (lcc, cf_lcc, ccc; designed on its "
+    "one-CAV platoon): the robust multi-model design over sampled HDV parameters (OVM).",
     _SYN,
     (
         Key("samples", "integer", "Number of sampled members.", 20, lo=1, hi=1000),

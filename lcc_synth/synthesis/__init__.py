@@ -7,6 +7,7 @@ robust multi-model descent), :mod:`.sparsity` (group-sparsity ADMM Pareto sweep;
 front), :mod:`.string_lmi` (bounded-real lemma, string-stable designs, one CAV),
 :mod:`.as_run` (the loop as it runs, one CAV), :mod:`.as_run_dynamics` (the gain with the
 estimator, filter and sample time as design variables, on the loop as it runs),
+:mod:`.robust_string` (the robust multi-model design of one CAV, on its one-CAV platoon),
 :mod:`.config` (``[synthesis]`` problem table, both vocabularies), :mod:`.design`
 (:func:`~.design.synthesize`, the one entry point),
 :mod:`.report` (checks and report), :mod:`.gains_file` (the gains JSON file).

@@ -64,6 +64,19 @@ One CAV (``[system] kind = "cf_lcc" | "fd_lcc" | "lcc" | "ccc"``):
     semantics = "replace"
     gains = { v_0 = -0.5, s_1 = -0.2, v_1 = 0.05, s_2 = -0.1, v_2 = 0.05 }
 
+    [synthesis.robust]        # optional, lcc / cf_lcc / ccc: one gain for sampled HDV
+                              # parameter sets, the keys of the platoon's table below
+                              # (robust_string.py)
+
+``[synthesis.robust]`` on one CAV runs the platoon's robust design on the string's one-CAV
+platoon (``lcc_synth.synthesis.robust_string``): designs ``full_state`` and ``structured``
+(method ``riccati`` / ``direct``), the CAV's whole command designed and written in the file's
+``semantics`` (``"added"``: minus the CAV's nominal HDV law, the same closed loop). Refused with
+a ConfigError naming the key: ``kind = "fd_lcc"`` (no head vehicle), the keys ``cross_check``,
+``band``, ``string``, ``sparsity``, ``as_run``, ``baseline``, ``method = "lmi"``, and
+``semantics = "added"`` with ``m = 0`` or a ``pattern`` without vehicle -1 (``cav_lag`` works:
+every member lagged).
+
 A platoon or a ring (``[system] kind = "platoon" | "ring"``):
 
 .. code-block:: toml
@@ -98,8 +111,8 @@ A platoon or a ring (``[system] kind = "platoon" | "ring"``):
 Neither comm_range nor patterns: every CAV hears every vehicle (the full-information optimum).
 The single-CAV keys ``pattern`` (other than "all"), ``cross_check``, ``band``, ``sparsity``
 (but ``max_loss``), ``string``, ``baseline`` and ``as_run`` do not apply: a ConfigError names the
-key and the layout (``kind``); the platoon keys ``comm_range``, ``patterns`` and ``robust`` are
-refused for one CAV the same way.
+key and the layout (``kind``); the platoon keys ``comm_range`` and ``patterns`` are refused for
+one CAV the same way (``robust`` applies to both: see above).
 """
 
 from __future__ import annotations
@@ -117,6 +130,7 @@ from lcc_synth.problem import Problem, System, check_top_level, system_from, war
 from lcc_synth.schema import declared
 from lcc_synth.synthesis.h2 import Weights
 from lcc_synth.synthesis.lag_design import check_lag_design
+from lcc_synth.synthesis.robust_string import check_robust_string
 
 __all__ = [
     "DESIGNS",
@@ -183,7 +197,8 @@ class SynthesisSpec(Record):
         Platoon / ring: the communication range the patterns came from (``None``: lists or
         full).
     robust : RobustSettings or None
-        Platoon / ring: ``[synthesis.robust]``.
+        ``[synthesis.robust]``: a platoon or ring, or one CAV behind a head vehicle (run on its
+        one-CAV platoon, :mod:`lcc_synth.synthesis.robust_string`).
     """
 
     name: str
@@ -240,6 +255,11 @@ class SynthesisSpec(Record):
             "string": {"gamma": self.string_gamma, "polish_steps": self.polish_steps,
                        "margin": self.string_margin},  # fmt: skip
         }
+        if self.robust is not None:  # the keys of the other designs do not combine with it
+            for key in ("cross_check", "band", "sparsity", "string"):
+                del t[key]
+            t["robust"] = _robust_table(self.robust)
+            return t
         if self.baseline is not None:
             bname, gains = self.baseline
             t["baseline"] = {"name": bname, "semantics": gains.semantics, "gains": gains.gains}
@@ -275,10 +295,14 @@ class SynthesisSpec(Record):
         if self.cav_lag:
             t["cav_lag"] = self.cav_lag
         if self.robust is not None:
-            rb = self.robust
-            t["robust"] = {"samples": rb.samples, "seed": rb.seed, "objective": rb.objective,
-                           **{k: list(v) for k, v in rb.ranges.items()}}  # fmt: skip
+            t["robust"] = _robust_table(self.robust)
         return t
+
+
+def _robust_table(rb: RobustSettings) -> dict[str, Any]:
+    """``[synthesis.robust]`` of ``rb`` (every layout)."""
+    return {"samples": rb.samples, "seed": rb.seed, "objective": rb.objective,
+            **{k: list(v) for k, v in rb.ranges.items()}}  # fmt: skip
 
 
 #: The spec of a platoon or ring synthesis: the same type as one CAV's (kept for imports).
@@ -379,7 +403,7 @@ def synthesis_spec(
     T.check(t, "synthesis")
     if system.platoon is not None:
         return platoon_spec(name, system, t, source)
-    for key in ("comm_range", "patterns", "robust"):
+    for key in ("comm_range", "patterns"):
         if key in t:
             T.get(t, key, "synthesis")  # a value out of range: that error first
             raise ConfigError(f"synthesis.{key}", f"only kind = 'platoon' or 'ring' has one "
@@ -392,11 +416,16 @@ def synthesis_spec(
             "synthesis.semantics", "fd_lcc has no vehicle ahead to follow: use 'replace'"
         )
     pattern = _pattern(t, system)
-    if design == "full_state":
+    robust = None
+    if T.get(t, "robust", "synthesis"):  # the one-CAV platoon's robust design (robust_string.py)
+        method = check_robust_string(t, system, design, semantics, pattern)
+        robust = _robust(t, system)
+        T.get(t, "method", "synthesis", default=method, choices=(method,))
+    elif design == "full_state":
         method = T.get(t, "method", "synthesis", default="riccati", choices=("riccati", "lmi"))
     else:
         method = T.get(t, "method", "synthesis", default="lmi", choices=("lmi", "direct"))
-    cross_check = T.get(t, "cross_check", "synthesis")
+    cross_check = T.get(t, "cross_check", "synthesis") and robust is None
     tol = T.get(t, "tol", "synthesis")
     max_iter = T.get(t, "max_iter", "synthesis")
     band = T.get(t, "band", "synthesis")
@@ -477,6 +506,7 @@ def synthesis_spec(
         string_margin=string_margin,
         baseline=baseline,
         source=source,
+        robust=robust,
     )
 
 
@@ -564,7 +594,9 @@ def _robust(t: dict, system: System) -> RobustSettings | None:
 
 
 def robust_members(system: System, robust: RobustSettings) -> list[Platoon]:
-    """The sampled platoons: every vehicle's ``ranges`` parameters drawn uniformly and
+    """The sampled platoons of a platoon or ring ``system`` (a one-CAV string: of
+    :func:`lcc_synth.synthesis.robust_string.string_platoon`): every vehicle's ``ranges``
+    parameters drawn uniformly and
     independently per member (``numpy.random.default_rng(seed)``, vehicle-major order);
     the other parameters those of the nominal vehicle. A ring keeps the nominal ``v*`` (or
     the given circumference)."""

@@ -4,7 +4,9 @@ Every layout reads one :class:`~lcc_synth.synthesis.config.SynthesisSpec` and gi
 :class:`~lcc_synth.synthesis.report.SynthesisReport`.
 
 One CAV: dispatch on the design (full-state Riccati / LMI, structured, sparsity,
-string-stable, optionally as run), check the result, build the report.
+string-stable, optionally as run), check the result, build the report; with
+``[synthesis.robust]`` the platoon design below on the string's one-CAV platoon
+(:mod:`~lcc_synth.synthesis.robust_string`).
 
 A platoon or a ring: per-CAV patterns, the design stages, the robust multi-model design, the
 checks and the report with a gain row per CAV. Stages (each reported with its true H2 norm
@@ -56,6 +58,7 @@ from lcc_synth.synthesis.report import (
     check_platoon_gain,
     evaluate_gain,
 )
+from lcc_synth.synthesis.robust_string import robust_string_design
 from lcc_synth.synthesis.sparsity import range_pareto, sparsity_sweep
 from lcc_synth.synthesis.string_lmi import string_aware_h2
 from lcc_synth.synthesis.structured import (
@@ -168,6 +171,8 @@ def synthesize(spec: SynthesisSpec) -> SynthesisReport:
     """
     if spec.system.platoon is not None:  # kind = "platoon" | "ring": a gain row per CAV
         return _synthesize_platoon(spec)
+    if spec.robust is not None:  # one CAV: the robust design of its one-CAV platoon
+        return robust_string_design(spec, _synthesize_platoon)
     t_start = time.perf_counter()
     model = spec.system.linear_model(warn=False)
     plant = make_plant(model, spec.semantics, spec.weights, spec.cav_lag)

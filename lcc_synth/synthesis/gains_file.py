@@ -15,7 +15,8 @@ Keys: ``kind, m, n, semantics, state_names, K, gains`` (``K`` = the gains in ``s
 order, ``gains`` = ``{state_name: value}``; ``u = +K x`` with the semantics of ``feedback.py``),
 plus ``pattern, weights, h2_true, h2_lmi_bound, gamma_peak, gamma_peak_omega, string_stable,
 plant_stable`` and extra information (``design``, ``v_star``, ``input_K``, ``input_kh``,
-``h2_unstructured``, ``max_real_eig``, ``problem``). Non-finite numbers are written as null.
+``h2_unstructured``, ``max_real_eig``, ``problem``; ``robust``, the per-member H2 summary, after
+a ``[synthesis.robust]`` design). Non-finite numbers are written as null.
 
 Platoon / ring gains file (``[system] kind = "platoon" | "ring"``): keys ``kind, size, cavs,
 ring, semantics, state_names, K, gains, h2_true`` (:data:`PLATOON_REQUIRED_KEYS`).
@@ -48,7 +49,7 @@ from lcc_synth.models.linear import KINDS, model_from_hdv
 from lcc_synth.models.platoon import PLATOON_KINDS
 from lcc_synth.problem import warn_large_gains
 from lcc_synth.schema.readers import read_json
-from lcc_synth.synthesis.report import SynthesisReport, _jsonable
+from lcc_synth.synthesis.report import UNSET, SynthesisReport, _jsonable
 
 __all__ = ["gains_document", "write_gains", "read_gains", "REQUIRED_KEYS",
            "PLATOON_REQUIRED_KEYS", "platoon_gains_document"]
@@ -73,11 +74,17 @@ def platoon_gains_document(rep: SynthesisReport) -> dict[str, Any]:
         "h2_unstructured": rep.h2_unstructured, "max_real_eig": c.max_real_eig,
         "stability_subspace": c.subspace, "input_K": rep.input_K, "input_kh": rep.input_kh,
         "conserved": rep.conserved,
-        "robust": None if rep.robust is None else {
-            k: {kk: vv for kk, vv in v.items() if kk != "members"} if isinstance(v, dict)
-            else v for k, v in rep.robust.items()},
+        "robust": _robust_summary(rep.robust),
     }  # fmt: skip
     return _jsonable(doc)
+
+
+def _robust_summary(robust: dict[str, Any] | None) -> dict[str, Any] | None:
+    """A robust design's information without its per-member rows (every layout)."""
+    if robust is None:
+        return None
+    return {k: {kk: vv for kk, vv in v.items() if kk != "members"} if isinstance(v, dict)
+            else v for k, v in robust.items()}  # fmt: skip
 
 
 def _located(err: ConfigError, path: Path, field: str | None, source: str | None):
@@ -224,6 +231,8 @@ def gains_document(rep: SynthesisReport) -> dict[str, Any]:
         "max_real_eig": c.max_real_eig,
         "max_real_eig_model": c.max_real_eig_model,
     }
+    if rep.robust is not UNSET and rep.robust is not None:  # [synthesis.robust]
+        doc["robust"] = _robust_summary(rep.robust)
     return _jsonable(doc)
 
 

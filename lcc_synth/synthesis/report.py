@@ -230,9 +230,12 @@ class SynthesisReport(Record):
     h2_lmi_bound, h2_restriction, solver, baseline, as_run
         One CAV: the LMI bound and the LMI gain's true H2, the solver's figures, the baseline
         gains' checks, the as-run design's information.
-    conserved, stages, robust
-        Platoon / ring: the ring's conserved direction ``c``, each stage's true H2 and time,
-        the per-member figures of a robust design.
+    conserved, stages
+        Platoon / ring: the ring's conserved direction ``c``, each stage's true H2 and time.
+    robust
+        The per-member figures of a robust design (``[synthesis.robust]``: a platoon or ring,
+        or one CAV designed on its one-CAV platoon, :mod:`lcc_synth.synthesis.robust_string`);
+        ``None`` without one on a platoon or ring.
     pareto : list of dict or None
         ``design = "sparsity"``: the Pareto front (one CAV) or the greedy range front.
     gain : lcc_synth.models.feedback.Gains
@@ -383,6 +386,7 @@ def format_report(rep: SynthesisReport) -> str:
                 else ""
             )
         )
+    lines += _robust_lines(rep)
     if rep.pareto:
         lines.append("Pareto sweep (vehicles heard besides the CAV -> true H2 after polishing):")
         lines.append(f"  {'#':>2s}  {'H2':>10s}  {'front':>5s}  vehicles")
@@ -395,6 +399,22 @@ def format_report(rep: SynthesisReport) -> str:
         lines.append("time: " + ", ".join(f"{k} {v:.3f} s" for k, v in rep.timings.items()))
     lines += [f"note: {s}" for s in rep.notes]
     return "\n".join(lines)
+
+
+def _robust_lines(rep: SynthesisReport) -> list[str]:
+    """The per-member summary of a robust design (every layout; none without one)."""
+    if rep.robust is UNSET or not rep.robust:
+        return []
+    r = rep.robust
+    lines = [f"robust ({r['objective']}, {r['samples']} members, seed {r['seed']}, "
+             f"ranges {r['ranges']}):"]  # fmt: skip
+    for key in ("nominal_design", "robust_design"):
+        s = r[key]
+        lines.append(f"  {key:<15s}: mean H2 {_fmt(s['mean_h2'])}, worst {_fmt(s['worst_h2'])}"
+                     f", best {_fmt(s['best_h2'])}, stable on {s['n_stable']}/{r['samples']}")
+    lines.append(f"  robust gain on the nominal model: H2 {_fmt(rep.check.h2)} (nominal design "
+                 f"{_fmt(r['nominal_design']['h2_nominal'])})")  # fmt: skip
+    return lines
 
 
 def check_platoon_gain(plant: PlatoonPlant, K: np.ndarray, what: str = "design") -> GainCheck:
@@ -465,16 +485,7 @@ def _format_platoon_report(rep: SynthesisReport) -> str:
     if rep.polish:
         lines.append("polish: " + ", ".join(f"{k}={_fmt(v) if isinstance(v, float) else v}"
                                              for k, v in rep.polish.items()))
-    if rep.robust:
-        r = rep.robust
-        lines.append(f"robust ({r['objective']}, {r['samples']} members, seed {r['seed']}, "
-                     f"ranges {r['ranges']}):")  # fmt: skip
-        for key in ("nominal_design", "robust_design"):
-            s = r[key]
-            lines.append(f"  {key:<15s}: mean H2 {_fmt(s['mean_h2'])}, worst {_fmt(s['worst_h2'])}"
-                         f", best {_fmt(s['best_h2'])}, stable on {s['n_stable']}/{r['samples']}")
-        lines.append(f"  robust gain on the nominal model: H2 {_fmt(c.h2)} (nominal design "
-                     f"{_fmt(r['nominal_design']['h2_nominal'])})")  # fmt: skip
+    lines += _robust_lines(rep)
     if rep.pareto:
         lines.append("range front (greedy per CAV: ranges -> vehicles heard, true H2, loss):")
         for p in rep.pareto:
