@@ -368,6 +368,28 @@ def test_robust_gain_is_stable_on_every_member_and_beats_the_nominal_on_its_obje
     assert np.all(K[~pattern_rows(make_platoon_plant(deeplcc_model()), spec.patterns)] == 0.0)
 
 
+def test_robust_members_draw_the_hdvs_and_keep_each_cavs_own_law():
+    """Only the human drivers are uncertain: a CAV's "added" law is part of its controller,
+    so every member keeps it nominal, while each HDV gets the row numpy draws for its
+    position (vehicle-major, one row per vehicle of the road, the CAVs' rows discarded)."""
+    robust = ('[synthesis.robust]\nsamples = 3\nseed = 5\nalpha = [0.4, 0.8]\n'
+              "s_go = [31.0, 39.0]\n")  # fmt: skip
+    text = _deeplcc_toml("", comm_range=1).replace(
+        "[synthesis.weights]", 'semantics = "added"\n' + robust + "[synthesis.weights]")
+    spec = spec_from_problem(Problem(Path("p.toml"), _parse(text)))
+    assert spec.semantics == "added"
+    base = spec.system.platoon
+    rng = np.random.default_rng(5)
+    for member in robust_members(spec.system, spec.robust):
+        draw = rng.uniform([0.4, 31.0], [0.8, 39.0], size=(8, 2))
+        for i, (h, h0, row) in enumerate(zip(member.hdv, base.hdv, draw, strict=True), 1):
+            if i in (3, 6):
+                assert h == h0  # the CAVs' own law, as their controller runs it
+            else:
+                assert (h.alpha, h.s_go) == (row[0], row[1])
+                assert h.beta == h0.beta  # a parameter without a range stays nominal
+
+
 # --------------------------------------------------------------------------------------------
 # Bad input and the CLI
 # --------------------------------------------------------------------------------------------

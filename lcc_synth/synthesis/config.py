@@ -595,11 +595,13 @@ def _robust(t: dict, system: System) -> RobustSettings | None:
 
 def robust_members(system: System, robust: RobustSettings) -> list[Platoon]:
     """The sampled platoons of a platoon or ring ``system`` (a one-CAV string: of
-    :func:`lcc_synth.synthesis.robust_string.string_platoon`): every vehicle's ``ranges``
-    parameters drawn uniformly and
-    independently per member (``numpy.random.default_rng(seed)``, vehicle-major order);
-    the other parameters those of the nominal vehicle. A ring keeps the nominal ``v*`` (or
-    the given circumference)."""
+    :func:`lcc_synth.synthesis.robust_string.string_platoon`): every HDV's ``ranges``
+    parameters drawn uniformly and independently per member (``numpy.random.default_rng(seed)``,
+    vehicle-major order, one row drawn per vehicle of the road); the other parameters those of
+    the nominal vehicle. A CAV keeps its nominal law in every member: under ``"added"`` that
+    law is part of its controller, not an uncertain driver (its drawn row is discarded, so the
+    HDVs' draws do not depend on where the CAVs are). A ring keeps the nominal ``v*`` (or the
+    given circumference)."""
     base = system.platoon
     rng = np.random.default_rng(robust.seed)
     keys = list(robust.ranges)
@@ -609,8 +611,9 @@ def robust_members(system: System, robust: RobustSettings) -> list[Platoon]:
     for s in range(robust.samples):
         draw = rng.uniform(lo, hi, size=(base.size, len(keys)))
         try:
-            models = tuple(replace(h, **{k: float(x) for k, x in zip(keys, row, strict=True)})
-                           for h, row in zip(base.hdv, draw, strict=True))  # fmt: skip
+            models = tuple(h if i in base.cavs else
+                           replace(h, **{k: float(x) for k, x in zip(keys, row, strict=True)})
+                           for i, (h, row) in enumerate(zip(base.hdv, draw, strict=True), 1))  # fmt: skip
             v_star = None if base.circumference is not None else base.v_star
             out.append(Platoon(models, base.cavs, v_star, base.ring, base.circumference,
                                base.vehicle_length))
