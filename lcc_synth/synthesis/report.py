@@ -395,8 +395,15 @@ def format_report(rep: SynthesisReport) -> str:
     return "\n".join(lines)
 
 
-def check_platoon_gain(plant: PlatoonPlant, K: np.ndarray, what: str = "design") -> GainCheck:
-    """True H2 and stability of design gain ``K``; :class:`SynthesisError` when unusable."""
+def check_platoon_gain(
+    plant: PlatoonPlant, K: np.ndarray, what: str = "design", string: bool = False
+) -> GainCheck:
+    """True H2 and stability of design gain ``K``; :class:`SynthesisError` when unusable.
+
+    ``string``: also the head-to-tail check of an open platoon (the one-CAV fields
+    ``plant_stable``, ``string_stable``, ``gamma_peak``, ``gamma_peak_omega``,
+    ``string_verdict``, ``string_margin``; :func:`lcc_synth.analysis.string_stability.
+    string_stability` on the CAVs' whole inputs)."""
     K = np.asarray(K, float)
     if not np.all(np.isfinite(K)):
         raise SynthesisError(f"{what}: the gain has non-finite entries")
@@ -412,8 +419,17 @@ def check_platoon_gain(plant: PlatoonPlant, K: np.ndarray, what: str = "design")
                              f"= {mre:.3g})", {"max_real_eig": mre})  # fmt: skip
     if not ev.stable:
         raise SynthesisError(f"{what}: the closed-loop H2 norm is not finite")
+    ss: dict[str, Any] = {}
+    if string:
+        from lcc_synth.analysis.string_stability import string_stability
+
+        rep = string_stability(m, *plant.input_feedback(K))
+        ss = {"plant_stable": bool(rep.plant_stable), "string_stable": bool(rep.string_stable),
+              "gamma_peak": float(rep.gamma_peak),
+              "gamma_peak_omega": float(rep.gamma_peak_omega), "string_verdict": rep.verdict,
+              "string_margin": float(rep.margin) if math.isfinite(rep.margin) else None}
     return GainCheck(h2=math.sqrt(ev.J), max_real_eig=mre, stable=True, subspace=sub,
-                     max_real_eig_full=mre_full, conserved_mode=m.conserved_mode)
+                     max_real_eig_full=mre_full, conserved_mode=m.conserved_mode, **ss)
 
 
 def _format_platoon_report(rep: SynthesisReport) -> str:
@@ -443,6 +459,18 @@ def _format_platoon_report(rep: SynthesisReport) -> str:
         + (f" (full state {_fmt(c.max_real_eig_full, '.3g')}: the conserved mode)"
            if rep.ring else ""),
     ]  # fmt: skip
+    if c.string_stable is not UNSET:
+        lines.append(f"peak |Gamma| head->tail : {_fmt(c.gamma_peak, '.9f')} at w = "
+                     f"{_fmt(c.gamma_peak_omega, '.4g')} rad/s -> "
+                     + verdict_text(c.string_verdict)
+                     + (f" (margin {c.string_margin:.3g})" if c.string_margin is not None
+                        else ""))  # fmt: skip
+    if rep.h2_lmi_bound is not UNSET:
+        lines.append(f"LMI bound               : {_fmt(rep.h2_lmi_bound)}  (LMI gain's true H2 "
+                     f"{_fmt(rep.h2_restriction)})")  # fmt: skip
+    if rep.solver is not UNSET and rep.solver:
+        lines.append("solver: " + ", ".join(f"{k}={_fmt(v) if isinstance(v, float) else v}"
+                                             for k, v in rep.solver.items()))  # fmt: skip
     for s in rep.stages:
         lines.append(f"stage {s['stage']:<22s}: H2 {_fmt(s['h2'])}  ({s['time']:.3f} s)")
     if rep.polish:
