@@ -18,7 +18,7 @@ and wall time):
 * ``sparsity`` -- ``design = "sparsity"``: the greedy per-CAV range front
   (:func:`~lcc_synth.synthesis.sparsity.range_pareto`) and its chosen point;
 * ``string LMI``, ``string polish`` -- ``design = "string_stable"`` (open platoons): the mixed
-  H2 / H-infinity LMI on the patterns and the string-stable-feasible descent
+  H2 / H-infinity LMI on the patterns and the string-stable-feasible polish
   (:func:`~lcc_synth.synthesis.string_lmi.platoon_string_h2`);
 * ``robust`` -- with ``[synthesis.robust]``: descent on the mean (or smooth worst) true H2 over
   the sampled members, from the nominal design, every accepted gain stable on every member.
