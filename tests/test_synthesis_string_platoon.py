@@ -171,3 +171,14 @@ def test_cli_designs_a_string_stable_platoon(tmp_path):
     assert doc["solver"]["gamma_bound"] == 1.0 and doc["solver"]["status"].startswith("optimal")
     assert doc["polish"]["iterations"] <= 1
     assert doc["check"]["h2"] <= doc["h2_restriction"] <= doc["h2_lmi_bound"] * (1 + 1e-6)
+
+
+def test_cli_refuses_a_string_stable_ring_with_one_line(tmp_path):
+    problem = tmp_path / "ring_string.toml"
+    problem.write_text(_text('kind = "ring"\nsize = 6\ncavs = [1, 4]\nv_star = 15.0',
+                             "string_stable"))
+    proc = run_cli(["synthesize", "--no-record", problem], cwd=tmp_path)
+    assert proc.returncode == 2
+    err = proc.stderr.strip().splitlines()
+    assert len(err) == 1 and "synthesis.design" in err[0] and str(problem) in err[0]
+    assert "kind = 'ring'" in err[0] and not proc.stdout
