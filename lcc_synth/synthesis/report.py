@@ -91,7 +91,8 @@ class GainCheck(Record):
     max_real_eig_model : float
         One CAV: the same on the full model (FD-LCC: the free position integrator is 0).
     plant_stable, string_stable : bool or None
-        One CAV: the head-to-tail check (``None`` without a head vehicle).
+        One CAV: the head-to-tail check (``None`` without a head vehicle); also set on an open
+        platoon's ``string_stable`` design (as the next three fields).
     gamma_peak, gamma_peak_omega : float or None
         One CAV: peak ``|Gamma|`` and its frequency (rad/s).
     string_verdict : str or None
@@ -227,7 +228,8 @@ class SynthesisReport(Record):
         The checks of the gain (:func:`check_gain`, :func:`check_platoon_gain`).
     h2_lmi_bound, h2_restriction, solver, baseline, as_run
         One CAV: the LMI bound and the LMI gain's true H2, the solver's figures, the baseline
-        gains' checks, the as-run design's information.
+        gains' checks, the as-run design's information (an open platoon's ``string_stable``
+        design sets the first three too).
     conserved, stages, robust
         Platoon / ring: the ring's conserved direction ``c``, each stage's true H2 and time,
         the per-member figures of a robust design.
@@ -402,8 +404,8 @@ def check_platoon_gain(
 
     ``string``: also the head-to-tail check of an open platoon (the one-CAV fields
     ``plant_stable``, ``string_stable``, ``gamma_peak``, ``gamma_peak_omega``,
-    ``string_verdict``, ``string_margin``; :func:`lcc_synth.analysis.string_stability.
-    string_stability` on the CAVs' whole inputs)."""
+    ``string_verdict``, ``string_margin``) by
+    :func:`~lcc_synth.analysis.string_stability.string_stability` on the CAVs' whole inputs."""
     K = np.asarray(K, float)
     if not np.all(np.isfinite(K)):
         raise SynthesisError(f"{what}: the gain has non-finite entries")
