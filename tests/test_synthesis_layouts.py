@@ -122,8 +122,6 @@ def test_structured_keeps_the_pattern_and_reports_its_true_h2_on_every_layout(la
 @pytest.mark.parametrize("layout", ["two_cav_platoon", "ring"])
 @pytest.mark.parametrize(("extra", "field", "design"), [
     ("as_run = true", "synthesis.as_run", "structured"),
-    ("[synthesis.string]\ngamma = 1.0", "synthesis.string", "structured"),
-    ("", "synthesis.design", "string_stable"),
     ('method = "lmi"', "synthesis.method", "structured"),
     ('method = "lmi"', "synthesis.method", "full_state"),
 ])  # fmt: skip
@@ -143,8 +141,8 @@ def test_a_one_cav_platoon_is_told_the_string_it_is():
 
     platoon = lcc.system(size=6, cavs=[3])
     with pytest.raises(ConfigError) as err:
-        lcc.h2_problem(platoon, design="structured", string=True)
-    assert err.value.field == "synthesis.string"
+        lcc.h2_problem(platoon, design="structured", as_run=True)
+    assert err.value.field == "synthesis.as_run"
     assert err.value.message.endswith('the string kind = "lcc", m = 2, n = 3, where it is '
                                       "available")  # fmt: skip
     a, b = lcc.model(platoon), lcc.model(lcc.system("lcc", m=2, n=3))

@@ -46,16 +46,19 @@ SYNTHESIS = Table(
             "block of X in the convex restriction (wider = tighter).", 4, lo=0, hi=50),
         Key("weights", "table", "Performance and disturbance weights: [synthesis.weights].", {}),
         Key("sparsity", "table", "design = sparsity: [synthesis.sparsity].", {}),
-        Key("string", "table", "design = string_stable: [synthesis.string].", {}),
+        Key("string", "table", "design = string_stable (one CAV, open platoon): "
+            "[synthesis.string].", {}),
         Key("baseline", "table", "Hand-picked gains to compare with: [synthesis.baseline].",
             {}),
         Key("as_run", "any", "Design the loop as it runs: true, false or the table "
             "[synthesis.as_run] (true: its defaults).", False),
-        Key("comm_range", "integer", "platoon, ring (structured): every CAV hears the R "
+        Key("comm_range", "integer", "platoon, ring (structured; string_stable on an open "
+            "platoon): every CAV hears the R "
             "vehicles ahead of it and the R behind it, itself included (the ring wraps "
             "around); 0 = decentralised (itself only); absent: every vehicle.", None, lo=0,
             hi=10000),
-        Key("patterns", "table", "platoon, ring (structured): per-CAV heard positions "
+        Key("patterns", "table", "platoon, ring (structured; string_stable on an open "
+            "platoon): per-CAV heard positions "
             "[synthesis.patterns] (override comm_range).", {}),
         Key("robust", "table", "platoon, ring, and lcc / cf_lcc / ccc (full_state, "
             "structured): one gain for sampled HDV parameter sets [synthesis.robust].", {}),

@@ -84,6 +84,8 @@ A platoon or a ring (``[system] kind = "platoon" | "ring"``):
     [synthesis]
     design = "structured"     # "full_state" (Riccati) | "structured" (per-CAV row patterns)
                               # | "sparsity" (greedy per-CAV range Pareto: sparsity.py)
+                              # | "string_stable" (open platoons: string_lmi.py; per-CAV
+                              # patterns as structured; needs weights.head > 0)
     semantics = "replace"     # default "replace" (u = K x is the CAV's whole acceleration)
     comm_range = 5            # every CAV hears the R vehicles ahead and the R behind it
                               # (itself included; the ring wraps around); 0 = decentralised
@@ -100,6 +102,11 @@ A platoon or a ring (``[system] kind = "platoon" | "ring"``):
     [synthesis.sparsity]      # design = "sparsity": only max_loss applies
     max_loss = 0.01           # chosen: fewest heard vehicles with H2 <= (1 + max_loss) H2*
 
+    [synthesis.string]        # design = "string_stable", open platoons: as for one CAV
+    gamma = 1.0               # H-infinity bound on head -> tail velocity, >= 1
+    polish_steps = 200        # string-stable-feasible descent iterations, >= 0
+    margin = 1e-4             # relative string-stability margin every accepted step keeps
+
     [synthesis.robust]        # one gain for a set of sampled HDV parameter sets
     samples = 20
     seed = 0
@@ -110,9 +117,12 @@ A platoon or a ring (``[system] kind = "platoon" | "ring"``):
 
 Neither comm_range nor patterns: every CAV hears every vehicle (the full-information optimum).
 The single-CAV keys ``pattern`` (other than "all"), ``cross_check``, ``band``, ``sparsity``
-(but ``max_loss``), ``string``, ``baseline`` and ``as_run`` do not apply: a ConfigError names the
-key and the layout (``kind``); the platoon keys ``comm_range`` and ``patterns`` are refused for
-one CAV the same way (``robust`` applies to both: see above).
+(but ``max_loss``), ``baseline`` and ``as_run`` do not apply: a ConfigError names the key and
+the layout (``kind``); the platoon keys ``comm_range`` and ``patterns`` are refused for one CAV
+the same way (``robust`` applies to both: see above). ``design = "string_stable"`` and
+``[synthesis.string]`` need a head vehicle: a ring refuses them (``synthesis.design`` /
+``synthesis.string``), and on a platoon they do not combine with ``[synthesis.robust]`` or
+``cav_lag``.
 """
 
 from __future__ import annotations
@@ -184,9 +194,11 @@ class SynthesisSpec(Record):
         ring.
     pattern : tuple of int or None
         One CAV: the vehicles heard besides the CAV (the paper's indexing); ``None``: all.
-    cross_check, band, string_gamma, polish_steps, string_margin, baseline, as_run
-        One CAV only (the full-state cross-check, the LMI restriction's band, the string-aware
-        design, the baseline gains, the as-run design).
+    cross_check, band, baseline, as_run
+        One CAV only (the full-state cross-check, the LMI restriction's band, the baseline
+        gains, the as-run design).
+    string_gamma, polish_steps, string_margin
+        ``[synthesis.string]`` of the string-aware design (one CAV or an open platoon).
     cav_lag : float
         Every layout: the CAVs' actuator lag ``tau`` (s) in the design plant (0: none;
         :mod:`lcc_synth.synthesis.lag_design`).
@@ -294,6 +306,9 @@ class SynthesisSpec(Record):
             t["sparsity"] = {"max_loss": self.max_loss}
         if self.cav_lag:
             t["cav_lag"] = self.cav_lag
+        if self.design == "string_stable":
+            t["string"] = {"gamma": self.string_gamma, "polish_steps": self.polish_steps,
+                           "margin": self.string_margin}  # fmt: skip
         if self.robust is not None:
             t["robust"] = _robust_table(self.robust)
         return t
@@ -511,9 +526,9 @@ def synthesis_spec(
 
 
 #: The designs a platoon or ring accepts.
-PLATOON_DESIGNS = ("full_state", "structured", "sparsity")
+PLATOON_DESIGNS = ("full_state", "structured", "sparsity", "string_stable")
 
-_NOT_FOR_PLATOONS = ("cross_check", "band", "string", "baseline", "as_run")
+_NOT_FOR_PLATOONS = ("cross_check", "band", "baseline", "as_run")
 
 
 def comm_range_pattern(platoon: Platoon, R: int) -> dict[int, tuple[int, ...]]:
@@ -611,9 +626,10 @@ def robust_members(system: System, robust: RobustSettings) -> list[Platoon]:
     for s in range(robust.samples):
         draw = rng.uniform(lo, hi, size=(base.size, len(keys)))
         try:
-            models = tuple(h if i in base.cavs else
-                           replace(h, **{k: float(x) for k, x in zip(keys, row, strict=True)})
-                           for i, (h, row) in enumerate(zip(base.hdv, draw, strict=True), 1))  # fmt: skip
+            models = tuple(
+                h if i in base.cavs else replace(h, **dict(zip(keys, map(float, row), strict=True)))
+                for i, (h, row) in enumerate(zip(base.hdv, draw, strict=True), 1)
+            )
             v_star = None if base.circumference is not None else base.v_star
             out.append(Platoon(models, base.cavs, v_star, base.ring, base.circumference,
                                base.vehicle_length))
@@ -626,8 +642,9 @@ def robust_members(system: System, robust: RobustSettings) -> list[Platoon]:
 def _single_cav_only(field: str, what: str, system: System) -> ConfigError:
     """The one error of a single-CAV feature asked of a platoon or ring (``field`` named); an
     open platoon of one CAV is told the ``kind = "lcc"`` string that it is."""
+    designs = [d for d in PLATOON_DESIGNS if not (system.ring and d == "string_stable")]
     msg = (f"{what} is a single-CAV feature, not available for kind = {system.kind!r} (its "
-           f"designs: {', '.join(PLATOON_DESIGNS)}; method riccati / direct)")  # fmt: skip
+           f"designs: {', '.join(designs)}; method riccati / direct)")  # fmt: skip
     cavs = tuple(system.platoon.cavs)
     if not system.ring and len(cavs) == 1:
         msg += (f"; this platoon's one CAV is the string kind = \"lcc\", m = {cavs[0] - 1}, "
@@ -644,6 +661,11 @@ def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> Synt
     design = T.get(t, "design", "synthesis")
     if design not in PLATOON_DESIGNS:
         raise _single_cav_only("synthesis.design", f"design = {design!r}", system)
+    if system.ring and (design == "string_stable" or "string" in t):
+        key = "design" if design == "string_stable" else "string"
+        raise ConfigError(f"synthesis.{key}", "string_stable needs a head vehicle: kind = "
+                          "'ring' has none (no head-to-tail transfer function); use kind = "
+                          "'platoon'")  # fmt: skip
     semantics = T.get(t, "semantics", "synthesis", default="replace")
     if t.get("method") == "lmi":
         raise _single_cav_only("synthesis.method", "method = 'lmi'", system)
@@ -652,7 +674,7 @@ def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> Synt
     if not system.platoon.cavs:
         raise ConfigError("system.cavs", "synthesis needs at least one CAV")
     patterns, R = _patterns(t, system.platoon)
-    if design != "structured" and patterns is not None:
+    if design not in ("structured", "string_stable") and patterns is not None:
         raise ConfigError("synthesis.design", f"{design} chooses whom each CAV hears: drop "
                           "comm_range and [synthesis.patterns], or use design = 'structured'")
     SP = declared("synthesis.sparsity")
@@ -675,13 +697,33 @@ def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> Synt
         raise ConfigError("synthesis.weights.head", "a ring has no head vehicle: set it to 0")
     if kw["head"] == 0 and kw["accel"] == 0:
         raise ConfigError("synthesis.weights", "head and accel cannot both be 0")
+    if design == "string_stable" and kw["head"] == 0:
+        raise ConfigError("synthesis.weights.head",
+                          "must be > 0 for design = 'string_stable' (the head disturbance is "
+                          "the point)")  # fmt: skip
     weights = Weights(**kw)
+    ST = declared("synthesis.string")
+    st = T.get(t, "string", "synthesis")
+    ST.check(st, "synthesis.string")
+    string = {key: ST.get(st, key, "synthesis.string") for key in ("gamma", "polish_steps",
+                                                                   "margin")}  # fmt: skip
     tol = T.get(t, "tol", "synthesis")
     max_iter = T.get(t, "max_iter", "synthesis")
     robust = _robust(t, system)
     cav_lag = check_lag_design(T.get(t, "cav_lag", "synthesis"), design, None)
+    if robust is not None and design == "string_stable":
+        raise ConfigError("synthesis.robust", "does not apply to design = 'string_stable' (the "
+                          "robust descent does not keep string stability); drop "
+                          "[synthesis.robust] or use design = 'structured'")  # fmt: skip
+    if cav_lag > 0 and design == "string_stable":
+        raise ConfigError("synthesis.cav_lag", "a platoon's design = 'string_stable' has no "
+                          "actuator lag (its LMI and polish are of the lag-free loop): use "
+                          "0, or design = 'structured' (its report checks the lagged "
+                          "string)")  # fmt: skip
     method = "riccati" if design == "full_state" else "direct"
     return SynthesisSpec(name=name, system=system, design=design, semantics=semantics,
                          weights=weights, method=method, tol=tol, max_iter=max_iter,
                          sparsity={"max_loss": max_loss}, source=src, patterns=patterns,
-                         comm_range=R, robust=robust, cav_lag=cav_lag)  # fmt: skip
+                         comm_range=R, robust=robust, cav_lag=cav_lag,
+                         string_gamma=string["gamma"], polish_steps=string["polish_steps"],
+                         string_margin=string["margin"])  # fmt: skip

@@ -21,6 +21,9 @@ and wall time):
 * ``polish`` -- Newton / BFGS descent on the true H2 with the patterns' mask;
 * ``sparsity`` -- ``design = "sparsity"``: the greedy per-CAV range front
   (:func:`~lcc_synth.synthesis.sparsity.range_pareto`) and its chosen point;
+* ``string LMI``, ``string polish`` -- ``design = "string_stable"`` (open platoons): the mixed
+  H2 / H-infinity LMI on the patterns and the string-stable-feasible polish
+  (:func:`~lcc_synth.synthesis.string_lmi.platoon_string_h2`);
 * ``robust`` -- with ``[synthesis.robust]``: descent on the mean (or smooth worst) true H2 over
   the sampled members, from the nominal design, every accepted gain stable on every member.
 """
@@ -53,6 +56,7 @@ from lcc_synth.synthesis.h2 import (
 )
 from lcc_synth.synthesis.lag_design import lag_note
 from lcc_synth.synthesis.report import (
+    UNSET,
     SynthesisReport,
     check_gain,
     check_platoon_gain,
@@ -60,7 +64,7 @@ from lcc_synth.synthesis.report import (
 )
 from lcc_synth.synthesis.robust_string import robust_string_design
 from lcc_synth.synthesis.sparsity import range_pareto, sparsity_sweep
-from lcc_synth.synthesis.string_lmi import string_aware_h2
+from lcc_synth.synthesis.string_lmi import platoon_string_h2, string_aware_h2
 from lcc_synth.synthesis.structured import (
     ROBUST_TEMPERATURES,
     descend,
@@ -105,21 +109,27 @@ def check_size(spec: SynthesisSpec, nx: int) -> None:
     case) above the available memory."""
     if not _uses_lmi(spec):
         return
-    m, n = spec.system.m, spec.system.n
+    platoon = spec.system.platoon
+    if platoon is not None:  # an open platoon's string_stable design (size vehicles)
+        count, key, what, fix = (platoon.size, "system.size", "size",
+                                 "design = 'structured'")  # fmt: skip
+    else:
+        count, key, what = spec.system.m + spec.system.n, "system.n", "m + n"
+        fix = "[synthesis] method = 'direct'"
     chordal = spec.design == "structured"
     limit = MAX_CHORDAL_VEHICLES if chordal else MAX_LMI_VEHICLES
     svec = nx * (nx + 1) // 2
     need = 8.0 * svec**2
-    if m + n > limit:
+    if count > limit:
         cost = "" if chordal else f" (estimated KKT memory {format_bytes(need)})"
         raise ConfigError(
-            "system.n",
-            f"{spec.design} synthesis solves an LMI of {nx} states: m + n = {m + n} is above "
-            f"the limit {limit}{cost}; use [synthesis] method = 'direct' for long strings",
+            key,
+            f"{spec.design} synthesis solves an LMI of {nx} states: {what} = {count} is above "
+            f"the limit {limit}{cost}; use {fix} for long strings",
         )
     if not chordal:
-        require_memory("system.n", need, f"LMI with {nx} states, {svec} unknowns per cone",
-                       "use [synthesis] method = 'direct'")
+        require_memory(key, need, f"LMI with {nx} states, {svec} unknowns per cone",
+                       f"use {fix}")
 
 
 #: relative H2 disagreement between the LMI and Riccati designs that counts as a failure
@@ -455,6 +465,25 @@ def _model(platoon):
     return platoon_model(platoon, warn=False)
 
 
+def _string_stage(spec: SynthesisSpec, plant: PlatoonPlant, mask, stages, timings):
+    """``design = "string_stable"`` on an open platoon: the gain, the polish's figures and the
+    LMI's (``bound``, ``restriction``: its gain's true H2, ``solver``) for the report; the
+    stages and timings are appended to ``stages`` and ``timings``."""
+    res = platoon_string_h2(plant, mask, spec.string_gamma, spec.polish_steps,
+                            spec.string_margin)  # fmt: skip
+    timings["lmi"], timings["polish"] = res.timings["lmi"], res.timings["polish"]
+    stages.append({"stage": "string LMI", "h2": res.h2_restriction, "time": timings["lmi"]})
+    stages.append({"stage": "string polish", "h2": res.h2, "time": timings["polish"]})
+    solver = {"status": res.lmi.status, "solve_time": res.lmi.solve_time,
+              "residual": res.lmi.residual, "gamma_bound": spec.string_gamma}  # fmt: skip
+    pol = {"iterations": res.polish.iterations,
+           "converged": res.polish.converged, "grad_norm": res.polish.grad_norm,
+           "free_entries": int(mask.sum()),
+           "constraint": "string stable (global check) at every accepted step"}  # fmt: skip
+    return res.g, pol, {"bound": res.h2_lmi_bound, "restriction": res.h2_restriction,
+                        "solver": solver}  # fmt: skip
+
+
 def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
     """Synthesise and check the gain of a platoon / ring ``spec``.
 
@@ -490,7 +519,11 @@ def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
     mask = pattern_rows(plant, spec.patterns)
     pol: dict = {}
     pareto = None
-    if spec.design == "sparsity":
+    lmi_info: dict = {}  # design = "string_stable": the LMI's figures for the report
+    if spec.design == "string_stable":
+        check_size(spec, plant.nx)
+        K, pol, lmi_info = _string_stage(spec, plant, mask, stages, timings)
+    elif spec.design == "sparsity":
         t0 = time.perf_counter()
         pareto, K, chosen = range_pareto(plant, h2_star, spec.max_loss, spec.tol, spec.max_iter)
         timings["sparsity"] = time.perf_counter() - t0
@@ -533,7 +566,12 @@ def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
         notes.append("robust stage: its H2 is the mean (objective mean) over the members; "
                      "check.h2 is the robust gain on the nominal model")  # fmt: skip
     K = np.where(mask, K, 0.0)  # exact zeros off the patterns (already so; kept explicit)
-    chk = check_platoon_gain(plant, K, f"{spec.design} design")
+    chk = check_platoon_gain(plant, K, f"{spec.design} design",
+                             string=spec.design == "string_stable")  # fmt: skip
+    if spec.design == "string_stable" and not chk.string_stable:
+        raise SynthesisError("string_stable design: the result is not string stable by the "
+                             f"global check (peak |Gamma| = {chk.gamma_peak:.9f})",
+                             lmi_info.get("solver"))  # fmt: skip
     gains = plant.gains(K)
     Ku, kh = plant.input_feedback(K)
     timings["total"] = time.perf_counter() - t_start
@@ -562,7 +600,10 @@ def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
         input_K=Ku.tolist(),
         input_kh=kh.tolist(),
         check=chk,
+        h2_lmi_bound=lmi_info.get("bound", UNSET),
+        h2_restriction=lmi_info.get("restriction", UNSET),
         h2_unstructured=h2_star,
+        solver=lmi_info.get("solver", UNSET),
         conserved=None if model.conserved is None else model.conserved.tolist(),
         stages=stages,
         polish=pol,

@@ -91,8 +91,8 @@ class GainCheck(Record):
     max_real_eig_model : float
         One CAV: the same on the full model (FD-LCC: the free position integrator is 0).
     plant_stable, string_stable : bool or None
-        One CAV, and an open platoon designed with ``cav_lag`` (its lagged loop): the
-        head-to-tail check (``None`` without a head vehicle).
+        One CAV; an open platoon designed with ``cav_lag`` (its lagged loop) or ``design =
+        "string_stable"``: the head-to-tail check (``None`` without a head vehicle).
     gamma_peak, gamma_peak_omega : float or None
         The same layouts: peak ``|Gamma|`` and its frequency (rad/s).
     string_verdict : str or None
@@ -229,7 +229,8 @@ class SynthesisReport(Record):
         The checks of the gain (:func:`check_gain`, :func:`check_platoon_gain`).
     h2_lmi_bound, h2_restriction, solver, baseline, as_run
         One CAV: the LMI bound and the LMI gain's true H2, the solver's figures, the baseline
-        gains' checks, the as-run design's information.
+        gains' checks, the as-run design's information (an open platoon's ``string_stable``
+        design sets the first three too).
     conserved, stages
         Platoon / ring: the ring's conserved direction ``c``, each stage's true H2 and time.
     robust
@@ -417,8 +418,17 @@ def _robust_lines(rep: SynthesisReport) -> list[str]:
     return lines
 
 
-def check_platoon_gain(plant: PlatoonPlant, K: np.ndarray, what: str = "design") -> GainCheck:
-    """True H2 and stability of design gain ``K``; :class:`SynthesisError` when unusable."""
+def check_platoon_gain(
+    plant: PlatoonPlant, K: np.ndarray, what: str = "design", string: bool = False
+) -> GainCheck:
+    """True H2 and stability of design gain ``K``; :class:`SynthesisError` when unusable.
+
+    The head-to-tail check of an open platoon (the one-CAV fields ``plant_stable``,
+    ``string_stable``, ``gamma_peak``, ``gamma_peak_omega``, ``string_verdict``,
+    ``string_margin``) is added with ``string`` (by
+    :func:`~lcc_synth.analysis.string_stability.string_stability` on the CAVs' whole inputs)
+    and for a plant with an actuator lag (of the lagged loop,
+    :func:`~lcc_synth.analysis.lag_string.lag_string_stability`)."""
     K = np.asarray(K, float)
     if not np.all(np.isfinite(K)):
         raise SynthesisError(f"{what}: the gain has non-finite entries")
@@ -434,17 +444,19 @@ def check_platoon_gain(plant: PlatoonPlant, K: np.ndarray, what: str = "design")
                              f"= {mre:.3g})", {"max_real_eig": mre})  # fmt: skip
     if not ev.stable:
         raise SynthesisError(f"{what}: the closed-loop H2 norm is not finite")
-    string = {}
-    if plant.lag > 0 and not m.ring:  # the lagged loop's head-to-tail check
+    ss: dict[str, Any] = {}
+    if not m.ring and (string or plant.lag > 0):
         from lcc_synth.analysis.lag_string import lag_string_stability
+        from lcc_synth.analysis.string_stability import string_stability
 
-        rep = lag_string_stability(m, *plant.input_feedback(K), plant.lag)
-        string = {"plant_stable": bool(rep.plant_stable), "string_stable": bool(rep.string_stable),
-                  "gamma_peak": float(rep.gamma_peak),
-                  "gamma_peak_omega": float(rep.gamma_peak_omega), "string_verdict": rep.verdict,
-                  "string_margin": float(rep.margin) if math.isfinite(rep.margin) else None}
+        rep = (lag_string_stability(m, *plant.input_feedback(K), plant.lag) if plant.lag > 0
+               else string_stability(m, *plant.input_feedback(K)))  # fmt: skip
+        ss = {"plant_stable": bool(rep.plant_stable), "string_stable": bool(rep.string_stable),
+              "gamma_peak": float(rep.gamma_peak),
+              "gamma_peak_omega": float(rep.gamma_peak_omega), "string_verdict": rep.verdict,
+              "string_margin": float(rep.margin) if math.isfinite(rep.margin) else None}
     return GainCheck(h2=math.sqrt(ev.J), max_real_eig=mre, stable=True, subspace=sub,
-                     max_real_eig_full=mre_full, conserved_mode=m.conserved_mode, **string)
+                     max_real_eig_full=mre_full, conserved_mode=m.conserved_mode, **ss)
 
 
 def _format_platoon_report(rep: SynthesisReport) -> str:
@@ -474,12 +486,20 @@ def _format_platoon_report(rep: SynthesisReport) -> str:
         + (f" (full state {_fmt(c.max_real_eig_full, '.3g')}: the conserved mode)"
            if rep.ring else ""),
     ]  # fmt: skip
-    if c.string_verdict is not UNSET:  # an open platoon with the lag: its lagged loop
-        lines.append(f"peak |Gamma| (lagged)   : {_fmt(c.gamma_peak, '.9f')} at w = "
+    if c.string_verdict is not UNSET:  # an open platoon's string check (lagged: with the lag)
+        label = ("peak |Gamma| head->tail " if rep.design == "string_stable"
+                 else "peak |Gamma| (lagged)   ")  # otherwise only a lagged design has it
+        lines.append(f"{label}: {_fmt(c.gamma_peak, '.9f')} at w = "
                      f"{_fmt(c.gamma_peak_omega, '.4g')} rad/s -> "
                      + verdict_text(c.string_verdict)
                      + (f" (margin {c.string_margin:.3g})" if c.string_margin is not None
                         else ""))  # fmt: skip
+    if rep.h2_lmi_bound is not UNSET:
+        lines.append(f"LMI bound               : {_fmt(rep.h2_lmi_bound)}  (LMI gain's true H2 "
+                     f"{_fmt(rep.h2_restriction)})")  # fmt: skip
+    if rep.solver is not UNSET and rep.solver:
+        lines.append("solver: " + ", ".join(f"{k}={_fmt(v) if isinstance(v, float) else v}"
+                                             for k, v in rep.solver.items()))  # fmt: skip
     for s in rep.stages:
         lines.append(f"stage {s['stage']:<22s}: H2 {_fmt(s['h2'])}  ({s['time']:.3f} s)")
     if rep.polish:

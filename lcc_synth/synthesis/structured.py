@@ -26,7 +26,9 @@ small numbers):
    CF-LCC with the pattern CAV + HDVs 1, 2 (2 cores, shared): 202 states 118 first-order
    steps in 22 s became 13 Newton steps in 2.4 s, 402 states 12 steps in about 25 s, the same
    H2 to 10 digits. Constrained polishing (``accept``, the string-aware design) keeps the
-   first-order directions.
+   first-order directions; it also polishes an open platoon's gain rows (a row pattern per
+   CAV; ``R = r I`` decouples the Anderson-Moore step by row), so the string-aware design of
+   a platoon is the one-CAV method with several inputs.
 
 Always rank results by :func:`~lcc_synth.synthesis.h2.h2_norm` of the gain, never by the bound.
 
@@ -368,23 +370,37 @@ def _newton_direction(plant: H2Plant, g, L, P, S, mask, grad) -> np.ndarray | No
     return d if np.all(np.isfinite(d)) else None
 
 
-def _am_direction(plant: H2Plant, g, L, P, mask) -> np.ndarray:
+def _am_direction(plant: H2Plant | PlatoonPlant, g, L, P, mask) -> np.ndarray:
     """Anderson-Moore step: ``g* = argmin over the pattern of tr((Q + g'Rg) L)`` with the cross
-    term ``2 B'P L`` frozen, i.e. ``R g*_P L_PP = -(B' P L)_P``; returns ``g* - g``."""
-    idx = np.flatnonzero(mask)
-    rhs = -(plant.B.T @ P @ L)[0, idx]
-    try:
-        gp = np.linalg.solve(plant.r * L[np.ix_(idx, idx)].T, rhs)
-    except np.linalg.LinAlgError:
-        return np.zeros_like(g)
-    d = np.zeros_like(g)
-    d[idx] = gp - g[idx]
-    return d
+    term ``2 B'P L`` frozen, i.e. ``R g*_P L_PP = -(B' P L)_P`` (several inputs: row by row,
+    ``R = r I``); returns ``g* - g`` (a row whose system is singular: no step)."""
+    rows = np.atleast_2d(mask)
+    G = np.atleast_2d(g)
+    BPL = plant.B.T @ P @ L
+    D = np.zeros_like(G)
+    for k in range(rows.shape[0]):
+        idx = np.flatnonzero(rows[k])
+        rhs = -BPL[k, idx]
+        try:
+            gp = np.linalg.solve(plant.r * L[np.ix_(idx, idx)].T, rhs)
+        except np.linalg.LinAlgError:
+            continue
+        D[k, idx] = gp - G[k, idx]
+    return D.reshape(np.shape(g))
+
+
+def _polish_cost(plant: H2Plant | PlatoonPlant, g: np.ndarray):
+    """``(J, L, P, S)`` of :func:`polish`: :func:`~lcc_synth.synthesis.h2.h2_cost_schur` for
+    one CAV, :func:`~lcc_synth.synthesis.h2.platoon_cost` for an open platoon."""
+    if isinstance(plant, PlatoonPlant):
+        ev = platoon_cost(plant, g)
+        return ev.J, ev.L, ev.P, ev.S
+    return h2_cost_schur(plant, g)
 
 
 @single_thread_blas
 def polish(
-    plant: H2Plant,
+    plant: H2Plant | PlatoonPlant,
     g0: np.ndarray,
     mask: np.ndarray,
     tol: float = 1e-7,
@@ -393,6 +409,9 @@ def polish(
     max_rejected: int = 10,
 ) -> PolishResult:
     """Minimise the true H2 cost over gains with the pattern ``mask``, from stabilising ``g0``.
+
+    One CAV: ``g0`` and ``mask`` on the design states. An open platoon (``PlatoonPlant``, not a
+    ring): ``n_cav x nx``, a row per CAV; the directions are the first-order ones.
 
     Parameters
     ----------
@@ -411,9 +430,13 @@ def polish(
     SynthesisError
         ``g0`` does not stabilise the plant (or fails ``accept``).
     """
+    if isinstance(plant, PlatoonPlant) and plant.ring:
+        raise SynthesisError("polish works on the full state: a ring's gain is descended on its "
+                             "invariant hyperplane (descend)")  # fmt: skip
     mask = np.asarray(mask, bool)
-    g = np.where(mask, np.asarray(g0, dtype=float).ravel(), 0.0)
-    J, L, P, S = h2_cost_schur(plant, g)
+    g = np.where(mask, np.asarray(g0, dtype=float).reshape(mask.shape), 0.0)
+    n_in = plant.B.shape[1]
+    J, L, P, S = _polish_cost(plant, g)
     if not math.isfinite(J):
         raise SynthesisError("polishing needs a stabilising initial gain")
     if accept is not None and not accept(g):
@@ -425,24 +448,25 @@ def polish(
     for it in range(1, max_iter + 1):  # noqa: B007
         if it == 1 or it % 25 == 0:
             progress(f"synthesis: polish iteration {it}/{max_iter}, H2^2 = {J:.6g}")
-        grad = 2.0 * (plant.r * g.reshape(1, -1) + plant.B.T @ P) @ L
-        grad = np.where(mask, grad.ravel(), 0.0)
+        grad = 2.0 * (plant.r * g.reshape(n_in, -1) + plant.B.T @ P) @ L
+        grad = np.where(mask, grad.reshape(mask.shape), 0.0)
         gn = float(np.linalg.norm(grad))
         if gn <= tol * max(1.0, J):
             converged = True
             break
         step_found = False
-        newton = _newton_direction(plant, g, L, P, S, mask, grad) if accept is None else None
+        one = accept is None and n_in == 1  # Newton: one CAV, unconstrained
+        newton = _newton_direction(plant, g, L, P, S, mask, grad) if one else None
         directions = [_am_direction(plant, g, L, P, mask), -grad]
         for d in ([newton] if newton is not None else []) + directions:
-            slope = float(grad @ d)
+            slope = float(grad.ravel() @ d.ravel())
             if not slope < 0:
                 continue
             t = 1.0
             rejected = 0  # steps refused by `accept` (each costs a global check)
             for _ in range(40):
                 trial = g + t * d
-                Jt, Lt, Pt, St = h2_cost_schur(plant, trial)
+                Jt, Lt, Pt, St = _polish_cost(plant, trial)
                 if Jt <= J + 1e-4 * t * slope:
                     if accept is None or accept(trial):
                         step_found = True
