@@ -117,6 +117,7 @@ __all__ = [
     "riccati_gain",
     "LMIResult",
     "lmi_full_state",
+    "true_h2",
     "STABILITY_TOL",
     "single_thread_blas",
     "PlatoonPlant",
@@ -591,29 +592,51 @@ def solve_checked(prob, what: str, hint: str = "") -> tuple[str, float, float]:
     return status, dt, float(value)
 
 
-def lmi_full_state(plant: H2Plant, eps: float = 1e-7) -> LMIResult:
-    """Full-state H2 synthesis by the standard LMI (Clarabel).
+def lmi_full_state(plant: H2Plant | PlatoonPlant, eps: float = 1e-7) -> LMIResult:
+    """Full-state H2 synthesis by the standard LMI (Clarabel), one input or several.
 
-    ``min tr(Q X) + R W`` over ``X > 0, Z, W`` with
+    ``min tr(Q X) + r tr(W)`` over ``X > 0, Z, W`` with
     ``A X + X A' + B Z + Z' B' + B_w B_w' <= 0`` and ``[[W, Z], [Z', X]] >= 0``; then
-    ``g = Z X^-1`` and ``J(g) <= tr(Q X) + R W``. The returned bound is its square root.
+    ``K = Z X^-1`` and ``J(K) <= tr(Q X) + r tr(W)``. The returned bound is its square root.
+
+    One CAV works on the design plant (``A, B, B_w, Q``; ``g`` a row); a platoon or ring on
+    its reduced plant (``A_r, B_r, B_wr, Q_r``; on a ring the hyperplane ``c x = 0``, where
+    the conserved mode that no ``X > 0`` could certify is absent) and returns the gain rows
+    ``K = K_r V'`` (``n_cav x nx``: on a ring the representative with no component along ``c``,
+    whatever the basis ``V``).
     """
     import cvxpy as cp
 
-    nx = plant.nx
+    A, B, Bw, Q = _lmi_plant(plant)
+    nx, nu = A.shape[0], B.shape[1]
     X = cp.Variable((nx, nx), symmetric=True)
-    Z = cp.Variable((1, nx))
-    W = cp.Variable((1, 1), symmetric=True)
-    M = plant.A @ X + X @ plant.A.T + plant.B @ Z + Z.T @ plant.B.T + plant.Bw @ plant.Bw.T
+    Z = cp.Variable((nu, nx))
+    W = cp.Variable((nu, nu), symmetric=True)
+    M = A @ X + X @ A.T + B @ Z + Z.T @ B.T + Bw @ Bw.T
     cons = [X >> eps * np.eye(nx), -(M + M.T) / 2 >> 0, cp.bmat([[W, Z], [Z.T, X]]) >> 0]
-    obj = cp.Minimize(cp.trace(plant.Q @ X) + plant.r * W[0, 0])
+    obj = cp.Minimize(cp.trace(Q @ X) + plant.r * cp.trace(W))
     prob = cp.Problem(obj, cons)
     status, dt, value = solve_checked(prob, "full-state H2 LMI")
     Xv, Zv = X.value, Z.value
-    g = np.linalg.solve(Xv.T, Zv.T).T.ravel()
-    Mv = plant.A @ Xv + Xv @ plant.A.T + plant.B @ Zv + Zv.T @ plant.B.T + plant.Bw @ plant.Bw.T
+    Kr = np.linalg.solve(Xv.T, Zv.T).T
+    Mv = A @ Xv + Xv @ A.T + B @ Zv + Zv.T @ B.T + Bw @ Bw.T
     residual = float(max(np.max(np.linalg.eigvalsh((Mv + Mv.T) / 2)), 0.0))
+    g = Kr @ plant.V.T if isinstance(plant, PlatoonPlant) else Kr.ravel()
     return LMIResult(g, math.sqrt(max(value, 0.0)), status, dt, residual)
+
+
+def _lmi_plant(plant: H2Plant | PlatoonPlant):
+    """``(A, B, B_w, Q)`` the full-state LMI works on: one CAV's design plant, a platoon's
+    reduced plant."""
+    if isinstance(plant, PlatoonPlant):
+        return plant.Ar, plant.Br, plant.Bwr, plant.Qr
+    return plant.A, plant.B, plant.Bw, plant.Q
+
+
+def true_h2(plant: H2Plant | PlatoonPlant, g: np.ndarray) -> float:
+    """True closed-loop H2 norm of a design gain on either plant (:func:`h2_norm` of a row,
+    :func:`platoon_h2` of a gain row per CAV; ``inf`` when not stable)."""
+    return platoon_h2(plant, g) if isinstance(plant, PlatoonPlant) else h2_norm(plant, g)
 
 
 @dataclass(frozen=True, eq=False)

@@ -99,6 +99,8 @@ __all__ = [
     "pattern_mask",
     "pattern_vehicles",
     "convex_restriction",
+    "RING_CONSERVED_DECAY",
+    "restriction_start",
     "PolishResult",
     "NEWTON_MAX_FREE",
     "h2_hessian",
@@ -138,13 +140,32 @@ def pattern_vehicles(plant: H2Plant, mask: np.ndarray) -> list[int]:
 # --------------------------------------------------------------------------------------------
 
 
-def _x_blocks(plant: H2Plant, mask: np.ndarray) -> list[np.ndarray]:
-    """Index sets of the diagonal blocks of X: the heard states, then each other vehicle."""
-    veh = plant.vehicle_of_state()
-    blocks = [np.flatnonzero(mask)]
-    for v in dict.fromkeys(veh[~mask]):
-        blocks.append(np.flatnonzero((veh == v) & ~mask))
-    return blocks
+def _x_blocks(veh: np.ndarray, mask: np.ndarray) -> tuple[list[np.ndarray], int]:
+    """Index sets of the diagonal blocks of X and how many of them are heard: first the states
+    heard by the same set of inputs (one block per set, in the order of their first state;
+    one CAV: its heard states), then each vehicle's states that no input hears."""
+    heard = mask.any(axis=0)
+    classes: dict[bytes, list[int]] = {}
+    for j in np.flatnonzero(heard):
+        classes.setdefault(mask[:, j].tobytes(), []).append(int(j))
+    blocks = [np.array(c, dtype=np.intp) for c in classes.values()]
+    nh = len(blocks)
+    for v in dict.fromkeys(veh[~heard]):
+        blocks.append(np.flatnonzero((veh == v) & ~heard))
+    return blocks, nh
+
+
+def _restriction_plant(plant: H2Plant | PlatoonPlant):
+    """``(A, B, B_w, Q, vehicle of each state)`` of the convex restriction: one CAV's design
+    plant; a platoon's full-state plant, on a ring with ``A_d - sigma c' c``
+    (:data:`RING_CONSERVED_DECAY`): the same dynamics on the hyperplane ``c x = 0``, which the
+    disturbances never leave, and the conserved mode moved from 0 to ``-sigma``."""
+    if not isinstance(plant, PlatoonPlant):
+        return plant.A, plant.B, plant.Bw, plant.Q, plant.vehicle_of_state()
+    veh = np.repeat(np.array(plant.model.vehicles), 2)
+    c = plant.model.conserved
+    A = plant.A if c is None else plant.A - RING_CONSERVED_DECAY * np.outer(c, c)
+    return A, plant.B, plant.Bw, plant.Q, veh
 
 
 def _cliques(adj: np.ndarray) -> list[np.ndarray]:
@@ -179,24 +200,41 @@ def _windows(blocks: list[np.ndarray], band: int) -> list[np.ndarray]:
     return [np.concatenate(blocks[i : i + k]) for i in range(len(blocks) - k + 1)]
 
 
-def convex_restriction(
-    plant: H2Plant, mask: np.ndarray, eps: float = 1e-7, chordal: bool = True, band: int = 4
-) -> LMIResult:
-    """Feasible structured gain and an upper bound on its H2 norm (sparsity invariance).
+#: Ring: the rate ``sigma`` (1/s) the convex restriction gives the conserved total-spacing mode
+#: (``A_d - sigma c' c``; ``c`` has unit length). It changes neither the dynamics on the
+#: hyperplane ``c x = 0`` nor the true H2 norm of any gain, only how much of the block-diagonal
+#: ``X`` the conserved direction takes (the bound).
+RING_CONSERVED_DECAY = 1.0
 
-    ``X = blkdiag(X_P, X_N)`` over the heard states P and the others N, ``Z`` zero on N, so
-    ``g = Z X^-1 = [Z_P X_P^-1, 0]`` has the pattern for ANY ``X_N``. ``X_N`` is parametrised
-    as ``eps I + sum_k F_k' T_k F_k`` with ``T_k >= 0`` on windows of ``band + 1`` consecutive
-    vehicles: every PSD matrix with that band (chordal) sparsity has this form, so ``X_N`` is a
-    banded PSD matrix with its zeros built in (``band = 0``: 2x2 blocks per vehicle). A wider
-    band tightens the bound (a full ``X_N`` is the least conservative) at the price of larger
-    cliques in the Lyapunov LMI.
+
+def convex_restriction(
+    plant: H2Plant | PlatoonPlant, mask: np.ndarray, eps: float = 1e-7, chordal: bool = True,
+    band: int = 4,
+) -> LMIResult:
+    """Feasible structured gain and an upper bound on its H2 norm (sparsity invariance), for
+    one CAV (a gain row) or several (a row per CAV, each with its own pattern).
+
+    The states heard by the same set of inputs form a class ``C``; ``X = blkdiag(X_C, ..., X_N)``
+    with a full block per class and ``X_N`` on the states no input hears, and ``Z`` zero on
+    every state its row does not hear, so ``K = Z X^-1`` (``K[:, C] = Z[:, C] X_C^-1``) keeps
+    every row's pattern for ANY ``X_N``. One CAV has one class (its heard states P: ``X =
+    blkdiag(X_P, X_N)``). ``X_N`` is parametrised as ``eps I + sum_k F_k' T_k F_k`` with
+    ``T_k >= 0`` on windows of ``band + 1`` consecutive vehicles: every PSD matrix with that
+    band (chordal) sparsity has this form, so ``X_N`` is a banded PSD matrix with its zeros
+    built in (``band = 0``: 2x2 blocks per vehicle). A wider band tightens the bound (a full
+    ``X_N`` is the least conservative) at the price of larger cliques in the Lyapunov LMI.
+
+    A platoon works on its full-state plant (the pattern is on ``K``, not on ``K V``); a ring
+    on ``A_d - sigma c' c`` (:data:`RING_CONSERVED_DECAY`), whose closed loop has the
+    eigenvalues of the reduced one and ``-sigma``, and the same true H2 norm for every gain
+    (the disturbances stay on ``c x = 0``, where the two plants agree): no basis ``V`` enters.
 
     Parameters
     ----------
-    plant : H2Plant
+    plant : H2Plant or PlatoonPlant
     mask : numpy.ndarray
-        Boolean mask of allowed gain entries (see :func:`pattern_mask`).
+        Boolean mask of allowed gain entries: one CAV ``(nx,)`` (:func:`pattern_mask`), a
+        platoon ``(n_cav, nx)`` (:func:`~lcc_synth.synthesis.h2.pattern_rows`).
     eps : float
         Lower bound on the eigenvalues of X.
     chordal : bool
@@ -204,6 +242,11 @@ def convex_restriction(
         imposes it as one dense PSD constraint (for cross-checks; much slower for long strings).
     band : int
         Coupling range of ``X_N`` in vehicles (>= 0).
+
+    Returns
+    -------
+    LMIResult
+        ``g``: one CAV a row, a platoon ``(n_cav, nx)``.
 
     Raises
     ------
@@ -214,36 +257,50 @@ def convex_restriction(
     import cvxpy as cp
     import scipy.sparse as sp
 
-    nx = plant.nx
-    mask = np.asarray(mask, bool)
-    blocks = _x_blocks(plant, mask)
-    P_idx = blocks[0]
-    N_idx = np.flatnonzero(~mask)
-    windows = _windows(blocks[1:], int(band))
+    A, B, Bw, Q, veh = _restriction_plant(plant)
+    nx, nu = A.shape[0], B.shape[1]
+    mask = np.asarray(mask, bool).reshape(nu, nx)
+    blocks, nh = _x_blocks(veh, mask)
+    classes = blocks[:nh]
+    H_idx = np.concatenate(classes)
+    N_idx = np.flatnonzero(~mask.any(axis=0))
+    windows = _windows(blocks[nh:], int(band))
+    # the heard states each row may use, as positions in H_idx
+    row_free = [np.flatnonzero(mask[k, H_idx]) for k in range(nu)]
 
-    def sel(idx):
-        return sp.csr_matrix((np.ones(len(idx)), (np.arange(len(idx)), idx)), shape=(len(idx), nx))
+    def sel(idx, n=nx):
+        return sp.csr_matrix((np.ones(len(idx)), (np.arange(len(idx)), idx)), shape=(len(idx), n))
 
-    XP = cp.Variable((len(P_idx), len(P_idx)), symmetric=True)
+    XC = [cp.Variable((len(c), len(c)), symmetric=True) for c in classes]
     T = [cp.Variable((len(w), len(w)), symmetric=True) for w in windows]
-    z = cp.Variable((1, len(P_idx)))
-    cons = [XP >> eps * np.eye(len(P_idx))] + [t >> 0 for t in T]
-    EP = sel(P_idx)
-    X = EP.T @ XP @ EP + sum(sel(w).T @ t @ sel(w) for w, t in zip(windows, T, strict=True))
+    if all(f.size == H_idx.size for f in row_free):
+        z = cp.Variable((nu, len(H_idx)))
+    else:  # a row's zeros on the classes it does not hear are built in
+        zk = [cp.Variable((1, f.size)) for f in row_free]
+        parts = [np.eye(nu)[:, [k]] @ v @ sel(f, H_idx.size)
+                 for k, (v, f) in enumerate(zip(zk, row_free, strict=True))]  # fmt: skip
+        z = sum(parts[1:], parts[0])
+    cons = [x >> eps * np.eye(len(c)) for x, c in zip(XC, classes, strict=True)]
+    cons += [t >> 0 for t in T]
+    XH = XC[0] if nh == 1 else cp.bmat(
+        [[XC[a] if a == b else np.zeros((len(ca), len(cb))) for b, cb in enumerate(classes)]
+         for a, ca in enumerate(classes)])  # fmt: skip
+    EH = sel(H_idx)
+    X = EH.T @ XH @ EH + sum(sel(w).T @ t @ sel(w) for w, t in zip(windows, T, strict=True))
     X_const = np.zeros((nx, nx))
     X_const[N_idx, N_idx] = eps
     X = X + X_const
-    Z = z @ EP
-    A, B, Bw = plant.A, plant.B, plant.Bw
+    Z = z @ EH
     AX = A @ X
     BZ = B @ Z
     M = AX + AX.T + BZ + BZ.T + Bw @ Bw.T
     # sparsity graph of M
     xpat = np.zeros((nx, nx), bool)
-    for b in [P_idx, *windows]:
+    for b in [*classes, *windows]:
         xpat[np.ix_(b, b)] = True
     zpat = np.zeros((nx, nx), bool)
-    zpat[np.ix_(np.flatnonzero(B.ravel() != 0), P_idx)] = True
+    for k in range(nu):
+        zpat[np.ix_(np.flatnonzero(B[:, k] != 0), H_idx[row_free[k]])] = True
     apat = (np.abs(A) > 0).astype(int) @ xpat.astype(int) > 0
     pat = apat | apat.T | zpat | zpat.T | (np.abs(Bw @ Bw.T) > 0) | np.eye(nx, dtype=bool)
     if chordal:
@@ -262,13 +319,14 @@ def convex_restriction(
     else:
         cons.append(-(M + M.T) / 2 >> 0)
         cones = [nx]
-    W = cp.Variable((1, 1), symmetric=True)
-    cons.append(cp.bmat([[W, z], [z.T, XP]]) >> 0)
+    W = cp.Variable((nu, nu), symmetric=True)
+    cons.append(cp.bmat([[W, z], [z.T, XH]]) >> 0)
+    qterms = [cp.trace(Q[np.ix_(c, c)] @ x) for c, x in zip(classes, XC, strict=True)]
     obj = cp.Minimize(
-        cp.trace(plant.Q[np.ix_(P_idx, P_idx)] @ XP)
-        + sum(cp.trace(plant.Q[np.ix_(w, w)] @ t) for w, t in zip(windows, T, strict=True))
-        + float(np.trace(plant.Q @ X_const))
-        + plant.r * W[0, 0]
+        sum(qterms[1:], qterms[0])
+        + sum(cp.trace(Q[np.ix_(w, w)] @ t) for w, t in zip(windows, T, strict=True))
+        + float(np.trace(Q @ X_const))
+        + plant.r * cp.trace(W)
     )
     prob = cp.Problem(obj, cons)
     status, dt, value = solve_checked(
@@ -278,24 +336,55 @@ def convex_restriction(
         "polish from the truncated Riccati gain)",
     )
     Xv = X_const.copy()
-    Xv[np.ix_(P_idx, P_idx)] += XP.value
+    for c, x in zip(classes, XC, strict=True):
+        Xv[np.ix_(c, c)] += x.value
     for w, t in zip(windows, T, strict=True):
         Xv[np.ix_(w, w)] += t.value
-    g = np.zeros(nx)
-    g[P_idx] = np.linalg.solve(XP.value.T, z.value.T).ravel()
-    Zv = np.zeros((1, nx))
-    Zv[0, P_idx] = z.value
+    zv = np.asarray(z.value).reshape(nu, len(H_idx))
+    K = np.zeros((nu, nx))
+    start = 0
+    for c, x in zip(classes, XC, strict=True):
+        K[:, c] = np.linalg.solve(x.value.T, zv[:, start : start + len(c)].T).T
+        start += len(c)
+    Zv = np.zeros((nu, nx))
+    Zv[:, H_idx] = zv
     Mv = A @ Xv + Xv @ A.T + B @ Zv + Zv.T @ B.T + Bw @ Bw.T
     residual = float(max(np.max(np.linalg.eigvalsh((Mv + Mv.T) / 2)), 0.0))
-    cones += [len(P_idx), *(len(w) for w in windows), len(P_idx) + 1]
+    cones += [*(len(c) for c in classes), *(len(w) for w in windows), len(H_idx) + nu]
     return LMIResult(
-        g,
+        K if isinstance(plant, PlatoonPlant) else K.ravel(),
         math.sqrt(max(value, 0.0)),
         status,
         dt,
         residual,
         {"n_psd_cones": len(cones), "largest_cone": max(cones), "band": int(band)},
     )
+
+
+def restriction_start(
+    plant: H2Plant | PlatoonPlant, mask: np.ndarray, band: int = 4
+) -> tuple[LMIResult, float]:
+    """The convex restriction (:func:`convex_restriction`) and the true squared H2 norm of its
+    gain, the start it offers the polish.
+
+    Raises
+    ------
+    SynthesisError
+        The restriction fails, or its gain does not stabilise the plant (solver status and
+        residual named).
+    """
+    lmi = convex_restriction(plant, mask, band=band)
+    if isinstance(plant, PlatoonPlant):
+        J = platoon_cost(plant, lmi.g).J
+    else:
+        J = h2_cost(plant, lmi.g)[0]
+    if not math.isfinite(J):
+        raise SynthesisError(
+            "the convex restriction returned a gain that does not stabilise the plant "
+            f"(solver status {lmi.status}, residual {lmi.residual:.2e})",
+            {"status": lmi.status, "residual": lmi.residual},
+        )
+    return lmi, J
 
 
 # --------------------------------------------------------------------------------------------
@@ -555,15 +644,8 @@ def structured_h2(
     if method == "lmi":
         t0 = time.perf_counter()
         progress(f"synthesis: LMI solve (convex restriction, {plant.nx} states, Clarabel)")
-        lmi = convex_restriction(plant, mask, band=band)
+        lmi, J_lmi = restriction_start(plant, mask, band)
         timings["lmi"] = time.perf_counter() - t0
-        J_lmi, _, _ = h2_cost(plant, lmi.g)
-        if not math.isfinite(J_lmi):
-            raise SynthesisError(
-                "the convex restriction returned a gain that does not stabilise the plant "
-                f"(solver status {lmi.status}, residual {lmi.residual:.2e})",
-                {"status": lmi.status, "residual": lmi.residual},
-            )
         starts.append((J_lmi, lmi.g, "convex_restriction"))
     elif method != "direct":
         raise ConfigError("synthesis.method", f"must be 'lmi' or 'direct', got {method!r}")
