@@ -294,6 +294,10 @@ class SynthesisSpec(Record):
             "weights": {k: v for k, v in asdict(self.weights).items()
                         if k not in ("position", "q_p")},  # fmt: skip
         }
+        if self.cross_check:  # a platoon's default: no cross-check
+            t["cross_check"] = True
+        if self.band != 4:
+            t["band"] = self.band
         if self.comm_range is not None:
             t["comm_range"] = self.comm_range
         if self.patterns is not None:
@@ -440,7 +444,7 @@ def synthesis_spec(
         method = T.get(t, "method", "synthesis", default="riccati", choices=("riccati", "lmi"))
     else:
         method = T.get(t, "method", "synthesis", default="lmi", choices=("lmi", "direct"))
-    cross_check = T.get(t, "cross_check", "synthesis") and robust is None
+    cross_check = T.get(t, "cross_check", "synthesis", default=True) and robust is None
     tol = T.get(t, "tol", "synthesis")
     max_iter = T.get(t, "max_iter", "synthesis")
     band = T.get(t, "band", "synthesis")
@@ -528,7 +532,7 @@ def synthesis_spec(
 #: The designs a platoon or ring accepts.
 PLATOON_DESIGNS = ("full_state", "structured", "sparsity", "string_stable")
 
-_NOT_FOR_PLATOONS = ("cross_check", "band", "baseline", "as_run")
+_NOT_FOR_PLATOONS = ("baseline", "as_run")
 
 
 def comm_range_pattern(platoon: Platoon, R: int) -> dict[int, tuple[int, ...]]:
@@ -644,7 +648,8 @@ def _single_cav_only(field: str, what: str, system: System) -> ConfigError:
     open platoon of one CAV is told the ``kind = "lcc"`` string that it is."""
     designs = [d for d in PLATOON_DESIGNS if not (system.ring and d == "string_stable")]
     msg = (f"{what} is a single-CAV feature, not available for kind = {system.kind!r} (its "
-           f"designs: {', '.join(designs)}; method riccati / direct)")  # fmt: skip
+           f"designs: {', '.join(designs)}; method riccati / lmi for full_state, lmi / direct "
+           "for structured)")  # fmt: skip
     cavs = tuple(system.platoon.cavs)
     if not system.ring and len(cavs) == 1:
         msg += (f"; this platoon's one CAV is the string kind = \"lcc\", m = {cavs[0] - 1}, "
@@ -667,10 +672,11 @@ def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> Synt
                           "'ring' has none (no head-to-tail transfer function); use kind = "
                           "'platoon'")  # fmt: skip
     semantics = T.get(t, "semantics", "synthesis", default="replace")
-    if t.get("method") == "lmi":
-        raise _single_cav_only("synthesis.method", "method = 'lmi'", system)
-    T.get(t, "method", "synthesis", default="riccati" if design == "full_state" else "direct",
-          choices=("riccati",) if design == "full_state" else ("direct",))  # fmt: skip
+    choices = {"full_state": ("riccati", "lmi"), "structured": ("lmi", "direct")}
+    method = T.get(t, "method", "synthesis", default="riccati" if design == "full_state"
+                   else "direct", choices=choices.get(design, ("direct",)))  # fmt: skip
+    cross_check = T.get(t, "cross_check", "synthesis", default=False)
+    band = T.get(t, "band", "synthesis")
     if not system.platoon.cavs:
         raise ConfigError("system.cavs", "synthesis needs at least one CAV")
     patterns, R = _patterns(t, system.platoon)
@@ -720,9 +726,14 @@ def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> Synt
                           "actuator lag (its LMI and polish are of the lag-free loop): use "
                           "0, or design = 'structured' (its report checks the lagged "
                           "string)")  # fmt: skip
-    method = "riccati" if design == "full_state" else "direct"
+    if cav_lag > 0 and (method == "lmi" or cross_check):  # the a_i: in no pattern, no X
+        key = "method" if method == "lmi" else "cross_check"
+        raise ConfigError(f"synthesis.{key}", "the LMI designs of a platoon or ring have no "
+                          "actuator lag: use method = 'riccati' / 'direct' without "
+                          "cross_check, or cav_lag = 0")  # fmt: skip
     return SynthesisSpec(name=name, system=system, design=design, semantics=semantics,
-                         weights=weights, method=method, tol=tol, max_iter=max_iter,
+                         weights=weights, method=method, cross_check=cross_check, band=band,
+                         tol=tol, max_iter=max_iter,
                          sparsity={"max_loss": max_loss}, source=src, patterns=patterns,
                          comm_range=R, robust=robust, cav_lag=cav_lag,
                          string_gamma=string["gamma"], polish_steps=string["polish_steps"],
