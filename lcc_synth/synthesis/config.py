@@ -87,6 +87,11 @@ A platoon or a ring (``[system] kind = "platoon" | "ring"``):
                               # | "string_stable" (open platoons: string_lmi.py; per-CAV
                               # patterns as structured; needs weights.head > 0)
     semantics = "replace"     # default "replace" (u = K x is the CAV's whole acceleration)
+    method = "direct"         # structured: "direct" (default) | "lmi" (the convex restriction,
+                              # a pattern per CAV row, starts the polish; its bound reported);
+                              # full_state: "riccati" (default) | "lmi" (checked against Riccati)
+    cross_check = false       # full_state: also solve the LMI and compare (default false here)
+    band = 4                  # structured "lmi": as for one CAV
     comm_range = 5            # every CAV hears the R vehicles ahead and the R behind it
                               # (itself included; the ring wraps around); 0 = decentralised
     cav_lag = 0.0             # every CAV's actuator lag tau (s) in the plant, a state a_i per
@@ -116,13 +121,16 @@ A platoon or a ring (``[system] kind = "platoon" | "ring"``):
     s_go = [30.0, 40.0]
 
 Neither comm_range nor patterns: every CAV hears every vehicle (the full-information optimum).
-The single-CAV keys ``pattern`` (other than "all"), ``cross_check``, ``band``, ``sparsity``
-(but ``max_loss``), ``baseline`` and ``as_run`` do not apply: a ConfigError names the key and
-the layout (``kind``); the platoon keys ``comm_range`` and ``patterns`` are refused for one CAV
-the same way (``robust`` applies to both: see above). ``design = "string_stable"`` and
-``[synthesis.string]`` need a head vehicle: a ring refuses them (``synthesis.design`` /
-``synthesis.string``), and on a platoon they do not combine with ``[synthesis.robust]`` or
-``cav_lag``.
+The LMI designs work on every layout: a platoon's or ring's full-state LMI is solved on its
+reduced plant (the ring's invariant hyperplane) and checked against Riccati within
+``CROSS_CHECK_TOL``; its structured restriction has a block of ``X`` per set of states heard by
+the same CAVs (:func:`~lcc_synth.synthesis.structured.convex_restriction`). The single-CAV keys
+``pattern`` (other than "all"), ``sparsity`` (but ``max_loss``), ``baseline`` and ``as_run`` do
+not apply: a ConfigError names the key and the layout (``kind``); the platoon keys
+``comm_range`` and ``patterns`` are refused for one CAV the same way (``robust`` applies to
+both: see above). ``design = "string_stable"`` and ``[synthesis.string]`` need a head vehicle:
+a ring refuses them (``synthesis.design`` / ``synthesis.string``), and on a platoon they do not
+combine with ``[synthesis.robust]`` or ``cav_lag``.
 """
 
 from __future__ import annotations
@@ -187,16 +195,19 @@ class SynthesisSpec(Record):
     Attributes
     ----------
     name, system, design, semantics, weights, tol, max_iter, source
-        Every layout. ``method``: ``"riccati"`` | ``"lmi"`` | ``"direct"`` (a platoon or ring:
-        ``"riccati"`` for ``full_state``, else ``"direct"``).
+        Every layout. ``method``: ``"riccati"`` | ``"lmi"`` for ``full_state``, ``"lmi"`` |
+        ``"direct"`` otherwise (a platoon or ring: default ``"direct"``; ``sparsity``:
+        ``"direct"`` only).
     sparsity : dict
         ``[synthesis.sparsity]``: every key for one CAV, ``max_loss`` only for a platoon or
         ring.
     pattern : tuple of int or None
         One CAV: the vehicles heard besides the CAV (the paper's indexing); ``None``: all.
-    cross_check, band, baseline, as_run
-        One CAV only (the full-state cross-check, the LMI restriction's band, the baseline
-        gains, the as-run design).
+    cross_check, band
+        Every layout: the full-state cross-check (default true for one CAV, false for a
+        platoon or ring), the LMI restriction's band.
+    baseline, as_run
+        One CAV only (the baseline gains, the as-run design).
     string_gamma, polish_steps, string_margin
         ``[synthesis.string]`` of the string-aware design (one CAV or an open platoon).
     cav_lag : float

@@ -16,8 +16,14 @@ and wall time):
   "full_state"`` returns it, checked against the Lyapunov evaluation of the same gain (with
   ``cav_lag``: the bound of a gain that feeds back the ``a_i``, and ``full_state`` is the
   start and polish below over every vehicle: :mod:`~lcc_synth.synthesis.lag_design`);
+* ``lmi`` -- ``full_state`` with ``method = "lmi"`` or ``cross_check``: the LMI on the reduced
+  plant, checked against Riccati (:func:`lmi_cross_check`; ``"lmi"`` returns its gain);
+* ``convex restriction`` -- ``structured`` with ``method = "lmi"``: a gain with the patterns and
+  its bound (:func:`~lcc_synth.synthesis.structured.convex_restriction`);
 * ``start`` -- a stabilising gain with the patterns (truncated Riccati modulo ``c``, or the
-  penalty continuation: :func:`~lcc_synth.synthesis.structured.initial_gain`);
+  penalty continuation: :func:`~lcc_synth.synthesis.structured.initial_gain`; with ``"lmi"``
+  the restriction's gain when its true H2 is lower: :func:`~lcc_synth.synthesis.structured.
+  structured_start`);
 * ``polish`` -- Newton / BFGS descent on the true H2 with the patterns' mask;
 * ``sparsity`` -- ``design = "sparsity"``: the greedy per-CAV range front
   (:func:`~lcc_synth.synthesis.sparsity.range_pareto`) and its chosen point;

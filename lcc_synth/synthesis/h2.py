@@ -1,9 +1,9 @@
 """H2 synthesis set-up for every layout: plant, weights, true H2 norm, Riccati and LMI designs.
 
-One CAV (:func:`make_plant`, a gain row ``g``; the LMI designs) and a platoon or ring
+One CAV (:func:`make_plant`, a gain row ``g``) and a platoon or ring
 (:func:`make_platoon_plant`, a gain row per CAV; the ring on its invariant hyperplane ``V``)
-share the weights, the disturbances and the checks; both plants are the same for one CAV (a
-test matches them to 1e-9).
+share the weights, the disturbances, the checks and the full-state LMI
+(:func:`lmi_full_state`); both plants are the same for one CAV (a test matches them to 1e-9).
 
 The design plant
 ----------------

@@ -32,9 +32,10 @@ small numbers):
 
 Always rank results by :func:`~lcc_synth.synthesis.h2.h2_norm` of the gain, never by the bound.
 
-Platoons and rings -- structured multi-input H2: a cheap stabilising start, then descent on
-the TRUE H2 norm with every CAV's row pattern kept exactly (robust multi-model objectives
-included).
+Platoons and rings -- structured multi-input H2: a cheap stabilising start (with ``method =
+"lmi"`` also the convex restriction above, a block of ``X`` per set of states heard by the same
+CAVs: :func:`structured_start`), then descent on the TRUE H2 norm with every CAV's row pattern
+kept exactly (robust multi-model objectives included).
 
 Polishing method
 ----------------
