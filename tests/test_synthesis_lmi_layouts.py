@@ -30,7 +30,8 @@ from lcc_synth.synthesis.h2 import (
     platoon_h2,
     platoon_riccati,
 )
-from lcc_synth.synthesis.structured import descend, h2_objective, restriction_start
+from lcc_synth.synthesis.restriction import restriction_start
+from lcc_synth.synthesis.structured import descend, h2_objective
 
 #: the two layouts of several inputs (nx = 12 each): a two-CAV open platoon and a ring
 ROWS = ["two_cav_platoon", "ring"]

@@ -19,7 +19,7 @@ and wall time):
 * ``lmi`` -- ``full_state`` with ``method = "lmi"`` or ``cross_check``: the LMI on the reduced
   plant, checked against Riccati (:func:`lmi_cross_check`; ``"lmi"`` returns its gain);
 * ``convex restriction`` -- ``structured`` with ``method = "lmi"``: a gain with the patterns and
-  its bound (:func:`~lcc_synth.synthesis.structured.convex_restriction`);
+  its bound (:func:`~lcc_synth.synthesis.restriction.convex_restriction`);
 * ``start`` -- a stabilising gain with the patterns (truncated Riccati modulo ``c``, or the
   penalty continuation: :func:`~lcc_synth.synthesis.structured.initial_gain`; with ``"lmi"``
   the restriction's gain when its true H2 is lower: :func:`~lcc_synth.synthesis.structured.
