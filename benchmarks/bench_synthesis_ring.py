@@ -73,7 +73,8 @@ def time_lmi(N: int) -> tuple[float, float]:
     """Plain full-state H2 LMI on the reduced ring (Clarabel): solve time and its gain's H2."""
     from lcc_synth.models.hdv import OVM
     from lcc_synth.models.platoon import Platoon, platoon_model
-    from lcc_synth.synthesis.h2 import Weights, lmi_full_state, make_platoon_plant, platoon_h2
+    from lcc_synth.synthesis.h2 import Weights, make_platoon_plant, platoon_h2
+    from lcc_synth.synthesis.lmi import lmi_full_state
 
     M = platoon_model(Platoon((OVM(),) * N, (N,), 15.0, ring=True), warn=False)
     p = make_platoon_plant(M, "replace", Weights(q_s=0.03, q_v=0.15, r=1.0, accel=1.0))

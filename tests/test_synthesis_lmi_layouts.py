@@ -23,14 +23,13 @@ from lcc_synth.problem import Problem
 from lcc_synth.synthesis.config import spec_from_problem
 from lcc_synth.synthesis.design import CROSS_CHECK_TOL, synthesize
 from lcc_synth.synthesis.h2 import (
-    lmi_full_state,
     make_platoon_plant,
     pattern_rows,
     platoon_cost,
     platoon_h2,
     platoon_riccati,
 )
-from lcc_synth.synthesis.restriction import restriction_start
+from lcc_synth.synthesis.lmi import lmi_full_state, restriction_start
 from lcc_synth.synthesis.structured import descend, h2_objective
 
 #: the two layouts of several inputs (nx = 12 each): a two-CAV open platoon and a ring
@@ -173,6 +172,11 @@ def test_platoon_lmi_keys_round_trip_and_what_stays_refused():
     with pytest.raises(ConfigError) as err:
         spec_from_problem(_problem("two_cav_platoon", "sparsity", 'method = "lmi"'))
     assert err.value.field == "synthesis.method" and "direct" in err.value.message
+    for extra, field in (('method = "lmi"', "synthesis.method"),
+                         ("cross_check = true", "synthesis.cross_check")):  # fmt: skip
+        with pytest.raises(ConfigError) as err:  # the lag states a_i are in no pattern
+            spec_from_problem(_problem("ring", "full_state", f"{extra}\ncav_lag = 0.2"))
+        assert err.value.field == field and "cav_lag = 0" in err.value.message
 
 
 def test_platoon_lmi_too_long_for_a_dense_lmi_names_the_size():

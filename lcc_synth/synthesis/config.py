@@ -124,13 +124,14 @@ Neither comm_range nor patterns: every CAV hears every vehicle (the full-informa
 The LMI designs work on every layout: a platoon's or ring's full-state LMI is solved on its
 reduced plant (the ring's invariant hyperplane) and checked against Riccati within
 ``CROSS_CHECK_TOL``; its structured restriction has a block of ``X`` per set of states heard by
-the same CAVs (:func:`~lcc_synth.synthesis.restriction.convex_restriction`). The single-CAV keys
-``pattern`` (other than "all"), ``sparsity`` (but ``max_loss``), ``baseline`` and ``as_run`` do
-not apply: a ConfigError names the key and the layout (``kind``); the platoon keys
-``comm_range`` and ``patterns`` are refused for one CAV the same way (``robust`` applies to
-both: see above). ``design = "string_stable"`` and ``[synthesis.string]`` need a head vehicle:
-a ring refuses them (``synthesis.design`` / ``synthesis.string``), and on a platoon they do not
-combine with ``[synthesis.robust]`` or ``cav_lag``.
+the same CAVs (:func:`~lcc_synth.synthesis.lmi.convex_restriction`); with ``cav_lag`` they are
+refused there (the lag states are in no pattern). The single-CAV keys ``pattern`` (other than
+"all"), ``sparsity`` (but ``max_loss``), ``baseline`` and ``as_run`` do not apply: a
+ConfigError names the key and the layout (``kind``); the platoon keys ``comm_range`` and
+``patterns`` are refused for one CAV the same way (``robust`` applies to both: see above).
+``design = "string_stable"`` and ``[synthesis.string]`` need a head vehicle: a ring refuses
+them (``synthesis.design`` / ``synthesis.string``), and on a platoon they do not combine with
+``[synthesis.robust]`` or ``cav_lag``.
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ and wall time):
 * ``lmi`` -- ``full_state`` with ``method = "lmi"`` or ``cross_check``: the LMI on the reduced
   plant, checked against Riccati (:func:`lmi_cross_check`; ``"lmi"`` returns its gain);
 * ``convex restriction`` -- ``structured`` with ``method = "lmi"``: a gain with the patterns and
-  its bound (:func:`~lcc_synth.synthesis.restriction.convex_restriction`);
+  its bound (:func:`~lcc_synth.synthesis.lmi.convex_restriction`);
 * ``start`` -- a stabilising gain with the patterns (truncated Riccati modulo ``c``, or the
   penalty continuation: :func:`~lcc_synth.synthesis.structured.initial_gain`; with ``"lmi"``
   the restriction's gain when its true H2 is lower: :func:`~lcc_synth.synthesis.structured.
@@ -51,7 +51,6 @@ from lcc_synth.synthesis.h2 import (
     PlatoonPlant,
     SynthesisError,
     h2_norm,
-    lmi_full_state,
     make_plant,
     make_platoon_plant,
     pattern_rows,
@@ -60,9 +59,9 @@ from lcc_synth.synthesis.h2 import (
     platoon_riccati,
     riccati_gain,
     single_thread_blas,
-    true_h2,
 )
 from lcc_synth.synthesis.lag_design import lag_note
+from lcc_synth.synthesis.lmi import lmi_full_state, true_h2
 from lcc_synth.synthesis.report import (
     UNSET,
     SynthesisReport,
@@ -150,7 +149,7 @@ CROSS_CHECK_TOL = 1e-5
 def lmi_cross_check(
     plant: H2Plant | PlatoonPlant, K_ric: np.ndarray, h2_star: float
 ) -> tuple[LMIResult, dict, float]:
-    """The full-state LMI (:func:`~lcc_synth.synthesis.h2.lmi_full_state`) checked against the
+    """The full-state LMI (:func:`~lcc_synth.synthesis.lmi.lmi_full_state`) checked against the
     Riccati optimum ``K_ric`` of value ``h2_star``: one CAV or a platoon / ring (its reduced
     plant); returns the LMI, the report's solver figures and the true H2 of the LMI's gain.
 

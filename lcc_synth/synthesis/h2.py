@@ -2,8 +2,9 @@
 
 One CAV (:func:`make_plant`, a gain row ``g``) and a platoon or ring
 (:func:`make_platoon_plant`, a gain row per CAV; the ring on its invariant hyperplane ``V``)
-share the weights, the disturbances, the checks and the full-state LMI
-(:func:`lmi_full_state`); both plants are the same for one CAV (a test matches them to 1e-9).
+share the weights, the disturbances, the checks and the LMI designs
+(:mod:`~lcc_synth.synthesis.lmi`); both plants are the same for one CAV (a test matches them
+to 1e-9).
 
 The design plant
 ----------------
@@ -116,8 +117,6 @@ __all__ = [
     "h2_norm",
     "riccati_gain",
     "LMIResult",
-    "lmi_full_state",
-    "true_h2",
     "STABILITY_TOL",
     "single_thread_blas",
     "PlatoonPlant",
@@ -590,53 +589,6 @@ def solve_checked(prob, what: str, hint: str = "") -> tuple[str, float, float]:
     for var, val in zip(prob.variables(), values, strict=True):
         var.save_value(val)
     return status, dt, float(value)
-
-
-def lmi_full_state(plant: H2Plant | PlatoonPlant, eps: float = 1e-7) -> LMIResult:
-    """Full-state H2 synthesis by the standard LMI (Clarabel), one input or several.
-
-    ``min tr(Q X) + r tr(W)`` over ``X > 0, Z, W`` with
-    ``A X + X A' + B Z + Z' B' + B_w B_w' <= 0`` and ``[[W, Z], [Z', X]] >= 0``; then
-    ``K = Z X^-1`` and ``J(K) <= tr(Q X) + r tr(W)``. The returned bound is its square root.
-
-    One CAV works on the design plant (``A, B, B_w, Q``; ``g`` a row); a platoon or ring on
-    its reduced plant (``A_r, B_r, B_wr, Q_r``; on a ring the hyperplane ``c x = 0``, where
-    the conserved mode that no ``X > 0`` could certify is absent) and returns the gain rows
-    ``K = K_r V'`` (``n_cav x nx``: on a ring the representative with no component along ``c``,
-    whatever the basis ``V``).
-    """
-    import cvxpy as cp
-
-    A, B, Bw, Q = _lmi_plant(plant)
-    nx, nu = A.shape[0], B.shape[1]
-    X = cp.Variable((nx, nx), symmetric=True)
-    Z = cp.Variable((nu, nx))
-    W = cp.Variable((nu, nu), symmetric=True)
-    M = A @ X + X @ A.T + B @ Z + Z.T @ B.T + Bw @ Bw.T
-    cons = [X >> eps * np.eye(nx), -(M + M.T) / 2 >> 0, cp.bmat([[W, Z], [Z.T, X]]) >> 0]
-    obj = cp.Minimize(cp.trace(Q @ X) + plant.r * cp.trace(W))
-    prob = cp.Problem(obj, cons)
-    status, dt, value = solve_checked(prob, "full-state H2 LMI")
-    Xv, Zv = X.value, Z.value
-    Kr = np.linalg.solve(Xv.T, Zv.T).T
-    Mv = A @ Xv + Xv @ A.T + B @ Zv + Zv.T @ B.T + Bw @ Bw.T
-    residual = float(max(np.max(np.linalg.eigvalsh((Mv + Mv.T) / 2)), 0.0))
-    g = Kr @ plant.V.T if isinstance(plant, PlatoonPlant) else Kr.ravel()
-    return LMIResult(g, math.sqrt(max(value, 0.0)), status, dt, residual)
-
-
-def _lmi_plant(plant: H2Plant | PlatoonPlant):
-    """``(A, B, B_w, Q)`` the full-state LMI works on: one CAV's design plant, a platoon's
-    reduced plant."""
-    if isinstance(plant, PlatoonPlant):
-        return plant.Ar, plant.Br, plant.Bwr, plant.Qr
-    return plant.A, plant.B, plant.Bw, plant.Q
-
-
-def true_h2(plant: H2Plant | PlatoonPlant, g: np.ndarray) -> float:
-    """True closed-loop H2 norm of a design gain on either plant (:func:`h2_norm` of a row,
-    :func:`platoon_h2` of a gain row per CAV; ``inf`` when not stable)."""
-    return platoon_h2(plant, g) if isinstance(plant, PlatoonPlant) else h2_norm(plant, g)
 
 
 @dataclass(frozen=True, eq=False)

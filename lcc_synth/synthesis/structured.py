@@ -7,7 +7,7 @@ multi-model objective).
 Two stages, both keeping the pattern exactly (forbidden entries are structural zeros, never
 small numbers):
 
-1. :func:`~lcc_synth.synthesis.restriction.convex_restriction` -- sparsity invariance. With
+1. :func:`~lcc_synth.synthesis.lmi.convex_restriction` -- sparsity invariance. With
    ``X = blkdiag(X_P, X_N)`` (a full block on the states of the heard vehicles, a banded PSD
    block on the others) and ``Z`` zero
    outside the heard states, ``g = Z X^-1`` has the pattern. The zeros are built into the
@@ -95,7 +95,7 @@ from lcc_synth.synthesis.h2 import (
     riccati_gain,
     single_thread_blas,
 )
-from lcc_synth.synthesis.restriction import (  # noqa: F401 (convex_restriction: its old home)
+from lcc_synth.synthesis.lmi import (  # noqa: F401 (convex_restriction: its old home)
     convex_restriction,
     restriction_start,
 )
