@@ -125,6 +125,7 @@ The LMI designs work on every layout: a platoon's or ring's full-state LMI is so
 reduced plant (the ring's invariant hyperplane) and checked against Riccati within
 ``CROSS_CHECK_TOL``; its structured restriction has a block of ``X`` per set of states heard by
 the same CAVs (:func:`~lcc_synth.synthesis.lmi.convex_restriction`); with ``cav_lag`` they are
+the same CAVs (:func:`~lcc_synth.synthesis.lmi.convex_restriction`); with ``cav_lag`` they are
 refused there (the lag states are in no pattern). The single-CAV keys ``pattern`` (other than
 "all"), ``sparsity`` (but ``max_loss``), ``baseline`` and ``as_run`` do not apply: a
 ConfigError names the key and the layout (``kind``); the platoon keys ``comm_range`` and
