@@ -157,7 +157,7 @@ def lmi_cross_check(
     ------
     SynthesisError
         The true H2 of the LMI's gain and ``h2_star`` differ by more than
-        :data:`CROSS_CHECK_TOL` (relative), or the solve fails.
+        ``CROSS_CHECK_TOL`` (relative), or the solve fails.
     """
     progress("synthesis: LMI solve (Clarabel)")
     lmi = lmi_full_state(plant)

@@ -1,5 +1,5 @@
 """The H2 LMI designs of every layout, one input or several (Clarabel via cvxpy, solved by
-:func:`~lcc_synth.synthesis.h2.solve_checked`): the full-state LMI (:func:`lmi_full_state`,
+``h2.solve_checked``): the full-state LMI (:func:`lmi_full_state`,
 one CAV's design plant or a platoon's reduced plant; it equals the Riccati optimum to about
 1e-8, which ``cross_check`` verifies) and the convex restriction of the structured design:
 sparsity invariance with chordal decomposition (:func:`convex_restriction`) and the start it
