@@ -125,7 +125,6 @@ The LMI designs work on every layout: a platoon's or ring's full-state LMI is so
 reduced plant (the ring's invariant hyperplane) and checked against Riccati within
 ``CROSS_CHECK_TOL``; its structured restriction has a block of ``X`` per set of states heard by
 the same CAVs (:func:`~lcc_synth.synthesis.lmi.convex_restriction`); with ``cav_lag`` they are
-the same CAVs (:func:`~lcc_synth.synthesis.lmi.convex_restriction`); with ``cav_lag`` they are
 refused there (the lag states are in no pattern). The single-CAV keys ``pattern`` (other than
 "all"), ``sparsity`` (but ``max_loss``), ``baseline`` and ``as_run`` do not apply: a
 ConfigError names the key and the layout (``kind``); the platoon keys ``comm_range`` and
@@ -685,7 +684,8 @@ def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> Synt
                           "'ring' has none (no head-to-tail transfer function); use kind = "
                           "'platoon'")  # fmt: skip
     semantics = T.get(t, "semantics", "synthesis", default="replace")
-    choices = {"full_state": ("riccati", "lmi"), "structured": ("lmi", "direct")}
+    choices = {"full_state": ("riccati", "lmi"), "structured": ("lmi", "direct"),
+               "string_stable": ("lmi", "direct")}  # as for one CAV (string_stable: unused)
     method = T.get(t, "method", "synthesis", default="riccati" if design == "full_state"
                    else "direct", choices=choices.get(design, ("direct",)))  # fmt: skip
     cross_check = T.get(t, "cross_check", "synthesis", default=False)
