@@ -48,13 +48,8 @@ def main() -> None:
 
     from lcc_synth.models.hdv import OVM
     from lcc_synth.models.linear import model_from_hdv
-    from lcc_synth.synthesis.h2 import (
-        Weights,
-        h2_norm,
-        lmi_full_state,
-        make_plant,
-        riccati_gain,
-    )
+    from lcc_synth.synthesis.h2 import Weights, h2_norm, make_plant, riccati_gain
+    from lcc_synth.synthesis.lmi import lmi_full_state
     from lcc_synth.synthesis.structured import (
         convex_restriction,
         pattern_mask,

@@ -444,8 +444,10 @@ def test_synthesis_defaults_are_the_code():
     assert {k.name: k.default for k in w.keys} == _dataclass_defaults(Weights)
     spec = _dataclass_defaults(SynthesisSpec)
     syn = declared("synthesis")
-    for key in ("cross_check", "tol", "max_iter", "band"):
+    for key in ("tol", "max_iter", "band"):
         assert syn.key(key).default == spec[key], key
+    # cross_check: the dataclass's default is one CAV's; a platoon or ring opts in
+    assert isinstance(syn.key("cross_check").default, Derived) and spec["cross_check"] is True
     string = declared("synthesis.string")
     assert string.key("gamma").default == spec["string_gamma"]
     assert string.key("polish_steps").default == spec["polish_steps"]

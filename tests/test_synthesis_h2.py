@@ -17,10 +17,10 @@ from lcc_synth.synthesis.h2 import (
     check_stabilisable,
     h2_cost,
     h2_norm,
-    lmi_full_state,
     make_plant,
     riccati_gain,
 )
+from lcc_synth.synthesis.lmi import lmi_full_state
 
 HDV = OVM(alpha=0.6, beta=0.9, s_st=5.0, s_go=35.0, v_max=30.0)
 

@@ -122,8 +122,6 @@ def test_structured_keeps_the_pattern_and_reports_its_true_h2_on_every_layout(la
 @pytest.mark.parametrize("layout", ["two_cav_platoon", "ring"])
 @pytest.mark.parametrize(("extra", "field", "design"), [
     ("as_run = true", "synthesis.as_run", "structured"),
-    ('method = "lmi"', "synthesis.method", "structured"),
-    ('method = "lmi"', "synthesis.method", "full_state"),
 ])  # fmt: skip
 def test_single_cav_features_name_the_key_and_the_layout(layout, extra, field, design):
     kind = "platoon" if layout == "two_cav_platoon" else "ring"

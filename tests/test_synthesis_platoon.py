@@ -403,7 +403,7 @@ def test_robust_members_draw_the_hdvs_and_keep_each_cavs_own_law():
         ("[synthesis.patterns]\nu_5 = [4]\n", "synthesis.patterns.u_5"),
         ("[synthesis.patterns]\nu_3 = [0]\n", "synthesis.patterns.u_3.0"),
         ('pattern = [1, 2]\n', "synthesis.pattern"),
-        ("band = 3\n", "synthesis.band"),
+        ("band = 51\n", "synthesis.band"),
         ("[synthesis.robust]\nsamples = 3\n", "synthesis.robust"),
         ("[synthesis.robust]\nalpha = [0.9, 0.5]\n", "synthesis.robust.alpha"),
         ("[synthesis.sparsity]\nn_gamma = 4\n", "synthesis.sparsity.n_gamma"),

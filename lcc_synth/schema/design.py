@@ -29,12 +29,12 @@ SYNTHESIS = Table(
         Key("pattern", "any", 'Vehicles heard besides the CAV: "all" or a list of paper '
             "indices in [-m, n] (structured, string_stable).", "all"),
         Key("method", "string", "full_state: riccati | lmi; the others: lmi (convex "
-            "restriction + polish) | direct (platoon, ring: riccati | direct only).",
+            "restriction + polish) | direct (platoon, ring: sparsity direct only).",
             Derived("riccati for full_state, else lmi (platoon, ring: direct)"),
             choices=Derived("riccati, lmi for full_state; lmi, direct otherwise; platoon and "
-                            "ring: riccati for full_state, direct for structured")),
+                            "ring: direct for sparsity")),
         Key("cross_check", "boolean", "full_state: also solve the other method and compare.",
-            True),
+            Derived("true for one CAV, false for platoon and ring")),
         Key("tol", "number", "Polishing tolerance (relative gradient norm).", 1e-7, lo=0.0,
             hi=1e-2, lo_open=True),
         Key("cav_lag", "number", "The CAVs' first-order actuator lag tau in the design plant "

@@ -87,6 +87,11 @@ A platoon or a ring (``[system] kind = "platoon" | "ring"``):
                               # | "string_stable" (open platoons: string_lmi.py; per-CAV
                               # patterns as structured; needs weights.head > 0)
     semantics = "replace"     # default "replace" (u = K x is the CAV's whole acceleration)
+    method = "direct"         # structured: "direct" (default) | "lmi" (the convex restriction,
+                              # a pattern per CAV row, starts the polish; its bound reported);
+                              # full_state: "riccati" (default) | "lmi" (checked against Riccati)
+    cross_check = false       # full_state: also solve the LMI and compare (default false here)
+    band = 4                  # structured "lmi": as for one CAV
     comm_range = 5            # every CAV hears the R vehicles ahead and the R behind it
                               # (itself included; the ring wraps around); 0 = decentralised
     cav_lag = 0.0             # every CAV's actuator lag tau (s) in the plant, a state a_i per
@@ -116,13 +121,17 @@ A platoon or a ring (``[system] kind = "platoon" | "ring"``):
     s_go = [30.0, 40.0]
 
 Neither comm_range nor patterns: every CAV hears every vehicle (the full-information optimum).
-The single-CAV keys ``pattern`` (other than "all"), ``cross_check``, ``band``, ``sparsity``
-(but ``max_loss``), ``baseline`` and ``as_run`` do not apply: a ConfigError names the key and
-the layout (``kind``); the platoon keys ``comm_range`` and ``patterns`` are refused for one CAV
-the same way (``robust`` applies to both: see above). ``design = "string_stable"`` and
-``[synthesis.string]`` need a head vehicle: a ring refuses them (``synthesis.design`` /
-``synthesis.string``), and on a platoon they do not combine with ``[synthesis.robust]`` or
-``cav_lag``.
+The LMI designs work on every layout: a platoon's or ring's full-state LMI is solved on its
+reduced plant (the ring's invariant hyperplane) and checked against Riccati within
+``CROSS_CHECK_TOL``; its structured restriction has a block of ``X`` per set of states heard by
+the same CAVs (:func:`~lcc_synth.synthesis.lmi.convex_restriction`); with ``cav_lag`` they are
+refused there (the lag states are in no pattern). The single-CAV keys ``pattern`` (other than
+"all"), ``sparsity`` (but ``max_loss``), ``baseline`` and ``as_run`` do not apply: a
+ConfigError names the key and the layout (``kind``); the platoon keys ``comm_range`` and
+``patterns`` are refused for one CAV the same way (``robust`` applies to both: see above).
+``design = "string_stable"`` and ``[synthesis.string]`` need a head vehicle: a ring refuses
+them (``synthesis.design`` / ``synthesis.string``), and on a platoon they do not combine with
+``[synthesis.robust]`` or ``cav_lag``.
 """
 
 from __future__ import annotations
@@ -187,16 +196,19 @@ class SynthesisSpec(Record):
     Attributes
     ----------
     name, system, design, semantics, weights, tol, max_iter, source
-        Every layout. ``method``: ``"riccati"`` | ``"lmi"`` | ``"direct"`` (a platoon or ring:
-        ``"riccati"`` for ``full_state``, else ``"direct"``).
+        Every layout. ``method``: ``"riccati"`` | ``"lmi"`` for ``full_state``, ``"lmi"`` |
+        ``"direct"`` otherwise (a platoon or ring: default ``"direct"``; ``sparsity``:
+        ``"direct"`` only).
     sparsity : dict
         ``[synthesis.sparsity]``: every key for one CAV, ``max_loss`` only for a platoon or
         ring.
     pattern : tuple of int or None
         One CAV: the vehicles heard besides the CAV (the paper's indexing); ``None``: all.
-    cross_check, band, baseline, as_run
-        One CAV only (the full-state cross-check, the LMI restriction's band, the baseline
-        gains, the as-run design).
+    cross_check, band
+        Every layout: the full-state cross-check (default true for one CAV, false for a
+        platoon or ring), the LMI restriction's band.
+    baseline, as_run
+        One CAV only (the baseline gains, the as-run design).
     string_gamma, polish_steps, string_margin
         ``[synthesis.string]`` of the string-aware design (one CAV or an open platoon).
     cav_lag : float
@@ -294,6 +306,10 @@ class SynthesisSpec(Record):
             "weights": {k: v for k, v in asdict(self.weights).items()
                         if k not in ("position", "q_p")},  # fmt: skip
         }
+        if self.cross_check:  # a platoon's default: no cross-check
+            t["cross_check"] = True
+        if self.band != 4:
+            t["band"] = self.band
         if self.comm_range is not None:
             t["comm_range"] = self.comm_range
         if self.patterns is not None:
@@ -440,7 +456,7 @@ def synthesis_spec(
         method = T.get(t, "method", "synthesis", default="riccati", choices=("riccati", "lmi"))
     else:
         method = T.get(t, "method", "synthesis", default="lmi", choices=("lmi", "direct"))
-    cross_check = T.get(t, "cross_check", "synthesis") and robust is None
+    cross_check = T.get(t, "cross_check", "synthesis", default=True) and robust is None
     tol = T.get(t, "tol", "synthesis")
     max_iter = T.get(t, "max_iter", "synthesis")
     band = T.get(t, "band", "synthesis")
@@ -528,7 +544,7 @@ def synthesis_spec(
 #: The designs a platoon or ring accepts.
 PLATOON_DESIGNS = ("full_state", "structured", "sparsity", "string_stable")
 
-_NOT_FOR_PLATOONS = ("cross_check", "band", "baseline", "as_run")
+_NOT_FOR_PLATOONS = ("baseline", "as_run")
 
 
 def comm_range_pattern(platoon: Platoon, R: int) -> dict[int, tuple[int, ...]]:
@@ -644,7 +660,8 @@ def _single_cav_only(field: str, what: str, system: System) -> ConfigError:
     open platoon of one CAV is told the ``kind = "lcc"`` string that it is."""
     designs = [d for d in PLATOON_DESIGNS if not (system.ring and d == "string_stable")]
     msg = (f"{what} is a single-CAV feature, not available for kind = {system.kind!r} (its "
-           f"designs: {', '.join(designs)}; method riccati / direct)")  # fmt: skip
+           f"designs: {', '.join(designs)}; method riccati / lmi for full_state, lmi / direct "
+           "for structured)")  # fmt: skip
     cavs = tuple(system.platoon.cavs)
     if not system.ring and len(cavs) == 1:
         msg += (f"; this platoon's one CAV is the string kind = \"lcc\", m = {cavs[0] - 1}, "
@@ -667,10 +684,12 @@ def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> Synt
                           "'ring' has none (no head-to-tail transfer function); use kind = "
                           "'platoon'")  # fmt: skip
     semantics = T.get(t, "semantics", "synthesis", default="replace")
-    if t.get("method") == "lmi":
-        raise _single_cav_only("synthesis.method", "method = 'lmi'", system)
-    T.get(t, "method", "synthesis", default="riccati" if design == "full_state" else "direct",
-          choices=("riccati",) if design == "full_state" else ("direct",))  # fmt: skip
+    choices = {"full_state": ("riccati", "lmi"), "structured": ("lmi", "direct"),
+               "string_stable": ("lmi", "direct")}  # as for one CAV (string_stable: unused)
+    method = T.get(t, "method", "synthesis", default="riccati" if design == "full_state"
+                   else "direct", choices=choices.get(design, ("direct",)))  # fmt: skip
+    cross_check = T.get(t, "cross_check", "synthesis", default=False)
+    band = T.get(t, "band", "synthesis")
     if not system.platoon.cavs:
         raise ConfigError("system.cavs", "synthesis needs at least one CAV")
     patterns, R = _patterns(t, system.platoon)
@@ -720,9 +739,14 @@ def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> Synt
                           "actuator lag (its LMI and polish are of the lag-free loop): use "
                           "0, or design = 'structured' (its report checks the lagged "
                           "string)")  # fmt: skip
-    method = "riccati" if design == "full_state" else "direct"
+    if cav_lag > 0 and (method == "lmi" or cross_check):  # the a_i: in no pattern, no X
+        key = "method" if method == "lmi" else "cross_check"
+        raise ConfigError(f"synthesis.{key}", "the LMI designs of a platoon or ring have no "
+                          "actuator lag: use method = 'riccati' / 'direct' without "
+                          "cross_check, or cav_lag = 0")  # fmt: skip
     return SynthesisSpec(name=name, system=system, design=design, semantics=semantics,
-                         weights=weights, method=method, tol=tol, max_iter=max_iter,
+                         weights=weights, method=method, cross_check=cross_check, band=band,
+                         tol=tol, max_iter=max_iter,
                          sparsity={"max_loss": max_loss}, source=src, patterns=patterns,
                          comm_range=R, robust=robust, cav_lag=cav_lag,
                          string_gamma=string["gamma"], polish_steps=string["polish_steps"],

@@ -16,8 +16,14 @@ and wall time):
   "full_state"`` returns it, checked against the Lyapunov evaluation of the same gain (with
   ``cav_lag``: the bound of a gain that feeds back the ``a_i``, and ``full_state`` is the
   start and polish below over every vehicle: :mod:`~lcc_synth.synthesis.lag_design`);
+* ``lmi`` -- ``full_state`` with ``method = "lmi"`` or ``cross_check``: the LMI on the reduced
+  plant, checked against Riccati (:func:`lmi_cross_check`; ``"lmi"`` returns its gain);
+* ``convex restriction`` -- ``structured`` with ``method = "lmi"``: a gain with the patterns and
+  its bound (:func:`~lcc_synth.synthesis.lmi.convex_restriction`);
 * ``start`` -- a stabilising gain with the patterns (truncated Riccati modulo ``c``, or the
-  penalty continuation: :func:`~lcc_synth.synthesis.structured.initial_gain`);
+  penalty continuation: :func:`~lcc_synth.synthesis.structured.initial_gain`; with ``"lmi"``
+  the restriction's gain when its true H2 is lower: :func:`~lcc_synth.synthesis.structured.
+  structured_start`);
 * ``polish`` -- Newton / BFGS descent on the true H2 with the patterns' mask;
 * ``sparsity`` -- ``design = "sparsity"``: the greedy per-CAV range front
   (:func:`~lcc_synth.synthesis.sparsity.range_pareto`) and its chosen point;
@@ -41,10 +47,10 @@ from lcc_synth.resources import format_bytes, progress, require_memory
 from lcc_synth.synthesis.config import SynthesisSpec, robust_members
 from lcc_synth.synthesis.h2 import (
     H2Plant,
+    LMIResult,
     PlatoonPlant,
     SynthesisError,
     h2_norm,
-    lmi_full_state,
     make_plant,
     make_platoon_plant,
     pattern_rows,
@@ -55,6 +61,7 @@ from lcc_synth.synthesis.h2 import (
     single_thread_blas,
 )
 from lcc_synth.synthesis.lag_design import lag_note
+from lcc_synth.synthesis.lmi import lmi_full_state, true_h2
 from lcc_synth.synthesis.report import (
     UNSET,
     SynthesisReport,
@@ -69,17 +76,18 @@ from lcc_synth.synthesis.structured import (
     ROBUST_TEMPERATURES,
     descend,
     h2_objective,
-    initial_gain,
     pattern_mask,
     pattern_vehicles,
     robust_objective,
     structured_h2,
+    structured_start,
 )
 
 __all__ = [
     "synthesize",
     "baseline_check",
     "design_gain_of",
+    "lmi_cross_check",
     "member_stats",
     "robust_design",
 ]
@@ -110,9 +118,11 @@ def check_size(spec: SynthesisSpec, nx: int) -> None:
     if not _uses_lmi(spec):
         return
     platoon = spec.system.platoon
-    if platoon is not None:  # an open platoon's string_stable design (size vehicles)
-        count, key, what, fix = (platoon.size, "system.size", "size",
-                                 "design = 'structured'")  # fmt: skip
+    if platoon is not None:  # a platoon or ring: size vehicles
+        count, key, what = platoon.size, "system.size", "size"
+        fix = {"string_stable": "design = 'structured'",
+               "full_state": "[synthesis] method = 'riccati'"}.get(
+                   spec.design, "[synthesis] method = 'direct'")  # fmt: skip
     else:
         count, key, what = spec.system.m + spec.system.n, "system.n", "m + n"
         fix = "[synthesis] method = 'direct'"
@@ -134,6 +144,39 @@ def check_size(spec: SynthesisSpec, nx: int) -> None:
 
 #: relative H2 disagreement between the LMI and Riccati designs that counts as a failure
 CROSS_CHECK_TOL = 1e-5
+
+
+def lmi_cross_check(
+    plant: H2Plant | PlatoonPlant, K_ric: np.ndarray, h2_star: float
+) -> tuple[LMIResult, dict, float]:
+    """The full-state LMI (:func:`~lcc_synth.synthesis.lmi.lmi_full_state`) checked against the
+    Riccati optimum ``K_ric`` of value ``h2_star``: one CAV or a platoon / ring (its reduced
+    plant); returns the LMI, the report's solver figures and the true H2 of the LMI's gain.
+
+    Raises
+    ------
+    SynthesisError
+        The true H2 of the LMI's gain and ``h2_star`` differ by more than
+        ``CROSS_CHECK_TOL`` (relative), or the solve fails.
+    """
+    progress("synthesis: LMI solve (Clarabel)")
+    lmi = lmi_full_state(plant)
+    h_lmi = true_h2(plant, lmi.g)
+    rel = abs(h_lmi - h2_star) / h2_star
+    solver = {
+        "status": lmi.status,
+        "solve_time": lmi.solve_time,
+        "residual": lmi.residual,
+        "riccati_vs_lmi_h2_rel": rel,
+        "riccati_vs_lmi_gain_max": float(np.max(np.abs(lmi.g - K_ric))),
+    }
+    if not rel <= CROSS_CHECK_TOL:
+        raise SynthesisError(
+            f"full-state LMI and Riccati disagree: H2 {h_lmi:.8g} vs {h2_star:.8g} "
+            f"(relative {rel:.2e} > {CROSS_CHECK_TOL:g}; status {lmi.status})",
+            solver,
+        )
+    return lmi, solver, h_lmi
 
 
 def design_gain_of(plant: H2Plant, gains) -> np.ndarray:
@@ -232,26 +275,9 @@ def synthesize(spec: SynthesisSpec) -> SynthesisReport:
         mask = np.ones(plant.nx, bool)
         g = g_ric
         if spec.method == "lmi" or spec.cross_check:
-            progress("synthesis: LMI solve (Clarabel)")
-            lmi = lmi_full_state(plant)
+            lmi, solver, restr = lmi_cross_check(plant, g_ric, h2_star)
             timings["lmi"] = lmi.solve_time
-            h_lmi = h2_norm(plant, lmi.g)
-            rel = abs(h_lmi - h2_star) / h2_star
-            solver = {
-                "status": lmi.status,
-                "solve_time": lmi.solve_time,
-                "residual": lmi.residual,
-                "riccati_vs_lmi_h2_rel": rel,
-                "riccati_vs_lmi_gain_max": float(np.max(np.abs(lmi.g - g_ric))),
-            }
             bound = lmi.bound
-            restr = h_lmi
-            if not rel <= CROSS_CHECK_TOL:
-                raise SynthesisError(
-                    f"full-state LMI and Riccati disagree: H2 {h_lmi:.8g} vs {h2_star:.8g} "
-                    f"(relative {rel:.2e} > {CROSS_CHECK_TOL:g}; status {lmi.status})",
-                    solver,
-                )
             if spec.method == "lmi":
                 g = lmi.g
     elif spec.design == "structured":
@@ -496,6 +522,7 @@ def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
     t_start = time.perf_counter()
     model = spec.system.linear_model(warn=False)
     plant = make_platoon_plant(model, spec.semantics, spec.weights, spec.cav_lag)
+    check_size(spec, plant.Ar.shape[0])
     progress(f"synthesis: {spec.design} design, {plant.nx} states ({spec.system.kind}, CAVs "
              f"{list(model.cavs)})")  # fmt: skip
     timings: dict[str, float] = {}
@@ -519,9 +546,8 @@ def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
     mask = pattern_rows(plant, spec.patterns)
     pol: dict = {}
     pareto = None
-    lmi_info: dict = {}  # design = "string_stable": the LMI's figures for the report
+    lmi_info: dict = {}  # the LMI's figures for the report (string_stable, method lmi)
     if spec.design == "string_stable":
-        check_size(spec, plant.nx)
         K, pol, lmi_info = _string_stage(spec, plant, mask, stages, timings)
     elif spec.design == "sparsity":
         t0 = time.perf_counter()
@@ -533,7 +559,8 @@ def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
         notes.append(f"chosen ranges: fewest heard vehicles with H2 within "
                      f"{100 * spec.max_loss:g}% of the full-information optimum (greedy "
                      "per-CAV range front)")  # fmt: skip
-    elif mask.all():  # full information (never with a lag: no pattern holds the a_i)
+    elif mask.all() and (spec.design == "full_state" or spec.method != "lmi"):
+        # full information (never with a lag: no pattern holds the a_i)
         K = K_ric
         h_lyap = platoon_h2(plant, K)
         rel = abs(h_lyap - h2_star) / h2_star
@@ -541,10 +568,25 @@ def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
         if not rel <= RICCATI_CHECK_TOL:
             raise SynthesisError(f"Riccati value {h2_star:.10g} and the Lyapunov H2 of its gain "
                                  f"{h_lyap:.10g} disagree (relative {rel:.2e})", pol)
+        if spec.design == "full_state" and (spec.method == "lmi" or spec.cross_check):
+            lmi, solver, h_lmi = lmi_cross_check(plant, K_ric, h2_star)
+            timings["lmi"] = lmi.solve_time
+            stages.append({"stage": "lmi", "h2": h_lmi, "time": lmi.solve_time})
+            lmi_info = {"bound": lmi.bound, "restriction": h_lmi, "solver": solver}
+            if spec.method == "lmi":
+                K = lmi.g
     else:
         t0 = time.perf_counter()
-        K0, how = initial_gain(plant, mask, K_ric)
+        how = "lmi" if spec.method == "lmi" else "direct"  # full_state with a lag: direct
+        K0, how, lmi = structured_start(plant, mask, K_ric, how, spec.band)
         timings["start"] = time.perf_counter() - t0
+        if lmi is not None:
+            h_lmi = platoon_h2(plant, lmi.g)
+            timings["lmi"] = lmi.solve_time
+            stages.append({"stage": "convex restriction", "h2": h_lmi, "time": lmi.solve_time})
+            lmi_info = {"bound": lmi.bound, "restriction": h_lmi,
+                        "solver": {"status": lmi.status, "solve_time": lmi.solve_time,
+                                   "residual": lmi.residual, **lmi.info}}  # fmt: skip
         stages.append({"stage": f"start ({how})", "h2": platoon_h2(plant, K0),
                        "time": timings["start"]})  # fmt: skip
         t0 = time.perf_counter()

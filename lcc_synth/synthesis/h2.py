@@ -1,9 +1,10 @@
 """H2 synthesis set-up for every layout: plant, weights, true H2 norm, Riccati and LMI designs.
 
-One CAV (:func:`make_plant`, a gain row ``g``; the LMI designs) and a platoon or ring
+One CAV (:func:`make_plant`, a gain row ``g``) and a platoon or ring
 (:func:`make_platoon_plant`, a gain row per CAV; the ring on its invariant hyperplane ``V``)
-share the weights, the disturbances and the checks; both plants are the same for one CAV (a
-test matches them to 1e-9).
+share the weights, the disturbances, the checks and the LMI designs
+(:mod:`~lcc_synth.synthesis.lmi`); both plants are the same for one CAV (a test matches them
+to 1e-9).
 
 The design plant
 ----------------
@@ -116,7 +117,6 @@ __all__ = [
     "h2_norm",
     "riccati_gain",
     "LMIResult",
-    "lmi_full_state",
     "STABILITY_TOL",
     "single_thread_blas",
     "PlatoonPlant",
@@ -589,31 +589,6 @@ def solve_checked(prob, what: str, hint: str = "") -> tuple[str, float, float]:
     for var, val in zip(prob.variables(), values, strict=True):
         var.save_value(val)
     return status, dt, float(value)
-
-
-def lmi_full_state(plant: H2Plant, eps: float = 1e-7) -> LMIResult:
-    """Full-state H2 synthesis by the standard LMI (Clarabel).
-
-    ``min tr(Q X) + R W`` over ``X > 0, Z, W`` with
-    ``A X + X A' + B Z + Z' B' + B_w B_w' <= 0`` and ``[[W, Z], [Z', X]] >= 0``; then
-    ``g = Z X^-1`` and ``J(g) <= tr(Q X) + R W``. The returned bound is its square root.
-    """
-    import cvxpy as cp
-
-    nx = plant.nx
-    X = cp.Variable((nx, nx), symmetric=True)
-    Z = cp.Variable((1, nx))
-    W = cp.Variable((1, 1), symmetric=True)
-    M = plant.A @ X + X @ plant.A.T + plant.B @ Z + Z.T @ plant.B.T + plant.Bw @ plant.Bw.T
-    cons = [X >> eps * np.eye(nx), -(M + M.T) / 2 >> 0, cp.bmat([[W, Z], [Z.T, X]]) >> 0]
-    obj = cp.Minimize(cp.trace(plant.Q @ X) + plant.r * W[0, 0])
-    prob = cp.Problem(obj, cons)
-    status, dt, value = solve_checked(prob, "full-state H2 LMI")
-    Xv, Zv = X.value, Z.value
-    g = np.linalg.solve(Xv.T, Zv.T).T.ravel()
-    Mv = plant.A @ Xv + Xv @ plant.A.T + plant.B @ Zv + Zv.T @ plant.B.T + plant.Bw @ plant.Bw.T
-    residual = float(max(np.max(np.linalg.eigvalsh((Mv + Mv.T) / 2)), 0.0))
-    return LMIResult(g, math.sqrt(max(value, 0.0)), status, dt, residual)
 
 
 @dataclass(frozen=True, eq=False)

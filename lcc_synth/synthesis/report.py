@@ -227,10 +227,12 @@ class SynthesisReport(Record):
         number per CAV.
     check : GainCheck
         The checks of the gain (:func:`check_gain`, :func:`check_platoon_gain`).
-    h2_lmi_bound, h2_restriction, solver, baseline, as_run
-        One CAV: the LMI bound and the LMI gain's true H2, the solver's figures, the baseline
-        gains' checks, the as-run design's information (an open platoon's ``string_stable``
-        design sets the first three too).
+    h2_lmi_bound, h2_restriction, solver
+        The LMI bound, the LMI gain's true H2 and the solver's figures: one CAV, and a
+        platoon / ring whose design solved an LMI (``method = "lmi"``, ``cross_check``, an
+        open platoon's ``string_stable``).
+    baseline, as_run
+        One CAV: the baseline gains' checks, the as-run design's information.
     conserved, stages
         Platoon / ring: the ring's conserved direction ``c``, each stage's true H2 and time.
     robust

@@ -7,8 +7,9 @@ multi-model objective).
 Two stages, both keeping the pattern exactly (forbidden entries are structural zeros, never
 small numbers):
 
-1. :func:`convex_restriction` -- sparsity invariance. With ``X = blkdiag(X_P, X_N)`` (a full
-   block on the states of the heard vehicles, a banded PSD block on the others) and ``Z`` zero
+1. :func:`~lcc_synth.synthesis.lmi.convex_restriction` -- sparsity invariance. With
+   ``X = blkdiag(X_P, X_N)`` (a full block on the states of the heard vehicles, a banded PSD
+   block on the others) and ``Z`` zero
    outside the heard states, ``g = Z X^-1`` has the pattern. The zeros are built into the
    variables (cvxpy variables only exist for the free entries), and the Lyapunov LMI, whose
    sparsity is then banded, is split by chordal decomposition into small PSD cones over the
@@ -32,9 +33,10 @@ small numbers):
 
 Always rank results by :func:`~lcc_synth.synthesis.h2.h2_norm` of the gain, never by the bound.
 
-Platoons and rings -- structured multi-input H2: a cheap stabilising start, then descent on
-the TRUE H2 norm with every CAV's row pattern kept exactly (robust multi-model objectives
-included).
+Platoons and rings -- structured multi-input H2: a cheap stabilising start (with ``method =
+"lmi"`` also the convex restriction above, a block of ``X`` per set of states heard by the
+same CAVs: :func:`structured_start`), then descent on the TRUE H2 norm with every CAV's row
+pattern kept exactly (robust multi-model objectives included).
 
 Polishing method
 ----------------
@@ -92,13 +94,15 @@ from lcc_synth.synthesis.h2 import (
     platoon_riccati,
     riccati_gain,
     single_thread_blas,
-    solve_checked,
+)
+from lcc_synth.synthesis.lmi import (  # noqa: F401 (convex_restriction: its old home)
+    convex_restriction,
+    restriction_start,
 )
 
 __all__ = [
     "pattern_mask",
     "pattern_vehicles",
-    "convex_restriction",
     "PolishResult",
     "NEWTON_MAX_FREE",
     "h2_hessian",
@@ -111,6 +115,7 @@ __all__ = [
     "DescentResult",
     "descend",
     "initial_gain",
+    "structured_start",
     "ROBUST_TEMPERATURES",
 ]
 
@@ -131,171 +136,6 @@ def pattern_mask(plant: H2Plant, vehicles: Iterable[int]) -> np.ndarray:
 def pattern_vehicles(plant: H2Plant, mask: np.ndarray) -> list[int]:
     """Vehicles whose states the mask allows (the CAV included)."""
     return sorted(set(int(v) for v in plant.vehicle_of_state()[np.asarray(mask, bool)]))
-
-
-# --------------------------------------------------------------------------------------------
-# Convex restriction (sparsity invariance + chordal decomposition)
-# --------------------------------------------------------------------------------------------
-
-
-def _x_blocks(plant: H2Plant, mask: np.ndarray) -> list[np.ndarray]:
-    """Index sets of the diagonal blocks of X: the heard states, then each other vehicle."""
-    veh = plant.vehicle_of_state()
-    blocks = [np.flatnonzero(mask)]
-    for v in dict.fromkeys(veh[~mask]):
-        blocks.append(np.flatnonzero((veh == v) & ~mask))
-    return blocks
-
-
-def _cliques(adj: np.ndarray) -> list[np.ndarray]:
-    """Maximal cliques of a chordal extension of the graph ``adj`` (natural elimination order).
-
-    The LCC string's graph is banded (plus a dense block on the heard vehicles), so the
-    natural order produces little fill-in.
-    """
-    n = adj.shape[0]
-    adj = adj.copy()
-    cand = []
-    for k in range(n):
-        later = np.flatnonzero(adj[k, k + 1 :]) + k + 1
-        if later.size:
-            adj[np.ix_(later, later)] = True  # fill-in makes the later neighbours a clique
-        cand.append(np.concatenate([[k], later]))
-    sets = [frozenset(c.tolist()) for c in cand]
-    out = []
-    for i, s in enumerate(sets):
-        if not any(i != j and s < t for j, t in enumerate(sets)) and s not in [
-            frozenset(o.tolist()) for o in out
-        ]:
-            out.append(np.array(sorted(s)))
-    return out
-
-
-def _windows(blocks: list[np.ndarray], band: int) -> list[np.ndarray]:
-    """Index sets of the PSD terms of ``X_N``: windows of ``band + 1`` consecutive vehicles."""
-    if band <= 0 or len(blocks) <= 1:
-        return list(blocks)
-    k = min(band + 1, len(blocks))
-    return [np.concatenate(blocks[i : i + k]) for i in range(len(blocks) - k + 1)]
-
-
-def convex_restriction(
-    plant: H2Plant, mask: np.ndarray, eps: float = 1e-7, chordal: bool = True, band: int = 4
-) -> LMIResult:
-    """Feasible structured gain and an upper bound on its H2 norm (sparsity invariance).
-
-    ``X = blkdiag(X_P, X_N)`` over the heard states P and the others N, ``Z`` zero on N, so
-    ``g = Z X^-1 = [Z_P X_P^-1, 0]`` has the pattern for ANY ``X_N``. ``X_N`` is parametrised
-    as ``eps I + sum_k F_k' T_k F_k`` with ``T_k >= 0`` on windows of ``band + 1`` consecutive
-    vehicles: every PSD matrix with that band (chordal) sparsity has this form, so ``X_N`` is a
-    banded PSD matrix with its zeros built in (``band = 0``: 2x2 blocks per vehicle). A wider
-    band tightens the bound (a full ``X_N`` is the least conservative) at the price of larger
-    cliques in the Lyapunov LMI.
-
-    Parameters
-    ----------
-    plant : H2Plant
-    mask : numpy.ndarray
-        Boolean mask of allowed gain entries (see :func:`pattern_mask`).
-    eps : float
-        Lower bound on the eigenvalues of X.
-    chordal : bool
-        Decompose the Lyapunov LMI over the cliques of its sparsity graph (default). ``False``
-        imposes it as one dense PSD constraint (for cross-checks; much slower for long strings).
-    band : int
-        Coupling range of ``X_N`` in vehicles (>= 0).
-
-    Raises
-    ------
-    SynthesisError
-        Infeasible restriction (no gain of this pattern is certified by such an X) or solver
-        failure.
-    """
-    import cvxpy as cp
-    import scipy.sparse as sp
-
-    nx = plant.nx
-    mask = np.asarray(mask, bool)
-    blocks = _x_blocks(plant, mask)
-    P_idx = blocks[0]
-    N_idx = np.flatnonzero(~mask)
-    windows = _windows(blocks[1:], int(band))
-
-    def sel(idx):
-        return sp.csr_matrix((np.ones(len(idx)), (np.arange(len(idx)), idx)), shape=(len(idx), nx))
-
-    XP = cp.Variable((len(P_idx), len(P_idx)), symmetric=True)
-    T = [cp.Variable((len(w), len(w)), symmetric=True) for w in windows]
-    z = cp.Variable((1, len(P_idx)))
-    cons = [XP >> eps * np.eye(len(P_idx))] + [t >> 0 for t in T]
-    EP = sel(P_idx)
-    X = EP.T @ XP @ EP + sum(sel(w).T @ t @ sel(w) for w, t in zip(windows, T, strict=True))
-    X_const = np.zeros((nx, nx))
-    X_const[N_idx, N_idx] = eps
-    X = X + X_const
-    Z = z @ EP
-    A, B, Bw = plant.A, plant.B, plant.Bw
-    AX = A @ X
-    BZ = B @ Z
-    M = AX + AX.T + BZ + BZ.T + Bw @ Bw.T
-    # sparsity graph of M
-    xpat = np.zeros((nx, nx), bool)
-    for b in [P_idx, *windows]:
-        xpat[np.ix_(b, b)] = True
-    zpat = np.zeros((nx, nx), bool)
-    zpat[np.ix_(np.flatnonzero(B.ravel() != 0), P_idx)] = True
-    apat = (np.abs(A) > 0).astype(int) @ xpat.astype(int) > 0
-    pat = apat | apat.T | zpat | zpat.T | (np.abs(Bw @ Bw.T) > 0) | np.eye(nx, dtype=bool)
-    if chordal:
-        cl = _cliques(pat)
-        S = [cp.Variable((len(c), len(c)), symmetric=True) for c in cl]
-        cons += [s >> 0 for s in S]
-        Ssum = sum(sel(c).T @ s @ sel(c) for c, s in zip(cl, S, strict=True))
-        cover = np.zeros((nx, nx), bool)
-        for c in cl:
-            cover[np.ix_(c, c)] = True
-        rows, cols = np.nonzero(np.tril(cover))
-        flat = rows * nx + cols  # row-major index into the nx*nx matrix
-        MS = M + Ssum
-        cons.append(cp.reshape(MS, (nx * nx,), order="C")[flat] == 0)
-        cones = [len(c) for c in cl]
-    else:
-        cons.append(-(M + M.T) / 2 >> 0)
-        cones = [nx]
-    W = cp.Variable((1, 1), symmetric=True)
-    cons.append(cp.bmat([[W, z], [z.T, XP]]) >> 0)
-    obj = cp.Minimize(
-        cp.trace(plant.Q[np.ix_(P_idx, P_idx)] @ XP)
-        + sum(cp.trace(plant.Q[np.ix_(w, w)] @ t) for w, t in zip(windows, T, strict=True))
-        + float(np.trace(plant.Q @ X_const))
-        + plant.r * W[0, 0]
-    )
-    prob = cp.Problem(obj, cons)
-    status, dt, value = solve_checked(
-        prob,
-        "structured H2 convex restriction",
-        "; the restriction certifies no gain of this pattern (use method = 'direct' to "
-        "polish from the truncated Riccati gain)",
-    )
-    Xv = X_const.copy()
-    Xv[np.ix_(P_idx, P_idx)] += XP.value
-    for w, t in zip(windows, T, strict=True):
-        Xv[np.ix_(w, w)] += t.value
-    g = np.zeros(nx)
-    g[P_idx] = np.linalg.solve(XP.value.T, z.value.T).ravel()
-    Zv = np.zeros((1, nx))
-    Zv[0, P_idx] = z.value
-    Mv = A @ Xv + Xv @ A.T + B @ Zv + Zv.T @ B.T + Bw @ Bw.T
-    residual = float(max(np.max(np.linalg.eigvalsh((Mv + Mv.T) / 2)), 0.0))
-    cones += [len(P_idx), *(len(w) for w in windows), len(P_idx) + 1]
-    return LMIResult(
-        g,
-        math.sqrt(max(value, 0.0)),
-        status,
-        dt,
-        residual,
-        {"n_psd_cones": len(cones), "largest_cone": max(cones), "band": int(band)},
-    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -555,15 +395,8 @@ def structured_h2(
     if method == "lmi":
         t0 = time.perf_counter()
         progress(f"synthesis: LMI solve (convex restriction, {plant.nx} states, Clarabel)")
-        lmi = convex_restriction(plant, mask, band=band)
+        lmi, J_lmi = restriction_start(plant, mask, band)
         timings["lmi"] = time.perf_counter() - t0
-        J_lmi, _, _ = h2_cost(plant, lmi.g)
-        if not math.isfinite(J_lmi):
-            raise SynthesisError(
-                "the convex restriction returned a gain that does not stabilise the plant "
-                f"(solver status {lmi.status}, residual {lmi.residual:.2e})",
-                {"status": lmi.status, "residual": lmi.residual},
-            )
         starts.append((J_lmi, lmi.g, "convex_restriction"))
     elif method != "direct":
         raise ConfigError("synthesis.method", f"must be 'lmi' or 'direct', got {method!r}")
@@ -796,6 +629,51 @@ def _shift_modulo_c(plant: PlatoonPlant, K: np.ndarray, mask: np.ndarray) -> np.
         if cc > 0:
             K[k] -= (float(c[off] @ K[k, off]) / cc) * c
     return K
+
+
+def structured_start(
+    plant: PlatoonPlant,
+    mask: np.ndarray,
+    K_ric: np.ndarray | None = None,
+    method: str = "direct",
+    band: int = 4,
+) -> tuple[np.ndarray, str, LMIResult | None]:
+    """The start of a platoon's / ring's polish, as :func:`structured_h2` starts one CAV's:
+    ``method = "direct"`` :func:`initial_gain`; ``"lmi"`` also the convex restriction
+    (:func:`restriction_start`), and the start is the one of lower true H2 (the restriction's
+    when :func:`initial_gain` finds none).
+
+    Returns
+    -------
+    K0 : numpy.ndarray
+        The start (``n_cav x nx``, zero off the patterns).
+    how : str
+        ``"convex_restriction"``, ``"truncated_riccati"`` or ``"penalty_continuation"``.
+    lmi : LMIResult or None
+        The restriction (its gain, bound and solver figures); ``None`` for ``"direct"``.
+
+    Raises
+    ------
+    SynthesisError
+        The restriction fails (``"lmi"``), or no stabilising start was found.
+    """
+    mask = np.asarray(mask, bool)
+    starts = []
+    lmi = None
+    if method == "lmi":
+        progress(f"synthesis: LMI solve (convex restriction, {plant.nx} states, Clarabel)")
+        lmi, J_lmi = restriction_start(plant, mask, band)
+        starts.append((J_lmi, lmi.g, "convex_restriction"))
+    elif method != "direct":
+        raise ConfigError("synthesis.method", f"must be 'lmi' or 'direct', got {method!r}")
+    try:
+        K0, how = initial_gain(plant, mask, K_ric)
+        starts.append((platoon_cost(plant, K0).J, K0, how))
+    except SynthesisError:
+        if not starts:
+            raise
+    _, K0, how = min(starts, key=lambda s: s[0])
+    return np.where(mask, K0, 0.0), how, lmi
 
 
 def initial_gain(
