@@ -54,7 +54,9 @@ def test_synthesis_size_refused(tmp_path, capsys):
     # dense cones (string-aware design): refused with the KKT memory estimate
     p = _mutate(tmp_path, "synth_string_stable_m2n2.toml", r"^n = 2$", "n = 150")
     msg = _refused(capsys, ["synthesize", str(p), "--no-record"], "system.n")
-    assert "method = 'direct'" in msg and "GiB" in msg and "limit 100" in msg
+    # the way out named is one that solves no LMI (string_stable solves it with any method)
+    assert "design = 'structured' and method = 'direct'" in msg and "GiB" in msg
+    assert "limit 100" in msg
 
 
 def test_long_structured_design_is_accepted():
@@ -74,6 +76,33 @@ def test_long_structured_design_is_accepted():
     longer = replace(spec, system=replace(spec.system, kind="lcc", m=5))
     with pytest.raises(ConfigError, match="m \\+ n = 205 is above the limit 200.*'direct'"):
         check_size(longer, 412)
+
+
+@pytest.mark.parametrize("kind", ["lcc", "platoon"])
+def test_the_way_out_of_an_lmi_size_refusal_is_one_that_passes(kind):
+    """Every design's size refusal names settings under which the same spec is accepted."""
+    import lcc_synth as lcc
+    from lcc_synth.errors import ConfigError
+    from lcc_synth.problem import load_problem
+    from lcc_synth.synthesis.config import spec_from_problem
+    from lcc_synth.synthesis.design import check_size
+
+    spec = spec_from_problem(load_problem(PROBLEMS / "synth_cf_lcc_pattern.toml"))
+    long = (replace(spec.system, kind="lcc", m=110, n=110) if kind == "lcc"
+            else lcc.system(size=221, cavs=[111]))  # fmt: skip
+    cases = {  # design -> (the refused settings, the settings its message names)
+        "full_state": ({"method": "lmi"}, {"method": "riccati", "cross_check": False}),
+        "structured": ({"method": "lmi"}, {"method": "direct"}),
+        "string_stable": ({}, {"design": "structured", "method": "direct"}),
+    }
+    for design, (bad, good) in cases.items():
+        sp = replace(spec, system=long, design=design, cross_check=True, **bad)
+        nx = 2 * 221  # 221 vehicles: past both limits
+        with pytest.raises(ConfigError) as err:
+            check_size(sp, nx)
+        named = re.findall(r"(\w+) = '?(\w+)'?", err.value.message.split("use ")[-1])
+        assert {k: {"false": False}.get(v, v) for k, v in named} == good
+        check_size(replace(sp, **good), nx)  # no ConfigError
 
 
 def test_memory_estimate_against_available(monkeypatch):

@@ -120,12 +120,12 @@ def check_size(spec: SynthesisSpec, nx: int) -> None:
     platoon = spec.system.platoon
     if platoon is not None:  # a platoon or ring: size vehicles
         count, key, what = platoon.size, "system.size", "size"
-        fix = {"string_stable": "design = 'structured'",
-               "full_state": "[synthesis] method = 'riccati'"}.get(
-                   spec.design, "[synthesis] method = 'direct'")  # fmt: skip
     else:
         count, key, what = spec.system.m + spec.system.n, "system.n", "m + n"
-        fix = "[synthesis] method = 'direct'"
+    fix = {  # what avoids the LMI: string_stable always solves it, whatever its method
+        "string_stable": "[synthesis] design = 'structured' and method = 'direct'",
+        "full_state": "[synthesis] method = 'riccati' and cross_check = false",
+    }.get(spec.design, "[synthesis] method = 'direct'")
     chordal = spec.design == "structured"
     limit = MAX_CHORDAL_VEHICLES if chordal else MAX_LMI_VEHICLES
     svec = nx * (nx + 1) // 2
