@@ -126,6 +126,26 @@ def test_robust_string_gain_is_the_one_cav_platoons(kind, semantics, design, lag
     assert "robust (mean, 4 members" in text and ("s_-1" in text) is (m > 0)
 
 
+@pytest.mark.parametrize("design", ["structured", "full_state"])
+def test_robust_string_with_the_lmi_start_is_the_one_cav_platoons(design):
+    """``method = "lmi"`` starts the robust descent from the platoon's LMI gain (the convex
+    restriction, or the full-state LMI): the string's gain, bound and solver figures are the
+    one-CAV platoon's, bit for bit in "replace"."""
+    lmi = 'method = "lmi"'
+    spec, rep = _string("lcc", "replace", design, lmi)
+    prep = _platoon("lcc", design=design, lag=lmi)
+    assert spec.method == "lmi" and prep.solver["status"].startswith("optimal")
+    assert np.array_equal(np.asarray(rep.K, float), np.asarray(prep.K[0], float))
+    timeless = [{k: v for k, v in r.solver.items() if k != "solve_time"} for r in (rep, prep)]
+    assert rep.robust == prep.robust and timeless[0] == timeless[1]
+    assert (rep.h2_lmi_bound, rep.h2_restriction) == (prep.h2_lmi_bound, prep.h2_restriction)
+    if design == "structured":  # the restriction's bound and gain: above the optimum
+        assert rep.h2_lmi_bound >= rep.h2_restriction >= rep.h2_unstructured
+    else:  # the full-state LMI is the Riccati optimum (to the solver's accuracy)
+        assert rep.h2_restriction == pytest.approx(rep.h2_unstructured, rel=1e-6)
+        assert rep.h2_lmi_bound == pytest.approx(rep.h2_unstructured, rel=1e-6)
+
+
 def _members(m: int, n: int) -> list[list[OVM]]:
     """Each member's vehicles (front to tail, the CAV's entry at m), drawn here."""
     rng = np.random.default_rng(SEED)
@@ -213,7 +233,7 @@ LCC = 'kind = "lcc"\nm = 1\nn = 2'
     (LCC, "", ROBUST.replace("[synthesis.robust]", '[hdv]\nmodel = "idm"\n[synthesis.robust]'),
      "synthesis.robust.alpha", ("IDM", "OVM")),
     (LCC, 'design = "sparsity"', ROBUST, "synthesis.design", ("full_state", "structured")),
-    (LCC, 'method = "lmi"', ROBUST, "synthesis.method", ("direct",)),
+    (LCC, "cross_check = true", ROBUST, "synthesis.cross_check", ("drop it",)),
     (LCC, "as_run = true", ROBUST, "synthesis.as_run", ("drop it",)),
     (LCC, 'design = "structured"\nmethod = "riccati"', ROBUST, "synthesis.method",
      ("direct",)),

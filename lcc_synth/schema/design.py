@@ -61,7 +61,8 @@ SYNTHESIS = Table(
             "platoon): per-CAV heard positions "
             "[synthesis.patterns] (override comm_range).", {}),
         Key("robust", "table", "platoon, ring, and lcc / cf_lcc / ccc (full_state, "
-            "structured): one gain for sampled HDV parameter sets [synthesis.robust].", {}),
+            "structured; any method): one gain for sampled HDV parameter sets "
+            "[synthesis.robust].", {}),
     ),
 )
 

@@ -451,7 +451,7 @@ def synthesis_spec(
     if T.get(t, "robust", "synthesis"):  # the one-CAV platoon's robust design (robust_string.py)
         method = check_robust_string(t, system, design, semantics, pattern)
         robust = _robust(t, system)
-        T.get(t, "method", "synthesis", default=method, choices=(method,))
+        method = T.get(t, "method", "synthesis", default=method, choices=(method, "lmi"))
     elif design == "full_state":
         method = T.get(t, "method", "synthesis", default="riccati", choices=("riccati", "lmi"))
     else:

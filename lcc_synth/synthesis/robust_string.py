@@ -18,7 +18,7 @@ What is designed, and the semantics
 -----------------------------------
 The design works on the CAV's whole command ``u = K x`` (the platoon's ``"replace"``): its
 input weight ``r`` weighs ``u``, and the CAV's own sampled parameters, which a platoon member
-draws like every vehicle's, enter nowhere (they are the HDV law the CAV would drive with, not a
+keeps nominal, enter nowhere (they are the HDV law the CAV would drive with, not a
 human's). The reported gain is then written in the user's ``semantics``: ``"replace"`` is
 ``K`` itself; ``"added"`` is ``K`` minus the CAV's *nominal* HDV law ``a1 s_0 - a2 v_0 + a3
 v_-1`` (eq. 23), so both semantics give the same closed loop (to rounding, ~1e-16 relative:
@@ -31,9 +31,11 @@ written that way and are refused with a ConfigError naming the field:
   it, so the added gain's information is not the pattern's.
 
 ``kind = "fd_lcc"`` has no head vehicle (the CAV drives freely at the front), so it is not a
-one-CAV platoon: refused (use ``cf_lcc``). The designs are ``full_state`` (the Riccati start)
-and ``structured`` (the platoon's start and Newton polish, ``method = "direct"``); the keys of
-the LMI, sparsity, string-stable, as-run and baseline designs are refused with robust.
+one-CAV platoon: refused (use ``cf_lcc``). The designs are ``full_state`` (the Riccati start,
+or ``method = "lmi"``: the full-state LMI's) and ``structured`` (the platoon's start and Newton
+polish, ``method = "direct"``, or ``"lmi"``: the convex restriction's start, ``band`` as on the
+platoon); the keys of the sparsity, string-stable, as-run and baseline designs and the
+full-state ``cross_check`` are refused with robust.
 ``cav_lag`` runs as on the platoon (every member lagged,
 :mod:`~lcc_synth.synthesis.lag_design`); the check is then of the string's lagged loop.
 
@@ -62,7 +64,7 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.models.platoon import Platoon
 from lcc_synth.problem import System
 from lcc_synth.synthesis.h2 import SynthesisError, make_plant
-from lcc_synth.synthesis.report import SynthesisReport, check_gain
+from lcc_synth.synthesis.report import UNSET, SynthesisReport, check_gain
 
 __all__ = ["ROBUST_STRING_DESIGNS", "string_platoon", "check_robust_string",
            "robust_string_design"]  # fmt: skip
@@ -71,7 +73,7 @@ __all__ = ["ROBUST_STRING_DESIGNS", "string_platoon", "check_robust_string",
 ROBUST_STRING_DESIGNS = ("full_state", "structured")
 
 #: ``[synthesis]`` keys of one-CAV designs that do not combine with ``[synthesis.robust]``.
-_NOT_WITH_ROBUST = ("cross_check", "band", "string", "sparsity", "as_run", "baseline")
+_NOT_WITH_ROBUST = ("cross_check", "string", "sparsity", "as_run", "baseline")
 
 
 def string_platoon(system: System) -> System:
@@ -98,14 +100,14 @@ def check_robust_string(
     pattern: tuple[int, ...] | None,
 ) -> str:
     """Refuse what ``[synthesis.robust]`` cannot do on the one-CAV string ``system`` (the
-    module docstring) and return the design's ``method`` (``"riccati"`` for ``full_state``,
-    else ``"direct"``).
+    module docstring) and return the design's default ``method`` (``"riccati"`` for
+    ``full_state``, else ``"direct"``; ``"lmi"`` may be asked: the platoon's LMI start).
 
     Raises
     ------
     ConfigError
-        Naming the field: the kind, the design, a key of another design, ``method = "lmi"``,
-        or ``semantics = "added"`` where its HDV law cannot be subtracted.
+        Naming the field: the kind, the design, a key of another design, or ``semantics =
+        "added"`` where its HDV law cannot be subtracted.
     """
     string_platoon(system)  # the kind first
     what = "[synthesis.robust] on a one-CAV string"
@@ -116,10 +118,6 @@ def check_robust_string(
         if key in t:
             raise ConfigError(f"synthesis.{key}", f"does not combine with {what} (its designs: "
                               "full_state, structured; method riccati / direct): drop it")
-    if t.get("method") == "lmi":
-        raise ConfigError("synthesis.method", f"{what} descends on the true H2 from the Riccati "
-                          "or direct start: use method = 'direct' (structured) or 'riccati' "
-                          "(full_state), or leave it out")  # fmt: skip
     if semantics == "added" and system.m == 0:
         raise ConfigError("synthesis.semantics", f"{what} designs the CAV's whole command; with "
                           "no HDV ahead (m = 0) the HDV law of 'added' feeds the head velocity "
@@ -181,6 +179,8 @@ def robust_string_design(
         notes.append("vehicles ahead are uncontrollable but stable: their gains act as "
                      "feed-forward")  # fmt: skip
     notes += prep.notes
+    lmi = {k: (None if getattr(prep, k) is UNSET else getattr(prep, k))  # method = "lmi" only
+           for k in ("h2_lmi_bound", "h2_restriction", "solver")}  # fmt: skip
     timings = {k: v for k, v in prep.timings.items() if k != "total"}
     timings["total"] = time.perf_counter() - t_start
     return SynthesisReport(
@@ -188,8 +188,9 @@ def robust_string_design(
         v_star=system.v_star, semantics=spec.semantics, weights=plant.weights.as_dict(),
         disturbances=list(whole.w_names), pattern=heard, state_names=list(model.state_names),
         K=[gains.gains[nm] for nm in model.state_names], gains=dict(gains.gains),
-        input_K=list(K_in), input_kh=kh_in, check=chk, h2_lmi_bound=None,
-        h2_restriction=None, h2_unstructured=prep.h2_unstructured, solver={},
+        input_K=list(K_in), input_kh=kh_in, check=chk, h2_lmi_bound=lmi["h2_lmi_bound"],
+        h2_restriction=lmi["h2_restriction"], h2_unstructured=prep.h2_unstructured,
+        solver=lmi["solver"] or {},
         polish=prep.polish, baseline=None, robust=prep.robust, pareto=None, timings=timings,
         notes=notes, as_run=None, gain=gains,
     )  # fmt: skip
