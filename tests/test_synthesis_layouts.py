@@ -291,3 +291,78 @@ def test_robust_design_on_one_cav_is_read_for_its_one_cav_platoon():
         spec_from_problem(_problem("one_cav_string", "structured", "comm_range = 1"))
     assert err.value.field == "synthesis.comm_range"
     assert "kind = 'cf_lcc'" in err.value.message
+
+
+# --------------------------------------------------------------------------------------------
+# The feature matrix of lcc_synth.synthesis, cell by cell
+# --------------------------------------------------------------------------------------------
+
+_MATRIX_ROBUST = "[synthesis.robust]\nsamples = 2\nalpha = [0.5, 0.7]\n"
+#: the matrix's option -> (design, the [synthesis] lines that ask for it)
+_MATRIX_ROWS = {
+    'design = "full_state"': ("full_state", ""),
+    'design = "structured"': ("structured", ""),
+    'design = "sparsity"': ("sparsity", ""),
+    'design = "string_stable"': ("string_stable", ""),
+    'method = "lmi"': ("structured", 'method = "lmi"'),
+    "cross_check = true": ("full_state", "cross_check = true"),
+    "band": ("structured", 'method = "lmi"\nband = 3'),
+    "[synthesis.robust]": ("structured", _MATRIX_ROBUST),
+    'robust, method = "lmi"': ("structured", 'method = "lmi"\n' + _MATRIX_ROBUST),
+    "robust, sparsity": ("sparsity", _MATRIX_ROBUST),
+    "robust, string_stable": ("string_stable", _MATRIX_ROBUST),
+    "cav_lag": ("structured", "cav_lag = 0.3"),
+    "cav_lag, full_state": ("full_state", "cav_lag = 0.3"),
+    "cav_lag, sparsity": ("sparsity", "cav_lag = 0.3"),
+    'cav_lag, method = "lmi"': ("structured", 'cav_lag = 0.3\nmethod = "lmi"'),
+    "cav_lag, string_stable": ("string_stable", "cav_lag = 0.3"),
+    "cav_lag, robust": ("structured", "cav_lag = 0.3\n" + _MATRIX_ROBUST),
+    "[synthesis.as_run]": ("structured", "as_run = true"),
+    "[synthesis.baseline]": ("structured", "[synthesis.baseline]\ngains = { s_1 = 0.1 }"),
+    "pattern = [...]": ("structured", "pattern = [1]"),
+    "comm_range": ("structured", "comm_range = 1"),
+}
+
+
+def _matrix() -> dict[str, dict[str, str]]:
+    """The table of the package docstring: option -> {layout: cell}."""
+    import re
+
+    import lcc_synth.synthesis as syn
+
+    lines = syn.__doc__.split("Feature matrix")[1].split("::\n\n")[1].split("\n\n")[0]
+    head, *rows = lines.splitlines()
+    cols = re.split(r"\s{2,}", head.strip())[1:]
+    assert cols == ["one CAV", "platoon", "ring"]
+    out = {}
+    for row in rows:
+        option, *cells = re.split(r"\s{2,}", row.strip())
+        out[option] = dict(zip(("one_cav_string", "two_cav_platoon", "ring"), cells, strict=True))
+    return out
+
+
+def test_the_feature_matrix_lists_every_checked_option():
+    assert list(_matrix()) == list(_MATRIX_ROWS)
+
+
+@pytest.mark.parametrize("layout", list(LAYOUTS))
+@pytest.mark.parametrize("option", list(_MATRIX_ROWS))
+def test_every_cell_of_the_feature_matrix_is_what_the_parser_does(option, layout):
+    """A "yes" parses into a spec (its designs run in the tests the docstring names); a
+    "no: KEY" is one ConfigError naming ``synthesis.KEY`` and the combination."""
+    design, extra = _MATRIX_ROWS[option]
+    cell = _matrix()[option][layout]
+    system, pattern = LAYOUTS[layout]
+    head = 0.0 if layout == "ring" else 0.5  # string_stable needs the head disturbance
+    text = (f'name = "m"\n{HDV}[system]\n{system}\n[synthesis]\ndesign = "{design}"\n'
+            f'semantics = "replace"\n{extra}\n[synthesis.weights]\nq_s = {Q_S}\nr = {R}\n'
+            f"head = {head}\naccel = 1.0\n")  # fmt: skip
+    problem = Problem(Path("m.toml"), tomllib.loads(text))
+    if cell == "yes":
+        spec = spec_from_problem(problem)
+        assert spec.design == design
+        return
+    assert cell.startswith("no: ")
+    with pytest.raises(ConfigError) as err:
+        spec_from_problem(problem)
+    assert err.value.field == f"synthesis.{cell[4:]}", err.value

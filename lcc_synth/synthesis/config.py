@@ -517,6 +517,12 @@ def synthesis_spec(
         baseline = (bname, gains)
     as_run = _as_run(t, system, design)
     cav_lag = check_lag_design(T.get(t, "cav_lag", "synthesis"), design, as_run)
+    asked = t.get("method") == "lmi" or t.get("cross_check") is True
+    if cav_lag > 0 and asked and design != "string_stable":  # as on a platoon or ring
+        key = "method" if t.get("method") == "lmi" else "cross_check"
+        raise ConfigError(f"synthesis.{key}", "with cav_lag the full-state and structured "
+                          "designs run the direct method (the lag state a_0 is in no pattern, "
+                          "so no LMI): leave method and cross_check out, or cav_lag = 0")  # fmt: skip
     return SynthesisSpec(
         cav_lag=cav_lag,
         as_run=as_run,

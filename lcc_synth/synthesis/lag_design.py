@@ -12,7 +12,9 @@ acceleration; that would be a gain on ``a_i``, not implemented.) Consequences, o
 * ``design = "full_state"`` is the structured design over every vehicle (``method =
   "direct"``: polishing from the truncated Riccati gain of the lagged plant), since the
   Riccati / LMI optimum feeds back ``a_0``; no Riccati-vs-LMI cross-check.
-* ``"structured"`` runs with ``method = "direct"`` whatever the file says: the convex
+* ``"structured"`` runs with ``method = "direct"`` (the default ``"lmi"`` is replaced; an
+  explicit ``method = "lmi"`` or ``cross_check = true`` is a ConfigError naming the key, on
+  every layout): the convex
   restriction (and the string-stability LMI) puts ``a_0`` in a block of ``X`` of its own,
   uncoupled from ``v_0``, and is infeasible (measured: m = n = 2 at ``tau`` = 0.6 s, CF-LCC
   n = 10 with the showcase's pattern at 0.3 s).
