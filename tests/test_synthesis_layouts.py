@@ -7,7 +7,8 @@ and the Lyapunov H2 norm of the reported whole-input gain for every design (the 
 invariant hyperplane ``c x = 0``, whose basis is scipy's null space of ``c``); ``design =
 "sparsity"`` on every layout too, and the robust design of several CAVs on each sampled member
 (one CAV's: tests/test_robust_one_cav.py). The features that exist only for one CAV (or only
-for several) raise one ConfigError naming the key and the layout.
+for several) raise one ConfigError naming the key and the layout; the feature matrix in the
+docstring of :mod:`lcc_synth.synthesis` is read and checked here cell by cell.
 """
 
 from __future__ import annotations

@@ -521,8 +521,9 @@ def synthesis_spec(
     if cav_lag > 0 and asked and design != "string_stable":  # as on a platoon or ring
         key = "method" if t.get("method") == "lmi" else "cross_check"
         raise ConfigError(f"synthesis.{key}", "with cav_lag the full-state and structured "
-                          "designs run the direct method (the lag state a_0 is in no pattern, "
-                          "so no LMI): leave method and cross_check out, or cav_lag = 0")  # fmt: skip
+                          "designs run the direct method (the lag state a_0 is in no "
+                          "pattern, so no LMI): leave method and cross_check out, or "
+                          "cav_lag = 0")  # fmt: skip
     return SynthesisSpec(
         cav_lag=cav_lag,
         as_run=as_run,
