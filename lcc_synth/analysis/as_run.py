@@ -343,7 +343,7 @@ def as_run_loop(
     nc = B0.shape[1]  # one row of the law per CAV
     K = np.zeros((nc, nx))
     K[:, : model.nx] = np.asarray(law.K, float).reshape(nc, model.nx)
-    kh = np.asarray(law.kh, float).reshape(nc)
+    kh = np.broadcast_to(np.asarray(law.kh, float), (nc,))
     T = None if sample_time is None else float(sample_time)
     if T is not None and not (math.isfinite(T) and T > 0):
         raise ConfigError("sample_time", f"must be > 0 s, got {sample_time!r}")
@@ -372,7 +372,7 @@ def as_run_loop(
     K_hdv = np.zeros((nc, nx))
     if law.K_hdv is not None:
         K_hdv[:, : model.nx] = np.asarray(law.K_hdv, float).reshape(nc, model.nx)
-    kh_hdv = np.asarray(law.kh_hdv, float).reshape(nc)
+    kh_hdv = np.broadcast_to(np.asarray(law.kh_hdv, float), (nc,))
     # received channels: non-own states the law or the estimator reads, and the head velocity
     ahead = "v_h" if model.m == 0 else "v_-1"
     reads = np.any((K != 0.0) | (K_hdv != 0.0), axis=0)  # by any CAV: one received copy each
