@@ -149,3 +149,37 @@ def test_cavs_driving_as_hdvs_on_a_platoon_and_the_ring_refusal():
     with pytest.raises(ConfigError, match="no head vehicle"):
         controller_loop(StaticGainController("g", gains, rmodel), ring)
     assert gamma_curves({"g": StaticGainController("g", gains, rmodel)}, ring, OMEGA) == {}
+
+
+# ------------------------------------------------------------------------------ lcc-synth run
+
+
+def test_run_analyses_the_platoon_layout_as_run(tmp_path, capsys):
+    """``lcc-synth run`` on the showcase's two-CAV platoon: every linear controller's loop as
+    run (both CAVs sampled every 0.05 s, the scenario's step), the same report as the analysis
+    of the gain it wrote (gains file) and of the CAVs' HDV law ("added" zero gain)."""
+    import json
+    from pathlib import Path
+
+    from lcc_synth.cli.main import main
+    from lcc_synth.experiments.comparison import load_suite
+    from lcc_synth.synthesis.gains_file import read_gains
+
+    showcase = Path(__file__).resolve().parents[1] / "problems" / "showcase.toml"
+    assert main(["run", str(showcase), "--scenarios", "platoon_brake", "--controllers",
+                 "all_hdv,h2", "--json", "--no-record", "--no-figures", "-q",
+                 "--out", str(tmp_path)]) == 0  # fmt: skip
+    ss = json.loads(capsys.readouterr().out)["string_stability"]
+    assert set(ss) == {"platoon8"} and set(ss["platoon8"]) == {"all_hdv", "h2"}
+    [gains_file] = tmp_path.glob("*/gains_platoon8_h2.json")
+    system = load_suite(showcase, ["platoon_brake"], ["h2"]).layouts["platoon8"]
+    model = system.linear_model(warn=False)
+    gains, _ = read_gains(gains_file, model=model)
+    for name, g in [("h2", gains), ("all_hdv", Gains.zero(model, "added"))]:
+        rep = as_run_report(as_run_loop(model, law_of_gains(model, g), 0.05)).as_dict()
+        got = ss["platoon8"][name]
+        assert got["verdict"] == rep["verdict"] and got["as_run"]["sample_time"] == 0.05
+        assert math.isclose(got["gamma_peak"], rep["gamma_peak"], rel_tol=1e-9)
+        assert math.isclose(got["margin"], rep["margin"], rel_tol=1e-6)
+    assert ss["platoon8"]["all_hdv"]["verdict"] == "string_unstable"
+    assert ss["platoon8"]["h2"]["verdict"] == "string_stable"

@@ -384,7 +384,7 @@ def _gamma_lines(suite, curves, settings) -> list[str]:
 
 
 def _gamma_summary(curves) -> str:
-    """``|Γ| as run: 14 curves, 2 string stable, 5 measured (not linear)``: one curve per
+    """``|Γ| as run: 17 curves, 3 string stable, 6 measured (not linear)``: one curve per
     controller and setting."""
     reps = [rep for per in curves.values() for _, rep in per.values()]
     stable = sum(1 for r in reps if getattr(r, "verdict", None) == "string_stable")
