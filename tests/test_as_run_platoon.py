@@ -108,6 +108,30 @@ def test_a_one_cav_platoon_is_the_one_cav_loop(semantics):
     assert info.value.field == "equilibrium_tau" and "fixed" in info.value.message
 
 
+def test_as_run_h2_of_a_platoon_loop():
+    """Continuous: the dual Lyapunov equation of the closed loop (the cost-to-go ``P``,
+    ``J = tr(Bw' P Bw)``) with each CAV's gain without its HDV law weighted; sampled: tends to
+    it as T -> 0 (the hold's O(T) error)."""
+    import scipy.linalg as sla
+
+    from lcc_synth.analysis.as_run_h2 import as_run_h2
+
+    model = _platoon().linear_model(warn=False)
+    gains = _gains(model)
+    Q = np.diag(np.tile([0.5, 1.0], 6))
+    Bw = np.zeros((model.nx, 6))
+    Bw[1::2] = np.eye(6)  # acceleration noise on every vehicle
+    cont = as_run_h2(as_run_loop(model, law_of_gains(model, gains)), Bw, Q, 1.0)
+    K, kh = gains.input_feedback(model)
+    Kg = gains.matrix(model)  # the gain alone ("added" to each CAV's HDV law)
+    Acl = model.A + model.B @ K
+    P = sla.solve_continuous_lyapunov(Acl.T, -(Q + Kg.T @ Kg))
+    assert math.isclose(cont, math.sqrt(np.trace(Bw.T @ P @ Bw)), rel_tol=1e-9)
+    errs = [abs(as_run_h2(as_run_loop(model, law_of_gains(model, gains), T), Bw, Q, 1.0)
+                / cont - 1) for T in (0.02, 0.01)]  # fmt: skip
+    assert errs[1] < errs[0] < 0.05 and errs[1] < 0.7 * errs[0]
+
+
 # ----------------------------------------------------------------------- against the simulator
 
 
