@@ -460,9 +460,11 @@ def _write_files(
             for lname, per in curves.items():
                 if per:
                     sy = suite.layouts[lname]
+                    size = (f"m={sy.m}, n={sy.n}" if sy.platoon is None else
+                            f"size {sy.platoon.size}, CAVs {', '.join(map(str, sy.platoon.cavs))}")
                     written.append(plot_gamma_curves(
                         per, omega, name("gamma", lname, ext=ext),
-                        title=f"|Γ(jω)| on layout {lname} ({sy.kind}, m={sy.m}, n={sy.n})",
+                        title=f"|Γ(jω)| on layout {lname} ({sy.kind}, {size})",
                     ))  # fmt: skip
                     bar.update(1)
     if gamma:
