@@ -174,12 +174,13 @@ def test_column_blocks_gives_an_over_wide_column_its_own_block():
 def test_estimate_counts_the_runs_and_curves_of_the_showcase():
     """6 scenarios; per scenario the controllers that run there (``only_scenarios``,
     ``only_layouts``), and a |Γ| curve per controller and (layout, latency) setting of the
-    single-CAV strings: the counts of the run's own table (24 rows) and its
-    ``string_stability.txt`` (14 lines with a verdict)."""
+    layouts with a head vehicle: the counts of the run's own table (24 rows) and its
+    ``string_stability.txt`` (17 lines with a verdict: 14 on the single-CAV strings, 3 on
+    platoon8, whose all_hdv, h2 and mpc run in platoon_brake; ring20 has no head)."""
     suite = load_suite(PROBLEMS / "showcase.toml")
     est = estimate_suite(suite)
     assert est.scenarios == 6 and est.controllers == (3, 6)
-    assert est.runs == 24 and est.curves == 14
+    assert est.runs == 24 and est.curves == 17
     assert est.seconds["recording"] == 0.0
     assert 10 < est.total < 600  # the model's order of magnitude (measured 58-65 s)
-    assert est.line().startswith("6 scenarios × 3–6 controllers (24 runs, 14 |Γ| curves)")
+    assert est.line().startswith("6 scenarios × 3–6 controllers (24 runs, 17 |Γ| curves)")

@@ -51,7 +51,28 @@ What the first-order hold of the head costs: a sine is not piecewise linear; the
 ``O((w T)^2 / 12)`` (< 1e-4 at ``w = 0.3``, ``T = 0.1``). A zero-order hold of the head (its
 delay ``T/2`` against the measured head) was 0.1-0.3 % off the simulator at ``T = 0.1``.
 
-H2 norm: :func:`lcc_synth.analysis.as_run_h2.as_run_h2`.
+Several CAVs: an open platoon
+-----------------------------
+The same function builds the loop of every CAV of an open platoon (``kind = "platoon"``, a
+:class:`~lcc_synth.models.platoon.PlatoonModel`): the law has a row per CAV, every CAV samples
+at the same ``T`` with the same latency and filter (the settings are scalars) and holds its
+own command; the plant's ``B`` has a column per CAV. As the simulator runs it
+(:mod:`lcc_synth.simulation.kernels`), every CAV's own spacing and velocity are exact to every
+CAV (the CAVs are connected), every other received value (the HDVs', the head's velocity) is
+one copy, delayed and filtered once, whichever CAV reads it; the output is the tail's
+velocity. The equilibrium estimate is one CAV's (its predecessor's velocity): a platoon's
+controllers run with a fixed equilibrium, so ``equilibrium_tau`` on a platoon is a
+ConfigError naming it. A ring has no head vehicle: ConfigError naming ``system.kind``.
+Measured (tests/test_as_run_platoon.py): a platoon with one CAV gives the paper's one-CAV
+loop (``kind = "lcc"``) entry for entry; the continuous loop is the platoon's closed loop
+(:func:`~lcc_synth.analysis.string_stability.gains_string_stability`: the same peak and
+margin); on a two-CAV platoon of 6 with ``T = 0.1`` s, 0.2 s latency and a 0.3 s filter the
+simulator's tail/head ratio at ``dt = 0.01`` s is within 5.3e-5, 2.1e-4, 2.2e-3 of ``|Gamma|`` at
+0.05, 0.1, 0.3 rad/s (Euler's first-order error, halved at ``dt / 2``; Richardson
+extrapolation 7e-5). The loop of the showcase's ``platoon8`` (8 vehicles, CAVs 3 and 6,
+``T = 0.05`` s) builds and is decided in 0.04 s.
+
+H2 norm: :func:`lcc_synth.analysis.as_run_h2.as_run_h2` (one CAV).
 """
 
 from __future__ import annotations
@@ -67,6 +88,7 @@ from lcc_synth.analysis.transfer import check_head, hessenberg_solver
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import Gains, cav_feedback, hdv_law
 from lcc_synth.models.linear import LCCModel, discretize
+from lcc_synth.models.platoon import PLATOON_KINDS, PlatoonModel, hdv_law_rows
 
 __all__ = [
     "NotRepresentable",
@@ -95,19 +117,23 @@ class NotRepresentable(ConfigError):
 
 @dataclass(frozen=True)
 class LoopLaw:
-    """The CAV's whole command ``u = K x + kh v_h - e w`` on an :class:`LCCModel`'s states.
+    """The CAV's whole command ``u = K x + kh v_h - e w`` on an :class:`LCCModel`'s states,
+    or every CAV's on an open platoon's (:class:`~lcc_synth.models.platoon.PlatoonModel`).
 
     ``K, kh`` include the CAV's HDV law when it drives with it ("added"), which is also given
     alone as ``K_hdv, kh_hdv`` (``None``: no HDV law; the H2 cost weighs the command without
     it, as the design does); ``e`` multiplies the equilibrium estimate ``w = v_hat - v*``
-    (:func:`estimator_shift` of the error gains; unused with a fixed equilibrium).
+    (:func:`estimator_shift` of the error gains; unused with a fixed equilibrium). One CAV:
+    ``K`` of ``nx`` entries and numbers; a platoon: ``K`` (and ``K_hdv``) one row per CAV
+    (``model.cavs`` order) and ``kh``, ``kh_hdv`` one entry each (``e`` unused: a platoon runs
+    with a fixed equilibrium).
     """
 
     K: np.ndarray
-    kh: float
+    kh: float | np.ndarray
     e: float = 0.0
     K_hdv: np.ndarray | None = None
-    kh_hdv: float = 0.0
+    kh_hdv: float | np.ndarray = 0.0
 
 
 def equilibrium_slope(model: LCCModel) -> float:
@@ -126,8 +152,16 @@ def estimator_shift(model: LCCModel) -> np.ndarray:
     )
 
 
-def law_of_gains(model: LCCModel, gains: Gains) -> LoopLaw:
-    """The :class:`LoopLaw` of static gains (eq. 23) on ``model``."""
+def law_of_gains(model: LCCModel | PlatoonModel, gains: Gains) -> LoopLaw:
+    """The :class:`LoopLaw` of static gains (eq. 23) on ``model`` (one CAV, or a row per CAV
+    of a platoon: :meth:`Gains.input_feedback <lcc_synth.models.feedback.Gains.input_feedback>`
+    with each CAV's HDV law, :func:`~lcc_synth.models.platoon.hdv_law_rows`, for "added")."""
+    if model.kind in PLATOON_KINDS:
+        K, kh = gains.input_feedback(model)
+        if gains.semantics == "added":
+            K0, kh0 = _platoon_hdv_law(model)
+            return LoopLaw(np.asarray(K, float), np.asarray(kh, float), 0.0, K0, kh0)
+        return LoopLaw(np.asarray(K, float), np.asarray(kh, float), 0.0)
     K, kh = cav_feedback(model, gains)
     e = float(gains.matrix(model)[0] @ estimator_shift(model))
     if gains.semantics == "added":
@@ -136,9 +170,43 @@ def law_of_gains(model: LCCModel, gains: Gains) -> LoopLaw:
     return LoopLaw(np.asarray(K, float), float(kh), e)
 
 
-def law_of_linear(model: LCCModel, law) -> LoopLaw:
+def _platoon_hdv_law(model: PlatoonModel) -> tuple[np.ndarray, np.ndarray]:
+    """Every CAV's HDV law on an open platoon's states: rows and head-velocity entries (the
+    CAV at position 1 follows the head)."""
+    kh = np.array([model.coefficients[i - 1].alpha3 if (i == 1 and not model.ring) else 0.0
+                   for i in model.cavs])
+    return hdv_law_rows(model), kh
+
+
+def _law_of_rows(model: PlatoonModel, law) -> LoopLaw:
+    """:func:`law_of_linear` on an open platoon: ``Ks``, ``Kv`` one row per CAV (or one row
+    for every CAV) by vehicle column, column ``i`` = position ``i``, column 0 the head."""
+    nc, nv = len(model.cavs), model.platoon.size + 1
+    Ks, Kv = (np.atleast_2d(np.asarray(x, float)) for x in (law.Ks, law.Kv))
+    if Ks.shape[0] == 1:
+        Ks, Kv = np.repeat(Ks, nc, axis=0), np.repeat(Kv, nc, axis=0)
+    if Ks.shape != (nc, nv) or Kv.shape != Ks.shape:
+        raise ConfigError("law", f"needs {nc} row(s) of {nv} gains per kind of error")
+    if np.any(Ks[:, 0] != 0.0):
+        raise ConfigError("law", "no gain on the head's spacing (it has none)")
+    if np.any(np.asarray(getattr(law, "Kp", 0.0), float) != 0.0):
+        raise ConfigError("law", "a platoon has no position state: Kp must be 0")
+    K = np.zeros((nc, model.nx))
+    K[:, 0::2] = Ks[:, 1:]
+    K[:, 1::2] = Kv[:, 1:]
+    kh = Kv[:, 0].copy()
+    if law.hdv_law:
+        K0, kh0 = _platoon_hdv_law(model)
+        return LoopLaw(K + K0, kh + kh0, 0.0, K0, kh0)
+    return LoopLaw(K, kh, 0.0)
+
+
+def law_of_linear(model: LCCModel | PlatoonModel, law) -> LoopLaw:
     """The :class:`LoopLaw` of a simulator law (``Ks``, ``Kv`` by vehicle column, ``Kp``,
-    ``hdv_law``; :class:`~lcc_synth.controllers.static.LinearLaw`) on ``model``."""
+    ``hdv_law``; :class:`~lcc_synth.controllers.static.LinearLaw`) on ``model`` (one CAV, or
+    an open platoon: a row per CAV)."""
+    if model.kind in PLATOON_KINDS:
+        return _law_of_rows(model, law)
     m = model.m
     K = np.zeros(model.nx)
     Ks = np.asarray(law.Ks, float)
@@ -174,8 +242,9 @@ class AsRunLoop:
     """The closed loop as it runs: ``xi' = A xi + h v_h``, tail velocity ``c xi + d v_h``.
 
     Discrete-time (``xi_k+1``) when ``sample_time`` is set, else continuous (``dxi/dt``).
-    ``u_row, u_v``: the CAV's command ``u = u_row xi + u_v v_h``; ``u_gain``: the same without
-    the HDV law (what the H2 design weighs); ``measured_head``: the law or the estimator reads
+    ``u_row, u_v``: the CAV's command ``u = u_row xi + u_v v_h`` (one CAV: a row and a number;
+    an open platoon: a row and an entry per CAV); ``u_gain``: the same without the HDV law
+    (what the H2 design weighs); ``measured_head``: the law or the estimator reads
     the head's velocity; ``nx``: the plant states come first; ``plant``: the physical plant
     ``(A, B, H)`` (the CAV's HDV law removed); ``settings``: what is in the loop.
     """
@@ -201,15 +270,16 @@ class AsRunLoop:
         return hessenberg_solver(self.A, self.h, self.c)(s) + self.d
 
 
-def _physical_plant(model: LCCModel, actuator_lag: float):
-    """``(A, B, H, names, own)`` of the string whose CAV applies its whole command ``u``.
+def _physical_plant(model: LCCModel | PlatoonModel, actuator_lag: float):
+    """``(A, B, H, names, own)`` of the string whose CAVs apply their whole commands ``u``.
 
     CF-LCC's ``A`` holds the CAV's HDV law (its input is the additional command): it is taken
-    out, since the simulator computes the whole command from samples. ``own``: states the CAV
-    measures itself (exact, not delayed). Extension point, the CAV's actuator lag: with
-    ``actuator_lag = tau_a > 0`` a state ``a_0`` (the CAV's acceleration) is appended,
-    ``dv_0/dt = a_0``, ``tau_a da_0/dt = u - a_0``. The simulator has no actuator lag yet: keep
-    0 until it does (then pass its value here).
+    out, since the simulator computes the whole command from samples. ``own``: states the CAVs
+    measure themselves (exact, not delayed): the CAV's spacing and velocity, and on a platoon
+    every CAV's (the simulator gives every CAV the exact values of every CAV,
+    :mod:`lcc_synth.simulation.kernels`). The CAVs' actuator lag: with
+    ``actuator_lag = tau_a > 0`` a state ``a_i`` (CAV ``i``'s acceleration) is appended per
+    CAV, ``dv_i/dt = a_i``, ``tau_a da_i/dt = u_i - a_i``.
     """
     A = np.array(model.A, dtype=float)
     B = np.array(model.B, dtype=float)
@@ -220,21 +290,22 @@ def _physical_plant(model: LCCModel, actuator_lag: float):
         H = H - B * kh_law
     names = list(model.state_names)
     own = np.zeros(model.nx, dtype=bool)
-    own[model.block(0)] = True
+    for cav in model.cavs:
+        own[model.block(cav)] = True
     lag = float(actuator_lag)
     if not (math.isfinite(lag) and lag >= 0):
         raise ConfigError("actuator_lag", f"must be a time constant >= 0 s, got {actuator_lag!r}")
-    if lag > 0:  # the CAV's velocity row is dv_0/dt = u here (no other term): u -> a_0
-        nx = model.nx
-        A2 = np.zeros((nx + 1, nx + 1))
+    if lag > 0:  # each CAV's velocity row is dv_i/dt = u_i here (no other term): u_i -> a_i
+        nx, nc = model.nx, B.shape[1]
+        A2 = np.zeros((nx + nc, nx + nc))
         A2[:nx, :nx] = A
-        A2[:nx, nx] = B[:, 0]
-        A2[nx, nx] = -1.0 / lag
-        B2 = np.zeros((nx + 1, 1))
-        B2[nx, 0] = 1.0 / lag
-        A, B, H = A2, B2, np.vstack([H, [[0.0]]])
-        names.append("a_0")
-        own = np.append(own, True)
+        A2[:nx, nx:] = B
+        A2[nx:, nx:] = -np.eye(nc) / lag
+        B2 = np.zeros((nx + nc, nc))
+        B2[nx:, :] = np.eye(nc) / lag
+        A, B, H = A2, B2, np.vstack([H, np.zeros((nc, 1))])
+        names += [f"a_{cav}" for cav in model.cavs]
+        own = np.append(own, np.ones(nc, dtype=bool))
     return A, B, H, tuple(names), own
 
 
@@ -251,7 +322,7 @@ def _steps(value: float, T: float, what: str) -> int:
 
 
 def as_run_loop(
-    model: LCCModel,
+    model: LCCModel | PlatoonModel,
     law: LoopLaw,
     sample_time: float | None = None,
     latency: float = 0.0,
@@ -259,20 +330,22 @@ def as_run_loop(
     measurement_filter: float = 0.0,
     actuator_lag: float = 0.0,
 ) -> AsRunLoop:
-    """The loop of the module docstring.
+    """The loop of the module docstring, of one CAV or of every CAV of an open platoon.
 
     Parameters
     ----------
-    model : LCCModel
-        A model with a head vehicle (the plant; its linear coefficients at ``v*``).
+    model : LCCModel or PlatoonModel
+        A model with a head vehicle (the plant; its linear coefficients at ``v*``): a paper
+        layout, or an open platoon (``kind = "platoon"``; a ring has no head: refused).
     law : LoopLaw
-        The CAV's whole command (:func:`law_of_gains`, :func:`law_of_linear`).
+        The CAVs' whole commands (:func:`law_of_gains`, :func:`law_of_linear`).
     sample_time : float, optional
         Controller period ``T`` (s); ``None``: continuous-time limit (then ``latency = 0``).
     latency : float
         Age (s) of every received V2V value; a multiple of ``T``.
     equilibrium_tau : float, optional
-        Time constant (s) of the equilibrium estimate; ``None`` = fixed equilibrium.
+        Time constant (s) of the equilibrium estimate; ``None`` = fixed equilibrium (the only
+        one on a platoon: its controllers run with a fixed equilibrium).
     measurement_filter : float
         Time constant (s) of the filter on each received value; 0 = off.
     actuator_lag : float
@@ -280,14 +353,19 @@ def as_run_loop(
 
     Raises
     ------
+    ConfigError
+        ``system.kind`` for a layout with no head vehicle (a ring, FD-LCC);
+        ``equilibrium_tau`` on a platoon.
     NotRepresentable
         A latency that is not a multiple of ``T`` (or any latency in continuous time).
     """
     check_head(model)
     A0, B0, H0, pnames, own = _physical_plant(model, actuator_lag)
     nx = A0.shape[0]
-    K = np.zeros(nx)
-    K[: model.nx] = np.asarray(law.K, float)
+    nc = B0.shape[1]  # one row of the law per CAV
+    K = np.zeros((nc, nx))
+    K[:, : model.nx] = np.asarray(law.K, float).reshape(nc, model.nx)
+    kh = np.broadcast_to(np.asarray(law.kh, float), (nc,))
     T = None if sample_time is None else float(sample_time)
     if T is not None and not (math.isfinite(T) and T > 0):
         raise ConfigError("sample_time", f"must be > 0 s, got {sample_time!r}")
@@ -300,20 +378,28 @@ def as_run_loop(
         )
     d = 0 if lat == 0 else _steps(lat, T, "latency")
     est = equilibrium_tau is not None
+    if est and model.kind in PLATOON_KINDS:
+        raise ConfigError(
+            "equilibrium_tau",
+            f"must be unset (a fixed equilibrium) on kind = {model.kind!r}: a platoon's "
+            "controllers run with equilibrium = \"fixed\" (the estimate follows one CAV's "
+            "predecessor)",
+        )
     if est and not (math.isfinite(equilibrium_tau) and equilibrium_tau > 0):
         raise ConfigError("equilibrium_tau", f"must be > 0 s, got {equilibrium_tau!r}")
     tf = float(measurement_filter or 0.0)
     if not (math.isfinite(tf) and tf >= 0):
         raise ConfigError("measurement_filter", f"must be >= 0 s, got {measurement_filter!r}")
 
-    K_hdv = np.zeros(nx)
+    K_hdv = np.zeros((nc, nx))
     if law.K_hdv is not None:
-        K_hdv[: model.nx] = np.asarray(law.K_hdv, float)
+        K_hdv[:, : model.nx] = np.asarray(law.K_hdv, float).reshape(nc, model.nx)
+    kh_hdv = np.broadcast_to(np.asarray(law.kh_hdv, float), (nc,))
     # received channels: non-own states the law or the estimator reads, and the head velocity
     ahead = "v_h" if model.m == 0 else "v_-1"
-    reads = (K != 0.0) | (K_hdv != 0.0)
+    reads = np.any((K != 0.0) | (K_hdv != 0.0), axis=0)  # by any CAV: one received copy each
     chans = [j for j in range(nx) if not own[j] and (reads[j] or (est and pnames[j] == ahead))]
-    use_head = law.kh != 0.0 or law.kh_hdv != 0.0 or (est and ahead == "v_h")
+    use_head = bool(np.any(kh != 0.0) or np.any(kh_hdv != 0.0) or (est and ahead == "v_h"))
     nr = len(chans) + int(use_head)
     R = np.zeros((nr, nx))
     for r, j in enumerate(chans):
@@ -348,7 +434,7 @@ def as_run_loop(
         Lam = np.zeros(nx)
     else:
         Ad, BHd = discretize(A0, np.hstack([B0, H0]), T)
-        Bd, Hd = BHd[:, :1], BHd[:, 1]
+        Bd, Hd = BHd[:, :nc], BHd[:, nc]
         M3 = np.zeros((nx + 2, nx + 2))
         M3[:nx, :nx] = A0
         M3[:nx, nx] = H0[:, 0]
@@ -370,16 +456,18 @@ def as_run_loop(
         Ko = np.where(own, Kx, 0.0)
         return Ko @ X + Kr @ f_now[0], float(Ko @ Lam + Kr @ f_now[1])
 
-    u_row, u_v = command(K, law.kh)
-    if est:
-        u_row = u_row - law.e * sel(i_w, 1)[0]
-    hdv_row, hdv_v = command(K_hdv, law.kh_hdv)
+    rows = [command(K[k], kh[k]) for k in range(nc)]
+    U, u_v = np.array([r for r, _ in rows]), np.array([v for _, v in rows])
+    if est:  # one CAV (refused on a platoon above)
+        U[0] = U[0] - law.e * sel(i_w, 1)[0]
+    rows = [command(K_hdv[k], kh_hdv[k]) for k in range(nc)]
+    U_hdv, hdv_v = np.array([r for r, _ in rows]), np.array([v for _, v in rows])
 
     A = np.zeros((N, N))
     h = np.zeros(N)
     if T is None:
-        A[:nx] = A0 @ X + B0 @ u_row.reshape(1, -1)
-        h[:nx] = H0[:, 0] + B0[:, 0] * u_v
+        A[:nx] = A0 @ X + B0 @ U
+        h[:nx] = H0[:, 0] + (B0 * u_v).sum(axis=1)
         if est:
             tau = float(equilibrium_tau)
             A[i_w] = (f_now[0][y_idx] - sel(i_w, 1)[0]) / tau
@@ -388,8 +476,8 @@ def as_run_loop(
             A[i_f : i_f + nr] = (r_now[0] - sel(i_f, nr)) / tf
             h[i_f : i_f + nr] = r_now[1] / tf
     else:
-        A[:nx] = Ad @ X + Bd @ u_row.reshape(1, -1)
-        h[:nx] = Ad @ Lam + Hd - Lam + Bd[:, 0] * u_v
+        A[:nx] = Ad @ X + Bd @ U
+        h[:nx] = Ad @ Lam + Hd - Lam + (Bd * u_v).sum(axis=1)
         if est:
             b = math.exp(-T / float(equilibrium_tau))
             A[i_w] = b * sel(i_w, 1)[0] + (1 - b) * f_now[0][y_idx]
@@ -403,7 +491,7 @@ def as_run_loop(
             for lag in range(2, d + 1):
                 A[i_d + (lag - 1) * nr : i_d + lag * nr] = sel(i_d + (lag - 2) * nr, nr)
     c = np.zeros(N)
-    c[pnames.index(f"v_{model.n}")] = 1.0
+    c[pnames.index(f"v_{model.vehicles[-1]}")] = 1.0  # the tail
     d_tail = float(c[:nx] @ Lam)
     settings = {
         "sample_time": T,
@@ -415,9 +503,12 @@ def as_run_loop(
         "actuator_lag": float(actuator_lag),
         "states": N,
     }
+    u_gain = (U - U_hdv, u_v - hdv_v)
+    if model.kind not in PLATOON_KINDS:  # one CAV: a row and a number
+        U, u_v, u_gain = U[0], float(u_v[0]), (u_gain[0][0], float(u_gain[1][0]))
     return AsRunLoop(
-        A, h, c, T, tuple(names), u_row, u_v, nx, (A0, B0, H0), settings,
-        u_gain=(u_row - hdv_row, u_v - hdv_v), measured_head=use_head, d=d_tail,
+        A, h, c, T, tuple(names), U, u_v, nx, (A0, B0, H0), settings,
+        u_gain=u_gain, measured_head=use_head, d=d_tail,
     )  # fmt: skip
 
 

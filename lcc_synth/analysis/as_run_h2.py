@@ -53,7 +53,8 @@ def as_run_h2(
 
     ``Bw`` ``(nx_model, nw)``: noise on the model's states (e.g. the acceleration noise of the
     design), ``Q`` ``(nx_model, nx_model)``, ``u_g`` the command without the HDV law (the
-    design's input); ``head``: intensity of white noise on the head velocity. Continuous loop:
+    design's input; an open platoon's loop: one per CAV, ``r sum_i u_g,i^2``); ``head``:
+    intensity of white noise on the head velocity. Continuous loop:
     Lyapunov equations. Sampled loop: the time-averaged power of ``z`` (the sampled-data H2
     norm): the discrete Lyapunov equation of the loop with the exact per-period noise
     covariance, plus the exact intra-sample cost of ``[x_k, u_k]`` and of the noise.
@@ -70,14 +71,15 @@ def as_run_h2(
     X = np.zeros((nx, N))
     X[:, :nx] = np.eye(nx)
     ug, ug_v = loop.u_gain if loop.u_gain is not None else (loop.u_row, loop.u_v)
-    ug = ug.reshape(1, -1)
+    ug = np.atleast_2d(ug)  # a row per CAV
+    nc = ug.shape[0]
     if loop.sample_time is None:
         if np.max(np.linalg.eigvals(loop.A).real) >= 0:
             return math.inf
         G = np.zeros((N, Bx.shape[1]))
         G[:nx] = Bx
         if head > 0:
-            if ug_v != 0.0:
+            if np.any(np.asarray(ug_v) != 0.0):
                 return None  # white noise straight into the weighted command
             G = np.column_stack([G, head * loop.h])
         L = sla.solve_continuous_lyapunov(loop.A, -G @ G.T)
@@ -91,7 +93,7 @@ def as_run_h2(
     if np.max(np.abs(np.linalg.eigvals(loop.A))) >= 1:
         return math.inf
     Wd, _, S = _blocks_exp(A0, Qx, Bx, T)
-    n1 = nx + 1  # [x; u] with u held: the intra-sample cost of the sampled state and command
+    n1 = nx + nc  # [x; u] with u held: the intra-sample cost of the sampled state and command
     Aa = np.zeros((n1, n1))
     Aa[:nx, :nx] = A0
     Aa[:nx, nx:] = B0
@@ -101,10 +103,10 @@ def as_run_h2(
     G = np.zeros((N, N))
     G[:nx, :nx] = Wd
     P = sla.solve_discrete_lyapunov(loop.A, G)
-    Mxu = np.vstack([X, loop.u_row.reshape(1, -1)])
+    Mxu = np.vstack([X, np.atleast_2d(loop.u_row)])
     J = (
         float(np.trace(Mxu.T @ Qint_a @ Mxu @ P))
-        + r * T * float((ug @ P @ ug.T)[0, 0])
+        + r * T * float(np.trace(ug @ P @ ug.T))
         + float(np.trace(Bx.T @ S @ Bx))
     )
     return math.sqrt(max(J / T, 0.0))

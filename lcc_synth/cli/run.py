@@ -384,7 +384,7 @@ def _gamma_lines(suite, curves, settings) -> list[str]:
 
 
 def _gamma_summary(curves) -> str:
-    """``|Γ| as run: 14 curves, 2 string stable, 5 measured (not linear)``: one curve per
+    """``|Γ| as run: 17 curves, 3 string stable, 6 measured (not linear)``: one curve per
     controller and setting."""
     reps = [rep for per in curves.values() for _, rep in per.values()]
     stable = sum(1 for r in reps if getattr(r, "verdict", None) == "string_stable")
@@ -460,9 +460,11 @@ def _write_files(
             for lname, per in curves.items():
                 if per:
                     sy = suite.layouts[lname]
+                    size = (f"m={sy.m}, n={sy.n}" if sy.platoon is None else
+                            f"size {sy.platoon.size}, CAVs {', '.join(map(str, sy.platoon.cavs))}")
                     written.append(plot_gamma_curves(
                         per, omega, name("gamma", lname, ext=ext),
-                        title=f"|Γ(jω)| on layout {lname} ({sy.kind}, m={sy.m}, n={sy.n})",
+                        title=f"|Γ(jω)| on layout {lname} ({sy.kind}, {size})",
                     ))  # fmt: skip
                     bar.update(1)
     if gamma:

@@ -575,15 +575,14 @@ def gamma_curves(
 
 
 def gamma_settings(suite: Suite) -> dict[str, list[tuple[str, float, float, list[str]]]]:
-    """Per single-CAV layout with a head vehicle (not ``fd_lcc``; a ring has no head and a
-    platoon's head-to-tail Γ is ``lcc-synth analyze``'s,
-    :func:`lcc_synth.analysis.string_stability.string_stability`), the distinct ``(dt, V2V
-    latency)`` of its scenarios:
+    """Per layout with a head vehicle (one CAV, or an open platoon: every CAV in the loop; not
+    ``fd_lcc`` or a ring, which have none), the distinct ``(dt, V2V latency)`` of its
+    scenarios:
     ``{layout: [(label suffix, dt, latency, scenario names)]}``; the suffix is ``""`` for the
     first (ideal links first), else e.g. ``" @ 0.1 s latency"``."""
     out: dict[str, list[tuple[str, float, float, list[str]]]] = {}
     for lname in suite.layouts_used():
-        if suite.layouts[lname].kind in ("fd_lcc", "ring", "platoon"):  # no head / several CAVs
+        if suite.layouts[lname].kind in ("fd_lcc", "ring"):  # no head vehicle
             continue
         pairs: dict[tuple[float, float], list[str]] = {}
         for sname, ss in suite.scenarios.items():

@@ -29,10 +29,10 @@ from typing import Any
 import numpy as np
 
 from lcc_synth.analysis.as_run import NotRepresentable, as_run_report, law_loop
+from lcc_synth.analysis.transfer import check_head
 from lcc_synth.controllers.base import ControlContext, Controller
 from lcc_synth.controllers.static import HDVController, StaticGainController
 from lcc_synth.interrupts import checkpoint
-from lcc_synth.models.feedback import PAPER_CAVS
 
 __all__ = [
     "MEASURE_AMPLITUDE",
@@ -59,19 +59,26 @@ MEASURE_SETTLE_RUN = 80.0
 def _context(system, dt: float) -> ControlContext:
     v = np.array([float(system.v_star)])
     s = np.array([float(system.hdv.equilibrium_spacing(system.v_star))])
-    return ControlContext(system.m, system.n, 1, float(dt), v, s, -5.0, 2.0, system.hdv)
+    if system.platoon is None:
+        return ControlContext(system.m, system.n, 1, float(dt), v, s, -5.0, 2.0, system.hdv)
+    # an open platoon: column i is position i (the head column 0), size + 1 columns
+    cavs, size = system.platoon.cavs, system.platoon.size
+    return ControlContext(cavs[0] - 1, size - cavs[0], 1, float(dt), v, s, -5.0, 2.0,
+                          system.hdv, cavs=tuple(cavs))  # fmt: skip
 
 
 def controller_loop(ctrl: Controller, system, dt: float = 0.01, latency: float = 0.0):
     """The :class:`~lcc_synth.analysis.as_run.AsRunLoop` of ``ctrl`` on ``system`` (``None``
-    when the controller is not linear). Raises ``NotRepresentable`` for a latency that is not
-    a multiple of the controller's period."""
-    if isinstance(ctrl, StaticGainController) and ctrl.gains.cavs == PAPER_CAVS:
+    when the controller is not linear): one CAV, or every CAV of an open platoon. Raises
+    ``NotRepresentable`` for a latency that is not a multiple of the controller's period, and
+    ConfigError naming ``system.kind`` on a ring (no head vehicle)."""
+    if isinstance(ctrl, StaticGainController):
         model = ctrl.model
     elif isinstance(ctrl, HDVController):
         model = system.linear_model(warn=False)
     else:
         return None
+    check_head(model)  # a ring: no head-to-tail transfer (ConfigError naming system.kind)
     law = ctrl.linear_law(_context(system, dt))
     period = float(dt if ctrl.sample_time is None else ctrl.sample_time)
     lat = round(float(latency) / dt) * float(dt)  # the simulator rounds it to steps
@@ -113,10 +120,17 @@ def measured_ratio(
     t = dt * np.arange(int(round(duration / dt)) + 1)
     accel = (amp * w * np.cos(np.outer(t, w) + phase)).sum(axis=1)
     head = Profile(tuple(t), tuple(accel), target="accel", interpolation="step")
-    sc = Scenario(
-        m=system.m, n=system.n, hdv=system.hdv, v_star=system.v_star, dt=dt,
-        duration=duration, perturbations=(head,), v2v=V2V(latency=latency), cav_lag=cav_lag,
-    )  # fmt: skip
+    if system.platoon is None:
+        sc = Scenario(
+            m=system.m, n=system.n, hdv=system.hdv, v_star=system.v_star, dt=dt,
+            duration=duration, perturbations=(head,), v2v=V2V(latency=latency),
+            cav_lag=cav_lag,
+        )  # fmt: skip
+    else:  # a platoon's CAV columns, every vehicle's own parameters and equilibrium
+        from lcc_synth.simulation.scenario_file import scenario_for
+
+        sc = scenario_for(system, (head,), dt=dt, duration=duration,
+                          v2v=V2V(latency=latency), cav_lag=cav_lag)  # fmt: skip
     res = simulate(sc, ctrl)
     tt = res.t
     keep = tt >= tt[-1] - window
@@ -172,9 +186,10 @@ def gamma_curves(
     :class:`~lcc_synth.analysis.as_run.AsRunReport`; any other controller (or a loop with no
     exact linear model) the :class:`MeasuredReport` at ``measure_omega`` (its curve is NaN
     except at those frequencies, interpolated on ``log omega``); ``measure_omega=None`` skips
-    them. Layouts without a head vehicle (``fd_lcc``) give ``{}``.
+    them. An open platoon's loop holds every CAV (:func:`controller_loop`). Layouts without a
+    head vehicle (``fd_lcc``, a ring) give ``{}``.
     """
-    if system.kind == "fd_lcc":
+    if system.kind in ("fd_lcc", "ring"):
         return {}
     omega = np.asarray(omega, dtype=float)
     out: dict[str, tuple[np.ndarray, Any]] = {}

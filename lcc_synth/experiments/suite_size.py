@@ -23,7 +23,8 @@
 
   Measured on ``problems/showcase.toml`` (this 2-core machine, shared): estimated 56 s
   without the recording against 58-65 s measured (controllers 3.8 s, simulations 29 s,
-  string stability 25 s). Limits: an order of magnitude, as
+  string stability 25 s; since platoon8 is analysed too, its three curves add 6 s, 5 s of
+  them the joint MPC's measurement, estimated 1 s). Limits: an order of magnitude, as
   :mod:`lcc_synth.resources`: solver iterations and machine load move the predictive
   controllers' steps by 2-5x; DeeP-LCC's data collection is not counted.
 """
