@@ -258,3 +258,51 @@ def test_cli_regions_on_a_platoon(tmp_path):
     assert out.returncode == 2 and out.stdout == ""
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1 and "maps.behind.vehicle" in lines[0] and "[3, 5]" in lines[0]
+
+
+def test_segment_product_decision_function_within_the_band():
+    """The rounding error of Ptilde on the segment product against exact rationals (the
+    product of the segments' exact polynomials, ``tests/test_regions.py``'s reference),
+    relative to the sum of the absolute values of the terms: within ``(2 deg + 16) eps``,
+    the bound the band ``tau = 16 (2 deg + 16) eps`` is built on (``deg = 2 N``)."""
+    from fractions import Fraction
+    from types import SimpleNamespace
+
+    from test_regions import _pmul, exact_gamma_polynomials, exact_ptilde
+
+    from lcc_synth.analysis.regions import _row_quadratics, region_band, region_frequency_grid
+
+    rng = np.random.default_rng(5)
+    eps = np.finfo(float).eps
+    w = region_frequency_grid()
+    xs = np.concatenate([[0.0], w[rng.choice(w.size, 8, replace=False)] ** 2])
+    drivers = [OVM(alpha=a, beta=b) for a, b in rng.uniform((0.4, 0.6), (1.0, 1.2), (7, 2))]
+    model = platoon_model(Platoon(tuple(drivers), (2, 5), 15.0), warn=False)
+    deg = 2 * model.platoon.size
+    worst = 0.0
+    for cav, vehicle in ((2, 1), (2, 4), (5, 7)):
+        fixed = {"u_2": {"s_3": -1.0, "v_3": -1.0}, "u_5": {"v_4": 0.5, "s_6": 0.5}}
+        fixed = {u: {n: g for n, g in row.items() if not (u == f"u_{cav}" and n[2:] ==
+                                                          str(vehicle))}
+                 for u, row in fixed.items()}  # fmt: skip
+        polys = affine_polynomials(model, vehicle, Gains.from_table(fixed, model, "added"), cav)
+        for mu, k in rng.uniform(-5, 5, size=(3, 2)):
+            A, B, C, SA, SB, SC = (a[0] for a in _row_quadratics(polys, np.array([mu]), xs))
+            got, scale = A + B * k + C * k * k, SA + SB * abs(k) + SC * k * k
+            table = platoon_gain(model, fixed, cav, vehicle, mu, k).as_table()
+            num, den = [Fraction(1)], [Fraction(1)]
+            for c, first, last in platoon_segments(model, None, cav, vehicle):
+                row = table.get(f"u_{c}", {})
+                seg = SimpleNamespace(m=c - first, n=last - c, coefficients={
+                    i - c: model.coefficients[i - 1] for i in range(first, last + 1)})
+                mus = {i - c: row.get(f"s_{i}", 0.0) for i in range(first, last + 1)}
+                kks = {i - c: row.get(f"v_{i}", 0.0) for i in range(first, last + 1)}
+                kh = row.get(f"v_{c - 1}", 0.0) if first == c else 0.0
+                n_, d_ = exact_gamma_polynomials(seg, mus, kks, kh)
+                num, den = _pmul(num, n_), _pmul(den, d_)
+            for j, x in enumerate(xs):
+                want = exact_ptilde(num, den, Fraction(float(x)))
+                err = abs(Fraction(float(got[j])) - want) / Fraction(float(scale[j]))
+                worst = max(worst, float(err) / eps)
+    assert worst <= 2 * deg + 16, worst  # measured 0.35 eps
+    assert region_band(deg) == pytest.approx(16 * (2 * deg + 16) * eps)

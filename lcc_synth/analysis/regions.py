@@ -79,6 +79,41 @@ frequencies (best of 3, on a shared 2-core machine; the previous single-threshol
 took 0.8-1.9 s in the same runs). Two interval markings per frequency (the band's edges)
 instead of one, but the chunks are now 20,000 points, so the working arrays stay in cache.
 
+Open platoons
+-------------
+On an open platoon (``kind = "platoon"``, several CAVs behind a head vehicle) the map varies
+the gains ``(mu_i, k_i)`` of one CAV ``c`` on one HDV ``i`` of its segment, every other gain
+fixed. When no CAV's gain crosses into another CAV's segment, the closed loop is a cascade of
+segments, each driven only by the velocity of the vehicle ahead of it, and
+
+    Gamma = prod_j num_j / den_j,    den = prod_j den_j (the closed-loop characteristic
+                                     polynomial: A_cl is block triangular by segments),
+
+each factor the paper's one-CAV ``Gamma`` of its segment (:func:`gamma_polynomials` with the
+segment's own coefficients; vehicles indexed from its CAV, the segment's input the velocity
+ahead of it: the head's, or the predecessor's as ``kh`` when the CAV leads its segment).
+Only the varied CAV's factor depends on ``(mu, k)``, affinely, so its three affine parts times
+the fixed product of the other factors are the map's ``N0..D2``, still affine, still with
+``N1(0) = N2(0) = D1(0) = D2(0) = 0`` exactly, and the decision, the band (``deg = 2 N``) and
+the cost above apply unchanged. :func:`platoon_segments` places the cuts: CAV ``c``'s stretch
+is ``c`` with every vehicle its added gain hears (the map's vehicle included; its
+predecessor's velocity alone is the segment's input); stretches of neighbouring CAVs must not
+meet, else the gain that crosses is a ConfigError naming it (``gains.u_c.STATE``), and a map
+vehicle that another CAV hears names ``vehicle``. The map's vehicle is an HDV between the
+CAV's neighbouring CAVs (the first CAV's segment starts at vehicle 1, the last one's ends at
+the tail); a ring has no head vehicle (ConfigError ``system.kind``). The one-CAV platoon
+(``cavs = [m + 1]``) gives the map of ``kind = "lcc"`` with the same ``m, n`` bit for bit
+(the same per-vehicle polynomials; ``tests/test_regions_platoon.py``).
+
+Measured on 7 OVM vehicles with CAVs at 2 and 5 (``tests/test_regions_platoon.py`` and a
+one-off check): 1,600 of 1,600 grid points agree with the closed loop built from ``A, B, H``
+(eigenvalues, the per-point verdict of the state space and ``|Gamma(jw)|`` on a dense grid;
+four 201 x 201 maps, 150 random and 250 boundary-adjacent points each, none in either band);
+the rounding error of ``Ptilde`` against exact rationals is at most 0.35 eps ``S`` (bound 44
+eps, ``tau = 1.6e-13``). Cost (``python benchmarks/bench_regions.py``): 1.3-3.5 s per
+1,002,001-point map with 8,570 frequencies on the shared 2-core machine (the paper's maps:
+1.1-2.5 s in the same run).
+
 Changes against the previous version on the full paper maps: 118 of 8 x 1,002,001 labels,
 all from "stable" to "string stable" (Fig. 7(a): 24, i.e. 4.94 % -> 4.95 % string stable;
 the other fractions move in the third decimal or less); every one of them is string stable by
