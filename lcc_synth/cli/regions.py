@@ -3,6 +3,8 @@
 Computes every ``[maps.NAME]`` string-stable region map of the problem (Figs. 7-8): the
 fractions of the ``(mu_i, k_i)`` grid that are plant stable and head-to-tail string stable,
 and, for a map with a ``baseline``, how much string-stable area it gains over the baseline.
+On an open platoon each map names the CAV whose gains vary (``cav``); see
+:mod:`lcc_synth.analysis.region_specs`.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ import sys
 
 from lcc_synth.cli.arguments import add_problem_arguments, add_recording
 
-HELP = "string-stable regions of one vehicle's feedback gains (Figs. 7-8; open platoons too)"
+HELP = "string-stable regions of one vehicle's feedback gains (Figs. 7-8)"
 
 #: The estimate printed first: seconds per grid row and frequency (the closed-form roots of
 #: the quadratics in ``k``) and per grid point (marking, Routh-Hurwitz). Measured on
