@@ -134,8 +134,9 @@ def test_one_cav_platoon_is_the_paper_map_bit_for_bit(m, n):
         a = affine_polynomials(lcc, v, g_lcc)
         b = affine_polynomials(one, v + m + 1, g_pl)
         assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
-        r1 = region_map(lcc, v, AXIS, AXIS, g_lcc)
-        r2 = region_map(one, v + m + 1, AXIS, AXIS, g_pl)
+        ax = AXIS[::2]  # the polynomials are equal bit for bit: a coarse grid suffices
+        r1 = region_map(lcc, v, ax, ax, g_lcc)
+        r2 = region_map(one, v + m + 1, ax, ax, g_pl)
         assert np.array_equal(r1.labels, r2.labels) and np.array_equal(r1.boundary, r2.boundary)
         assert r1.band == r2.band and r2.cav == m + 1 and r1.cav is None
 
