@@ -307,3 +307,16 @@ def test_segment_product_decision_function_within_the_band():
                 worst = max(worst, float(err) / eps)
     assert worst <= 2 * deg + 16, worst  # measured 0.35 eps
     assert region_band(deg) == pytest.approx(16 * (2 * deg + 16) * eps)
+
+
+def test_flat_api_maps_a_platoon():
+    import lcc_synth as lcc
+
+    system = lcc.system(size=7, cavs=[2, 5])
+    g = lcc.gains({"u_2": {"s_3": -1.0, "v_3": -1.0}}, semantics="added", model=system)
+    ax = AXIS[::4]
+    a = lcc.region_map(system, 7, ax, ax, g, cav=5)
+    b = region_map(TWO, 7, ax, ax, Gains.from_table({"u_2": {"s_3": -1.0, "v_3": -1.0}}, TWO,
+                                                    "added"), cav=5)  # fmt: skip
+    assert np.array_equal(a.labels, b.labels) and a.cav == 5
+    assert a.fixed == {"u_2.s_3": -1.0, "u_2.v_3": -1.0}
