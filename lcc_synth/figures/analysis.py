@@ -202,7 +202,8 @@ def plot_region_maps(maps, path: str | Path, baselines=None, titles=None, ncols:
                 colors="none", hatches=["///"],
             )
         i = rm.vehicle
-        of = "" if rm.cav is None else f" of CAV {rm.cav}"  # an open platoon's map
+        cav = getattr(rm, "cav", None)  # an open platoon's map names its CAV
+        of = "" if cav is None else f" of CAV {cav}"
         ax.set_xlabel(f"$\\mu_{{{i}}}${of} (1/s²)")
         ax.set_ylabel(f"$k_{{{i}}}${of} (1/s)")
         fixed = ", ".join(f"{k}={v:g}" for k, v in rm.fixed.items())
