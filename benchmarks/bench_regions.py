@@ -4,6 +4,9 @@ mu, k in [-10, 10] with step 0.02 (1001 x 1001 = 1,002,001 points) for each of v
 1, 2 (m = n = 2, OVM at v* = 15 m/s, no other gains), with the default frequency grid. Prints
 the wall time and the cost per grid point, and for comparison the cost of the exact per-point
 check (:func:`lcc_synth.analysis.string_stability.string_stability`) that the map replaces.
+Then the same grid on an open platoon of 7 OVM vehicles with CAVs at 2 and 5 (each map the
+varied CAV's segment times the other segment's fixed polynomials): CAV 2 on vehicles 1 and 3,
+CAV 5 on vehicles 6 and 7, the other CAV's gains fixed.
 
 Usage: python benchmarks/bench_regions.py [STEP]   (default 0.02)
 """
@@ -21,6 +24,7 @@ from lcc_synth.analysis.string_stability import string_stability
 from lcc_synth.models.feedback import Gains, input_feedback
 from lcc_synth.models.hdv import OVM
 from lcc_synth.models.linear import general_lcc
+from lcc_synth.models.platoon import Platoon, platoon_model
 
 
 def main(argv: list[str]) -> int:
@@ -53,6 +57,23 @@ def main(argv: list[str]) -> int:
         f"exact per-point check (string_stability, vehicle 1): {1e3 * per:.2f} ms/point, "
         f"i.e. {per * axis.size**2 / 3600:.1f} h for one full map"
     )
+    platoon = platoon_model(Platoon((OVM(),) * 7, (2, 5), 15.0), warn=False)
+    fixed = {"u_2": {"s_3": -1.0, "v_3": -1.0}, "u_5": {"s_6": 0.5, "v_6": -0.5}}
+    total = 0.0
+    for cav, vehicle in ((2, 1), (2, 3), (5, 6), (5, 7)):
+        table = {u: {n: g for n, g in row.items() if n[2:] != str(vehicle)}
+                 for u, row in fixed.items()}  # fmt: skip
+        gains = Gains.from_table(table, platoon, "added")
+        t0 = time.perf_counter()
+        rm = region_map(platoon, vehicle, axis, axis, gains, omega=omega, cav=cav)
+        dt = time.perf_counter() - t0
+        total += dt
+        print(
+            f"platoon CAV {cav}, vehicle {vehicle}: {dt:6.2f} s, {1e6 * dt / rm.points:6.3f} "
+            f"us/point; plant stable {100 * rm.plant_stable_fraction:6.2f}%, string stable "
+            f"{100 * rm.string_stable_fraction:6.2f}%, boundary {int(rm.boundary.sum())}"
+        )
+    print(f"all four platoon maps: {total:.2f} s")
     return 0
 
 

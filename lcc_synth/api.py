@@ -419,17 +419,19 @@ def region_map(
     gain: Gains | None = None,
     omega=None,
     name: str = "",
+    cav: int | None = None,
 ):
     """Stability / string-stability map over the gains ``(mu, k)`` of one HDV's spacing and
     velocity (Sec. IV-B, Fig. 7-8): a :class:`~lcc_synth.analysis.regions.RegionMap`.
     ``gain``: the other gains, fixed (from :func:`gains`). ``model``: a :class:`System` or its
-    linear model. :func:`lcc_synth.analysis.regions.region_map`."""
+    linear model. ``cav``: on an open platoon, the position of the CAV whose gains on
+    ``vehicle`` vary (default: the only CAV). :func:`lcc_synth.analysis.regions.region_map`."""
     from lcc_synth.analysis.regions import region_map as _region_map
 
     model = _linear(model)
     g = None if gain is None else _stated(gain, model)
     return _region_map(model, vehicle, np.asarray(mu, float), np.asarray(k, float), g, omega,
-                       name)  # fmt: skip
+                       name, cav=cav)  # fmt: skip
 
 
 def h2_problem(

@@ -341,6 +341,10 @@ def _load_coverage_corpus(tmp: Path) -> None:
     model = system_from(prob.data).linear_model(warn=False)
     specs, _ = region_specs_from(prob.data, model)
     assert len(specs["a"].mu) == 5
+    platoon = {"system": {"kind": "platoon", "size": 4, "cavs": [2, 4]},
+               "maps": {"b": {"cav": 4, "vehicle": 3, "gains": {"u_2": {"s_1": 0.5}}}}}
+    model = system_from(platoon).linear_model(warn=False)
+    assert region_specs_from(platoon, model)[0]["b"].cav == 4
     from lcc_synth.controllers.baseline_tables import baseline_from_table
 
     for kind, table in (

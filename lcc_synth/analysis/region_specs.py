@@ -4,6 +4,13 @@
 others, the grid and an optional baseline map (the expansion of Fig. 7(c)-(f) over Fig. 7(a)(b));
 ``[regions]`` holds the shared grid and frequency options. The maps themselves are computed by
 :func:`lcc_synth.analysis.regions.region_map`.
+
+On an open platoon (``kind = "platoon"``) the table speaks the platoon's vocabulary: ``cav``
+is the position of the CAV whose gains vary (may be left out with one CAV), ``vehicle`` a
+position in that CAV's segment (an HDV between the neighbouring CAVs) and ``gains`` the other
+gains as per-CAV tables, ``gains.u_5 = { s_6 = 0.5, v_6 = -0.5 }``. A gain that crosses into
+another CAV's segment, a map vehicle another CAV hears, and a ring (no head vehicle) are
+ConfigErrors naming the field (:func:`lcc_synth.analysis.regions.platoon_segments`).
 """
 
 from __future__ import annotations
@@ -16,6 +23,7 @@ import numpy as np
 from lcc_synth.analysis.regions import (
     STRING_STABLE,
     RegionMap,
+    platoon_segments,
     region_frequency_grid,
     region_map,
 )
@@ -51,7 +59,8 @@ def grid_axis(
 
 @dataclass(frozen=True)
 class RegionSpec:
-    """One ``[maps.NAME]`` table: which vehicle's gains vary, the fixed gains, the grid."""
+    """One ``[maps.NAME]`` table: which vehicle's gains vary, the fixed gains, the grid
+    (``cav``: the CAV position of an open platoon's map, ``None`` for one CAV)."""
 
     name: str
     vehicle: int
@@ -60,6 +69,7 @@ class RegionSpec:
     gains: Gains
     baseline: str | None = None
     title: str = ""
+    cav: int | None = None
 
     def toml_table(self) -> dict:
         """The ``[maps.NAME]`` table of this map, its grid explicit (``mu``, ``k``, ``step``);
@@ -68,9 +78,10 @@ class RegionSpec:
                                for a, n in ((self.mu, "mu"), (self.k, "k")))  # fmt: skip
         if st != st_k:
             raise ConfigError(f"maps.{self.name}.step", "mu and k have different steps")
-        return {"title": self.title, "vehicle": int(self.vehicle), "semantics":
-                self.gains.semantics, "gains": dict(self.gains.gains), "baseline": self.baseline,
-                "mu": mu, "k": k, "step": st}  # fmt: skip
+        out = {"title": self.title, "vehicle": int(self.vehicle), "semantics":
+               self.gains.semantics, "gains": self.gains.as_table(), "baseline": self.baseline,
+               "mu": mu, "k": k, "step": st}  # fmt: skip
+        return out if self.cav is None else {**out, "cav": int(self.cav)}
 
 
 def _axis_table(axis: np.ndarray, field_name: str) -> tuple[list[float], float]:
@@ -95,10 +106,12 @@ def region_specs_from(
     from lcc_synth.schema import declared
 
     try:
-        if model.kind == "fd_lcc" or tuple(model.cavs) != (0,):
+        platoon = model.kind == "platoon"
+        if model.kind == "fd_lcc" or not (platoon or tuple(model.cavs) == (0,)):
             raise ConfigError(
                 "system.kind", "region maps (Figs. 7-8) vary one CAV's gains behind a head "
-                f"vehicle (lcc, cf_lcc or ccc), not {model.kind}"
+                f"vehicle (lcc, cf_lcc, ccc or an open platoon), not {model.kind}"
+                + (": a ring has no head vehicle" if model.kind == "ring" else "")
             )
         R = declared("regions")
         opts = declared("").get(data, "regions", "")
@@ -130,25 +143,32 @@ def region_specs_from(
                 raise ConfigError(field, f"must be a table, got {t!r}")
             M.check(t, field)
             vehicle = M.get(t, "vehicle", field)
-            if vehicle not in allowed_vehicles:
+            if platoon:
+                specs[name] = _platoon_spec(name, t, model, M, vehicle)
+            elif "cav" in t:
+                raise ConfigError(f"{field}.cav", f"is for kind = 'platoon' (the CAV whose "
+                                  f"gains vary); a {model.kind} system has one CAV: remove "
+                                  "it")  # fmt: skip
+            elif vehicle not in allowed_vehicles:
                 raise ConfigError(
                     f"{field}.vehicle",
                     f"must be one of {allowed_vehicles} (an HDV of this m={model.m}, "
                     f"n={model.n} system), got {vehicle}",
                 )
-            semantics = M.get(t, "semantics", field)
-            raw = M.get(t, "gains", field)
-            warn_large_gains(raw, f"{field}.gains")
-            try:
-                gains = Gains.named(raw, semantics)
-                gains.check(model)
-            except ConfigError as err:
-                raise ConfigError(f"{field}.{err.field}", err.message) from None
-            for own in (f"s_{vehicle}", f"v_{vehicle}"):
-                if own in gains.gains:
-                    raise ConfigError(
-                        f"{field}.gains.{own}", "is the map's own axis; remove it from gains"
-                    )
+            if not platoon:
+                semantics = M.get(t, "semantics", field)
+                raw = M.get(t, "gains", field)
+                warn_large_gains(raw, f"{field}.gains")
+                try:
+                    gains = Gains.named(raw, semantics)
+                    gains.check(model)
+                except ConfigError as err:
+                    raise ConfigError(f"{field}.{err.field}", err.message) from None
+                for own in (f"s_{vehicle}", f"v_{vehicle}"):
+                    if own in gains.gains:
+                        raise ConfigError(
+                            f"{field}.gains.{own}", "is the map's own axis; remove it from gains"
+                        )
             if any(key in t for key in ("mu", "k", "step")):
                 st = step if step is not None else M.get(t, "step", field, default=d_step)
                 sf = step_field if step is not None else f"{field}.step"
@@ -160,7 +180,11 @@ def region_specs_from(
                 mu, k = mu_default, k_default
             baseline = M.get(t, "baseline", field)
             title = M.get(t, "title", field, default=name)
-            specs[name] = RegionSpec(name, vehicle, mu, k, gains, baseline, title)
+            if platoon:
+                p = specs[name]
+                specs[name] = RegionSpec(name, vehicle, mu, k, p.gains, baseline, title, p.cav)
+            else:
+                specs[name] = RegionSpec(name, vehicle, mu, k, gains, baseline, title)
         for name, spec in specs.items():
             if spec.baseline is None:
                 continue
@@ -171,6 +195,7 @@ def region_specs_from(
                 )
             if (
                 base.vehicle != spec.vehicle
+                or base.cav != spec.cav
                 or base.mu.shape != spec.mu.shape
                 or base.k.shape != spec.k.shape
                 or not np.allclose(base.mu, spec.mu)
@@ -178,11 +203,39 @@ def region_specs_from(
             ):
                 raise ConfigError(
                     f"maps.{name}.baseline",
-                    f"map {spec.baseline!r} must have the same vehicle and grid",
+                    f"map {spec.baseline!r} must have the same vehicle, CAV and grid",
                 )
         return specs, omega
     except ConfigError as err:
         raise err.with_source(source) if source and not err.source else err from None
+
+
+def _platoon_spec(name: str, t: Mapping, model, M, vehicle: int) -> RegionSpec:
+    """The CAV, vehicle and fixed gains of an open platoon's ``[maps.NAME]`` (grid and title
+    filled in by :func:`region_specs_from`); errors name ``maps.NAME.FIELD``."""
+    from lcc_synth.problem import warn_large_gains
+
+    field_ = f"maps.{name}"
+    cav = M.get(t, "cav", field_)
+    if cav is None and len(model.cavs) == 1:
+        cav = model.cavs[0]
+    semantics = M.get(t, "semantics", field_)
+    raw = M.get(t, "gains", field_)
+    for u, row in raw.items():
+        if isinstance(row, Mapping):
+            warn_large_gains(row, f"{field_}.gains.{u}")
+    try:
+        gains = Gains.from_table(raw, model, semantics, field="gains")
+        platoon_segments(model, gains, cav, vehicle)
+    except ConfigError as err:
+        raise ConfigError(f"{field_}.{err.field}", err.message) from None
+    own = raw.get(f"u_{cav}", {})
+    for state in (f"s_{vehicle}", f"v_{vehicle}"):
+        if state in own:
+            raise ConfigError(
+                f"{field_}.gains.u_{cav}.{state}", "is the map's own axis; remove it from gains"
+            )
+    return RegionSpec(name, vehicle, np.empty(0), np.empty(0), gains, cav=int(cav))
 
 
 def regions_tables(specs: Mapping[str, RegionSpec], omega: np.ndarray) -> dict:
@@ -206,7 +259,7 @@ def run_region_specs(
     for name, s in specs.items():
         step = None if on_rows is None else (lambda rows, name=name: on_rows(name, rows))
         out[name] = region_map(model, s.vehicle, s.mu, s.k, gains=s.gains, omega=omega,
-                               name=name, on_rows=step)  # fmt: skip
+                               name=name, on_rows=step, cav=s.cav)  # fmt: skip
     return out
 
 

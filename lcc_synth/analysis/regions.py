@@ -79,6 +79,41 @@ frequencies (best of 3, on a shared 2-core machine; the previous single-threshol
 took 0.8-1.9 s in the same runs). Two interval markings per frequency (the band's edges)
 instead of one, but the chunks are now 20,000 points, so the working arrays stay in cache.
 
+Open platoons
+-------------
+On an open platoon (``kind = "platoon"``, several CAVs behind a head vehicle) the map varies
+the gains ``(mu_i, k_i)`` of one CAV ``c`` on one HDV ``i`` of its segment, every other gain
+fixed. When no CAV's gain crosses into another CAV's segment, the closed loop is a cascade of
+segments, each driven only by the velocity of the vehicle ahead of it, and
+
+    Gamma = prod_j num_j / den_j,    den = prod_j den_j (the closed-loop characteristic
+                                     polynomial: A_cl is block triangular by segments),
+
+each factor the paper's one-CAV ``Gamma`` of its segment (:func:`gamma_polynomials` with the
+segment's own coefficients; vehicles indexed from its CAV, the segment's input the velocity
+ahead of it: the head's, or the predecessor's as ``kh`` when the CAV leads its segment).
+Only the varied CAV's factor depends on ``(mu, k)``, affinely, so its three affine parts times
+the fixed product of the other factors are the map's ``N0..D2``, still affine, still with
+``N1(0) = N2(0) = D1(0) = D2(0) = 0`` exactly, and the decision, the band (``deg = 2 N``) and
+the cost above apply unchanged. :func:`platoon_segments` places the cuts: CAV ``c``'s stretch
+is ``c`` with every vehicle its added gain hears (the map's vehicle included; its
+predecessor's velocity alone is the segment's input); stretches of neighbouring CAVs must not
+meet, else the gain that crosses is a ConfigError naming it (``gains.u_c.STATE``), and a map
+vehicle that another CAV hears names ``vehicle``. The map's vehicle is an HDV between the
+CAV's neighbouring CAVs (the first CAV's segment starts at vehicle 1, the last one's ends at
+the tail); a ring has no head vehicle (ConfigError ``system.kind``). The one-CAV platoon
+(``cavs = [m + 1]``) gives the map of ``kind = "lcc"`` with the same ``m, n`` bit for bit
+(the same per-vehicle polynomials; ``tests/test_regions_platoon.py``).
+
+Measured on 7 OVM vehicles with CAVs at 2 and 5 (``tests/test_regions_platoon.py`` and a
+one-off check): 1,600 of 1,600 grid points agree with the closed loop built from ``A, B, H``
+(eigenvalues, the per-point verdict of the state space and ``|Gamma(jw)|`` on a dense grid;
+four 201 x 201 maps, 150 random and 250 boundary-adjacent points each, none in either band);
+the rounding error of ``Ptilde`` against exact rationals is at most 0.35 eps ``S`` (bound 44
+eps, ``tau = 1.6e-13``). Cost (``python benchmarks/bench_regions.py``): 1.3-3.5 s per
+1,002,001-point map with 8,570 frequencies on the shared 2-core machine (the paper's maps:
+1.1-2.5 s in the same run).
+
 Changes against the previous version on the full paper maps: 118 of 8 x 1,002,001 labels,
 all from "stable" to "string stable" (Fig. 7(a): 24, i.e. 4.94 % -> 4.95 % string stable;
 the other fractions move in the third decimal or less); every one of them is string stable by
@@ -98,6 +133,7 @@ from lcc_synth.analysis.transfer import closed_form_gains, gamma_polynomials
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import Gains, input_feedback
 from lcc_synth.models.linear import LCCModel
+from lcc_synth.models.platoon import hdv_law_rows
 from lcc_synth.models.records import Record
 
 __all__ = [
@@ -111,6 +147,7 @@ __all__ = [
     "region_band",
     "region_frequency_grid",
     "affine_polynomials",
+    "platoon_segments",
     "hurwitz",
     "region_map",
     "region_fractions",
@@ -151,6 +188,9 @@ class RegionMap(Record):
         with ``Ptilde > band * S``). They carry the conservative label :data:`STABLE`.
     band : float
         The relative tolerance ``tau`` used (:func:`region_band`).
+    cav : int or None
+        An open platoon's map: the position of the CAV whose gains vary (``vehicle`` and
+        ``fixed``, ``"u_3.s_1"``, in the platoon's positions); ``None`` for one CAV.
     """
 
     name: str
@@ -163,6 +203,7 @@ class RegionMap(Record):
     seconds: float = 0.0
     boundary: np.ndarray | None = None
     band: float = 0.0
+    cav: int | None = None
 
     def __post_init__(self):
         if self.boundary is None:
@@ -213,6 +254,8 @@ class RegionMap(Record):
             "seconds": self.seconds,
             "labels_legend": {str(k): v for k, v in _LABEL_NAMES.items()},
         }
+        if self.cav is not None:
+            out["cav"] = self.cav
         if include_labels:
             out["labels"] = self.labels.tolist()
             out["boundary"] = np.argwhere(self.boundary).tolist()
@@ -253,13 +296,20 @@ def _base_gains(model: LCCModel, gains) -> tuple[dict, dict, float]:
     return closed_form_gains(model, K, kh)
 
 
-def affine_polynomials(model: LCCModel, vehicle: int, gains=None):
+def affine_polynomials(model: LCCModel, vehicle: int, gains=None, cav: int | None = None):
     """``(N0, N1, N2, D0, D1, D2)``: ``num = N0 + mu N1 + k N2``, ``den = D0 + mu D1 + k D2``
     for the gains ``(mu, k)`` of ``vehicle``, the other gains from ``gains``.
 
     Coefficients are in *ascending* powers, all padded to the degree of ``den``.
     ``gains`` is a :class:`~lcc_synth.models.feedback.Gains` or input feedback ``(K, kh)``.
+    On an open platoon (``model.kind == "platoon"``) ``cav`` is the CAV position whose gains
+    on ``vehicle`` vary (default: the only CAV) and the polynomials are the segment product
+    of :func:`platoon_segments` (see the module docstring).
     """
+    if getattr(model, "kind", None) in ("platoon", "ring"):
+        return _platoon_affine(model, vehicle, gains, cav)
+    if cav is not None:
+        raise ConfigError("cav", f"is for a platoon; this {model.kind} model has one CAV (0)")
     if tuple(model.cavs) != (0,):
         raise ConfigError(
             "model", "region maps (Figs. 7-8) vary the paper's gains mu_i, k_i of one CAV on "
@@ -288,6 +338,166 @@ def affine_polynomials(model: LCCModel, vehicle: int, gains=None):
     t = _AFFINE_STEP
     (n0, d0), (n1, d1), (n2, d2) = polys(0.0, 0.0), polys(t, 0.0), polys(0.0, t)
     return n0, (n1 - n0) / t, (n2 - n0) / t, d0, (d1 - d0) / t, (d2 - d0) / t
+
+
+def _platoon_feedback(model, gains) -> tuple[np.ndarray, np.ndarray]:
+    """``(K_add, kh_add)``: each CAV's command on a platoon (one row per CAV) minus its HDV law
+    (:func:`~lcc_synth.models.platoon.hdv_law_rows`, and ``a3 v_h`` for a CAV at position 1):
+    the gains *added* to the HDV law, whatever the semantics of ``gains``."""
+    if gains is None:
+        gains = Gains.zero(model)
+    if isinstance(gains, Gains):
+        gains.check(model)
+        K, kh = gains.input_feedback(model)
+    else:
+        K, kh = gains
+    K = np.atleast_2d(np.asarray(K, dtype=float))
+    kh = np.asarray(kh, dtype=float).reshape(-1)
+    if K.shape != (len(model.cavs), model.nx) or kh.shape != (len(model.cavs),):
+        raise ConfigError(
+            "gains", f"need one row of {model.nx} entries and one head gain per CAV "
+            f"{list(model.cavs)}, got K of shape {K.shape} and {kh.size} head gains",
+        )
+    kh0 = np.array([model.coefficients[0].alpha3 if c == 1 else 0.0 for c in model.cavs])
+    return K - hdv_law_rows(model), kh - kh0
+
+
+def _heard(model, row: np.ndarray, c: int) -> dict[int, str]:
+    """``{position: state}`` of the vehicles CAV ``c``'s added gain row hears (the first state
+    name with a non-zero gain), its predecessor left out when only its velocity is heard."""
+    out = {}
+    for p in model.vehicles:
+        s, v = row[model.index(f"s_{p}")], row[model.index(f"v_{p}")]
+        if s != 0.0 or v != 0.0:
+            out[p] = f"s_{p}" if s != 0.0 else f"v_{p}"
+    if out.get(c - 1) == f"v_{c - 1}":
+        del out[c - 1]  # the predecessor's velocity: the segment's input
+    return out
+
+
+def platoon_segments(
+    model, gains=None, cav: int | None = None, vehicle: int | None = None
+) -> list[tuple[int, int, int]]:
+    """``[(cav, first, last), ...]``: the segments of an open platoon in which ``Gamma``
+    factors, front to tail, one per CAV (see the module docstring).
+
+    Each CAV's stretch is the CAV with every vehicle its added gain hears (``vehicle`` too for
+    the CAV ``cav`` of a map; its predecessor's velocity alone is the segment's input, not a
+    vehicle of it); segment ``j`` starts at the first vehicle of its stretch (the first
+    segment at 1) and ends before the next one. Errors (:class:`ConfigError`) name the field:
+    ``system.kind`` (a ring: no head vehicle), ``system.cavs`` (no CAV), ``cav``, ``vehicle``
+    (not an HDV between the neighbouring CAVs, or one another CAV hears) and
+    ``gains.u_c.STATE`` (a gain that crosses into another CAV's stretch: no factorisation).
+    """
+    if model.ring:
+        raise ConfigError(
+            "system.kind", "a ring has no head vehicle: the head-to-tail Gamma of a region map "
+            "is undefined; give an open platoon (kind = 'platoon')",
+        )
+    cavs = list(model.cavs)
+    if not cavs:
+        raise ConfigError("system.cavs", "a region map varies a CAV's gains: give a CAV")
+    K_add, kh_add = _platoon_feedback(model, gains)
+    if vehicle is not None:
+        if cav is None and len(cavs) == 1:
+            cav = cavs[0]
+        if cav not in cavs:
+            raise ConfigError("cav", f"must be the position of the CAV whose gains vary, one of "
+                              f"{cavs}, got {cav!r}")  # fmt: skip
+        r = cavs.index(cav)
+        lo = cavs[r - 1] + 1 if r > 0 else 1
+        hi = cavs[r + 1] - 1 if r + 1 < len(cavs) else model.platoon.size
+        allowed = [p for p in range(lo, hi + 1) if p != cav]
+        if vehicle not in allowed:
+            raise ConfigError(
+                "vehicle", f"must be an HDV of CAV {cav}'s segment (between the neighbouring "
+                f"CAVs), one of {allowed}, got {vehicle!r}",
+            )
+    stretches = []  # (first, last) heard, the map's vehicle included, and without it
+    for r, c in enumerate(cavs):
+        heard = _heard(model, K_add[r], c)
+        if kh_add[r] != 0.0 and c != 1:
+            raise ConfigError(f"gains.u_{c}", "hears the head vehicle's velocity v_h: Gamma "
+                              "does not factor per segment")  # fmt: skip
+        own = sorted({c, *heard})
+        full = sorted({c, vehicle, *heard}) if c == cav else own
+        stretches.append(((full[0], full[-1]), (own[0], own[-1]), heard))
+    for r in range(1, len(cavs)):
+        ((_, hi_prev), (_, own_hi_prev), heard_prev) = stretches[r - 1]
+        ((lo, hi), (own_lo, _), heard) = stretches[r]
+        if hi_prev < lo:
+            continue
+        prev, c = cavs[r - 1], cavs[r]
+        if own_hi_prev < own_lo:  # only the map's vehicle makes the stretches meet
+            other, span = (c, (lo, hi)) if cav == prev else (prev, stretches[r - 1][0])
+            raise ConfigError("vehicle", f"{vehicle} is in CAV {other}'s segment (CAV {other} "
+                              f"hears vehicles {span[0]}..{span[1]}): Gamma does not factor "
+                              "per segment")  # fmt: skip
+        if own_lo <= prev or own_hi_prev < c:  # CAV c hears at or ahead of the previous CAV
+            raise ConfigError(f"gains.u_{c}.{heard[own_lo]}", f"crosses into CAV {prev}'s "
+                              f"segment (CAV {prev} hears up to vehicle {own_hi_prev}): Gamma "
+                              "does not factor per segment")  # fmt: skip
+        raise ConfigError(f"gains.u_{prev}.{heard_prev[own_hi_prev]}", f"crosses into CAV {c}'s"
+                          f" segment (CAV {c} hears from vehicle {own_lo}): Gamma does not "
+                          "factor per segment")  # fmt: skip
+    firsts = [1] + [full[0] for full, _, _ in stretches[1:]]
+    lasts = [f - 1 for f in firsts[1:]] + [model.platoon.size]
+    return list(zip(cavs, firsts, lasts, strict=True))
+
+
+def _segment_gains(model, K_add, kh_add, r: int, segment: tuple[int, int, int]):
+    """The paper's one-CAV view of a platoon segment ``(cav, first, last)``: ``(coefs, mu, k,
+    m, n, kh)`` for :func:`~lcc_synth.analysis.transfer.gamma_polynomials`, vehicles indexed
+    from the CAV, the segment's input (``kh``, with ``m = 0``) the predecessor's velocity."""
+    c, first, last = segment
+    idx = range(first, last + 1)
+    coefs = {i - c: model.coefficients[i - 1] for i in idx}
+    mu = {i - c: float(K_add[r, model.index(f"s_{i}")]) for i in idx}
+    kk = {i - c: float(K_add[r, model.index(f"v_{i}")]) for i in idx}
+    kh = 0.0
+    if first == c:
+        kh = float(kh_add[r]) if c == 1 else float(K_add[r, model.index(f"v_{c - 1}")])
+    return coefs, mu, kk, c - first, last - c, kh
+
+
+def _platoon_affine(model, vehicle: int, gains, cav: int | None):
+    """:func:`affine_polynomials` of an open platoon: the varied CAV's segment affine in its
+    gains on ``vehicle``, times the fixed numerators / denominators of the other segments."""
+    segments = platoon_segments(model, gains, cav, vehicle)
+    K_add, kh_add = _platoon_feedback(model, gains)
+    cav = cav if cav is not None else model.cavs[0]
+    other_num, other_den = np.array([1.0]), np.array([1.0])
+    for r, seg in enumerate(segments):
+        if seg[0] == cav:
+            varied = r
+            continue
+        num, den = gamma_polynomials(*_segment_gains(model, K_add, kh_add, r, seg))
+        other_num, other_den = np.polymul(other_num, num), np.polymul(other_den, den)
+    coefs, mu, kk, m, n, kh = _segment_gains(model, K_add, kh_add, varied, segments[varied])
+    i = vehicle - cav
+    deg_seg = 2 * (m + n + 1)
+
+    def polys(a, b):
+        m2, k2 = dict(mu), dict(kk)
+        m2[i], k2[i] = a, b
+        out = []
+        for p in gamma_polynomials(coefs, m2, k2, m, n, kh):
+            asc = np.zeros(deg_seg + 1)
+            asc[: len(p)] = p[::-1]
+            out.append(asc)
+        return out
+
+    t = _AFFINE_STEP  # as in affine_polynomials: exact division, slopes before the product
+    (n0, d0), (n1, d1), (n2, d2) = polys(0.0, 0.0), polys(t, 0.0), polys(0.0, t)
+    parts = (n0, (n1 - n0) / t, (n2 - n0) / t, d0, (d1 - d0) / t, (d2 - d0) / t)
+    deg = 2 * len(model.vehicles)
+    out = []
+    for j, p in enumerate(parts):
+        prod = np.convolve(p, (other_num if j < 3 else other_den)[::-1])
+        asc = np.zeros(deg + 1)
+        asc[: prod.size] = prod[: deg + 1]
+        out.append(asc)
+    return tuple(out)
 
 
 def hurwitz(coef_desc: np.ndarray) -> np.ndarray:
@@ -492,15 +702,18 @@ def region_map(
     name: str = "",
     chunk_points: int = 20_000,
     on_rows: Callable[[int], None] | None = None,
+    cav: int | None = None,
 ) -> RegionMap:
     """Classify every ``(mu[a], k[b])`` for ``vehicle`` (see the module docstring).
 
     Parameters
     ----------
-    model : LCCModel
-        A model with a head vehicle (``lcc``, ``cf_lcc``, ``ccc``).
+    model : LCCModel or PlatoonModel
+        A model with a head vehicle: one CAV (``lcc``, ``cf_lcc``, ``ccc``) or an open platoon
+        whose CAVs' gains do not cross segments (:func:`platoon_segments`).
     vehicle : int
-        The HDV whose ``s_i``/``v_i`` gains vary (``i != 0``).
+        The HDV whose ``s_i``/``v_i`` gains vary (one CAV: ``i != 0``; a platoon: a position
+        in the segment of ``cav``).
     mu, k : array_like
         Grid axes, ``k`` sorted increasing.
     gains : Gains or (K, kh), optional
@@ -515,6 +728,9 @@ def region_map(
     on_rows : callable, optional
         ``on_rows(rows)`` after each chunk, with the number of ``mu`` rows it classified (a
         progress bar).
+    cav : int, optional
+        A platoon only: the position of the CAV whose gains on ``vehicle`` vary (default: the
+        platoon's only CAV).
     """
     t0 = time.perf_counter()
     mu = np.asarray(mu, dtype=float).reshape(-1)
@@ -526,7 +742,9 @@ def region_map(
     w = region_frequency_grid() if omega is None else np.asarray(omega, dtype=float)
     if w.size == 0 or np.any(w <= 0) or not np.all(np.isfinite(w)):
         raise ConfigError("omega", "frequency grid must be finite, positive and non-empty")
-    polys = affine_polynomials(model, vehicle, gains)
+    polys = affine_polynomials(model, vehicle, gains, cav)
+    if cav is None and getattr(model, "kind", None) == "platoon":
+        cav = model.cavs[0]
     d0, d1, d2 = polys[3:]
     tau = region_band(d0.size - 1)
     x = np.concatenate([[0.0], w * w])  # x = w^2; x = 0 is the curvature, exactly
@@ -572,7 +790,14 @@ def region_map(
         if on_rows is not None:
             on_rows(mr.size)
     fixed = {}
-    if isinstance(gains, Gains):
+    if isinstance(gains, Gains) and cav is not None:
+        fixed = {
+            f"{u}.{n}": v
+            for u, row in gains.as_table().items()
+            for n, v in row.items()
+            if not (u == f"u_{cav}" and n in (f"s_{vehicle}", f"v_{vehicle}"))
+        }
+    elif isinstance(gains, Gains):
         fixed = {
             n: v
             for n, v in gains.gains.items()
@@ -589,6 +814,7 @@ def region_map(
         seconds=time.perf_counter() - t0,
         boundary=boundary,
         band=tau,
+        cav=None if cav is None else int(cav),
     )
 
 

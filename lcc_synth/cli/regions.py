@@ -3,6 +3,8 @@
 Computes every ``[maps.NAME]`` string-stable region map of the problem (Figs. 7-8): the
 fractions of the ``(mu_i, k_i)`` grid that are plant stable and head-to-tail string stable,
 and, for a map with a ``baseline``, how much string-stable area it gains over the baseline.
+On an open platoon each map names the CAV whose gains vary (``cav``); see
+:mod:`lcc_synth.analysis.region_specs`.
 """
 
 from __future__ import annotations
@@ -102,7 +104,9 @@ def run(args: argparse.Namespace) -> int:
             written.append(str(plot_region_maps(maps, args.png, baselines, titles)))
 
     def report() -> None:
-        print(f"{doc['problem']} ({src}): {system.kind}, m = {system.m}, n = {system.n}, "
+        layout = (f"CAVs at {list(model.cavs)} of {len(model.vehicles)}"
+                  if model.kind == "platoon" else f"m = {system.m}, n = {system.n}")
+        print(f"{doc['problem']} ({src}): {system.kind}, {layout}, "
               f"v* = {system.v_star:g} m/s; {omega.size} frequencies in "
               f"[{omega[0]:g}, {omega[-1]:g}] rad/s")
         _print_table(doc["maps"])
@@ -130,8 +134,9 @@ def _print_table(maps: dict) -> None:
             x = e["expansion"]
             vs = f"+{100 * x['gained_fraction']:.2f}% / -{100 * x['lost_fraction']:.2f}%"
         shape = f"{e['shape'][0]}x{e['shape'][1]}"
+        vehicle = f"{e['vehicle']} (u_{e['cav']})" if "cav" in e else str(e["vehicle"])
         print(
-            f"{name:<8} {e['vehicle']:>7} {shape:>11} {fixed:<22} "
+            f"{name:<8} {vehicle:>7} {shape:>11} {fixed:<22} "
             f"{100 * e['plant_stable_fraction']:>8.2f}% {100 * e['string_stable_fraction']:>9.2f}% "
             f"{vs:<22} {e['seconds']:>6.2f}"
         )

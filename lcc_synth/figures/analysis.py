@@ -202,11 +202,14 @@ def plot_region_maps(maps, path: str | Path, baselines=None, titles=None, ncols:
                 colors="none", hatches=["///"],
             )
         i = rm.vehicle
-        ax.set_xlabel(f"$\\mu_{{{i}}}$ (1/s²)")
-        ax.set_ylabel(f"$k_{{{i}}}$ (1/s)")
+        cav = getattr(rm, "cav", None)  # an open platoon's map names its CAV
+        of = "" if cav is None else f" of CAV {cav}"
+        ax.set_xlabel(f"$\\mu_{{{i}}}${of} (1/s²)")
+        ax.set_ylabel(f"$k_{{{i}}}${of} (1/s)")
         fixed = ", ".join(f"{k}={v:g}" for k, v in rm.fixed.items())
         sub = f"string stable {100 * rm.string_stable_fraction:.1f}% of grid"
-        ax.set_title(f"{titles.get(name, name)}\n{sub}" + (f"; {fixed}" if fixed else ""),
+        sep = ";\n" if len(fixed) > 40 else "; "  # a long list of fixed gains on its own line
+        ax.set_title(f"{titles.get(name, name)}\n{sub}" + (f"{sep}{fixed}" if fixed else ""),
                      fontsize=9)
         ax.axhline(0, color="k", lw=0.4)
         ax.axvline(0, color="k", lw=0.4)

@@ -250,12 +250,17 @@ REGIONS = Table(
 
 MAPS = Table(
     "maps.NAME",
-    "A (mu, k) stability map of one HDV's gains (Figs. 7, 8).",
+    "A (mu, k) stability map of one HDV's gains (Figs. 7, 8); on an open platoon, of one "
+    "CAV's gains on an HDV of its segment, the other CAVs' gains fixed.",
     ("regions",),
     (
         Key("vehicle", "integer", "The HDV whose gains are the axes (an index of the system, "
-            "not 0).", REQUIRED),
-        Key("gains", "table", "The other gains, fixed; not the map's own s_i, v_i.", {}),
+            "not 0; platoon: a position between the CAV's neighbouring CAVs).", REQUIRED),
+        Key("cav", "integer", "Platoon only: the position of the CAV whose gains vary "
+            "(default: the platoon's only CAV).", None),
+        Key("gains", "table", "The other gains, fixed; not the map's own s_i, v_i. Platoon: "
+            "one table per CAV input, [maps.NAME.gains.u_5] with s_i / v_i gains, none that "
+            "crosses into another CAV's segment.", {}),
         Key("semantics", "string", "How the gain enters the command.", "added", choices=_SEM),
         Key("baseline", "string", "Another map drawn as this one's reference.", None),
         Key("title", "string", "Figure title.", Derived("NAME")),
