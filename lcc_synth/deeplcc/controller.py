@@ -62,7 +62,7 @@ from lcc_synth.mpc.report import new_step_record, step_statistics
 from lcc_synth.mpc.scaffold import STATUS_CODES, SampleLoop, update_equilibrium
 from lcc_synth.mpc.settings import paper_fallback_gains
 from lcc_synth.mpc.solver import OSQPSolver
-from lcc_synth.synthesis.h2 import single_thread_blas
+from lcc_synth.resources import single_thread_blas
 
 __all__ = ["DeePLCCController", "NO_RING", "STATUS_CODES"]
 

@@ -75,6 +75,7 @@ from lcc_synth.models.linear import LCCModel, discretize, model_from_hdv
 from lcc_synth.mpc.delay import DelayModel, pad
 from lcc_synth.mpc.lag import prediction_extension
 from lcc_synth.mpc.settings import MPCSettings
+from lcc_synth.resources import single_thread_blas
 
 __all__ = [
     "Family",
@@ -261,28 +262,6 @@ def riccati(A: np.ndarray, B: np.ndarray, Q: np.ndarray, R: np.ndarray,
     return 0.5 * (P + P.T)
 
 
-_BLAS_CONTROLLER = None
-
-
-def _single_thread_blas():
-    """Context limiting BLAS/LAPACK to one thread (``threadpoolctl``).
-
-    The Riccati solve on 22 states takes ~2 ms single-threaded; with OpenBLAS's thread pool on
-    two busy cores it took 2-40 ms and stalled once for 1.9 s (measured), which a control loop
-    cannot afford.
-    """
-    global _BLAS_CONTROLLER
-    try:
-        from threadpoolctl import ThreadpoolController
-    except ImportError:  # pragma: no cover - declared dependency
-        from contextlib import nullcontext
-
-        return nullcontext()
-    if _BLAS_CONTROLLER is None:
-        _BLAS_CONTROLLER = ThreadpoolController()
-    return _BLAS_CONTROLLER.limit(limits=1, user_api="blas")
-
-
 def linearize(
     kind: str,
     m: int,
@@ -292,7 +271,7 @@ def linearize(
     settings: MPCSettings,
 ) -> Linearization:
     """Linearise the HDV model at ``v_lin`` and build the discrete prediction model."""
-    with _single_thread_blas():
+    with single_thread_blas():
         return _linearize(kind, m, n, hdv, v_lin, settings)
 
 

@@ -68,8 +68,9 @@ from lcc_synth.errors import ConfigError
 from lcc_synth.models.lag import with_actuator_lag
 from lcc_synth.models.platoon import Platoon, PlatoonModel, discretize, platoon_model
 from lcc_synth.mpc.delay import DelayModel, delay_model, delay_samples, pad
-from lcc_synth.mpc.formulation import _single_thread_blas, riccati
+from lcc_synth.mpc.formulation import riccati
 from lcc_synth.mpc.settings import MPCSettings
+from lcc_synth.resources import single_thread_blas
 
 __all__ = [
     "JointLinearization",
@@ -159,7 +160,7 @@ def linearize_joint(platoon: Platoon, v_lin: float, settings: MPCSettings
                       ) -> JointLinearization:
     """The platoon linearised at ``v_lin`` (every vehicle at its own equilibrium spacing) and
     its discrete prediction model and terminal cost."""
-    with _single_thread_blas():
+    with single_thread_blas():
         if float(v_lin) != float(platoon.v_star):
             platoon = replace(platoon, v_star=float(v_lin), circumference=None)
         model = platoon_model(platoon, warn=False)

@@ -43,11 +43,10 @@ import numpy as np
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.feedback import input_feedback
-from lcc_synth.resources import format_bytes, progress, require_memory
+from lcc_synth.resources import format_bytes, progress, require_memory, single_thread_blas
 from lcc_synth.synthesis.config import SynthesisSpec, robust_members
 from lcc_synth.synthesis.h2 import (
     H2Plant,
-    LMIResult,
     PlatoonPlant,
     SynthesisError,
     h2_norm,
@@ -58,10 +57,9 @@ from lcc_synth.synthesis.h2 import (
     platoon_h2,
     platoon_riccati,
     riccati_gain,
-    single_thread_blas,
 )
 from lcc_synth.synthesis.lag_design import lag_note
-from lcc_synth.synthesis.lmi import lmi_full_state, true_h2
+from lcc_synth.synthesis.lmi import LMIResult, lmi_full_state, true_h2
 from lcc_synth.synthesis.report import (
     UNSET,
     SynthesisReport,

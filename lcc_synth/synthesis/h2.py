@@ -87,7 +87,6 @@ With ``A_K = A_r + B_r K V``: ``A_K L + L A_K' + B_wr B_wr' = 0``,
 
 from __future__ import annotations
 
-import functools
 import math
 import weakref
 from dataclasses import asdict, dataclass, field
@@ -101,6 +100,7 @@ from lcc_synth.models.lag import with_actuator_lag
 from lcc_synth.models.linear import LCCModel
 from lcc_synth.models.platoon import PlatoonModel
 from lcc_synth.models.records import Record
+from lcc_synth.resources import single_thread_blas
 from lcc_synth.synthesis.lyapunov import ClosedLoopSchur, closed_loop_schur
 
 __all__ = [
@@ -116,9 +116,7 @@ __all__ = [
     "h2_cost_schur",
     "h2_norm",
     "riccati_gain",
-    "LMIResult",
     "STABILITY_TOL",
-    "single_thread_blas",
     "PlatoonPlant",
     "make_platoon_plant",
     "H2Eval",
@@ -129,24 +127,6 @@ __all__ = [
     "platoon_riccati",
     "pattern_rows",
 ]
-
-def single_thread_blas(fn):
-    """Run ``fn`` with single-threaded BLAS/LAPACK (threadpoolctl).
-
-    The synthesis works on matrices of at most a few hundred rows, where OpenBLAS's threads cost
-    far more than they gain: polishing an 82-state structured design took 9.8 s with the
-    default threads on a loaded 2-core machine and 0.5 s with one thread.
-    """
-
-    @functools.wraps(fn)
-    def wrapper(*args, **kwargs):
-        from threadpoolctl import threadpool_limits
-
-        with threadpool_limits(limits=1, user_api="blas"):
-            return fn(*args, **kwargs)
-
-    return wrapper
-
 
 #: a closed loop counts as stable when every eigenvalue has real part below ``-STABILITY_TOL``
 STABILITY_TOL = 1e-9
@@ -302,6 +282,46 @@ class H2Plant:
     def Br(self) -> np.ndarray:
         """The input matrix beside :attr:`Ar` (``B``)."""
         return self.B
+
+    # what every design plant offers (this one: a gain row; PlatoonPlant: a row per CAV)
+    Bwr = property(lambda self: self.Bw, doc="The disturbances beside :attr:`Ar` (``B_w``).")
+    Qr = property(lambda self: self.Q, doc="The state weight beside :attr:`Ar` (``Q``).")
+    V = property(lambda self: np.eye(self.nx), doc="Basis of the (unreduced) design state.")
+    conserved = property(lambda self: None, doc="No conserved direction: the string is open.")
+
+    def design_gain(self, K: np.ndarray) -> np.ndarray:
+        """A gain in this plant's form: one row (``K.ravel()``)."""
+        return np.asarray(K, dtype=float).ravel()
+
+    def cost(self, g: np.ndarray) -> float:
+        """Squared true H2 norm of ``g`` (``inf`` when not stable): :func:`h2_cost`."""
+        return h2_cost(self, g)[0]
+
+    def true_h2(self, g: np.ndarray) -> float:
+        """True H2 norm of ``g``: :func:`h2_norm`."""
+        return h2_norm(self, g)
+
+    def polish_cost(self, g: np.ndarray):
+        """``(J, L, P, S)`` of the polish: :func:`h2_cost_schur`."""
+        return h2_cost_schur(self, g)
+
+    def head_tail(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(h, c)``: the head-velocity input column and the tail-velocity output row of the
+        design state (with the lag state ``a_0`` last); fd_lcc has no head vehicle."""
+        model = self.model
+        if model.kind == "fd_lcc":
+            raise ConfigError("system.kind", "fd_lcc has no head vehicle: string stability is "
+                              "undefined")  # fmt: skip
+        if self.lag > 0:
+            from lcc_synth.analysis.lag_string import lagged_lcc
+
+            lag = lagged_lcc(model, self.lag)
+            h = (lag.H + lag.B * self.kh0).ravel()[[*self.keep, model.nx]]
+        else:
+            h = (model.H + model.B * self.kh0).ravel()[self.keep]
+        c = np.zeros(self.nx)
+        c[list(self.keep).index(model.tail_velocity_index)] = 1.0
+        return h, c
 
     def vehicle_of_state(self) -> np.ndarray:
         """Vehicle index (-m..n) of each design state (the lag state ``a_0``: ``n + 1``, a
@@ -523,74 +543,6 @@ def _riccati(plant: H2Plant) -> tuple[np.ndarray, np.ndarray]:
     return g.ravel(), P
 
 
-@dataclass
-class LMIResult:
-    """A gain from a convex (LMI) design with its bound and solver diagnostics."""
-
-    g: np.ndarray
-    bound: float
-    status: str
-    solve_time: float
-    residual: float
-    info: dict = field(default_factory=dict)
-
-
-def _clarabel(prob) -> tuple[str, float | None, list]:
-    """Solve ``prob`` with Clarabel (named explicitly; see STACK_NOTES: left to choose, cvxpy
-    picks SCS); returns its status, value and every variable's value, which is what comes back
-    from :func:`~lcc_synth.interrupts.call_in_child`."""
-    import warnings
-
-    import cvxpy as cp
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # "solution may be inaccurate"
-        try:
-            prob.solve(solver=cp.CLARABEL)
-        except cp.error.SolverError as err:
-            return "solver_error", str(err), []
-    return prob.status, prob.value, [v.value for v in prob.variables()]
-
-
-def solve_checked(prob, what: str, hint: str = "") -> tuple[str, float, float]:
-    """Solve a cvxpy problem with Clarabel (named explicitly); raise on failure.
-
-    The solve runs in a forked child process (:func:`lcc_synth.interrupts.call_in_child`), so
-    that Ctrl-C or SIGTERM stops it at once: cvxpy's compilation and Clarabel hold the
-    interpreter lock for seconds at a time on large designs. The variables of ``prob`` get the
-    solution's values (bit for bit those of an in-process solve).
-
-    Accepts ``optimal`` and ``optimal_inaccurate`` (the caller checks the *result*: eigenvalues
-    and the true H2 norm); anything else is a :class:`SynthesisError`.
-
-    Returns
-    -------
-    status : str
-    seconds : float
-        Wall time of the solve.
-    value : float
-        The optimal value.
-    """
-    import time
-
-    from lcc_synth.interrupts import call_in_child
-
-    t0 = time.perf_counter()
-    status, value, values = call_in_child(_clarabel, prob)
-    if status == "solver_error":
-        raise SynthesisError(
-            f"{what}: Clarabel failed ({value}); the problem is probably infeasible or "
-            f"badly conditioned{hint}",
-            {"status": "solver_error"},
-        )
-    dt = time.perf_counter() - t0
-    if status not in ("optimal", "optimal_inaccurate"):
-        raise SynthesisError(f"{what}: solver status {status!r}{hint}", {"status": status})
-    for var, val in zip(prob.variables(), values, strict=True):
-        var.save_value(val)
-    return status, dt, float(value)
-
-
 @dataclass(frozen=True, eq=False)
 class PlatoonPlant:
     """The design plant of the module docstring (full state and reduced to ``c x = 0``).
@@ -656,6 +608,36 @@ class PlatoonPlant:
     def n_in(self) -> int:
         """Number of CAV inputs."""
         return self.B.shape[1]
+
+    def design_gain(self, K: np.ndarray) -> np.ndarray:
+        """A gain in this plant's form: a row per CAV (``K`` itself)."""
+        return K
+
+    def cost(self, K: np.ndarray) -> float:
+        """Squared true H2 norm of ``K`` (``inf`` when not stable): :func:`platoon_cost`."""
+        return platoon_cost(self, K).J
+
+    def true_h2(self, K: np.ndarray) -> float:
+        """True H2 norm of ``K``: :func:`platoon_h2`."""
+        return platoon_h2(self, K)
+
+    def polish_cost(self, K: np.ndarray):
+        """``(J, L, P, S)`` of the polish (an open platoon): :func:`platoon_cost`."""
+        ev = platoon_cost(self, K)
+        return ev.J, ev.L, ev.P, ev.S
+
+    def vehicle_of_state(self) -> np.ndarray:
+        """Position of each state's vehicle (a lag state: -1, a vehicle no pattern names)."""
+        veh = np.repeat(np.array(self.model.vehicles), 2)
+        return np.concatenate([veh, np.full(self.nx - veh.size, -1)])
+
+    def head_tail(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(h, c)`` of the head-to-tail loop (:func:`~lcc_synth.analysis.transfer.
+        head_to_tail_loop`; a ring has no head: ConfigError naming ``system.kind``)."""
+        from lcc_synth.analysis.transfer import head_to_tail_loop
+
+        _, h, c = head_to_tail_loop(self.model, self.K0, self.kh0)
+        return h, c
 
     @property
     def ring(self) -> bool:

@@ -1,5 +1,5 @@
 """The H2 LMI designs of every layout, one input or several (Clarabel via cvxpy, solved by
-``h2.solve_checked``): the full-state LMI (:func:`lmi_full_state`,
+``solve_checked``): the full-state LMI (:func:`lmi_full_state`,
 one CAV's design plant or a platoon's reduced plant; it equals the Riccati optimum to about
 1e-8, which ``cross_check`` verifies) and the convex restriction of the structured design:
 sparsity invariance with chordal decomposition (:func:`convex_restriction`) and the start it
@@ -25,28 +25,89 @@ against 0.05 s for the whole ``method = "direct"`` design, which reaches the sam
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from lcc_synth.synthesis.h2 import (
-    H2Plant,
-    LMIResult,
-    PlatoonPlant,
-    SynthesisError,
-    h2_cost,
-    h2_norm,
-    platoon_cost,
-    platoon_h2,
-    solve_checked,
-)
+from lcc_synth.synthesis.h2 import H2Plant, PlatoonPlant, SynthesisError
 
 __all__ = [
+    "LMIResult",
+    "solve_checked",
     "lmi_full_state",
     "true_h2",
     "convex_restriction",
     "restriction_start",
     "RING_CONSERVED_DECAY",
 ]
+
+
+@dataclass
+class LMIResult:
+    """A gain from a convex (LMI) design with its bound and solver diagnostics."""
+
+    g: np.ndarray
+    bound: float
+    status: str
+    solve_time: float
+    residual: float
+    info: dict = field(default_factory=dict)
+
+
+def _clarabel(prob) -> tuple[str, float | None, list]:
+    """Solve ``prob`` with Clarabel (named explicitly; see STACK_NOTES: left to choose, cvxpy
+    picks SCS); returns its status, value and every variable's value, which is what comes back
+    from :func:`~lcc_synth.interrupts.call_in_child`."""
+    import warnings
+
+    import cvxpy as cp
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # "solution may be inaccurate"
+        try:
+            prob.solve(solver=cp.CLARABEL)
+        except cp.error.SolverError as err:
+            return "solver_error", str(err), []
+    return prob.status, prob.value, [v.value for v in prob.variables()]
+
+
+def solve_checked(prob, what: str, hint: str = "") -> tuple[str, float, float]:
+    """Solve a cvxpy problem with Clarabel (named explicitly); raise on failure.
+
+    The solve runs in a forked child process (:func:`lcc_synth.interrupts.call_in_child`), so
+    that Ctrl-C or SIGTERM stops it at once: cvxpy's compilation and Clarabel hold the
+    interpreter lock for seconds at a time on large designs. The variables of ``prob`` get the
+    solution's values (bit for bit those of an in-process solve).
+
+    Accepts ``optimal`` and ``optimal_inaccurate`` (the caller checks the *result*: eigenvalues
+    and the true H2 norm); anything else is a :class:`SynthesisError`.
+
+    Returns
+    -------
+    status : str
+    seconds : float
+        Wall time of the solve.
+    value : float
+        The optimal value.
+    """
+    import time
+
+    from lcc_synth.interrupts import call_in_child
+
+    t0 = time.perf_counter()
+    status, value, values = call_in_child(_clarabel, prob)
+    if status == "solver_error":
+        raise SynthesisError(
+            f"{what}: Clarabel failed ({value}); the problem is probably infeasible or "
+            f"badly conditioned{hint}",
+            {"status": "solver_error"},
+        )
+    dt = time.perf_counter() - t0
+    if status not in ("optimal", "optimal_inaccurate"):
+        raise SynthesisError(f"{what}: solver status {status!r}{hint}", {"status": status})
+    for var, val in zip(prob.variables(), values, strict=True):
+        var.save_value(val)
+    return status, dt, float(value)
 
 
 def lmi_full_state(plant: H2Plant | PlatoonPlant, eps: float = 1e-7) -> LMIResult:
@@ -64,7 +125,7 @@ def lmi_full_state(plant: H2Plant | PlatoonPlant, eps: float = 1e-7) -> LMIResul
     """
     import cvxpy as cp
 
-    A, B, Bw, Q = _lmi_plant(plant)
+    A, B, Bw, Q = (plant.Ar, plant.Br, plant.Bwr, plant.Qr)
     nx, nu = A.shape[0], B.shape[1]
     X = cp.Variable((nx, nx), symmetric=True)
     Z = cp.Variable((nu, nx))
@@ -78,22 +139,14 @@ def lmi_full_state(plant: H2Plant | PlatoonPlant, eps: float = 1e-7) -> LMIResul
     Kr = np.linalg.solve(Xv.T, Zv.T).T
     Mv = A @ Xv + Xv @ A.T + B @ Zv + Zv.T @ B.T + Bw @ Bw.T
     residual = float(max(np.max(np.linalg.eigvalsh((Mv + Mv.T) / 2)), 0.0))
-    g = Kr @ plant.V.T if isinstance(plant, PlatoonPlant) else Kr.ravel()
+    g = plant.design_gain(Kr @ plant.V.T)
     return LMIResult(g, math.sqrt(max(value, 0.0)), status, dt, residual)
 
 
-def _lmi_plant(plant: H2Plant | PlatoonPlant):
-    """``(A, B, B_w, Q)`` the full-state LMI works on: one CAV's design plant, a platoon's
-    reduced plant."""
-    if isinstance(plant, PlatoonPlant):
-        return plant.Ar, plant.Br, plant.Bwr, plant.Qr
-    return plant.A, plant.B, plant.Bw, plant.Q
-
-
 def true_h2(plant: H2Plant | PlatoonPlant, g: np.ndarray) -> float:
-    """True closed-loop H2 norm of a design gain on either plant (:func:`h2_norm` of a row,
-    :func:`platoon_h2` of a gain row per CAV; ``inf`` when not stable)."""
-    return platoon_h2(plant, g) if isinstance(plant, PlatoonPlant) else h2_norm(plant, g)
+    """True closed-loop H2 norm of a design gain on either plant (``plant.true_h2``: a row,
+    or a gain row per CAV; ``inf`` when not stable)."""
+    return plant.true_h2(g)
 
 
 def _x_blocks(veh: np.ndarray, mask: np.ndarray) -> tuple[list[np.ndarray], int]:
@@ -117,16 +170,13 @@ def _restriction_plant(plant: H2Plant | PlatoonPlant):
     spacing state ``s_N``, ``sigma`` :data:`RING_CONSERVED_DECAY`): the same dynamics on the
     hyperplane ``c x = 0``, which the disturbances never leave, and the conserved mode moved
     from 0 to ``-sigma`` (``c A = -sigma c``)."""
-    if not isinstance(plant, PlatoonPlant):
-        return plant.A, plant.B, plant.Bw, plant.Q, plant.vehicle_of_state()
-    veh = np.repeat(np.array(plant.model.vehicles), 2)
-    c = plant.model.conserved
+    c = plant.conserved
     A = plant.A
     if c is not None:
         j = plant.nx - 2  # one dense row, last but one in the elimination order: small cliques
         A = A.copy()
         A[j] -= RING_CONSERVED_DECAY * c / c[j]
-    return A, plant.B, plant.Bw, plant.Q, veh
+    return A, plant.B, plant.Bw, plant.Q, plant.vehicle_of_state()
 
 
 def _cliques(adj: np.ndarray) -> list[np.ndarray]:
@@ -319,7 +369,7 @@ def convex_restriction(
     residual = float(max(np.max(np.linalg.eigvalsh((Mv + Mv.T) / 2)), 0.0))
     cones += [*(len(c) for c in classes), *(len(w) for w in windows), len(H_idx) + nu]
     return LMIResult(
-        K if isinstance(plant, PlatoonPlant) else K.ravel(),
+        plant.design_gain(K),
         math.sqrt(max(value, 0.0)),
         status,
         dt,
@@ -341,10 +391,7 @@ def restriction_start(
         residual named).
     """
     lmi = convex_restriction(plant, mask, band=band)
-    if isinstance(plant, PlatoonPlant):
-        J = platoon_cost(plant, lmi.g).J
-    else:
-        J = h2_cost(plant, lmi.g)[0]
+    J = plant.cost(lmi.g)
     if not math.isfinite(J):
         raise SynthesisError(
             "the convex restriction returned a gain that does not stabilise the plant "

@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.resources import progress
+from lcc_synth.resources import progress, single_thread_blas
 from lcc_synth.synthesis.h2 import (
     H2Plant,
     PlatoonPlant,
@@ -54,7 +54,6 @@ from lcc_synth.synthesis.h2 import (
     h2_cost,
     pattern_rows,
     riccati_gain,
-    single_thread_blas,
 )
 from lcc_synth.synthesis.structured import descend, h2_objective, initial_gain, pattern_mask, polish
 

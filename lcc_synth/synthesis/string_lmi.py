@@ -64,17 +64,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.resources import progress
+from lcc_synth.resources import progress, single_thread_blas
 from lcc_synth.synthesis.h2 import (
     H2Plant,
-    LMIResult,
     PlatoonPlant,
     SynthesisError,
     h2_cost,
     platoon_cost,
-    single_thread_blas,
-    solve_checked,
 )
+from lcc_synth.synthesis.lmi import LMIResult, solve_checked
 from lcc_synth.synthesis.structured import PolishResult, pattern_mask, polish
 
 __all__ = [
@@ -94,34 +92,11 @@ def string_check(plant: H2Plant | PlatoonPlant, g: np.ndarray):
     from lcc_synth.analysis.string_stability import string_stability
 
     K, kh = plant.input_feedback(g)
-    if isinstance(plant, H2Plant) and plant.lag > 0:  # the CAV's actuator lag in the loop
+    if plant.lag > 0:  # the CAVs' actuator lag in the loop
         from lcc_synth.analysis.lag_string import lag_string_stability
 
         return lag_string_stability(plant.model, K, kh, plant.lag)
     return string_stability(plant.model, K, kh)
-
-
-def _head_tail(plant: H2Plant | PlatoonPlant) -> tuple[np.ndarray, np.ndarray]:
-    model = plant.model
-    if isinstance(plant, PlatoonPlant):  # the ring: ConfigError naming system.kind
-        from lcc_synth.analysis.transfer import head_to_tail_loop
-
-        _, h, c = head_to_tail_loop(model, plant.K0, plant.kh0)
-        return h, c
-    if model.kind == "fd_lcc":
-        raise ConfigError(
-            "system.kind", "fd_lcc has no head vehicle: string stability is undefined"
-        )
-    if plant.lag > 0:  # design state: the kept states, then the lag state a_0
-        from lcc_synth.analysis.lag_string import lagged_lcc
-
-        lag = lagged_lcc(model, plant.lag)
-        h = (lag.H + lag.B * plant.kh0).ravel()[[*plant.keep, model.nx]]
-    else:
-        h = (model.H + model.B * plant.kh0).ravel()[plant.keep]
-    c = np.zeros(plant.nx)
-    c[list(plant.keep).index(model.tail_velocity_index)] = 1.0
-    return h, c
 
 
 def string_lmi(
@@ -138,7 +113,7 @@ def string_lmi(
         raise ConfigError(
             "string.gamma", f"must be >= 1 (|Gamma(0)| = 1 for every gain), got {gamma!r}"
         )
-    h, c = _head_tail(plant)
+    h, c = plant.head_tail()  # fd_lcc, a ring: ConfigError naming system.kind
     nx = plant.nx
     mask = np.asarray(mask, bool)
     rows = np.atleast_2d(mask)

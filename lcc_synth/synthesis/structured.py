@@ -77,25 +77,23 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lcc_synth.errors import ConfigError
-from lcc_synth.resources import progress
+from lcc_synth.resources import progress, single_thread_blas
 from lcc_synth.synthesis.h2 import (
     STABILITY_TOL,
     H2Plant,
-    LMIResult,
     PlatoonPlant,
     SynthesisError,
     closed_loop_matrix,
     h2_cost,
-    h2_cost_schur,
     max_real_eig,
     platoon_cost,
     platoon_gradient,
     platoon_hessian,
     platoon_riccati,
     riccati_gain,
-    single_thread_blas,
 )
 from lcc_synth.synthesis.lmi import (  # noqa: F401 (convex_restriction: its old home)
+    LMIResult,
     convex_restriction,
     restriction_start,
 )
@@ -232,10 +230,7 @@ def _am_direction(plant: H2Plant | PlatoonPlant, g, L, P, mask) -> np.ndarray:
 def _polish_cost(plant: H2Plant | PlatoonPlant, g: np.ndarray):
     """``(J, L, P, S)`` of :func:`polish`: :func:`~lcc_synth.synthesis.h2.h2_cost_schur` for
     one CAV, :func:`~lcc_synth.synthesis.h2.platoon_cost` for an open platoon."""
-    if isinstance(plant, PlatoonPlant):
-        ev = platoon_cost(plant, g)
-        return ev.J, ev.L, ev.P, ev.S
-    return h2_cost_schur(plant, g)
+    return plant.polish_cost(g)
 
 
 @single_thread_blas
@@ -270,7 +265,7 @@ def polish(
     SynthesisError
         ``g0`` does not stabilise the plant (or fails ``accept``).
     """
-    if isinstance(plant, PlatoonPlant) and plant.ring:
+    if plant.conserved is not None:  # a ring
         raise SynthesisError("polish works on the full state: a ring's gain is descended on its "
                              "invariant hyperplane (descend)")  # fmt: skip
     mask = np.asarray(mask, bool)
