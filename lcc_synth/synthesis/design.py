@@ -29,7 +29,7 @@ and wall time):
   (:func:`~lcc_synth.synthesis.sparsity.range_pareto`) and its chosen point;
 * ``string LMI``, ``string polish`` -- ``design = "string_stable"`` (open platoons): the mixed
   H2 / H-infinity LMI on the patterns and the string-stable-feasible polish
-  (:func:`~lcc_synth.synthesis.string_lmi.platoon_string_h2`);
+  (:func:`~lcc_synth.synthesis.string_lmi.string_aware_h2`);
 * ``robust`` -- with ``[synthesis.robust]``: descent on the mean (or smooth worst) true H2 over
   the sampled members, from the nominal design, every accepted gain stable on every member.
 """
@@ -69,7 +69,7 @@ from lcc_synth.synthesis.report import (
 )
 from lcc_synth.synthesis.robust_string import robust_string_design
 from lcc_synth.synthesis.sparsity import range_pareto, sparsity_sweep
-from lcc_synth.synthesis.string_lmi import platoon_string_h2, string_aware_h2
+from lcc_synth.synthesis.string_lmi import string_aware_h2
 from lcc_synth.synthesis.structured import (
     ROBUST_TEMPERATURES,
     descend,
@@ -493,8 +493,8 @@ def _string_stage(spec: SynthesisSpec, plant: PlatoonPlant, mask, stages, timing
     """``design = "string_stable"`` on an open platoon: the gain, the polish's figures and the
     LMI's (``bound``, ``restriction``: its gain's true H2, ``solver``) for the report; the
     stages and timings are appended to ``stages`` and ``timings``."""
-    res = platoon_string_h2(plant, mask, spec.string_gamma, spec.polish_steps,
-                            spec.string_margin)  # fmt: skip
+    res = string_aware_h2(plant, mask, spec.string_gamma, spec.polish_steps,
+                          spec.string_margin)  # fmt: skip
     timings["lmi"], timings["polish"] = res.timings["lmi"], res.timings["polish"]
     stages.append({"stage": "string LMI", "h2": res.h2_restriction, "time": timings["lmi"]})
     stages.append({"stage": "string polish", "h2": res.h2, "time": timings["polish"]})

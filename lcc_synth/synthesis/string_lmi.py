@@ -1,8 +1,8 @@
 """String-stability-aware H2 design: H2 cost with an H-infinity bound on head -> tail.
 
-One design for every layout with a head vehicle: the one-CAV string (:func:`string_aware_h2`
-on an ``H2Plant``) and an open platoon of any number of CAVs (:func:`platoon_string_h2` on a
-``PlatoonPlant``, a gain row per CAV). A ring has no head vehicle and no head-to-tail transfer
+One design for every layout with a head vehicle, :func:`string_aware_h2`: the one-CAV string
+(an ``H2Plant``) and an open platoon of any number of CAVs (a ``PlatoonPlant``, a gain row per
+CAV). A ring has no head vehicle and no head-to-tail transfer
 function: refused (ConfigError naming ``synthesis.design``).
 
 Convex step (mixed H2/H-infinity with a common Lyapunov matrix, Clarabel)::
@@ -69,8 +69,6 @@ from lcc_synth.synthesis.h2 import (
     H2Plant,
     PlatoonPlant,
     SynthesisError,
-    h2_cost,
-    platoon_cost,
 )
 from lcc_synth.synthesis.lmi import LMIResult, solve_checked
 from lcc_synth.synthesis.structured import PolishResult, pattern_mask, polish
@@ -80,7 +78,6 @@ __all__ = [
     "DESIGN_MARGIN",
     "string_lmi",
     "string_aware_h2",
-    "platoon_string_h2",
     "string_check",
 ]
 
@@ -231,14 +228,18 @@ def _keeps_margin(plant: H2Plant | PlatoonPlant, margin: float, start_margin: fl
 
 @single_thread_blas
 def string_aware_h2(
-    plant: H2Plant,
-    vehicles: Iterable[int],
+    plant: H2Plant | PlatoonPlant,
+    vehicles: Iterable[int] | np.ndarray,
     gamma: float = 1.0,
     polish_steps: int = 200,
     margin: float = DESIGN_MARGIN,
     start: np.ndarray | None = None,
 ) -> StringResult:
-    """String-stable structured H2 design (LMI, then string-stable-feasible polishing).
+    """String-stable structured H2 design (LMI, then string-stable-feasible polishing) of
+    every layout with a head vehicle: one CAV (``vehicles``: the heard vehicles, or its mask)
+    or an open platoon (``vehicles``: the per-CAV mask, ``n_cav x nx`` booleans,
+    :func:`~lcc_synth.synthesis.h2.pattern_rows`; a platoon of one CAV gives the gain of the
+    ``kind = "lcc"`` string it is).
 
     ``margin``: the relative string-stability margin every accepted polishing step keeps
     (``StringStabilityReport.margin``; default :data:`DESIGN_MARGIN`), capped at the LMI
@@ -248,10 +249,16 @@ def string_aware_h2(
 
     Raises
     ------
+    ConfigError
+        ``synthesis.design`` for a ring (no head vehicle, no head-to-tail transfer function).
     SynthesisError
         The LMI is infeasible, or its gain is not plant/string stable by the global check.
     """
-    mask = pattern_mask(plant, vehicles)
+    if plant.conserved is not None:
+        raise ConfigError("synthesis.design", "string_stable needs a head vehicle: a ring has "
+                          "none (no head-to-tail transfer function); use kind = 'platoon'")
+    is_mask = isinstance(vehicles, np.ndarray) and vehicles.dtype == bool
+    mask = vehicles if is_mask else pattern_mask(plant, vehicles)
     t0 = time.perf_counter()
     if start is None:
         lmi = string_lmi(plant, mask, gamma)
@@ -259,7 +266,7 @@ def string_aware_h2(
         g0 = np.where(mask, np.asarray(start, dtype=float), 0.0)
         lmi = LMIResult(g0, math.nan, "not solved (start given)", 0.0, math.nan, {})
     t_lmi = time.perf_counter() - t0
-    J0, _, _ = h2_cost(plant, lmi.g)
+    J0 = plant.cost(lmi.g)
     rep = _checked_start(plant, lmi, J0)
     accept = _keeps_margin(plant, margin, rep.margin)
     t0 = time.perf_counter()
@@ -275,54 +282,5 @@ def string_aware_h2(
         lmi=lmi,
         polish=pol,
         string_report=rep,
-        timings={"lmi": t_lmi, "polish": t_pol},
-    )
-
-
-@single_thread_blas
-def platoon_string_h2(
-    plant: PlatoonPlant,
-    mask: np.ndarray,
-    gamma: float = 1.0,
-    polish_steps: int = 200,
-    margin: float = DESIGN_MARGIN,
-) -> StringResult:
-    """String-stable structured H2 design of an open platoon: a gain row per CAV.
-
-    The LMI of :func:`string_lmi` on the per-CAV patterns ``mask`` (``n_cav x nx`` booleans,
-    :func:`~lcc_synth.synthesis.h2.pattern_rows`), then the one-CAV polish with several
-    inputs (:func:`~lcc_synth.synthesis.structured.polish`) accepting only gains that stay
-    plant and string stable by the global check with ``margin`` (capped at the LMI gain's
-    own). A platoon of one CAV gives the gain of the ``kind = "lcc"`` string it is.
-
-    Raises
-    ------
-    ConfigError
-        ``synthesis.design`` for a ring (no head vehicle, no head-to-tail transfer function).
-    SynthesisError
-        The LMI is infeasible, or its gain is not plant/string stable by the global check.
-    """
-    if plant.ring:
-        raise ConfigError("synthesis.design", "string_stable needs a head vehicle: a ring has "
-                          "none (no head-to-tail transfer function); use kind = 'platoon'")
-    mask = np.asarray(mask, bool)
-    t0 = time.perf_counter()
-    lmi = string_lmi(plant, mask, gamma)
-    t_lmi = time.perf_counter() - t0
-    J0 = platoon_cost(plant, lmi.g).J
-    rep = _checked_start(plant, lmi, J0)
-    accept = _keeps_margin(plant, margin, rep.margin)
-    t0 = time.perf_counter()
-    pol = polish(plant, lmi.g, mask, max_iter=polish_steps, accept=accept)
-    t_pol = time.perf_counter() - t0
-    return StringResult(
-        g=pol.g,
-        mask=mask,
-        h2=math.sqrt(pol.J),
-        h2_restriction=math.sqrt(J0),
-        h2_lmi_bound=lmi.bound,
-        lmi=lmi,
-        polish=pol,
-        string_report=string_check(plant, pol.g),
         timings={"lmi": t_lmi, "polish": t_pol},
     )
