@@ -13,6 +13,7 @@ import json
 import numpy as np
 import pytest
 from cli_subprocess import PAPER_HDV, run_cli
+from test_regions import boundary_points
 
 from lcc_synth.analysis.region_specs import grid_axis, region_specs_from
 from lcc_synth.analysis.regions import (
@@ -62,16 +63,6 @@ def direct_label(model, gain: Gains) -> int | None:
         return STRING_STABLE
     assert rep.verdict == "string_unstable", rep.verdict
     return STABLE
-
-
-def boundary_points(labels: np.ndarray) -> np.ndarray:
-    """Grid points with a 4-neighbour of a different label."""
-    b = np.zeros(labels.shape, bool)
-    b[1:] |= labels[1:] != labels[:-1]
-    b[:-1] |= labels[1:] != labels[:-1]
-    b[:, 1:] |= labels[:, 1:] != labels[:, :-1]
-    b[:, :-1] |= labels[:, 1:] != labels[:, :-1]
-    return np.argwhere(b)
 
 
 @pytest.mark.parametrize(
