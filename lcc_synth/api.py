@@ -471,12 +471,21 @@ def h2_problem(
     return spec_from_problem(Problem(Path("<python>"), data))
 
 
-def synthesize_h2(system, *args: Any, **kwargs: Any):
-    """Synthesise a static H2 gain (``lcc-synth synthesize``).
+def synthesize_h2(
+    system,
+    design: str = "structured",
+    pattern: Sequence[int] | str = "all",
+    weights: Mapping[str, Any] | None = None,
+    name: str = "python",
+    **options: Any,
+):
+    """Synthesise a static H2 gain (``lcc-synth synthesize``) on any layout.
 
-    ``system``: a :class:`System` (then the other arguments are those of :func:`h2_problem`)
-    or a spec from :func:`h2_problem` /
-    :func:`~lcc_synth.experiments.problem_objects.load_problem` (``.synthesis``).
+    ``system``: a :class:`System` of any layout (one CAV, a platoon, a ring; the other
+    arguments are those of :func:`h2_problem`: ``design``, ``pattern`` for one CAV,
+    ``comm_range`` / ``patterns`` for several, ``weights`` and any ``[synthesis]`` key), or a
+    spec from :func:`h2_problem` / :func:`~lcc_synth.experiments.problem_objects.load_problem`
+    (``.synthesis``) alone.
 
     Returns
     -------
@@ -502,8 +511,8 @@ def synthesize_h2(system, *args: Any, **kwargs: Any):
     from lcc_synth.synthesis.design import synthesize
 
     if isinstance(system, System):
-        spec = h2_problem(system, *args, **kwargs)
-    elif args or kwargs:
+        spec = h2_problem(system, design, pattern, weights, name, **options)
+    elif options or (design, pattern, weights, name) != ("structured", "all", None, "python"):
         raise ConfigError("synthesis", "give a System and options, or a spec alone")
     else:
         spec = system

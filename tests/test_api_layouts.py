@@ -296,3 +296,20 @@ def test_public_string_stability_on_every_layout(name):
     assert rep.plant_stable and np.linalg.eigvals(Acl).real.max() < 0
     assert rep.gamma_peak == pytest.approx(peak, rel=1e-9)
     assert rep.verdict == ("string_stable" if peak <= 1.0 + 1e-9 else "string_unstable")
+
+
+def test_synthesize_h2_has_h2_problems_parameters_and_designs_every_layout():
+    """``help(lcc.synthesize_h2)`` shows the options it takes (those of ``h2_problem``, not
+    ``*args``), and the same call designs a platoon's gain as its problem file does."""
+    import inspect
+
+    sig = inspect.signature(lcc.synthesize_h2).parameters
+    assert list(sig)[1:] == list(inspect.signature(lcc.h2_problem).parameters)[1:]
+    system = lcc.system(size=6, cavs=[2, 5])
+    rep = lcc.synthesize_h2(system, "structured", comm_range=1, weights={"q_s": 0.5})
+    spec = lcc.h2_problem(system, "structured", comm_range=1, weights={"q_s": 0.5})
+    again = lcc.synthesize_h2(spec)  # the same spec, whichever way it is given
+    assert again.K == rep.K and again.check == rep.check  # (the timings differ)
+    assert rep.patterns == {"u_2": [1, 2, 3], "u_5": [4, 5, 6]}
+    with pytest.raises(ConfigError, match="a spec alone"):
+        lcc.synthesize_h2(spec, comm_range=2)
