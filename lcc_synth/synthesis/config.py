@@ -207,8 +207,11 @@ class SynthesisSpec(Record):
     cross_check, band
         Every layout: the full-state cross-check (default true for one CAV, false for a
         platoon or ring), the LMI restriction's band.
-    baseline, as_run
-        One CAV only (the baseline gains, the as-run design).
+    baseline : tuple or None
+        Every layout: ``(name, Gains)`` of ``[synthesis.baseline]``, the gains on the model
+        (one CAV: by state name; a platoon or ring: a row per CAV).
+    as_run
+        One CAV only (the as-run design).
     string_gamma, polish_steps, string_margin
         ``[synthesis.string]`` of the string-aware design (one CAV or an open platoon).
     cav_lag : float
@@ -327,6 +330,10 @@ class SynthesisSpec(Record):
                            "margin": self.string_margin}  # fmt: skip
         if self.robust is not None:
             t["robust"] = _robust_table(self.robust)
+        if self.baseline is not None:
+            bname, gains = self.baseline
+            t["baseline"] = {"name": bname, "semantics": gains.semantics,
+                             "gains": gains.as_table()}  # fmt: skip
         return t
 
 
@@ -500,21 +507,7 @@ def synthesis_spec(
             "must be > 0 for design = 'string_stable' (the head disturbance is the point)",
         )
 
-    baseline = None
-    B = declared("synthesis.baseline")
-    b = T.get(t, "baseline", "synthesis")
-    if b:
-        B.check(b, "synthesis.baseline")
-        bname = B.get(b, "name", "synthesis.baseline")
-        bsem = B.get(b, "semantics", "synthesis.baseline", default=semantics)
-        bg = B.get(b, "gains", "synthesis.baseline")
-        warn_large_gains(bg, "synthesis.baseline.gains")
-        try:
-            gains = Gains.named(bg, bsem)
-            gains.check(system.linear_model(warn=False))
-        except ConfigError as err:
-            raise ConfigError(f"synthesis.baseline.{err.field}", err.message) from None
-        baseline = (bname, gains)
+    baseline = _baseline(t, system, semantics)
     as_run = _as_run(t, system, design)
     cav_lag = check_lag_design(T.get(t, "cav_lag", "synthesis"), design, as_run)
     asked = t.get("method") == "lmi" or t.get("cross_check") is True
@@ -551,7 +544,37 @@ def synthesis_spec(
 #: The designs a platoon or ring accepts.
 PLATOON_DESIGNS = ("full_state", "structured", "sparsity", "string_stable")
 
-_NOT_FOR_PLATOONS = ("baseline", "as_run")
+_NOT_FOR_PLATOONS = ("as_run",)
+
+
+def _baseline(t: dict, system: System, semantics: str) -> tuple[str, Gains] | None:
+    """``[synthesis.baseline]`` of any layout as ``(name, gains)`` (``None`` without one): the
+    gains in the layout's vocabulary (``{state: gain}`` for one CAV, :meth:`~lcc_synth.models.
+    feedback.Gains.named`; ``{u_i: {state: gain}}`` for a platoon or ring, :meth:`~lcc_synth.
+    models.feedback.Gains.from_table`, as static controllers read them), checked
+    against the model (errors name ``synthesis.baseline...``)."""
+    f = "synthesis.baseline"
+    B = declared(f)
+    b = declared("synthesis").get(t, "baseline", "synthesis")
+    if not b:
+        return None
+    B.check(b, f)
+    bname = B.get(b, "name", f)
+    bsem = B.get(b, "semantics", f, default=semantics)
+    bg = B.get(b, "gains", f)
+    flat = {f"{u}.{k}": g for u, row in bg.items() if isinstance(row, dict)
+            for k, g in row.items()}  # fmt: skip
+    warn_large_gains({**bg, **flat}, f"{f}.gains")
+    model = system.linear_model(warn=False)
+    try:
+        gains = (Gains.named(bg, bsem) if system.platoon is None
+                 else Gains.from_table(bg, model, bsem, f"{f}.gains"))  # fmt: skip
+        gains.check(model)
+    except ConfigError as err:
+        if err.field.startswith(f):
+            raise
+        raise ConfigError(f"{f}.{err.field}", err.message) from None
+    return bname, gains
 
 
 def comm_range_pattern(platoon: Platoon, R: int) -> dict[int, tuple[int, ...]]:
@@ -756,5 +779,6 @@ def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> Synt
                          tol=tol, max_iter=max_iter,
                          sparsity={"max_loss": max_loss}, source=src, patterns=patterns,
                          comm_range=R, robust=robust, cav_lag=cav_lag,
+                         baseline=_baseline(t, system, semantics),
                          string_gamma=string["gamma"], polish_steps=string["polish_steps"],
                          string_margin=string["margin"])  # fmt: skip
