@@ -59,7 +59,8 @@ One CAV (``[system] kind = "cf_lcc" | "fd_lcc" | "lcc" | "ccc"``):
     weight = 0.0              # trade-off weight on the as-run amplification, >= 0
     polish_steps = 200        # as-run-string-stable polishing iterations, >= 0
 
-    [synthesis.baseline]      # optional: compare with hand-picked gains (e.g. the paper's)
+    [synthesis.baseline]      # optional: compare with hand-picked gains (e.g. the paper's);
+                              # an unstable one is reported (H2 inf), not refused
     name = "paper"
     semantics = "replace"
     gains = { v_0 = -0.5, s_1 = -0.2, v_1 = 0.05, s_2 = -0.1, v_2 = 0.05 }
@@ -112,6 +113,11 @@ A platoon or a ring (``[system] kind = "platoon" | "ring"``):
     polish_steps = 200        # string-stable-feasible descent iterations, >= 0
     margin = 1e-4             # relative string-stability margin every accepted step keeps
 
+    [synthesis.baseline]      # optional: hand-picked gains reported beside the design, a
+    name = "hand"             # row per CAV input (the form of static controllers); their
+    semantics = "replace"     # true H2 (ring: on c x = 0), stability and, open platoons, the
+    gains = { u_3 = { s_3 = 0.3, v_3 = -0.6, v_2 = 0.2 } }  # head-to-tail string check
+
     [synthesis.robust]        # one gain for a set of sampled HDV parameter sets
     samples = 20
     seed = 0
@@ -126,7 +132,7 @@ reduced plant (the ring's invariant hyperplane) and checked against Riccati with
 ``CROSS_CHECK_TOL``; its structured restriction has a block of ``X`` per set of states heard by
 the same CAVs (:func:`~lcc_synth.synthesis.lmi.convex_restriction`); with ``cav_lag`` they are
 refused there (the lag states are in no pattern). The single-CAV keys ``pattern`` (other than
-"all"), ``sparsity`` (but ``max_loss``), ``baseline`` and ``as_run`` do not apply: a
+"all"), ``sparsity`` (but ``max_loss``) and ``as_run`` do not apply: a
 ConfigError names the key and the layout (``kind``); the platoon keys ``comm_range`` and
 ``patterns`` are refused for one CAV the same way (``robust`` applies to both: see above).
 ``design = "string_stable"`` and ``[synthesis.string]`` need a head vehicle: a ring refuses

@@ -9,8 +9,8 @@ string-stable, optionally as run), check the result, build the report; with
 (:mod:`~lcc_synth.synthesis.robust_string`).
 
 A platoon or a ring: per-CAV patterns, the design stages, the robust multi-model design, the
-checks and the report with a gain row per CAV. Stages (each reported with its true H2 norm
-and wall time):
+checks, the baseline's (:func:`baseline_check`) and the report with a gain row per CAV.
+Stages (each reported with its true H2 norm and wall time):
 
 * ``riccati`` -- the full-information optimum (CARE on the reduced plant); ``design =
   "full_state"`` returns it, checked against the Lyapunov evaluation of the same gain (with
