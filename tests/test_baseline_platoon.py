@@ -112,9 +112,12 @@ def test_baseline_h2_and_stability_are_those_of_its_closed_loop_built_here(layou
     assert b["string_verdict"] == "string_unstable"
 
 
-@pytest.mark.parametrize("layout", list(LAYOUTS))
-def test_a_baseline_equal_to_the_designs_gain_reports_the_designs_h2(layout):
-    spec = _spec(layout)
+@pytest.mark.parametrize(("layout", "cav_lag"), [("platoon", 0.0), ("ring", 0.0),
+                                                  ("platoon", 0.3)])  # fmt: skip
+def test_a_baseline_equal_to_the_designs_gain_reports_the_designs_h2(layout, cav_lag):
+    """The same gain, the same plant (with ``cav_lag``: the lag states' columns 0 in both):
+    the same H2 to the last bit."""
+    spec = replace(_spec(layout), cav_lag=cav_lag)
     rep = synthesize(spec)
     again = synthesize(replace(spec, baseline=("own", rep.gain)))
     assert again.baseline["h2"] == again.check.h2 == rep.check.h2
@@ -176,3 +179,14 @@ def test_cli_reports_a_rings_baseline_in_json(tmp_path):
     assert doc["ok"] and b["name"] == "hand" and b["stable"] is True
     assert b["gains"] == tomllib.loads(f"g = {gains}")["g"]
     assert 0 < doc["check"]["h2"] < b["h2"]
+
+
+def test_cli_refuses_an_unknown_cav_of_a_baseline_naming_it(tmp_path):
+    system, _ = LAYOUTS["platoon"]
+    p = tmp_path / "platoon.toml"
+    p.write_text(f'name = "platoon"\n{HDV}[system]\n{system}\n[synthesis]\ndesign = "full_state"\n'
+                 '[synthesis.baseline]\ngains = { u_3 = { s_3 = 0.1 } }\n')  # fmt: skip
+    proc = run_cli(["synthesize", p, "--no-record"], cwd=tmp_path, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert "synthesis.baseline.gains.u_3" in proc.stderr and "u_2" in proc.stderr
+    assert "Traceback" not in proc.stderr

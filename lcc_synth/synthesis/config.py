@@ -560,7 +560,7 @@ def _baseline(t: dict, system: System, semantics: str) -> tuple[str, Gains] | No
     models.feedback.Gains.from_table`, as static controllers read them), checked
     against the model (errors name ``synthesis.baseline...``)."""
     f = "synthesis.baseline"
-    B = declared(f)
+    B = declared("synthesis.baseline")
     b = declared("synthesis").get(t, "baseline", "synthesis")
     if not b:
         return None
