@@ -202,27 +202,20 @@ def baseline_check(spec: SynthesisSpec, plant: H2Plant | PlatoonPlant) -> dict:
     its invariant hyperplane; an open platoon's head-to-tail string check always). An unstable
     baseline is reported (``h2`` infinite), not refused."""
     name, gains = spec.baseline
-    if isinstance(plant, PlatoonPlant):
+    if spec.system.platoon is not None:  # a gain row per CAV (the lag states' columns 0)
         bplant = plant
         if gains.semantics != plant.semantics:
             bplant = make_platoon_plant(plant.model, gains.semantics, plant.weights, plant.lag)
-        K = np.zeros((bplant.n_in, bplant.nx))  # the lag states' columns: 0
+        K = np.zeros((bplant.n_in, bplant.nx))
         K[:, : plant.model.nx] = gains.matrix(plant.model)
         chk = evaluate_platoon_gain(bplant, K, string=True)
-        return {"name": name, "semantics": gains.semantics, "gains": gains.as_table(),
-                "vehicles": gains.vehicles(), **chk.as_dict()}  # fmt: skip
-    bplant = plant
-    if gains.semantics != plant.semantics:
-        bplant = make_plant(plant.model, gains.semantics, plant.weights, plant.lag)
-    g = design_gain_of(bplant, gains)
-    chk = evaluate_gain(bplant, g)
-    return {
-        "name": name,
-        "semantics": gains.semantics,
-        "gains": dict(gains.gains),
-        "vehicles": gains.vehicles(),
-        **chk.as_dict(),
-    }
+    else:
+        bplant = plant
+        if gains.semantics != plant.semantics:
+            bplant = make_plant(plant.model, gains.semantics, plant.weights, plant.lag)
+        chk = evaluate_gain(bplant, design_gain_of(bplant, gains))
+    return {"name": name, "semantics": gains.semantics, "gains": gains.as_table(),
+            "vehicles": gains.vehicles(), **chk.as_dict()}  # fmt: skip
 
 
 @single_thread_blas
