@@ -319,10 +319,15 @@ _MATRIX_ROWS = {
     "cav_lag, string_stable": ("string_stable", "cav_lag = 0.3"),
     "cav_lag, robust": ("structured", "cav_lag = 0.3\n" + _MATRIX_ROBUST),
     "[synthesis.as_run]": ("structured", "as_run = true"),
-    "[synthesis.baseline]": ("structured", "[synthesis.baseline]\ngains = { s_1 = 0.1 }"),
+    "[synthesis.baseline]": ("structured", "[synthesis.baseline]\ngains = {BASELINE_GAINS}"),
     "pattern = [...]": ("structured", "pattern = [1]"),
     "comm_range": ("structured", "comm_range = 1"),
 }
+
+
+#: the baseline gains of each layout, in its vocabulary (state names; a row per CAV input)
+_MATRIX_BASELINE = {"one_cav_string": "{ s_1 = 0.1 }", "two_cav_platoon": "{ u_2 = { s_3 = 0.1 } }",
+                    "ring": "{ u_4 = { s_5 = 0.1 } }"}  # fmt: skip
 
 
 def _matrix() -> dict[str, dict[str, str]]:
@@ -352,6 +357,7 @@ def test_every_cell_of_the_feature_matrix_is_what_the_parser_does(option, layout
     """A "yes" parses into a spec (its designs run in the tests the docstring names); a
     "no: KEY" is one ConfigError naming ``synthesis.KEY`` and the combination."""
     design, extra = _MATRIX_ROWS[option]
+    extra = extra.replace("{BASELINE_GAINS}", _MATRIX_BASELINE[layout])
     cell = _matrix()[option][layout]
     system, pattern = LAYOUTS[layout]
     head = 0.0 if layout == "ring" else 0.5  # string_stable needs the head disturbance

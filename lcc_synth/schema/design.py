@@ -147,13 +147,15 @@ STRING = Table(
 
 BASELINE = Table(
     "synthesis.baseline",
-    "Hand-picked gains (e.g. the paper's) reported beside the design.",
+    "Hand-picked gains (e.g. the paper's) reported beside the design (every layout): true H2, "
+    "stability and, with a head vehicle, string stability; an unstable one is reported.",
     _SYN,
     (
         Key("name", "string", "Its label.", "baseline"),
         Key("semantics", "string", "How the gain enters the command.",
             Derived("[synthesis].semantics"), choices=_SEM),
-        Key("gains", "table", "State name -> gain; missing states 0.", REQUIRED),
+        Key("gains", "table", "State name -> gain; missing states 0. Platoon / ring: one "
+            "table per CAV input, gains = { u_3 = { s_3 = ..., v_2 = ... } }.", REQUIRED),
     ),
 )
 

@@ -20,7 +20,8 @@ Feature matrix of ``[synthesis]`` (``tests/test_synthesis_layouts.py`` reads thi
 checks every cell: "yes" parses into a spec, "no: KEY" is one ConfigError naming
 ``synthesis.KEY``; the designs themselves run on each layout in ``test_synthesis_layouts``,
 ``test_synthesis_lmi_layouts``, ``test_synthesis_string_platoon``, ``test_robust_one_cav``,
-``test_synthesis_platoon``, ``test_lag_platoon`` and ``test_actuator_lag``)::
+``test_synthesis_platoon``, ``test_lag_platoon``, ``test_actuator_lag`` and
+``test_baseline_platoon``)::
 
     option                           one CAV            platoon            ring
     design = "full_state"            yes                yes                yes
@@ -41,7 +42,7 @@ checks every cell: "yes" parses into a spec, "no: KEY" is one ConfigError naming
     cav_lag, string_stable           yes                no: cav_lag        no: design
     cav_lag, robust                  yes                yes                yes
     [synthesis.as_run]               yes                no: as_run         no: as_run
-    [synthesis.baseline]             yes                no: baseline       no: baseline
+    [synthesis.baseline]             yes                yes                yes
     pattern = [...]                  yes                no: pattern        no: pattern
     comm_range                       no: comm_range     yes                yes
 
@@ -50,7 +51,7 @@ checks every cell: "yes" parses into a spec, "no: KEY" is one ConfigError naming
 stay: a ring has no head vehicle, so no head-to-tail transfer function to bound; the lag
 states are in no pattern, so no LMI holds them and the string-stable polish of several CAVs is
 of the lag-free loop; the robust descent does not keep string stability; the as-run loop
-(estimator, sampling, latency) and the baseline gains are written for one CAV's command.
+(estimator, sampling, latency) is written for one CAV's command.
 """
 
 from lcc_synth.synthesis.h2 import SynthesisError, Weights, h2_norm, make_plant, riccati_gain

@@ -59,7 +59,8 @@ One CAV (``[system] kind = "cf_lcc" | "fd_lcc" | "lcc" | "ccc"``):
     weight = 0.0              # trade-off weight on the as-run amplification, >= 0
     polish_steps = 200        # as-run-string-stable polishing iterations, >= 0
 
-    [synthesis.baseline]      # optional: compare with hand-picked gains (e.g. the paper's)
+    [synthesis.baseline]      # optional: compare with hand-picked gains (e.g. the paper's);
+                              # an unstable one is reported (H2 inf), not refused
     name = "paper"
     semantics = "replace"
     gains = { v_0 = -0.5, s_1 = -0.2, v_1 = 0.05, s_2 = -0.1, v_2 = 0.05 }
@@ -112,6 +113,11 @@ A platoon or a ring (``[system] kind = "platoon" | "ring"``):
     polish_steps = 200        # string-stable-feasible descent iterations, >= 0
     margin = 1e-4             # relative string-stability margin every accepted step keeps
 
+    [synthesis.baseline]      # optional: hand-picked gains reported beside the design, a
+    name = "hand"             # row per CAV input (the form of static controllers); their
+    semantics = "replace"     # true H2 (ring: on c x = 0), stability and, open platoons, the
+    gains = { u_3 = { s_3 = 0.3, v_3 = -0.6, v_2 = 0.2 } }  # head-to-tail string check
+
     [synthesis.robust]        # one gain for a set of sampled HDV parameter sets
     samples = 20
     seed = 0
@@ -126,7 +132,7 @@ reduced plant (the ring's invariant hyperplane) and checked against Riccati with
 ``CROSS_CHECK_TOL``; its structured restriction has a block of ``X`` per set of states heard by
 the same CAVs (:func:`~lcc_synth.synthesis.lmi.convex_restriction`); with ``cav_lag`` they are
 refused there (the lag states are in no pattern). The single-CAV keys ``pattern`` (other than
-"all"), ``sparsity`` (but ``max_loss``), ``baseline`` and ``as_run`` do not apply: a
+"all"), ``sparsity`` (but ``max_loss``) and ``as_run`` do not apply: a
 ConfigError names the key and the layout (``kind``); the platoon keys ``comm_range`` and
 ``patterns`` are refused for one CAV the same way (``robust`` applies to both: see above).
 ``design = "string_stable"`` and ``[synthesis.string]`` need a head vehicle: a ring refuses
@@ -207,8 +213,11 @@ class SynthesisSpec(Record):
     cross_check, band
         Every layout: the full-state cross-check (default true for one CAV, false for a
         platoon or ring), the LMI restriction's band.
-    baseline, as_run
-        One CAV only (the baseline gains, the as-run design).
+    baseline : tuple or None
+        Every layout: ``(name, Gains)`` of ``[synthesis.baseline]``, the gains on the model
+        (one CAV: by state name; a platoon or ring: a row per CAV).
+    as_run
+        One CAV only (the as-run design).
     string_gamma, polish_steps, string_margin
         ``[synthesis.string]`` of the string-aware design (one CAV or an open platoon).
     cav_lag : float
@@ -327,6 +336,10 @@ class SynthesisSpec(Record):
                            "margin": self.string_margin}  # fmt: skip
         if self.robust is not None:
             t["robust"] = _robust_table(self.robust)
+        if self.baseline is not None:
+            bname, gains = self.baseline
+            t["baseline"] = {"name": bname, "semantics": gains.semantics,
+                             "gains": gains.as_table()}  # fmt: skip
         return t
 
 
@@ -500,21 +513,7 @@ def synthesis_spec(
             "must be > 0 for design = 'string_stable' (the head disturbance is the point)",
         )
 
-    baseline = None
-    B = declared("synthesis.baseline")
-    b = T.get(t, "baseline", "synthesis")
-    if b:
-        B.check(b, "synthesis.baseline")
-        bname = B.get(b, "name", "synthesis.baseline")
-        bsem = B.get(b, "semantics", "synthesis.baseline", default=semantics)
-        bg = B.get(b, "gains", "synthesis.baseline")
-        warn_large_gains(bg, "synthesis.baseline.gains")
-        try:
-            gains = Gains.named(bg, bsem)
-            gains.check(system.linear_model(warn=False))
-        except ConfigError as err:
-            raise ConfigError(f"synthesis.baseline.{err.field}", err.message) from None
-        baseline = (bname, gains)
+    baseline = _baseline(t, system, semantics)
     as_run = _as_run(t, system, design)
     cav_lag = check_lag_design(T.get(t, "cav_lag", "synthesis"), design, as_run)
     asked = t.get("method") == "lmi" or t.get("cross_check") is True
@@ -551,7 +550,37 @@ def synthesis_spec(
 #: The designs a platoon or ring accepts.
 PLATOON_DESIGNS = ("full_state", "structured", "sparsity", "string_stable")
 
-_NOT_FOR_PLATOONS = ("baseline", "as_run")
+_NOT_FOR_PLATOONS = ("as_run",)
+
+
+def _baseline(t: dict, system: System, semantics: str) -> tuple[str, Gains] | None:
+    """``[synthesis.baseline]`` of any layout as ``(name, gains)`` (``None`` without one): the
+    gains in the layout's vocabulary (``{state: gain}`` for one CAV, :meth:`~lcc_synth.models.
+    feedback.Gains.named`; ``{u_i: {state: gain}}`` for a platoon or ring, :meth:`~lcc_synth.
+    models.feedback.Gains.from_table`, as static controllers read them), checked
+    against the model (errors name ``synthesis.baseline...``)."""
+    f = "synthesis.baseline"
+    B = declared("synthesis.baseline")
+    b = declared("synthesis").get(t, "baseline", "synthesis")
+    if not b:
+        return None
+    B.check(b, f)
+    bname = B.get(b, "name", f)
+    bsem = B.get(b, "semantics", f, default=semantics)
+    bg = B.get(b, "gains", f)
+    flat = {f"{u}.{k}": g for u, row in bg.items() if isinstance(row, dict)
+            for k, g in row.items()}  # fmt: skip
+    warn_large_gains({**bg, **flat}, f"{f}.gains")
+    model = system.linear_model(warn=False)
+    try:
+        gains = (Gains.named(bg, bsem) if system.platoon is None
+                 else Gains.from_table(bg, model, bsem, f"{f}.gains"))  # fmt: skip
+        gains.check(model)
+    except ConfigError as err:
+        if err.field.startswith(f):
+            raise
+        raise ConfigError(f"{f}.{err.field}", err.message) from None
+    return bname, gains
 
 
 def comm_range_pattern(platoon: Platoon, R: int) -> dict[int, tuple[int, ...]]:
@@ -756,5 +785,6 @@ def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> Synt
                          tol=tol, max_iter=max_iter,
                          sparsity={"max_loss": max_loss}, source=src, patterns=patterns,
                          comm_range=R, robust=robust, cav_lag=cav_lag,
+                         baseline=_baseline(t, system, semantics),
                          string_gamma=string["gamma"], polish_steps=string["polish_steps"],
                          string_margin=string["margin"])  # fmt: skip

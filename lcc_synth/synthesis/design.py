@@ -9,8 +9,8 @@ string-stable, optionally as run), check the result, build the report; with
 (:mod:`~lcc_synth.synthesis.robust_string`).
 
 A platoon or a ring: per-CAV patterns, the design stages, the robust multi-model design, the
-checks and the report with a gain row per CAV. Stages (each reported with its true H2 norm
-and wall time):
+checks, the baseline's (:func:`baseline_check`) and the report with a gain row per CAV.
+Stages (each reported with its true H2 norm and wall time):
 
 * ``riccati`` -- the full-information optimum (CARE on the reduced plant); ``design =
   "full_state"`` returns it, checked against the Lyapunov evaluation of the same gain (with
@@ -66,6 +66,7 @@ from lcc_synth.synthesis.report import (
     check_gain,
     check_platoon_gain,
     evaluate_gain,
+    evaluate_platoon_gain,
 )
 from lcc_synth.synthesis.robust_string import robust_string_design
 from lcc_synth.synthesis.sparsity import range_pareto, sparsity_sweep
@@ -193,21 +194,28 @@ def design_gain_of(plant: H2Plant, gains) -> np.ndarray:
     return np.append(g_full[plant.keep], 0.0) if plant.lag > 0 else g_full[plant.keep]
 
 
-def baseline_check(spec: SynthesisSpec, plant: H2Plant) -> dict:
-    """True H2, stability and string stability of the problem's baseline gains."""
+def baseline_check(spec: SynthesisSpec, plant: H2Plant | PlatoonPlant) -> dict:
+    """True H2, stability and string stability of the problem's baseline gains, on the design
+    plant of their semantics (the design's weights and lag): one CAV by
+    :func:`~lcc_synth.synthesis.report.evaluate_gain`; a platoon or ring by
+    :func:`~lcc_synth.synthesis.report.evaluate_platoon_gain` (a ring's H2 and stability on
+    its invariant hyperplane; an open platoon's head-to-tail string check always). An unstable
+    baseline is reported (``h2`` infinite), not refused."""
     name, gains = spec.baseline
-    bplant = plant
-    if gains.semantics != plant.semantics:
-        bplant = make_plant(plant.model, gains.semantics, plant.weights, plant.lag)
-    g = design_gain_of(bplant, gains)
-    chk = evaluate_gain(bplant, g)
-    return {
-        "name": name,
-        "semantics": gains.semantics,
-        "gains": dict(gains.gains),
-        "vehicles": gains.vehicles(),
-        **chk.as_dict(),
-    }
+    if spec.system.platoon is not None:  # a gain row per CAV (the lag states' columns 0)
+        bplant = plant
+        if gains.semantics != plant.semantics:
+            bplant = make_platoon_plant(plant.model, gains.semantics, plant.weights, plant.lag)
+        K = np.zeros((bplant.n_in, bplant.nx))
+        K[:, : plant.model.nx] = gains.matrix(plant.model)
+        chk = evaluate_platoon_gain(bplant, K, string=True)
+    else:
+        bplant = plant
+        if gains.semantics != plant.semantics:
+            bplant = make_plant(plant.model, gains.semantics, plant.weights, plant.lag)
+        chk = evaluate_gain(bplant, design_gain_of(bplant, gains))
+    return {"name": name, "semantics": gains.semantics, "gains": gains.as_table(),
+            "vehicles": gains.vehicles(), **chk.as_dict()}  # fmt: skip
 
 
 @single_thread_blas
@@ -614,6 +622,7 @@ def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
                              lmi_info.get("solver"))  # fmt: skip
     gains = plant.gains(K)
     Ku, kh = plant.input_feedback(K)
+    baseline = baseline_check(spec, plant) if spec.baseline else UNSET
     timings["total"] = time.perf_counter() - t_start
     progress(f"synthesis: done in {timings['total']:.2f} s")
     pat = {f"u_{i}": sorted({v for v in range(1, model.platoon.size + 1)
@@ -647,6 +656,7 @@ def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
         conserved=None if model.conserved is None else model.conserved.tolist(),
         stages=stages,
         polish=pol,
+        baseline=baseline,
         robust=robust,
         pareto=pareto,
         timings=timings,

@@ -51,6 +51,7 @@ __all__ = [
     "format_report",
     "PlatoonCheck",
     "check_platoon_gain",
+    "evaluate_platoon_gain",
     "PlatoonReport",
 ]
 
@@ -231,8 +232,12 @@ class SynthesisReport(Record):
         The LMI bound, the LMI gain's true H2 and the solver's figures: one CAV, and a
         platoon / ring whose design solved an LMI (``method = "lmi"``, ``cross_check``, an
         open platoon's ``string_stable``).
-    baseline, as_run
-        One CAV: the baseline gains' checks, the as-run design's information.
+    baseline : dict or None
+        ``[synthesis.baseline]``'s checks (:func:`~lcc_synth.synthesis.design.baseline_check`:
+        ``name``, ``semantics``, ``gains``, ``vehicles`` and the check's keys of the layout);
+        one CAV: ``None`` without one; a platoon or ring: :data:`UNSET` without one.
+    as_run
+        One CAV: the as-run design's information.
     conserved, stages
         Platoon / ring: the ring's conserved direction ``c``, each stage's true H2 and time.
     robust
@@ -372,23 +377,7 @@ def format_report(rep: SynthesisReport) -> str:
     if rep.polish:
         lines.append("polish: " + ", ".join(f"{k}={_fmt(v) if isinstance(v, float) else v}"
                                              for k, v in rep.polish.items()))
-    if rep.baseline:
-        b = rep.baseline
-        lines.append(
-            f"baseline '{b['name']}': true H2 {_fmt(b['h2'])}, max Re(eig) "
-            f"{_fmt(b['max_real_eig'], '.4g')}"
-            + (
-                f", peak |Gamma| {_fmt(b['gamma_peak'], '.6f')}, "
-                + verdict_text(b.get("string_verdict"))
-                if b.get("string_stable") is not None
-                else ""
-            )
-            + (
-                f"  -> synthesised gain is {100 * (1 - c.h2 / b['h2']):.1f}% lower in H2"
-                if b["h2"] and math.isfinite(b["h2"])
-                else ""
-            )
-        )
+    lines += _baseline_lines(rep)
     lines += _robust_lines(rep)
     if rep.pareto:
         lines.append("Pareto sweep (vehicles heard besides the CAV -> true H2 after polishing):")
@@ -402,6 +391,25 @@ def format_report(rep: SynthesisReport) -> str:
         lines.append("time: " + ", ".join(f"{k} {v:.3f} s" for k, v in rep.timings.items()))
     lines += [f"note: {s}" for s in rep.notes]
     return "\n".join(lines)
+
+
+def _baseline_lines(rep: SynthesisReport) -> list[str]:
+    """The baseline gains' checks beside the design's (every layout; none without one; an
+    unstable baseline: its H2 n/a and ``NOT stable``)."""
+    if rep.baseline is UNSET or not rep.baseline:
+        return []
+    b, c = rep.baseline, rep.check
+    h2 = b["h2"] if b["h2"] is not None else math.inf  # JSON-read reports: null
+    line = (f"baseline '{b['name']}': true H2 {_fmt(b['h2'])}, max Re(eig) "
+            f"{_fmt(b['max_real_eig'], '.4g')}")  # fmt: skip
+    if not math.isfinite(h2):
+        line += " (closed loop NOT stable)"
+    if b.get("string_stable") is not None:
+        line += f", peak |Gamma| {_fmt(b['gamma_peak'], '.6f')}, " + verdict_text(
+            b.get("string_verdict"))
+    if h2 and math.isfinite(h2):
+        line += f"  -> synthesised gain is {100 * (1 - c.h2 / h2):.1f}% lower in H2"
+    return [line]
 
 
 def _robust_lines(rep: SynthesisReport) -> list[str]:
@@ -420,10 +428,9 @@ def _robust_lines(rep: SynthesisReport) -> list[str]:
     return lines
 
 
-def check_platoon_gain(
-    plant: PlatoonPlant, K: np.ndarray, what: str = "design", string: bool = False
-) -> GainCheck:
-    """True H2 and stability of design gain ``K``; :class:`SynthesisError` when unusable.
+def evaluate_platoon_gain(plant: PlatoonPlant, K: np.ndarray, string: bool = False) -> GainCheck:
+    """True H2 and stability of design gain ``K`` (finite entries), unstable ones included
+    (``stable = False``, ``h2 = inf``): the platoon / ring form of :func:`evaluate_gain`.
 
     The head-to-tail check of an open platoon (the one-CAV fields ``plant_stable``,
     ``string_stable``, ``gamma_peak``, ``gamma_peak_omega``, ``string_verdict``,
@@ -432,8 +439,6 @@ def check_platoon_gain(
     and for a plant with an actuator lag (of the lagged loop,
     :func:`~lcc_synth.analysis.lag_string.lag_string_stability`)."""
     K = np.asarray(K, float)
-    if not np.all(np.isfinite(K)):
-        raise SynthesisError(f"{what}: the gain has non-finite entries")
     ev = platoon_cost(plant, K)
     mre = float(np.max(np.linalg.eigvals(plant.closed_loop(K)).real))
     Acl_full = plant.A + plant.B @ K
@@ -441,11 +446,7 @@ def check_platoon_gain(
     m = plant.model
     sub = (f"invariant hyperplane c x = 0 ({plant.V.shape[1]} of {plant.nx} states)"
            if m.ring else "full state")  # fmt: skip
-    if not mre < -STABILITY_TOL:
-        raise SynthesisError(f"{what}: the closed loop is not stable on the {sub} (max Re(eig) "
-                             f"= {mre:.3g})", {"max_real_eig": mre})  # fmt: skip
-    if not ev.stable:
-        raise SynthesisError(f"{what}: the closed-loop H2 norm is not finite")
+    stable = bool(mre < -STABILITY_TOL and ev.stable)
     ss: dict[str, Any] = {}
     if not m.ring and (string or plant.lag > 0):
         from lcc_synth.analysis.lag_string import lag_string_stability
@@ -457,8 +458,27 @@ def check_platoon_gain(
               "gamma_peak": float(rep.gamma_peak),
               "gamma_peak_omega": float(rep.gamma_peak_omega), "string_verdict": rep.verdict,
               "string_margin": float(rep.margin) if math.isfinite(rep.margin) else None}
-    return GainCheck(h2=math.sqrt(ev.J), max_real_eig=mre, stable=True, subspace=sub,
-                     max_real_eig_full=mre_full, conserved_mode=m.conserved_mode, **ss)
+    return GainCheck(h2=math.sqrt(ev.J) if stable else math.inf, max_real_eig=mre,
+                     stable=stable, subspace=sub, max_real_eig_full=mre_full,
+                     conserved_mode=m.conserved_mode, **ss)  # fmt: skip
+
+
+def check_platoon_gain(
+    plant: PlatoonPlant, K: np.ndarray, what: str = "design", string: bool = False
+) -> GainCheck:
+    """:func:`evaluate_platoon_gain`, raising :class:`SynthesisError` on an unusable result
+    (non-finite entries, a closed loop not stable, an infinite H2 norm)."""
+    K = np.asarray(K, float)
+    if not np.all(np.isfinite(K)):
+        raise SynthesisError(f"{what}: the gain has non-finite entries")
+    chk = evaluate_platoon_gain(plant, K, string)
+    if not chk.max_real_eig < -STABILITY_TOL:
+        raise SynthesisError(f"{what}: the closed loop is not stable on the {chk.subspace} "
+                             f"(max Re(eig) = {chk.max_real_eig:.3g})",
+                             {"max_real_eig": chk.max_real_eig})  # fmt: skip
+    if not chk.stable:
+        raise SynthesisError(f"{what}: the closed-loop H2 norm is not finite")
+    return chk
 
 
 def _format_platoon_report(rep: SynthesisReport) -> str:
@@ -507,6 +527,7 @@ def _format_platoon_report(rep: SynthesisReport) -> str:
     if rep.polish:
         lines.append("polish: " + ", ".join(f"{k}={_fmt(v) if isinstance(v, float) else v}"
                                              for k, v in rep.polish.items()))
+    lines += _baseline_lines(rep)
     lines += _robust_lines(rep)
     if rep.pareto:
         lines.append("range front (greedy per CAV: ranges -> vehicles heard, true H2, loss):")
