@@ -295,3 +295,22 @@ def test_exact_reference_confirms_every_decided_verdict():
         if d == 1e-14:  # |margin| ~ 7e-15, below the band: too close to call, by both methods
             assert rep.verdict == "boundary", (name, rep.margin, rep.band)
             assert loop_string_stability(*loop, method="hamiltonian").verdict == "boundary"
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_zero_eigenvalue_does_not_hide_a_clearly_unstable_one(seed):
+    """A loop with an eigenvalue at 0 is on the imaginary axis ("boundary"), but one that also
+    has an eigenvalue at +5 is plant unstable: in the coordinates it was built in (the exact
+    0) and after a random change of coordinates (the 0 becomes round-off of either sign)."""
+    from lcc_synth.analysis.string_stability import plant_verdict
+
+    rng = np.random.default_rng(seed)
+    T = rng.normal(size=(4, 4))
+    for eigs, verdict in (([0.0, 5.0, -1.0, -2.0], "plant_unstable"),
+                          ([0.0, -0.5, -1.0, -2.0], "boundary"),
+                          ([1e-3, -0.5, -1.0, -2.0], "plant_unstable"),
+                          ([-1e-3, -0.5, -1.0, -2.0], "plant_stable")):  # fmt: skip
+        assert plant_verdict(np.array(eigs))[0] == verdict, eigs
+        moved = np.linalg.eigvals(T @ np.diag(eigs) @ np.linalg.inv(T))
+        assert plant_verdict(moved)[0] == verdict, (eigs, moved)
+        assert plant_verdict(moved * 3600.0)[0] == verdict  # seconds -> hours: the same

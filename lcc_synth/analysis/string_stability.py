@@ -217,15 +217,23 @@ def string_band(eigs: np.ndarray) -> float:
 def plant_verdict(eigs: np.ndarray) -> tuple[str, float]:
     """``(verdict, max Re lambda)`` of a loop with eigenvalues ``eigs``: ``"plant_stable"`` /
     ``"plant_unstable"`` when the largest real part is below / above ``-+ tau max|lambda|``
-    (:func:`string_band`), ``"boundary"`` in between or when an eigenvalue is 0 (``tau``
-    infinite): too close to call at this precision."""
+    (:func:`string_band` of the eigenvalues that are not numerically 0), ``"boundary"`` in
+    between: too close to call at this precision.
+
+    An eigenvalue numerically 0 (``|lambda| <= BAND_FACTOR eps max|lambda|``: an exact 0, or
+    the round-off a change of coordinates leaves of it) is on the imaginary axis: the loop is
+    then ``"boundary"``, unless another eigenvalue is clearly in the right half-plane
+    (``"plant_unstable"``, which a 0 eigenvalue cannot make stable)."""
     eigs = np.asarray(eigs, dtype=complex)
     max_re = float(eigs.real.max())
-    band = string_band(eigs)
     scale = float(np.abs(eigs).max()) if eigs.size else 1.0
-    if not np.isfinite(band) or abs(max_re) <= band * scale:
+    tiny = np.abs(eigs) <= BAND_FACTOR * _EPS * scale
+    band = string_band(eigs[~tiny])
+    if max_re > band * scale:
+        return "plant_unstable", max_re
+    if tiny.any() or abs(max_re) <= band * scale:
         return "boundary", max_re
-    return ("plant_stable" if max_re < 0.0 else "plant_unstable"), max_re
+    return "plant_stable", max_re
 
 
 def plant_stability(model, K, kh=0.0) -> tuple[str, float]:
