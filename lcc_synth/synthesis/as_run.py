@@ -281,10 +281,15 @@ def check_platoon(ring: bool, st: AsRunSettings) -> None:
 def as_run_note(st: AsRunSettings, info: dict) -> str:
     """The report's note on a design :func:`as_run_design` left NOT string stable as run."""
     after = info["after"]
-    return ("as run (" + ("estimated" if st.equilibrium_tau else "fixed")
+    note = ("as run (" + ("estimated" if st.equilibrium_tau else "fixed")
             + f" equilibrium, period {st.period:g} s): NOT string stable "
             f"(peak |Gamma| {after['gamma_peak']:.4f}, margin {after['margin']:.3g}); no "
             "step could be accepted")  # fmt: skip
+    tried = info.get("fallback")
+    if tried:  # a platoon's string LMI start: failed, or not string stable as run either
+        note += ("; the string LMI start: " + tried["error"] if "error" in tried else
+                 f"; nor the string LMI start (peak |Gamma| {tried['gamma_peak']:.4f} as run)")
+    return note
 
 
 def as_run_design(
