@@ -60,9 +60,9 @@ def _controller(rep, system):
     return StaticGainController("g", rep.gain, model, sample_time=T)
 
 
-def _peak_as_run(rep, system) -> float:
+def _peak_as_run(rep, system, latency=LATENCY) -> float:
     """``max |Gamma|`` of the loop the simulator's controller runs, on a dense grid."""
-    loop = controller_loop(_controller(rep, system), system, 0.01, LATENCY)
+    loop = controller_loop(_controller(rep, system), system, 0.01, latency)
     assert loop.sample_time == T
     w = np.logspace(-4, math.log10(math.pi / T), 4000)
     return float(np.max(np.abs(loop.response(w))))
@@ -95,6 +95,19 @@ def test_as_run_design_of_a_two_cav_platoon_is_string_stable_as_run(designs):
     assert a["h2_after"] == pytest.approx(rep.check.h2, rel=1e-9)
     assert [s["stage"] for s in rep.stages][-1] == "as-run polish"
     assert "as_run" not in plain.as_dict()  # no table, no block: the JSON is unchanged
+
+
+def test_string_stable_design_then_as_run():
+    """``design = "string_stable"`` (string stable in continuous time, margin 1.2e-4 as run at
+    0.1 s without latency: below the as-run margin 1e-3) ends string stable as run with that
+    margin, and still in continuous time (the design's check)."""
+    rep = synthesize(lcc.h2_problem(_system(), design="string_stable", weights=WEIGHTS,
+                                    semantics="replace", patterns=PATTERNS,
+                                    as_run={"sample_time": T}))  # fmt: skip
+    a = rep.as_run
+    assert 0 < a["before"]["margin"] < 1e-3 <= a["after"]["margin"] and a["string_stable"]
+    assert _peak_as_run(rep, _system(), 0.0) <= 1.0 + 1e-9
+    assert rep.check.string_stable
 
 
 @pytest.mark.slow  # the analysed loop of the default test above is this loop

@@ -27,6 +27,23 @@ cost exactly (the head-velocity weight makes it differ).
 
 Otherwise the design is returned with its as-run verdict (no step could be accepted): the
 report says so (``as_run.string_stable = false``), never silently.
+
+An open platoon (a gain row per CAV; :func:`check_platoon`): the loop of every CAV at once
+(:func:`lcc_synth.analysis.as_run.as_run_loop`, every CAV sampled at the same period with the
+same latency and filter), a fixed equilibrium (``C = I``: ``J`` is the platoon's true H2
+cost), the Anderson-Moore step row by row. No trade-off step (``weight > 0`` is refused): when
+the structured gain is not string stable as run, the polish starts instead from the string
+LMI's gain on the same patterns (:func:`lcc_synth.synthesis.string_lmi.string_lmi`, passed as
+``fallback``) if that one is; ``info["start"]`` says which. A platoon of one CAV runs the one
+CAV's computation on its row: the ``kind = "lcc"`` string's gain bit for bit while the
+structured gain is string stable as run (the string has no fallback, so they differ when it
+is not: the string reports NOT string stable). Measured (tests/test_as_run_design_platoon.py,
+2 cores, shared): the open platoon of 4 (CAVs 2 and 4, CAV 2 hearing vehicles 1-3, 14 free
+entries, ``q_s0 = 10``) sampled at 0.1 s with 0.2 s latency: the structured gain peaks at
+``|Gamma|`` 1.0236 as run (margin -0.094); the string LMI start and 7 accepted steps end
+string stable as run at margin 1.0e-3 for an H2 of 3.7060 against 3.6509, in 1.6 s (each
+trial costs one as-run loop and verdict, 16 states). With CAV 2 hearing only 1-3 on a platoon
+of 4 whose CAVs are 2 and 3 the LMI is infeasible: the report's note says so.
 """
 
 from __future__ import annotations

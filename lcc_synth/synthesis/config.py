@@ -132,9 +132,15 @@ reduced plant (the ring's invariant hyperplane) and checked against Riccati with
 ``CROSS_CHECK_TOL``; its structured restriction has a block of ``X`` per set of states heard by
 the same CAVs (:func:`~lcc_synth.synthesis.lmi.convex_restriction`); with ``cav_lag`` they are
 refused there (the lag states are in no pattern). The single-CAV keys ``pattern`` (other than
-"all"), ``sparsity`` (but ``max_loss``) and ``as_run`` do not apply: a
-ConfigError names the key and the layout (``kind``); the platoon keys ``comm_range`` and
+"all") and ``sparsity`` (but ``max_loss``) do not apply: a ConfigError names the key and
+the layout (``kind``); the platoon keys ``comm_range`` and
 ``patterns`` are refused for one CAV the same way (``robust`` applies to both: see above).
+``[synthesis.as_run]`` works on open platoons with ``design = "structured"`` or
+``"string_stable"`` (the same table; every CAV samples at ``sample_time`` with the same
+``latency`` and ``measurement_filter``): ``equilibrium = "fixed"`` only and ``weight = 0``
+(ConfigErrors naming ``synthesis.as_run.equilibrium`` / ``synthesis.as_run.weight``); a ring
+refuses it (``synthesis.as_run``: no head vehicle), as do ``[synthesis.robust]`` and
+``cav_lag`` with it (``synthesis.as_run`` / ``synthesis.cav_lag``).
 ``design = "string_stable"`` and ``[synthesis.string]`` need a head vehicle: a ring refuses
 them (``synthesis.design`` / ``synthesis.string``), and on a platoon they do not combine with
 ``[synthesis.robust]`` or ``cav_lag``.
