@@ -612,6 +612,7 @@ def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
         from lcc_synth.synthesis.as_run import as_run_design, as_run_note
 
         progress("synthesis: as-run polish (string stable as run at every accepted step)")
+
         def lmi_gain():  # the fallback start: the string LMI's gain on the same patterns
             return string_lmi(plant, mask, spec.string_gamma).g
 
