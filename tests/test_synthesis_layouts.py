@@ -120,30 +120,21 @@ def test_structured_keeps_the_pattern_and_reports_its_true_h2_on_every_layout(la
     assert h2 >= rep.h2_unstructured * (1 - 1e-9)  # a pattern never beats full information
 
 
-@pytest.mark.parametrize("layout", ["two_cav_platoon", "ring"])
-@pytest.mark.parametrize(("extra", "field", "design"), [
-    ("as_run = true", "synthesis.as_run", "structured"),
-])  # fmt: skip
-def test_single_cav_features_name_the_key_and_the_layout(layout, extra, field, design):
-    kind = "platoon" if layout == "two_cav_platoon" else "ring"
+def test_the_as_run_design_of_a_ring_names_the_key_and_the_layout():
+    """The one feature a ring refuses that an open platoon has: the as-run design (no head
+    vehicle; tests/test_as_run_design_platoon.py runs it on platoons)."""
     with pytest.raises(ConfigError) as err:
-        spec_from_problem(_problem(layout, design, extra))
-    assert err.value.field == field
-    assert f"kind = {kind!r}" in err.value.message
-    assert "this platoon's one CAV" not in err.value.message  # several CAVs / a ring: no hint
+        spec_from_problem(_problem("ring", "structured", "as_run = true"))
+    assert err.value.field == "synthesis.as_run"
+    assert "kind = 'ring'" in err.value.message
 
 
-def test_a_one_cav_platoon_is_told_the_string_it_is():
-    """A platoon of one CAV asking for a single-CAV design is told the ``kind = "lcc"`` string
-    it is; the hint is the truth: that string's linear model is the platoon's, bit for bit."""
+def test_a_one_cav_platoon_is_the_lcc_string():
+    """A platoon of one CAV is the ``kind = "lcc"`` string (every single-CAV feature now runs on
+    open platoons): that string's linear model is the platoon's, bit for bit."""
     import lcc_synth as lcc
 
     platoon = lcc.system(size=6, cavs=[3])
-    with pytest.raises(ConfigError) as err:
-        lcc.h2_problem(platoon, design="structured", as_run=True)
-    assert err.value.field == "synthesis.as_run"
-    assert err.value.message.endswith('the string kind = "lcc", m = 2, n = 3, where it is '
-                                      "available")  # fmt: skip
     a, b = lcc.model(platoon), lcc.model(lcc.system("lcc", m=2, n=3))
     for X, Y in ((a.A, b.A), (a.B, b.B), (a.H, b.H)):
         np.testing.assert_array_equal(X, Y)

@@ -161,8 +161,8 @@ BASELINE = Table(
 
 AS_RUN = Table(
     "synthesis.as_run",
-    "Design the loop as it runs (structured, string_stable; not fd_lcc): estimate, "
-    "sample-and-hold, latency, filter.",
+    "Design the loop as it runs (structured, string_stable; not fd_lcc, not a ring; an open "
+    "platoon: fixed equilibrium, weight 0): estimate, sample-and-hold, latency, filter.",
     _SYN,
     (
         Key("equilibrium", "string", "The controller's equilibrium.", "fixed",

@@ -7,7 +7,7 @@ and the polishing on the true H2 cost; robust multi-model descent), :mod:`.spars
 (group-sparsity ADMM Pareto sweep; per-CAV range front), :mod:`.string_lmi` (bounded-real
 lemma, string-stable designs of every layout with a head vehicle), :mod:`.lag_design` (the
 CAVs' actuator lag in the plant), :mod:`.robust_string` (the robust multi-model design of one
-CAV, on its one-CAV platoon), :mod:`.as_run` (the loop as it runs, one CAV),
+CAV, on its one-CAV platoon), :mod:`.as_run` (the loop as it runs, one CAV or an open platoon),
 :mod:`.as_run_dynamics` (the gain with the estimator, filter and sample time as design
 variables, on the loop as it runs), :mod:`.config` (``[synthesis]`` problem table, both
 vocabularies), :mod:`.design` (:func:`~.design.synthesize`, the one entry point),
@@ -20,8 +20,8 @@ Feature matrix of ``[synthesis]`` (``tests/test_synthesis_layouts.py`` reads thi
 checks every cell: "yes" parses into a spec, "no: KEY" is one ConfigError naming
 ``synthesis.KEY``; the designs themselves run on each layout in ``test_synthesis_layouts``,
 ``test_synthesis_lmi_layouts``, ``test_synthesis_string_platoon``, ``test_robust_one_cav``,
-``test_synthesis_platoon``, ``test_lag_platoon``, ``test_actuator_lag`` and
-``test_baseline_platoon``)::
+``test_synthesis_platoon``, ``test_lag_platoon``, ``test_actuator_lag``,
+``test_baseline_platoon`` and ``test_as_run_design_platoon``)::
 
     option                           one CAV            platoon            ring
     design = "full_state"            yes                yes                yes
@@ -41,7 +41,7 @@ checks every cell: "yes" parses into a spec, "no: KEY" is one ConfigError naming
     cav_lag, method = "lmi"          no: method         no: method         no: method
     cav_lag, string_stable           yes                no: cav_lag        no: design
     cav_lag, robust                  yes                yes                yes
-    [synthesis.as_run]               yes                no: as_run         no: as_run
+    [synthesis.as_run]               yes                yes                no: as_run
     [synthesis.baseline]             yes                yes                yes
     pattern = [...]                  yes                no: pattern        no: pattern
     comm_range                       no: comm_range     yes                yes
@@ -50,8 +50,9 @@ checks every cell: "yes" parses into a spec, "no: KEY" is one ConfigError naming
 ``[synthesis.robust]`` and ``design = "string_stable"``, as a ring does. Why the "no" cells
 stay: a ring has no head vehicle, so no head-to-tail transfer function to bound; the lag
 states are in no pattern, so no LMI holds them and the string-stable polish of several CAVs is
-of the lag-free loop; the robust descent does not keep string stability; the as-run loop
-(estimator, sampling, latency) is written for one CAV's command.
+of the lag-free loop; the robust descent does not keep string stability. The as-run design
+of an open platoon (``test_as_run_design_platoon``) has a fixed equilibrium and no trade-off
+step: its ``equilibrium = "estimated"`` and ``weight > 0`` are ConfigErrors naming them.
 """
 
 from lcc_synth.synthesis.h2 import SynthesisError, Weights, h2_norm, make_plant, riccati_gain

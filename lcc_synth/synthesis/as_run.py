@@ -27,12 +27,30 @@ cost exactly (the head-velocity weight makes it differ).
 
 Otherwise the design is returned with its as-run verdict (no step could be accepted): the
 report says so (``as_run.string_stable = false``), never silently.
+
+An open platoon (a gain row per CAV; :func:`check_platoon`): the loop of every CAV at once
+(:func:`lcc_synth.analysis.as_run.as_run_loop`, every CAV sampled at the same period with the
+same latency and filter), a fixed equilibrium (``C = I``: ``J`` is the platoon's true H2
+cost), the Anderson-Moore step row by row. No trade-off step (``weight > 0`` is refused): when
+the structured gain is not string stable as run, the polish starts instead from the string
+LMI's gain on the same patterns (:func:`lcc_synth.synthesis.string_lmi.string_lmi`, passed as
+``fallback``) if that one is; ``info["start"]`` says which. A platoon of one CAV runs the one
+CAV's computation on its row: the ``kind = "lcc"`` string's gain bit for bit while the
+structured gain is string stable as run (the string has no fallback, so they differ when it
+is not: the string reports NOT string stable). Measured (tests/test_as_run_design_platoon.py,
+2 cores, shared): the open platoon of 4 (CAVs 2 and 4, CAV 2 hearing vehicles 1-3, 14 free
+entries, ``q_s0 = 10``) sampled at 0.1 s with 0.2 s latency: the structured gain peaks at
+``|Gamma|`` 1.0236 as run (margin -0.094); the string LMI start and 7 accepted steps end
+string stable as run at margin 1.0e-3 for an H2 of 3.7060 against 3.6509, in 1.6 s (each
+trial costs one as-run loop and verdict, 16 states). With CAV 2 hearing only 1-3 on a platoon
+of 4 whose CAVs are 2 and 3 the LMI is infeasible: the report's note says so.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -45,9 +63,10 @@ from lcc_synth.analysis.as_run import (
     law_of_gains,
 )
 from lcc_synth.errors import ConfigError
-from lcc_synth.synthesis.h2 import STABILITY_TOL, H2Plant, SynthesisError
+from lcc_synth.synthesis.h2 import STABILITY_TOL, H2Plant, PlatoonPlant, SynthesisError
 
-__all__ = ["AsRunSettings", "output_cost", "as_run_check", "amplification", "as_run_design"]
+__all__ = ["AsRunSettings", "output_cost", "as_run_check", "amplification", "check_platoon",
+           "as_run_note", "as_run_design"]
 
 
 @dataclass(frozen=True)
@@ -110,7 +129,7 @@ def _augmented(plant: H2Plant, st: AsRunSettings):
 def output_cost(aug, r: float, g: np.ndarray):
     """``(J, L, P)`` of ``u = g C xi`` on the augmented loop (``inf, None, None`` if unstable)."""
     A, B, C, Bw, Q = aug
-    K = np.asarray(g, float).reshape(1, -1) @ C
+    K = np.atleast_2d(np.asarray(g, float)) @ C  # a row per CAV (one CAV: one row)
     AK = A + B @ K
     if np.max(np.linalg.eigvals(AK).real) >= -STABILITY_TOL:
         return math.inf, None, None
@@ -126,6 +145,8 @@ def output_cost(aug, r: float, g: np.ndarray):
 def _directions(aug, r, g, L, P, mask):
     A, B, C, _, _ = aug
     CLC = C @ L @ C.T
+    if np.ndim(g) == 2:  # a platoon: a row per CAV (fixed equilibrium, C = I)
+        return _row_directions(r, g, CLC, B.T @ P @ L @ C.T, mask)
     BPLC = (B.T @ P @ L @ C.T).ravel()
     grad = 2.0 * (r * g @ CLC + BPLC)
     grad = np.where(mask, grad, 0.0)
@@ -135,6 +156,20 @@ def _directions(aug, r, g, L, P, mask):
         d[idx] = np.linalg.solve(r * CLC[np.ix_(idx, idx)].T, -BPLC[idx]) - g[idx]
     except np.linalg.LinAlgError:
         pass
+    return grad, d
+
+
+def _row_directions(r, G, CLC, BPLC, mask):
+    """:func:`_directions` of a gain with a row per CAV: the gradient ``2 (r G CLC + BPLC)``
+    and the Anderson-Moore step row by row (``R = r I``)."""
+    grad = np.where(mask, 2.0 * (r * G @ CLC + BPLC), 0.0)
+    d = np.zeros_like(G)
+    for k in range(G.shape[0]):
+        idx = np.flatnonzero(mask[k])
+        try:
+            d[k, idx] = np.linalg.solve(r * CLC[np.ix_(idx, idx)].T, -BPLC[k, idx]) - G[k, idx]
+        except np.linalg.LinAlgError:
+            continue
     return grad, d
 
 
@@ -152,7 +187,7 @@ def _polish(aug, r, g0, mask, accept, steps: int, tol: float = 1e-7):
             break
         found = False
         for d in (am, -grad):
-            slope = float(grad @ d)
+            slope = float(grad.ravel() @ d.ravel())
             if not slope < 0:
                 continue
             t, refused = 1.0, 0
@@ -234,14 +269,79 @@ def _tradeoff(plant, aug, mask, g0, st):
     return g if math.isfinite(output_cost(aug, plant.r, g)[0]) else g0
 
 
-def as_run_design(plant: H2Plant, mask: np.ndarray, g0: np.ndarray, st: AsRunSettings):
+def check_platoon(ring: bool, st: AsRunSettings) -> None:
+    """Refuse what the as-run design of a platoon (``ring``: a ring) cannot run (see the
+    module docstring).
+
+    Raises
+    ------
+    ConfigError
+        ``synthesis.as_run`` on a ring (no head vehicle, no head-to-tail loop);
+        ``synthesis.as_run.equilibrium`` = "estimated" on a platoon (the simulator has no
+        per-CAV equilibrium estimator); ``synthesis.as_run.weight`` > 0 on a platoon (the
+        trade-off step is of one CAV's loop).
+    """
+    if ring:
+        raise ConfigError("synthesis.as_run", "needs a head vehicle: kind = 'ring' has none (no "
+                          "head-to-tail loop to check as run); use kind = 'platoon' or drop "
+                          "[synthesis.as_run]")  # fmt: skip
+    if st.equilibrium_tau is not None:
+        raise ConfigError("synthesis.as_run.equilibrium", 'must be "fixed" on a platoon: the '
+                          "simulator has no per-CAV equilibrium estimator (a platoon's "
+                          "controllers run with the fixed v*)")  # fmt: skip
+    if st.weight > 0:
+        raise ConfigError("synthesis.as_run.weight", f"must be 0 on a platoon, got "
+                          f"{st.weight:g}: the trade-off step is of one CAV's loop (the "
+                          "polish from a gain string stable as run works on platoons)")  # fmt: skip
+
+
+def as_run_note(st: AsRunSettings, info: dict) -> str:
+    """The report's note on a design :func:`as_run_design` left NOT string stable as run."""
+    after = info["after"]
+    note = ("as run (" + ("estimated" if st.equilibrium_tau else "fixed")
+            + f" equilibrium, period {st.period:g} s): NOT string stable "
+            f"(peak |Gamma| {after['gamma_peak']:.4f}, margin {after['margin']:.3g}); no "
+            "step could be accepted")  # fmt: skip
+    tried = info.get("fallback")
+    if tried:  # a platoon's string LMI start: failed, or not string stable as run either
+        note += ("; the string LMI start: " + tried["error"] if "error" in tried else
+                 f"; nor the string LMI start (peak |Gamma| {tried['gamma_peak']:.4f} as run)")
+    return note
+
+
+def as_run_design(
+    plant: H2Plant | PlatoonPlant,
+    mask: np.ndarray,
+    g0: np.ndarray,
+    st: AsRunSettings,
+    fallback: Callable[[], np.ndarray] | None = None,
+):
     """The design of the module docstring from the structured H2 gain ``g0``.
 
+    ``plant``: one CAV (``g0``, ``mask`` on the design states) or an open platoon (``n_cav x
+    nx``, a row per CAV; fixed equilibrium, no trade-off: :func:`check_platoon`). A platoon of
+    one CAV runs on its one row, the computation of the ``kind = "lcc"`` string it is.
+    ``fallback``: called when ``g0`` is not string stable as run with the margin; its gain (on
+    the pattern) starts the polish instead if it is (the platoon's string LMI gain; a
+    :class:`SynthesisError` it raises is reported, not raised).
+
     Returns ``(g, info)``; ``info`` holds the settings, the as-run reports before and after,
-    the H2 norms (augmented loop), whether the polish ran and the timings.
+    the H2 norms (augmented loop; ``h2_before`` is ``g0``'s), whether the polish ran and the
+    timings; with a ``fallback`` also ``start`` (``"design"`` or ``"fallback"``) and
+    ``fallback`` (its as-run report, or the error that stopped it; ``None`` if not needed).
+
+    Raises
+    ------
+    ConfigError
+        ``fd_lcc`` (no head vehicle) and the refusals of :func:`check_platoon`.
     """
     if plant.model.kind == "fd_lcc":
         raise ConfigError("synthesis.as_run", "needs a head vehicle (not fd_lcc)")
+    if isinstance(plant, PlatoonPlant):
+        check_platoon(plant.ring, st)
+    shape = np.shape(g0)
+    if isinstance(plant, PlatoonPlant) and plant.n_in == 1:  # one row: one CAV's computation
+        g0, mask = np.ravel(g0), np.ravel(mask)
     t0 = time.perf_counter()
     aug = _augmented(plant, st)
     mask = np.asarray(mask, bool)
@@ -249,6 +349,17 @@ def as_run_design(plant: H2Plant, mask: np.ndarray, g0: np.ndarray, st: AsRunSet
     g = g0 if st.weight <= 0 else _tradeoff(plant, aug, mask, g0, st)
     t_trade = time.perf_counter() - t0
     rep = as_run_check(plant, g, st)
+    start, tried = "design", None
+    if fallback is not None and not (rep.string_stable and rep.margin >= st.margin):
+        try:
+            g1 = np.where(mask, np.reshape(fallback(), mask.shape), 0.0)
+        except SynthesisError as err:
+            tried = {"error": str(err)}
+        else:
+            r1 = as_run_check(plant, g1, st)
+            tried = r1.as_dict()
+            if r1.string_stable and r1.margin >= st.margin:
+                g, rep, start = g1, r1, "fallback"
     polished = False
     iters = 0
     if rep.string_stable and rep.margin >= st.margin:
@@ -271,4 +382,6 @@ def as_run_design(plant: H2Plant, mask: np.ndarray, g0: np.ndarray, st: AsRunSet
         "polish_iterations": iters,
         "timings": {"tradeoff": t_trade, "total": time.perf_counter() - t0},
     }
-    return g, info
+    if fallback is not None:
+        info["start"], info["fallback"] = start, tried
+    return np.reshape(g, shape), info

@@ -132,9 +132,15 @@ reduced plant (the ring's invariant hyperplane) and checked against Riccati with
 ``CROSS_CHECK_TOL``; its structured restriction has a block of ``X`` per set of states heard by
 the same CAVs (:func:`~lcc_synth.synthesis.lmi.convex_restriction`); with ``cav_lag`` they are
 refused there (the lag states are in no pattern). The single-CAV keys ``pattern`` (other than
-"all"), ``sparsity`` (but ``max_loss``) and ``as_run`` do not apply: a
-ConfigError names the key and the layout (``kind``); the platoon keys ``comm_range`` and
+"all") and ``sparsity`` (but ``max_loss``) do not apply: a ConfigError names the key and
+the layout (``kind``); the platoon keys ``comm_range`` and
 ``patterns`` are refused for one CAV the same way (``robust`` applies to both: see above).
+``[synthesis.as_run]`` works on open platoons with ``design = "structured"`` or
+``"string_stable"`` (the same table; every CAV samples at ``sample_time`` with the same
+``latency`` and ``measurement_filter``): ``equilibrium = "fixed"`` only and ``weight = 0``
+(ConfigErrors naming ``synthesis.as_run.equilibrium`` / ``synthesis.as_run.weight``); a ring
+refuses it (``synthesis.as_run``: no head vehicle), as do ``[synthesis.robust]`` and
+``cav_lag`` with it (``synthesis.as_run`` / ``synthesis.cav_lag``).
 ``design = "string_stable"`` and ``[synthesis.string]`` need a head vehicle: a ring refuses
 them (``synthesis.design`` / ``synthesis.string``), and on a platoon they do not combine with
 ``[synthesis.robust]`` or ``cav_lag``.
@@ -299,10 +305,7 @@ class SynthesisSpec(Record):
         if self.cav_lag:
             t["cav_lag"] = self.cav_lag
         if self.as_run is not None:
-            t["as_run"] = {
-                "equilibrium": "fixed" if self.as_run.equilibrium_tau is None else "estimated",
-                **asdict(self.as_run),
-            }
+            t["as_run"] = _as_run_table(self.as_run)
         return t
 
     def _platoon_table(self) -> dict[str, Any]:
@@ -340,7 +343,14 @@ class SynthesisSpec(Record):
             bname, gains = self.baseline
             t["baseline"] = {"name": bname, "semantics": gains.semantics,
                              "gains": gains.as_table()}  # fmt: skip
+        if self.as_run is not None:
+            t["as_run"] = _as_run_table(self.as_run)
         return t
+
+
+def _as_run_table(st) -> dict[str, Any]:
+    """``[synthesis.as_run]`` of settings ``st`` (every layout with a head vehicle)."""
+    return {"equilibrium": "fixed" if st.equilibrium_tau is None else "estimated", **asdict(st)}
 
 
 def _robust_table(rb: RobustSettings) -> dict[str, Any]:
@@ -396,7 +406,7 @@ def _as_run(t: dict, system: System, design: str):
     if eq == "fixed" and "equilibrium_tau" in raw:
         raise ConfigError(f"{f}.equilibrium_tau", 'only applies with equilibrium = "estimated"')
     st = A.get(raw, "sample_time", f)
-    return AsRunSettings(
+    settings = AsRunSettings(
         equilibrium_tau=tau if eq == "estimated" else None,
         sample_time=st,
         dt=A.get(raw, "dt", f),
@@ -406,6 +416,11 @@ def _as_run(t: dict, system: System, design: str):
         weight=A.get(raw, "weight", f),
         polish_steps=A.get(raw, "polish_steps", f),
     )
+    if system.platoon is not None:  # a ring, "estimated", weight > 0: named refusals
+        from lcc_synth.synthesis.as_run import check_platoon
+
+        check_platoon(system.ring, settings)
+    return settings
 
 
 def spec_from_problem(problem: Problem) -> SynthesisSpec:
@@ -549,9 +564,6 @@ def synthesis_spec(
 
 #: The designs a platoon or ring accepts.
 PLATOON_DESIGNS = ("full_state", "structured", "sparsity", "string_stable")
-
-_NOT_FOR_PLATOONS = ("as_run",)
-
 
 def _baseline(t: dict, system: System, semantics: str) -> tuple[str, Gains] | None:
     """``[synthesis.baseline]`` of any layout as ``(name, gains)`` (``None`` without one): the
@@ -708,9 +720,6 @@ def _single_cav_only(field: str, what: str, system: System) -> ConfigError:
 def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> SynthesisSpec:
     """Parse ``[synthesis]`` (already key-checked) for a platoon or ring ``system``."""
     T = declared("synthesis")
-    for key in _NOT_FOR_PLATOONS:
-        if key in t:
-            raise _single_cav_only(f"synthesis.{key}", f"[synthesis] {key}", system)
     design = T.get(t, "design", "synthesis")
     if design not in PLATOON_DESIGNS:
         raise _single_cav_only("synthesis.design", f"design = {design!r}", system)
@@ -765,7 +774,12 @@ def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> Synt
     tol = T.get(t, "tol", "synthesis")
     max_iter = T.get(t, "max_iter", "synthesis")
     robust = _robust(t, system)
-    cav_lag = check_lag_design(T.get(t, "cav_lag", "synthesis"), design, None)
+    as_run = _as_run(t, system, design)
+    cav_lag = check_lag_design(T.get(t, "cav_lag", "synthesis"), design, as_run)
+    if as_run is not None and robust is not None:
+        raise ConfigError("synthesis.as_run", "does not combine with [synthesis.robust] (the "
+                          "robust descent does not keep the as-run string stability): drop "
+                          "one of them")  # fmt: skip
     if robust is not None and design == "string_stable":
         raise ConfigError("synthesis.robust", "does not apply to design = 'string_stable' (the "
                           "robust descent does not keep string stability); drop "
@@ -787,4 +801,4 @@ def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> Synt
                          comm_range=R, robust=robust, cav_lag=cav_lag,
                          baseline=_baseline(t, system, semantics),
                          string_gamma=string["gamma"], polish_steps=string["polish_steps"],
-                         string_margin=string["margin"])  # fmt: skip
+                         string_margin=string["margin"], as_run=as_run)  # fmt: skip

@@ -70,7 +70,7 @@ from lcc_synth.synthesis.report import (
 )
 from lcc_synth.synthesis.robust_string import robust_string_design
 from lcc_synth.synthesis.sparsity import range_pareto, sparsity_sweep
-from lcc_synth.synthesis.string_lmi import string_aware_h2
+from lcc_synth.synthesis.string_lmi import string_aware_h2, string_lmi
 from lcc_synth.synthesis.structured import (
     ROBUST_TEMPERATURES,
     descend,
@@ -363,18 +363,12 @@ def synthesize(spec: SynthesisSpec) -> SynthesisReport:
 
     as_run = None
     if spec.as_run is not None:
-        from lcc_synth.synthesis.as_run import as_run_design
+        from lcc_synth.synthesis.as_run import as_run_design, as_run_note
 
         g, as_run = as_run_design(plant, mask, np.where(mask, g, 0.0), spec.as_run)
         timings["as_run"] = as_run["timings"]["total"]
         if not as_run["string_stable"]:
-            after = as_run["after"]
-            notes.append(
-                "as run (" + ("estimated" if spec.as_run.equilibrium_tau else "fixed")
-                + f" equilibrium, period {spec.as_run.period:g} s): NOT string stable "
-                f"(peak |Gamma| {after['gamma_peak']:.4f}, margin {after['margin']:.3g}); no "
-                "step could be accepted"
-            )
+            notes.append(as_run_note(spec.as_run, as_run))
     progress("synthesis: checking the gain (stability, H2, string stability)")
     g = np.where(mask, g, 0.0)  # exact zeros off the pattern (already so; kept explicit)
     chk = check_gain(plant, g, f"{spec.design} design", solver)
@@ -613,6 +607,21 @@ def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
                        "h2": robust["robust_design"]["mean_h2"], "time": timings["robust"]})
         notes.append("robust stage: its H2 is the mean (objective mean) over the members; "
                      "check.h2 is the robust gain on the nominal model")  # fmt: skip
+    as_run = UNSET
+    if spec.as_run is not None:  # open platoons, fixed equilibrium (the config refuses the rest)
+        from lcc_synth.synthesis.as_run import as_run_design, as_run_note
+
+        progress("synthesis: as-run polish (string stable as run at every accepted step)")
+
+        def lmi_gain():  # the fallback start: the string LMI's gain on the same patterns
+            return string_lmi(plant, mask, spec.string_gamma).g
+
+        K, as_run = as_run_design(plant, mask, np.where(mask, K, 0.0), spec.as_run, lmi_gain)
+        timings["as_run"] = as_run["timings"]["total"]
+        stages.append({"stage": "as-run polish", "h2": as_run["h2_after"],
+                       "time": timings["as_run"]})  # fmt: skip
+        if not as_run["string_stable"]:
+            notes.append(as_run_note(spec.as_run, as_run))
     K = np.where(mask, K, 0.0)  # exact zeros off the patterns (already so; kept explicit)
     chk = check_platoon_gain(plant, K, f"{spec.design} design",
                              string=spec.design == "string_stable")  # fmt: skip
@@ -661,5 +670,6 @@ def _synthesize_platoon(spec: SynthesisSpec) -> SynthesisReport:
         pareto=pareto,
         timings=timings,
         notes=notes,
+        as_run=as_run,
         gain=gains,
     )
