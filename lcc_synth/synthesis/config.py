@@ -165,7 +165,6 @@ from lcc_synth.synthesis.robust_string import check_robust_string
 
 __all__ = [
     "DESIGNS",
-    "PLATOON_DESIGNS",
     "RobustSettings",
     "SynthesisSpec",
     "PlatoonSynthesisSpec",
@@ -562,9 +561,6 @@ def synthesis_spec(
     )
 
 
-#: The designs a platoon or ring accepts.
-PLATOON_DESIGNS = ("full_state", "structured", "sparsity", "string_stable")
-
 def _baseline(t: dict, system: System, semantics: str) -> tuple[str, Gains] | None:
     """``[synthesis.baseline]`` of any layout as ``(name, gains)`` (``None`` without one): the
     gains in the layout's vocabulary (``{state: gain}`` for one CAV, :meth:`~lcc_synth.models.
@@ -703,26 +699,10 @@ def robust_members(system: System, robust: RobustSettings) -> list[Platoon]:
     return out
 
 
-def _single_cav_only(field: str, what: str, system: System) -> ConfigError:
-    """The one error of a single-CAV feature asked of a platoon or ring (``field`` named); an
-    open platoon of one CAV is told the ``kind = "lcc"`` string that it is."""
-    designs = [d for d in PLATOON_DESIGNS if not (system.ring and d == "string_stable")]
-    msg = (f"{what} is a single-CAV feature, not available for kind = {system.kind!r} (its "
-           f"designs: {', '.join(designs)}; method riccati / lmi for full_state, lmi / direct "
-           "for structured)")  # fmt: skip
-    cavs = tuple(system.platoon.cavs)
-    if not system.ring and len(cavs) == 1:
-        msg += (f"; this platoon's one CAV is the string kind = \"lcc\", m = {cavs[0] - 1}, "
-                f"n = {system.platoon.size - cavs[0]}, where it is available")  # fmt: skip
-    return ConfigError(field, msg)
-
-
 def platoon_spec(name: str, system: System, t: dict[str, Any], src: str) -> SynthesisSpec:
     """Parse ``[synthesis]`` (already key-checked) for a platoon or ring ``system``."""
     T = declared("synthesis")
-    design = T.get(t, "design", "synthesis")
-    if design not in PLATOON_DESIGNS:
-        raise _single_cav_only("synthesis.design", f"design = {design!r}", system)
+    design = T.get(t, "design", "synthesis")  # every design of one CAV
     if system.ring and (design == "string_stable" or "string" in t):
         key = "design" if design == "string_stable" else "string"
         raise ConfigError(f"synthesis.{key}", "string_stable needs a head vehicle: kind = "
