@@ -50,7 +50,9 @@ checks every cell: "yes" parses into a spec, "no: KEY" is one ConfigError naming
 ``[synthesis.robust]`` and ``design = "string_stable"``, as a ring does. Why the "no" cells
 stay: a ring has no head vehicle, so no head-to-tail transfer function to bound; the lag
 states are in no pattern, so no LMI holds them and the string-stable polish of several CAVs is
-of the lag-free loop; the robust descent does not keep string stability. The as-run design
+of the lag-free loop; the robust descent does not keep string stability; one CAV's sparsity
+design (the ADMM Pareto sweep) has no robust stage, a platoon's (the greedy range front, which
+a one-CAV string would need its own vocabulary for) has. The as-run design
 of an open platoon (``test_as_run_design_platoon``) has a fixed equilibrium and no trade-off
 step: its ``equilibrium = "estimated"`` and ``weight > 0`` are ConfigErrors naming them.
 """
