@@ -132,14 +132,20 @@ def test_the_rings_multiprecision_energy_is_the_float64_energy():
     np.testing.assert_allclose(double.lambda_max, mp.lambda_max, rtol=1e-12)
 
 
-@pytest.mark.parametrize("name", ["two_cav", "ring"])
-def test_region_maps_on_a_platoon_or_ring_name_the_model(name):
+@pytest.mark.parametrize(("name", "field", "words"), [
+    ("two_cav", "cav", ("[1, 3]", "None")),  # which CAV's gains vary: it must be said
+    ("ring", "system.kind", ("no head vehicle",)),  # no head-to-tail Gamma at all
+])  # fmt: skip
+def test_region_maps_on_a_platoon_or_ring_name_what_is_missing(name, field, words):
+    """Region maps exist for open platoons (tests/test_regions_platoon.py), one CAV's gains at a
+    time: a platoon map that does not say which CAV is one error naming ``cav``; a ring has no
+    head vehicle and no map."""
     model = _layouts()[name]
     axis = np.linspace(-1.0, 1.0, 3)
     with pytest.raises(ConfigError) as err:
         region_map(model, 2, axis, axis)
-    assert err.value.field == "model"
-    assert f"kind = {model.kind!r}" in err.value.message
+    assert err.value.field == field
+    assert all(w in err.value.message for w in words), err.value.message
 
 
 def test_region_map_of_the_one_cav_layout_runs():
@@ -150,8 +156,9 @@ def test_region_map_of_the_one_cav_layout_runs():
     assert rm.labels.shape == (3, 3)
 
 
-@pytest.mark.parametrize("kind", ["platoon", "ring"])
-def test_regions_command_on_a_platoon_or_ring_file_is_one_error(tmp_path, kind):
+@pytest.mark.parametrize(("kind", "field"), [("platoon", "maps.a.cav"), ("ring", "system.kind")])
+def test_regions_command_on_a_platoon_or_ring_file_is_one_error(tmp_path, kind, field):
+    """A platoon's map that names no CAV, a ring's map: exit 2, one line naming the field."""
     problem = tmp_path / f"{kind}.toml"
     problem.write_text(
         f'name = "{kind}"\n[hdv]\nmodel = "ovm"\n[system]\nkind = "{kind}"\nsize = 5\n'
@@ -160,5 +167,5 @@ def test_regions_command_on_a_platoon_or_ring_file_is_one_error(tmp_path, kind):
     out = run_cli(["regions", problem, "--no-record", "-q"], cwd=tmp_path, timeout=120)
     assert out.returncode == 2, out.stderr
     lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
-    assert any("system.kind" in ln and kind in ln for ln in lines), out.stderr
+    assert len(lines) == 1 and field in lines[0], out.stderr
     assert "Traceback" not in out.stderr
