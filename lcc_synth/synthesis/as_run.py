@@ -337,10 +337,8 @@ def as_run_design(
     """
     if plant.model.kind == "fd_lcc":
         raise ConfigError("synthesis.as_run", "needs a head vehicle (not fd_lcc)")
-    if isinstance(plant, PlatoonPlant):
-        check_platoon(plant.ring, st)
-    shape = np.shape(g0)
-    if isinstance(plant, PlatoonPlant) and plant.n_in == 1:  # one row: one CAV's computation
+    shape = np.shape(g0)  # (a platoon's refusals, check_platoon: when its spec is read)
+    if len(shape) == 2 and shape[0] == 1:  # one row: one CAV's computation
         g0, mask = np.ravel(g0), np.ravel(mask)
     t0 = time.perf_counter()
     aug = _augmented(plant, st)
