@@ -93,6 +93,7 @@ __all__ = [
     "progress",
     "progress_bar",
     "notice",
+    "single_thread_blas",
     "quiet",
     "set_progress",
     "set_quiet",
