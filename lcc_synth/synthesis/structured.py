@@ -227,12 +227,6 @@ def _am_direction(plant: H2Plant | PlatoonPlant, g, L, P, mask) -> np.ndarray:
     return D.reshape(np.shape(g))
 
 
-def _polish_cost(plant: H2Plant | PlatoonPlant, g: np.ndarray):
-    """``(J, L, P, S)`` of :func:`polish`: :func:`~lcc_synth.synthesis.h2.h2_cost_schur` for
-    one CAV, :func:`~lcc_synth.synthesis.h2.platoon_cost` for an open platoon."""
-    return plant.polish_cost(g)
-
-
 @single_thread_blas
 def polish(
     plant: H2Plant | PlatoonPlant,
@@ -271,7 +265,7 @@ def polish(
     mask = np.asarray(mask, bool)
     g = np.where(mask, np.asarray(g0, dtype=float).reshape(mask.shape), 0.0)
     n_in = plant.B.shape[1]
-    J, L, P, S = _polish_cost(plant, g)
+    J, L, P, S = plant.polish_cost(g)
     if not math.isfinite(J):
         raise SynthesisError("polishing needs a stabilising initial gain")
     if accept is not None and not accept(g):
@@ -301,7 +295,7 @@ def polish(
             rejected = 0  # steps refused by `accept` (each costs a global check)
             for _ in range(40):
                 trial = g + t * d
-                Jt, Lt, Pt, St = _polish_cost(plant, trial)
+                Jt, Lt, Pt, St = plant.polish_cost(trial)
                 if Jt <= J + 1e-4 * t * slope:
                     if accept is None or accept(trial):
                         step_found = True
