@@ -403,3 +403,61 @@ def test_as_run_table_is_checked():
         spec(True, design="full_state")
     with pytest.raises(ConfigError, match="unknown|not allowed|bogus"):
         spec({"bogus": 1})
+
+
+# ------------------------------------------------- a QP controller measured with its exact QP
+
+
+@pytest.mark.parametrize("table", [
+    {"type": "mpc", "sample_time": 0.1},
+    {"type": "deep_lcc", "data": {"T": 600}},
+])  # fmt: skip
+def test_measuring_with_the_exact_qp_gives_the_polished_osqp_ratios(table, monkeypatch):
+    """A QP controller's measured ratio with its QP solved by DAQP (``exact_qp``, what
+    ``lcc-synth run`` measures) equals the ratio with the controller's own polished OSQP; an
+    OSQP that does not polish is measured as it is."""
+    from lcc_synth.experiments.controller_tables import controller_from_table as build
+    from lcc_synth.mpc.active_set import DAQPSolver, exact_qp
+
+    system = _system(4)
+    ctrl = build("qp", table, system)
+    w = np.array([0.3, 1.0])
+    own = measured_ratio(ctrl, system, w, 0.01, 0.1, settle=10.0, exact=False)
+    assert ctrl.describe()["qp"]["solver"].startswith("osqp ")
+    calls = []
+    solve = DAQPSolver.solve
+    monkeypatch.setattr(DAQPSolver, "solve", lambda *a, **k: calls.append(1) or solve(*a, **k))
+    exact = measured_ratio(ctrl, system, w, 0.01, 0.1, settle=10.0)
+    assert len(calls) > 300  # DAQP solved every sample
+    assert np.all(np.abs(exact / own - 1.0) < 1e-9), (exact, own)
+    assert 0.2 < own.min() and own.max() < 1.5  # a real measurement, not a constant
+    with exact_qp() as swaps:
+        measured_ratio(ctrl, system, w[1:], 0.01, 0.0, settle=1.0, exact=False)
+    assert swaps and set(swaps) == {"osqp -> daqp"}
+    no_polish = build("np", {**table, "solver": {"polish": False}}, system)
+    with exact_qp() as swaps:
+        measured_ratio(no_polish, system, w[1:], 0.01, 0.0, settle=1.0, exact=False)
+    assert swaps == []
+
+
+def test_deep_lcc_runs_the_solver_method_it_is_given():
+    """``[controllers.NAME.solver] method = "daqp"`` on DeeP-LCC runs DAQP (it used to be
+    read and ignored: OSQP ran); its commands equal OSQP's polished ones."""
+    from dataclasses import replace
+
+    from lcc_synth.experiments.controller_tables import controller_from_table
+    from lcc_synth.simulation.engine import simulate
+    from lcc_synth.simulation.perturbations import Brake
+    from lcc_synth.simulation.scenario import Scenario
+
+    system = _system(4)
+    sc = Scenario(m=0, n=4, hdv=system.hdv, v_star=15.0, dt=0.01, duration=30.0,
+                  perturbations=(Brake(vehicle=0, start=20.0, duration=1.0, decel=-3.0),))
+    runs = {}
+    for method in ("osqp", "daqp"):
+        ctrl = controller_from_table(method, {"type": "deep_lcc", "data": {"T": 600},
+                                         "solver": {"method": method}}, system)
+        assert ctrl.describe()["qp"]["solver"].startswith(f"{method} ")
+        runs[method] = simulate(replace(sc), ctrl).velocity[0]
+    assert np.max(np.abs(runs["daqp"] - runs["osqp"])) < 1e-8
+    assert np.ptp(runs["osqp"][:, 1]) > 1.0  # the brake moved the CAV

@@ -182,5 +182,5 @@ def test_estimate_counts_the_runs_and_curves_of_the_showcase():
     assert est.scenarios == 6 and est.controllers == (3, 6)
     assert est.runs == 24 and est.curves == 17
     assert est.seconds["recording"] == 0.0
-    assert 10 < est.total < 600  # the model's order of magnitude (measured 58-65 s)
+    assert 10 < est.total < 600  # the model's order of magnitude (measured 37 s CPU)
     assert est.line().startswith("6 scenarios × 3–6 controllers (24 runs, 17 |Γ| curves)")

@@ -17,9 +17,11 @@ At every sample (the data's ``dt``; the simulator holds the command in between):
 4. **QP** (:mod:`lcc_synth.deeplcc.qp`) on the exact reduction of the QP in ``g``, solved by
    OSQP (one workspace per batch member set up at :meth:`reset`, vectors updated per step,
    warm start from the shifted previous solution, status checked:
-   :class:`lcc_synth.mpc.solver.OSQPSolver`). The spacing bound of every CAV is the absolute
-   safe spacing, or with ``constraints.spacing = "equilibrium"`` the paper's ``lo <= s -
-   s_eq <= hi`` on its spacing error (the rows of ``y`` with no time gap, plus upper rows:
+   :class:`lcc_synth.mpc.solver.OSQPSolver`), or with ``solver.method = "daqp"`` by DAQP from
+   the previous active set (:class:`lcc_synth.mpc.active_set.DAQPSolver`, the MPC's option).
+   The spacing bound of every CAV is the absolute safe spacing, or with
+   ``constraints.spacing = "equilibrium"`` the paper's ``lo <= s - s_eq <= hi`` on its
+   spacing error (the rows of ``y`` with no time gap, plus upper rows:
    :func:`lcc_synth.deeplcc.qp.formulate`).
 5. **Exact re-solve.** When OSQP stops unsolved (``max_iter`` = 200 by default), the same QP
    is solved by DAQP, an exact active-set solver (:class:`lcc_synth.deeplcc.qp.ExactSolver`);
@@ -57,6 +59,7 @@ from lcc_synth.deeplcc.qp import DeepQP, ExactSolver, formulate
 from lcc_synth.deeplcc.settings import DeePLCCSettings
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import CarFollowingModel, free_speed
+from lcc_synth.mpc.active_set import DAQPSolver, make_solver, solver_label
 from lcc_synth.mpc.formulation import error_bound, spacing_families
 from lcc_synth.mpc.report import new_step_record, step_statistics
 from lcc_synth.mpc.scaffold import STATUS_CODES, SampleLoop, update_equilibrium
@@ -75,7 +78,7 @@ class _Member:
     """Solver and loop state of one batch member (the fields :class:`~lcc_synth.mpc.scaffold.
     SampleLoop` and :func:`~lcc_synth.mpc.scaffold.update_equilibrium` use, plus the rings)."""
 
-    solver: OSQPSolver
+    solver: OSQPSolver | DAQPSolver
     s_off: np.ndarray
     v_buf: np.ndarray
     vel: np.ndarray  # (Tini + 1, nv) absolute velocities, oldest first
@@ -226,7 +229,7 @@ class DeePLCCController(SampleLoop):
         for b in range(ctx.batch):
             q, lo, hi = self.qp.vectors(np.zeros(2 * n_w), self._a_min, self._a_max,
                                         np.full(n_w, -np.inf))  # fmt: skip
-            solver = OSQPSolver(self.qp.qp, q, lo, hi, self.settings.solver)
+            solver = make_solver(self.qp.qp, q, lo, hi, self.settings.solver)
             s_off = np.asarray(ctx.spacing_reference()[b], float) - float(ctx.s_star[b])
             s_off = np.nan_to_num(s_off, nan=0.0)[list(self.cavs)]
             mem = _Member(solver, s_off, np.zeros(Wn), np.zeros((Tini + 1, self.nv)),
@@ -426,8 +429,6 @@ class DeePLCCController(SampleLoop):
 
     def describe(self) -> dict[str, Any]:
         """Settings, data size and excitation, QP size, fallback gain."""
-        import osqp
-
         d = self.settings.as_dict()
         d.update({
             "type": "deep_lcc",
@@ -445,7 +446,7 @@ class DeePLCCController(SampleLoop):
                 "variables": self.qp.n_var,
                 "constraints": self.qp.qp.A.shape[0],
                 "setup_time_s": self.setup_time,
-                "solver": f"osqp {osqp.__version__}",
+                "solver": solver_label(self.settings.solver),
             },
             "fallback": {"source": "paper", "semantics": self.fallback.semantics,
                          "gains": dict(self.fallback.gains)},

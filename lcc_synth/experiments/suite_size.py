@@ -21,10 +21,9 @@
   - the recording: :data:`~lcc_synth.resources.RECORD_RUN_S` per run plus
     :data:`~lcc_synth.resources.RECORD_BYTE_S` per byte of its estimated size.
 
-  Measured on ``problems/showcase.toml`` (this 2-core machine, shared): estimated 56 s
-  without the recording against 58-65 s measured (controllers 3.8 s, simulations 29 s,
-  string stability 25 s; since platoon8 is analysed too, its three curves add 6 s, 5 s of
-  them the joint MPC's measurement, estimated 1 s). Limits: an order of magnitude, as
+  Measured on ``problems/showcase.toml`` (this 2-core machine, shared, 2026-12-03):
+  controllers 3.1-4.9 s, simulations 14.2-14.9 s, string stability as run 5.8 s (30.8 s
+  before the measurements solved their QPs with DAQP). Limits: an order of magnitude, as
   :mod:`lcc_synth.resources`: solver iterations and machine load move the predictive
   controllers' steps by 2-5x; DeeP-LCC's data collection is not counted.
 """
@@ -53,8 +52,10 @@ DESIGN_S = 0.5
 #: Seconds per as-run |Gamma| curve of a linear controller (measured 0.05-0.09 s on string10).
 CURVE_S = 0.1
 #: Seconds per simulator step of the small-signal measurement of a predictive controller at
-#: horizon 50 (the showcase's five measurements, 20,570 steps each: 24 s, 0.23 ms per step).
-MEASURE_STEP_S = 2.5e-4
+#: horizon 50, its QP solved by DAQP (:func:`lcc_synth.mpc.active_set.exact_qp`; the
+#: showcase's six measurements, 20,570 steps each: 0.37-0.82 s for an MPC, 1.7 s for
+#: DeeP-LCC, 5.2 s together, 42 us per step; with OSQP they took 24 s).
+MEASURE_STEP_S = 4e-5
 #: Controller types whose loop is linear (an as-run curve, no measurement).
 _LINEAR = ("hdv", "static", "gains_file", "h2")
 

@@ -278,7 +278,29 @@ class Platoon(Record):
     @cached_property
     def equilibrium_spacings(self) -> np.ndarray:
         """``(N,)`` each vehicle's equilibrium spacing at ``v*`` (its HDV law's)."""
-        return np.array([float(h.equilibrium_spacing(self.v_star)) for h in self.hdv])
+        return self.spacings_at(self.v_star)
+
+    @cached_property
+    def _laws(self) -> tuple[tuple[CarFollowingModel, np.ndarray], ...]:
+        """The distinct HDV laws (equal dataclasses are one law; a law that cannot be hashed
+        is its own) and the positions (0-based) that drive by each."""
+        where: dict[object, tuple[CarFollowingModel, list[int]]] = {}
+        for i, h in enumerate(self.hdv):
+            key: object = h
+            try:
+                hash(h)
+            except TypeError:
+                key = id(h)
+            where.setdefault(key, (h, []))[1].append(i)
+        return tuple((h, np.array(ix)) for h, ix in where.values())
+
+    def spacings_at(self, v: float) -> np.ndarray:
+        """``(N,)`` each vehicle's equilibrium spacing at the velocity ``v`` (m/s): one
+        evaluation per distinct HDV law (the MPC asks every sample)."""
+        out = np.empty(len(self.hdv))
+        for h, ix in self._laws:
+            out[ix] = float(h.equilibrium_spacing(v))
+        return out
 
     @property
     def length(self) -> float:

@@ -206,7 +206,7 @@ class StringLayout(Layout):
             update_equilibrium(mem, v_ref)
         v_eq = mem.v_eq
         ve = mpc._clip_v(v_eq)
-        s_ref = np.array([float(h.equilibrium_spacing(ve)) for h in self.platoon.hdv])
+        s_ref = self.platoon.spacings_at(ve)
         if self.ring:  # spacing errors summing to zero (module docstring, step 2)
             s_ref += np.mean(s - s_ref)
         x = np.empty(2 * s.size)

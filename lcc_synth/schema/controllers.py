@@ -248,7 +248,8 @@ DEEP_LCC_CONSTRAINTS = Table(
 #: DeeP-LCC's OSQP iteration limit: past it the exact active-set solve takes over.
 DEEP_MAX_ITER = 200
 DEEP_LCC_SOLVER = Table(
-    f"{_C}.solver", "OSQP settings of DeeP-LCC's reduced QP.", _CMDS,
+    f"{_C}.solver", "QP solver of DeeP-LCC's reduced QP: OSQP (default) or DAQP, as the "
+    "MPC's.", _CMDS,
     (*(replace(k, default=DEEP_MAX_ITER, meaning="Iteration limit (then the exact solve).")
        if k.name == "max_iter" else k for k in MPC_SOLVER.keys),
      Key("exact", "boolean", "When OSQP stops unsolved, solve the QP with DAQP (an exact "
