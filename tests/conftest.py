@@ -18,6 +18,10 @@ default); during the tests a cache directory that would land inside the reposito
 redirected into one temporary directory of the session (a test that changes to its own
 directory, or names an absolute one, is left alone). The data are still cached and reused
 within the session.
+
+**One simulated head brake.** :func:`mpc_head_brake_run`: ``lcc-synth simulate
+problems/mpc_head_brake.toml --json --rrd`` run once per session in a subprocess, for the
+tests that read its JSON or its recording (they only read them).
 """
 
 from __future__ import annotations
@@ -118,3 +122,19 @@ def _deeplcc_cache_outside_the_repository(tmp_path_factory):
     mp.setattr(build, "load_or_collect", load_or_collect)
     yield root
     mp.undo()
+
+
+@pytest.fixture(scope="session")
+def mpc_head_brake_run(tmp_path_factory):
+    """``(JSON document, recording path)`` of ``lcc-synth simulate
+    problems/mpc_head_brake.toml --json --rrd`` (the real CLI in a subprocess), run once."""
+    import json
+
+    from cli_subprocess import PROBLEMS, run_cli
+
+    tmp = tmp_path_factory.mktemp("mpc_head_brake")
+    rrd = tmp / "hb.rrd"
+    proc = run_cli(["simulate", PROBLEMS / "mpc_head_brake.toml", "--json", "--rrd", rrd],
+                   cwd=tmp)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    return json.loads(proc.stdout), rrd

@@ -30,12 +30,8 @@ def _time_panel(path):
 
 
 @pytest.fixture(scope="module")
-def head_brake(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("ctx")
-    rrd = tmp / "hb.rrd"
-    proc = run_cli(["simulate", PROBLEMS / "mpc_head_brake.toml", "--rrd", rrd], cwd=tmp)
-    assert proc.returncode == 0, proc.stderr
-    return rrd
+def head_brake(mpc_head_brake_run):
+    return mpc_head_brake_run[1]
 
 
 def test_the_time_panel_opens_paused_on_the_event(head_brake):

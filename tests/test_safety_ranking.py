@@ -8,7 +8,6 @@ of the table (2.12 m/s) but reaches 0.096 m with 297 emergency-braking steps."""
 
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
@@ -109,14 +108,12 @@ def test_sweep_counts_unsafe_scenarios_and_ranks_by_them():
 
 
 @pytest.fixture(scope="module")
-def head_brake(tmp_path_factory):
+def head_brake(tmp_path_factory, mpc_head_brake_run):
+    doc, rrd = mpc_head_brake_run
     tmp = tmp_path_factory.mktemp("hb")
-    proc = run_cli(["simulate", PROBLEMS / "mpc_head_brake.toml", "--json", "--rrd",
-                    tmp / "hb.rrd"], cwd=tmp)  # fmt: skip
-    assert proc.returncode == 0, proc.stderr
     text = run_cli(["simulate", PROBLEMS / "mpc_head_brake.toml", "--no-record"], cwd=tmp)
     assert text.returncode == 0, text.stderr
-    return json.loads(proc.stdout), text.stdout, tmp / "hb.rrd"
+    return doc, text.stdout, rrd
 
 
 def test_mpc_head_brake_ranks_the_run_emergency_braking_saved_last(head_brake):
