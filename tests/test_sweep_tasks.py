@@ -63,3 +63,28 @@ def test_load_sweep_sizes_tasks_for_the_workers_unless_the_batch_is_given():
     assert load_sweep(problem, count=1000, workers=2).batch_size == 50
     assert load_sweep(problem, count=200, workers=2).batch_size == 12
     assert load_sweep(problem, count=10, batch_size=4, workers=2).batch_size == 4  # as given
+
+
+def test_the_run_time_estimate_reads_each_qp_solver(tmp_path):
+    """The sweep's run-time estimate costs an MPC or DeeP-LCC period at its solver's measured
+    figure: DAQP (the robustness file's) at MPC_DAQP_SOLVE_S / DEEPLCC_DAQP_SOLVE_S, the
+    same file with OSQP at MPC_SOLVE_S / DEEPLCC_SOLVE_S."""
+    from lcc_synth.experiments.sweep_estimate import (
+        DEEPLCC_DAQP_SOLVE_S,
+        DEEPLCC_SOLVE_S,
+        MPC_DAQP_SOLVE_S,
+        MPC_SOLVE_S,
+        estimate_sweep,
+    )
+
+    problem = Path(__file__).resolve().parents[1] / "problems" / "sweep_robustness.toml"
+    osqp = tmp_path / "osqp.toml"
+    osqp.write_text(problem.read_text().replace('solver = { method = "daqp" }\n', ""))
+    names = ["mpc", "mpc_delay", "deep_lcc"]
+    exact = estimate_sweep(load_sweep(problem, count=10, controllers=names), 2).per_scenario
+    admm = estimate_sweep(load_sweep(osqp, count=10, controllers=names), 2).per_scenario
+    for name, (daqp_s, osqp_s) in {"mpc": (MPC_DAQP_SOLVE_S, MPC_SOLVE_S),
+                                   "mpc_delay": (MPC_DAQP_SOLVE_S, MPC_SOLVE_S),
+                                   "deep_lcc": (DEEPLCC_DAQP_SOLVE_S, DEEPLCC_SOLVE_S)}.items():
+        assert exact[name] / admm[name] == pytest.approx(daqp_s / osqp_s, rel=1e-12), name
+        assert exact[name] < admm[name]

@@ -36,10 +36,12 @@ Run time
     measured 4.5 us for ``hdv``, 6.2 for the static gain with an estimated equilibrium, 3.6 for
     ``h2``), and per controller period for an MPC (:data:`MPC_SOLVE_S`; measured 1.52 ms,
     1.39 with a delay model) and DeeP-LCC (:data:`DEEPLCC_SOLVE_S`; measured 1.96 ms, its
-    data collection and set-up per scenario included); the ``h2`` synthesis in the client is
-    not counted. Measured in one process (one BLAS thread) on 6 scenarios of the reference
-    sweep, whose settings drawn per scenario make it simulate them one by one: the slower way
-    (a batch of 6 without drawn settings took 0.5-0.75 of the time).
+    data collection and set-up per scenario included), or with their QP solved by DAQP
+    (``solver.method = "daqp"``: :data:`MPC_DAQP_SOLVE_S`, :data:`DEEPLCC_DAQP_SOLVE_S`); the
+    ``h2`` synthesis in the client is not counted. Measured in one process (one BLAS
+    thread) on 6 scenarios of the reference sweep, whose settings drawn per scenario make it
+    simulate them one by one: the slower way (a batch of 6 without drawn settings took
+    0.5-0.75 of the time).
 """
 
 from __future__ import annotations
@@ -55,6 +57,7 @@ __all__ = [
     "BYTES_PER_VALUE", "BYTES_PER_VALUE_RECORDED", "BASE_BYTES", "BASE_BYTES_RECORDED",
     "CSV_BYTES_PER_VALUE", "JSON_BYTES_PER_TASK",
     "JSON_BYTES_PER_CONTROLLER", "FIGURE_BYTES", "STEP_S", "MPC_SOLVE_S", "DEEPLCC_SOLVE_S",
+    "MPC_DAQP_SOLVE_S", "DEEPLCC_DAQP_SOLVE_S",
     "LONG_S", "SweepEstimate", "estimate_sweep",
 ]  # fmt: skip
 
@@ -81,6 +84,12 @@ STEP_S = 6.5e-6
 MPC_SOLVE_S = 1.6e-3
 #: Seconds per DeeP-LCC period (its QP, its data collection and set-up spread over the run).
 DEEPLCC_SOLVE_S = 2.0e-3
+#: :data:`MPC_SOLVE_S` with ``solver.method = "daqp"`` (measured 0.24 ms per period where
+#: OSQP took 1.2 ms, same process and load).
+MPC_DAQP_SOLVE_S = 3e-4
+#: :data:`DEEPLCC_SOLVE_S` with ``solver.method = "daqp"`` (measured 0.68 ms where OSQP, with
+#: its exact re-solves, took 1.9 ms).
+DEEPLCC_DAQP_SOLVE_S = 7e-4
 #: Estimated run time from which ``lcc-synth sweep`` prints the estimate first, seconds.
 LONG_S = 60.0
 
@@ -175,13 +184,15 @@ def _duration(s: float) -> str:
 
 def _per_scenario(table: dict[str, Any], steps: float, duration: float, scale: float) -> float:
     kind = table.get("type")
+    solver = table.get("solver") if isinstance(table.get("solver"), dict) else {}
+    daqp = solver.get("method") == "daqp"
     if kind == "mpc":
         period = float(table.get("sample_time") or 0.1)
-        return duration / period * MPC_SOLVE_S * scale
+        return duration / period * (MPC_DAQP_SOLVE_S if daqp else MPC_SOLVE_S) * scale
     if kind == "deep_lcc":
         data = table.get("data") if isinstance(table.get("data"), dict) else {}
         period = float(data.get("dt") or 0.05)
-        return duration / period * DEEPLCC_SOLVE_S * scale
+        return duration / period * (DEEPLCC_DAQP_SOLVE_S if daqp else DEEPLCC_SOLVE_S) * scale
     return steps * STEP_S * scale
 
 
