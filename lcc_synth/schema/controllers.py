@@ -103,7 +103,7 @@ MPC = Table(
      Key("weights", "table", "Stage cost: [controllers.NAME.weights].", {}),
      Key("constraints", "table", "Bounds: [controllers.NAME.constraints].", {}),
      Key("prediction", "table", "Prediction model: [controllers.NAME.prediction].", {}),
-     Key("solver", "table", "OSQP settings: [controllers.NAME.solver].", {}), _START),
+     Key("solver", "table", "QP solver and its settings: [controllers.NAME.solver].", {}), _START),
     variant=_MPC,
 )
 MPC_WEIGHTS = Table(
@@ -181,7 +181,7 @@ MPC_PREDICTION = Table(
 )
 MPC_SOLVER = Table(
     f"{_C}.solver", "QP solver of the MPC: OSQP (default) or DAQP, and OSQP's settings.", _CMDS,
-    (Key("method", "string", "QP solver: osqp (ADMM, the published results) or daqp (exact "
+    (Key("method", "string", "QP solver: osqp (ADMM with polishing, the default) or daqp (exact "
          "dense active set, lcc_synth.mpc.active_set).", "osqp", choices=("osqp", "daqp")),
      Key("eps_abs", "number", "Absolute tolerance (OSQP).", 1.0e-6, lo=0.0, lo_open=True),
      Key("eps_rel", "number", "Relative tolerance (OSQP).", 1.0e-6, lo=0.0),
@@ -208,7 +208,7 @@ DEEP_LCC = Table(
          unit="s"),
      Key("weights", "table", "Cost: [controllers.NAME.weights].", {}),
      Key("constraints", "table", "Bounds: [controllers.NAME.constraints].", {}),
-     Key("solver", "table", "OSQP settings: [controllers.NAME.solver].", {}),
+     Key("solver", "table", "QP solver and its settings: [controllers.NAME.solver].", {}),
      Key("data", "table", "Offline data: [controllers.NAME.data].", {}), _START),
     variant=_DEEP,
 )
