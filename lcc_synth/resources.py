@@ -28,7 +28,8 @@ it starting up): :data:`VEHICLE_STEP_S`. A controller that is not compiled: 66 u
 controller step for the engine's loop and observation (:data:`STEP_S`, a FollowerStopper)
 plus 2.4 us per scenario (:data:`SCENARIO_STEP_S`); the MPC 0.7-2.0 ms per controller step and
 scenario at horizon 50, its setup included (:data:`MPC_STEP_S`), DeeP-LCC 0.8-1.2 ms
-(:data:`DEEPLCC_STEP_S`), both taken proportional to the horizon. Recording: 36-62 ms per run
+(:data:`DEEPLCC_STEP_S`), both taken proportional to the horizon; with their QP solved by
+DAQP about a quarter of that (:func:`qp_step_seconds`). Recording: 36-62 ms per run
 alone, 97 ms per run of the 200-seed study above (600 runs, 155 MB: 58 s more than without
 recording), :data:`RECORD_RUN_S`, plus 0.013-0.02 s per MB written (:data:`RECORD_BYTE_S`).
 
@@ -73,6 +74,9 @@ __all__ = [
     "SCENARIO_STEP_S",
     "MPC_STEP_S",
     "DEEPLCC_STEP_S",
+    "MPC_DAQP_STEP_S",
+    "DEEPLCC_DAQP_STEP_S",
+    "qp_step_seconds",
     "RECORD_RUN_S",
     "RECORD_BYTE_S",
     "RESULT_PEAK",
@@ -115,6 +119,11 @@ SCENARIO_STEP_S = 3e-6
 MPC_STEP_S = 2e-3
 #: seconds per controller step and scenario of DeeP-LCC at horizon 50 (proportional to it)
 DEEPLCC_STEP_S = 1.2e-3
+#: :data:`MPC_STEP_S` with ``solver.method = "daqp"`` (the showcase's 24 simulations took
+#: 3.0 s with DAQP, 11-15 s with OSQP: a quarter)
+MPC_DAQP_STEP_S = 5e-4
+#: :data:`DEEPLCC_STEP_S` with ``solver.method = "daqp"`` (its set-up is the larger part)
+DEEPLCC_DAQP_STEP_S = 4e-4
 #: seconds per recorded run (decimation, Arrow conversion, documents; measured 37-97 ms)
 RECORD_RUN_S = 0.1
 #: seconds per recorded byte (0.02 s per MB)
@@ -337,12 +346,26 @@ def _step_costs(controller: Any) -> tuple[float, float]:
     controller that is not compiled; ``(0, 0)`` for one that is (``linear_law``)."""
     if callable(getattr(controller, "linear_law", None)):
         return 0.0, 0.0
-    horizon = getattr(getattr(controller, "settings", None), "horizon", None)
+    settings = getattr(controller, "settings", None)
+    horizon = getattr(settings, "horizon", None)
     if horizon is None:
         return STEP_S, SCENARIO_STEP_S
-    scale = max(1, int(horizon)) / 50.0
-    deep = "deep" in type(controller).__name__.lower()
-    return STEP_S, (DEEPLCC_STEP_S if deep else MPC_STEP_S) * scale
+    kind = "deep_lcc" if "deep" in type(controller).__name__.lower() else "mpc"
+    method = getattr(getattr(settings, "solver", None), "method", "osqp")
+    return STEP_S, qp_step_seconds(kind, method, int(horizon))
+
+
+def qp_step_seconds(kind: str, method: str = "osqp", horizon: int = 50) -> float:
+    """Seconds per controller step and scenario of a predictive controller (``kind`` ``"mpc"``
+    or ``"deep_lcc"``) solving its QP with ``method`` (``"osqp"``, ``"daqp"``), proportional
+    to the ``horizon`` (:data:`MPC_STEP_S`, :data:`DEEPLCC_STEP_S`,
+    :data:`MPC_DAQP_STEP_S`, :data:`DEEPLCC_DAQP_STEP_S`)."""
+    daqp = method == "daqp"
+    if kind == "deep_lcc":
+        per = DEEPLCC_DAQP_STEP_S if daqp else DEEPLCC_STEP_S
+    else:
+        per = MPC_DAQP_STEP_S if daqp else MPC_STEP_S
+    return per * max(1, int(horizon)) / 50.0
 
 
 def _history_bytes(controller: Any, nv: int) -> float:

@@ -184,3 +184,22 @@ def test_estimate_counts_the_runs_and_curves_of_the_showcase():
     assert est.seconds["recording"] == 0.0
     assert 10 < est.total < 600  # the model's order of magnitude (measured 37 s CPU)
     assert est.line().startswith("6 scenarios × 3–6 controllers (24 runs, 17 |Γ| curves)")
+
+
+def test_run_estimate_costs_each_predictive_controller_at_its_solver(tmp_path, monkeypatch):
+    """The estimate's simulations cost an MPC or DeeP-LCC step at its QP solver's figure
+    (``resources.qp_step_seconds``): the showcase (DAQP, its file) is estimated cheaper than
+    the same file with OSQP, and exactly as costly once the DAQP figures are set to OSQP's."""
+    import lcc_synth.resources as res
+
+    text = (PROBLEMS / "showcase.toml").read_text()
+    assert text.count('solver = { method = "daqp" }') == 3  # mpc, mpc_delay, deep_lcc
+    osqp = tmp_path / "showcase.toml"
+    osqp.write_text(text.replace('solver = { method = "daqp" }\n', ""))
+    exact, admm = (load_suite(PROBLEMS / "showcase.toml"), load_suite(osqp))
+    sims = [estimate_suite(s).seconds["simulations"] for s in (exact, admm)]
+    assert sims[0] < 0.6 * sims[1]
+    monkeypatch.setattr(res, "MPC_DAQP_STEP_S", res.MPC_STEP_S)
+    monkeypatch.setattr(res, "DEEPLCC_DAQP_STEP_S", res.DEEPLCC_STEP_S)
+    sims = [estimate_suite(s).seconds["simulations"] for s in (exact, admm)]
+    assert sims[0] == pytest.approx(sims[1], rel=1e-12)

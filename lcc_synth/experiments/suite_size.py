@@ -12,8 +12,8 @@
   - simulations: per scenario and controller, ``batch x steps x vehicles`` vehicle-steps at
     :data:`lcc_synth.resources.VEHICLE_STEP_S`, plus, for a controller that is not compiled,
     its controller steps (``duration / sample_time``) at
-    :data:`~lcc_synth.resources.MPC_STEP_S` / :data:`~lcc_synth.resources.DEEPLCC_STEP_S`
-    (scaled by ``horizon / 50``) or :data:`~lcc_synth.resources.STEP_S` (a baseline);
+    :func:`~lcc_synth.resources.qp_step_seconds` (by the QP solver, scaled by ``horizon / 50``)
+    or :data:`~lcc_synth.resources.STEP_S` (a baseline);
   - string stability as run (:func:`~lcc_synth.experiments.comparison.gamma_settings`): per
     linear controller and setting :data:`CURVE_S`; per other controller one simulation of
     ``MEASURE_SETTLE_RUN + 2 pi / min(MEASURE_OMEGA)`` s (20,570 steps at ``dt = 0.01``) at
@@ -104,8 +104,17 @@ class SuiteEstimate:
                 f"{format_duration(self.total)}")  # fmt: skip
 
 
+def _horizon(table: dict[str, Any]) -> int:
+    return max(1, int(table.get("horizon", 50) or 50))
+
+
+def _method(table: dict[str, Any]) -> str:
+    solver = table.get("solver")
+    return str(solver.get("method", "osqp")) if isinstance(solver, dict) else "osqp"
+
+
 def _per_step(table: dict[str, Any], per_step_50: float) -> float:
-    return per_step_50 * max(1, int(table.get("horizon", 50) or 50)) / 50.0
+    return per_step_50 * _horizon(table) / 50.0
 
 
 def _controller_steps(table: dict[str, Any], scenario: Any) -> int:
@@ -121,13 +130,12 @@ def estimate_suite(suite: Suite, recording: Any = None) -> SuiteEstimate:
     :class:`~lcc_synth.recording.size.RecordingEstimate` (``None``: no recording)."""
     from lcc_synth.experiments.string_as_run import MEASURE_OMEGA, MEASURE_SETTLE_RUN
     from lcc_synth.resources import (
-        DEEPLCC_STEP_S,
-        MPC_STEP_S,
         RECORD_BYTE_S,
         RECORD_RUN_S,
         SCENARIO_STEP_S,
         STEP_S,
         VEHICLE_STEP_S,
+        qp_step_seconds,
     )
 
     designs = sum(1 for lname in suite.layouts_used() for t in suite.controllers.values()
@@ -146,10 +154,8 @@ def estimate_suite(suite: Suite, recording: Any = None) -> SuiteEstimate:
             if kind in _LINEAR:
                 continue
             steps = _controller_steps(t, sc)
-            if kind == "mpc":
-                sim += steps * sc.batch * _per_step(t, MPC_STEP_S)
-            elif kind == "deep_lcc":
-                sim += steps * sc.batch * _per_step(t, DEEPLCC_STEP_S)
+            if kind in ("mpc", "deep_lcc"):
+                sim += steps * sc.batch * qp_step_seconds(kind, _method(t), _horizon(t))
             else:
                 sim += steps * (STEP_S + sc.batch * SCENARIO_STEP_S)
     string, curves = 0.0, 0
