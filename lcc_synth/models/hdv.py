@@ -117,6 +117,8 @@ class OVM(Record):
         return ovm_accel(s, ds, v, self.alpha, self.beta, self.s_st, self.s_go, self.v_max)
 
     def _check_v_star(self, v_star) -> None:
+        if type(v_star) is float and type(self.v_max) in (float, int) and 0.0 < v_star < self.v_max:
+            return  # the predictive controllers' call every sample (NaN fails the test)
         vs = np.asarray(v_star, dtype=float)
         if np.any(~np.isfinite(vs)) or np.any(vs <= 0) or np.any(vs >= np.asarray(self.v_max)):
             raise ConfigError(
