@@ -40,7 +40,8 @@ Simulation (:func:`record_simulation`), under ``/<scenario>/<controller>/``:
 ``events``             ``TextLog`` on the timeline: CAV emergency braking on/off, collisions
 ``metrics``            ``TextDocument`` (markdown), the run's metrics table
 ``controller``         ``TextDocument`` (markdown), ``describe()`` and ``stats()`` of the controller
-``mpc/solve_time_ms``  ``Scalars`` (MPC only): whole controller step and OSQP time per step (ms)
+``mpc/solve_time_ms``  ``Scalars`` (MPC only): whole controller step and QP solver (OSQP or
+                       DAQP) time per step (ms)
 ``mpc/status``         ``Scalars`` (MPC only): status code (0 QP, 1 shifted plan, 2 static gain,
                        3 hold) and 1 when a fallback was used
 ``mpc/predicted/*``    ``LineStrips2D`` (MPC only): ``u``, ``velocity``, ``spacing`` plans at

@@ -487,10 +487,10 @@ def record_mpc_history(
     ``predicted_velocity`` / ``predicted_spacing`` ``(B, S, N+1, V)`` and ``pred_time (N+1,)``
     offsets (s); arrays without the batch axis are accepted too.
 
-    Entities: ``mpc/solve_time_ms`` (series: whole step, OSQP), ``mpc/status`` (status code and
-    1 when a fallback was used), and ``mpc/predicted/{u,velocity,spacing}``: ``LineStrips2D``
-    at each recorded controller step, x = seconds ahead of that step, y = the predicted value
-    (one strip per vehicle), so scrubbing the timeline shows the plan of the moment.
+    Entities: ``mpc/solve_time_ms`` (series: whole step, QP solver), ``mpc/status`` (status
+    code and 1 when a fallback was used), and ``mpc/predicted/{u,velocity,spacing}``:
+    ``LineStrips2D`` at each recorded controller step, x = seconds ahead of that step, y = the
+    predicted value (one strip per vehicle), so scrubbing the timeline shows the plan of the moment.
     ``plan_every`` records every k-th plan (default: at most about 200 plans).
 
     ``decimate="minmax"`` (what the commands record by default): the solve times keep the
@@ -537,7 +537,8 @@ def record_mpc_history(
         return idx, _time_column(t[idx])
 
     times = [member(k, 0) for k in ("step_time", "osqp_time", "solve_time")]
-    times = [(k, x) for k, x in zip(("step", "OSQP", "solve"), times, strict=True) if x is not None]
+    names = ("step", "QP solver", "solve")
+    times = [(k, x) for k, x in zip(names, times, strict=True) if x is not None]
     if times:
         vals = np.column_stack([x.astype(np.float64) * 1e3 for _, x in times])
         idx, tcol = rows(vals)
