@@ -302,6 +302,7 @@ def _layout_once(fig, path: Path, dpi: int):
     if engine is None or path.suffix.lower() != ".png":
         yield
         return
+    dpi0 = fig.get_dpi()
     fig.set_dpi(dpi)
     engine.execute(fig)
     # no engine at all ("none" leaves a placeholder, for which savefig still draws twice)
@@ -312,3 +313,4 @@ def _layout_once(fig, path: Path, dpi: int):
         yield
     finally:
         fig.set_layout_engine(engine)
+        fig.set_dpi(dpi0)
