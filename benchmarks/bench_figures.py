@@ -14,9 +14,16 @@ they are (:func:`lcc_synth.figures.style._layout_once`: laid out and drawn once;
 font cache, the first Agg draw) is excluded. The two write the same pixels
 (``tests/test_figures.py``).
 
-Measured 2026-12-03 on the 2-core machine at a load average of 2-3 (other engineers' tests):
-see the report of the branch; on a shared machine only the fastest of several repeats
-compares.
+Measured 2026-12-03 on the 2-core machine at a load average of 1.1-1.5 (other engineers'
+tests; only the fastest of several repeats compares), fastest of 5, ``savefig`` -> ``once``:
+profiles 0.53 -> 0.40 (brake_behind), 0.54 -> 0.37 (head_sine), 0.52 -> 0.39 (head_brake),
+0.73 -> 0.62 (heterogeneous), 0.40 -> 0.33 (platoon_brake), 0.46 -> 0.36 s (ring_wave); |Γ|
+0.21 -> 0.17 (string10), 0.16 -> 0.12 (sec5a), 0.15 -> 0.12 s (platoon8); all nine 3.70 ->
+2.87 s CPU (-22 %). Not kept: drawing each curve through its min/max-decimated rows (about
+2-3 per pixel column, :func:`lcc_synth.recording.decimate.minmax_rows`) made the six profiles
+slower (3.84 -> 4.24 s): a curve costs matplotlib per artist, not per point (Agg already
+simplifies the 7,001-point paths in C++: 0.16 s for all six), and the decimation itself costs
+0.5 ms per series.
 
 Usage: ``python benchmarks/bench_figures.py [--data PATH] [--repeats 5] [--format png]
 [--out DIR]`` (``--out`` keeps the figures to look at)
