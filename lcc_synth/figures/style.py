@@ -335,8 +335,11 @@ def _ticks_once(fig):
     3.36 -> 2.66 s CPU, the same pixels (``tests/test_figures.py`` compares a PNG with
     matplotlib's own ``savefig`` of the same figure). The instance attributes are removed on
     leaving (the class's method again)."""
-    axes = [ax for ax in fig.get_axes() if hasattr(ax, "_axis_map")]
-    axis_list = [axis for ax in axes for axis in ax._axis_map.values()]
+    axis_list = [axis for ax in fig.get_axes()
+                 for axis in (getattr(ax, "xaxis", None), getattr(ax, "yaxis", None),
+                              getattr(ax, "zaxis", None)) if axis is not None
+                 and callable(getattr(type(axis), "_update_ticks", None))]  # fmt: skip
+    # (a matplotlib without that method: nothing is kept, the figure is drawn as savefig would)
     for axis in axis_list:
         axis._update_ticks = _placed_once(axis)
     try:
