@@ -312,3 +312,66 @@ def test_gamma_measured_points_are_points_and_the_axis_ends_where_curves_decay(t
     fig.canvas.draw()  # the legend takes at most a third of the figure's height
     box = fig.legends[0].get_window_extent(fig.canvas.get_renderer())
     assert box.height < fig.bbox.height / 3
+
+
+def _pixels(path):
+    from PIL import Image
+
+    return np.asarray(Image.open(path).convert("RGBA"))
+
+
+def test_a_png_is_drawn_once_and_as_savefig_lays_it_out(tmp_path, capture, monkeypatch):
+    """A PNG is laid out once and drawn once (savefig alone draws a layout-only pass first),
+    and its pixels are those of matplotlib's own constrained-layout ``savefig`` of the same
+    figure; the figure keeps its layout engine."""
+    from matplotlib.figure import Figure
+
+    draws = []
+    draw = Figure.draw
+    monkeypatch.setattr(Figure, "draw", lambda self, r: (draws.append(1), draw(self, r))[1])
+    res = _run(1.0, m=1, n=3)
+    res.aeb_active = np.zeros((1, res.t.size), dtype=bool)
+    res.aeb_active[0, 40:61] = True
+    figures.plot_profiles({"mpc": res, "h2": _run(3.0)}, tmp_path / "p.png", title="t")
+    assert len(draws) == 1
+    (fig,) = capture()
+    assert fig.get_layout_engine() is not None and fig.get_constrained_layout()
+    fig.savefig(tmp_path / "ref.png", dpi=110)  # matplotlib's two passes
+    assert len(draws) == 3
+    np.testing.assert_array_equal(_pixels(tmp_path / "p.png"), _pixels(tmp_path / "ref.png"))
+
+
+@pytest.mark.parametrize("ext", [".pdf", ".svg"])
+def test_vector_files_are_laid_out_by_savefig(tmp_path, capture, ext):
+    """A vector file (text measured at 72 dpi by its own renderer) keeps ``savefig``'s own
+    layout: the axes sit where matplotlib's ``savefig`` to that type puts them, which is not
+    where a PNG's are (to a few thousandths of the figure)."""
+    runs = {"mpc": _run(1.0), "h2": _run(3.0)}
+    figures.plot_profiles(runs, tmp_path / f"p{ext}")
+    figures.plot_profiles(runs, tmp_path / "p.png")
+    vec, png = capture()
+    head = (tmp_path / f"p{ext}").read_bytes()[:100]
+    assert head.startswith(b"%PDF") if ext == ".pdf" else b"<svg" in head or b"<?xml" in head
+    got = [ax.get_position().bounds for ax in vec.axes]
+    vec.savefig(tmp_path / f"ref{ext}")
+    np.testing.assert_allclose(got, [ax.get_position().bounds for ax in vec.axes], atol=1e-12)
+    assert not np.allclose(got, [ax.get_position().bounds for ax in png.axes], atol=1e-4)
+
+
+def test_a_png_places_each_axis_ticks_once_per_layout_pass(tmp_path, capture, monkeypatch):
+    """While a PNG is laid out and drawn, an axis places its ticks once per position of its
+    axes (two layout passes, then the draw) instead of at every measurement (about eight per
+    axes and pass), and keeps no trace of it after."""
+    from matplotlib.axis import Axis
+
+    calls = []
+    place = Axis._update_ticks
+    monkeypatch.setattr(Axis, "_update_ticks", lambda self: (calls.append(self), place(self))[1])
+    figures.plot_profiles({"mpc": _run(1.0), "h2": _run(3.0)}, tmp_path / "p.png")
+    (fig,) = capture()
+    axes = [axis for ax in fig.axes for axis in (ax.xaxis, ax.yaxis)]
+    assert 0 < len(calls) <= 3 * len(axes)
+    assert not any("_update_ticks" in vars(axis) for axis in axes)
+    calls.clear()
+    fig.savefig(tmp_path / "ref.png", dpi=110)  # matplotlib alone: many more
+    assert len(calls) > 6 * len(axes)
