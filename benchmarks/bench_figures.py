@@ -14,12 +14,13 @@ they are (:func:`lcc_synth.figures.style._layout_once`: laid out and drawn once;
 font cache, the first Agg draw) is excluded. The two write the same pixels
 (``tests/test_figures.py``).
 
-Measured 2026-12-03 on the 2-core machine at a load average of 1.1-1.5 (other engineers'
-tests; only the fastest of several repeats compares), fastest of 5, ``savefig`` -> ``once``:
-profiles 0.53 -> 0.40 (brake_behind), 0.54 -> 0.37 (head_sine), 0.52 -> 0.39 (head_brake),
-0.73 -> 0.62 (heterogeneous), 0.40 -> 0.33 (platoon_brake), 0.46 -> 0.36 s (ring_wave); |Γ|
-0.21 -> 0.17 (string10), 0.16 -> 0.12 (sec5a), 0.15 -> 0.12 s (platoon8); all nine 3.70 ->
-2.87 s CPU (-22 %). Not kept: drawing each curve through its min/max-decimated rows (about
+Measured 2026-12-03 on the 2-core machine at a load average of 0.5-1.0, fastest of 5,
+``savefig`` -> ``once``: profiles 0.53 -> 0.48 (brake_behind), 0.58 -> 0.50 (head_sine),
+0.66 -> 0.52 (head_brake), 1.10 -> 0.90 (heterogeneous), 0.50 -> 0.43 (platoon_brake),
+0.57 -> 0.52 s (ring_wave); |Γ| 0.30 -> 0.27 (string10), 0.23 -> 0.19 (sec5a), 0.19 -> 0.15 s
+(platoon8); all nine 4.68 -> 3.95 s CPU (-16 %). Also tried and not kept: placing each axis'
+ticks once per layout pass (a memo on matplotlib's private ``Axis._update_ticks``, -22 % in
+all with the above; not worth a private method). Not kept: drawing each curve through its min/max-decimated rows (about
 2-3 per pixel column, :func:`lcc_synth.recording.decimate.minmax_rows`) made the six profiles
 slower (3.84 -> 4.24 s): a curve costs matplotlib per artist, not per point (Agg already
 simplifies the 7,001-point paths in C++: 0.16 s for all six), and the decimation itself costs

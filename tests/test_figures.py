@@ -356,22 +356,3 @@ def test_vector_files_are_laid_out_by_savefig(tmp_path, capture, ext):
     vec.savefig(tmp_path / f"ref{ext}")
     np.testing.assert_allclose(got, [ax.get_position().bounds for ax in vec.axes], atol=1e-12)
     assert not np.allclose(got, [ax.get_position().bounds for ax in png.axes], atol=1e-4)
-
-
-def test_a_png_places_each_axis_ticks_once_per_layout_pass(tmp_path, capture, monkeypatch):
-    """While a PNG is laid out and drawn, an axis places its ticks once per position of its
-    axes (two layout passes, then the draw) instead of at every measurement (about eight per
-    axes and pass), and keeps no trace of it after."""
-    from matplotlib.axis import Axis
-
-    calls = []
-    place = Axis._update_ticks
-    monkeypatch.setattr(Axis, "_update_ticks", lambda self: (calls.append(self), place(self))[1])
-    figures.plot_profiles({"mpc": _run(1.0), "h2": _run(3.0)}, tmp_path / "p.png")
-    (fig,) = capture()
-    axes = [axis for ax in fig.axes for axis in (ax.xaxis, ax.yaxis)]
-    assert 0 < len(calls) <= 3 * len(axes)
-    assert not any("_update_ticks" in vars(axis) for axis in axes)
-    calls.clear()
-    fig.savefig(tmp_path / "ref.png", dpi=110)  # matplotlib alone: many more
-    assert len(calls) > 6 * len(axes)

@@ -290,15 +290,13 @@ def _save(
 def _layout_once(fig, path: Path, dpi: int):
     """Lay ``fig`` out once, for a raster file: with a layout engine, ``savefig`` draws the
     figure twice (a pass that only lays it out, with every artist drawn on a renderer that
-    paints nothing, then the picture); here the engine runs once at the file's resolution, on
-    the renderer that draws the file, and is switched off for the one draw of ``savefig``
-    (restored after), and each axis places its ticks once per layout pass
-    (:func:`_ticks_once`). The positions are those ``savefig`` would compute, so the pixels
-    are the same (``tests/test_figures.py``). Measured on the nine figures of ``lcc-synth run``
-    (``benchmarks/bench_figures.py``, fastest of 5, 2026-12-03): 3.70 -> 2.87 s CPU with the
-    zlib level of :data:`PNG_OPTIONS`; under cProfile the six profiles 8.66 -> 5.00 s. A vector
-    file (PDF, SVG: text measured at 72 dpi by its own renderer) keeps ``savefig``'s two
-    passes."""
+    paints nothing, then the picture); here the engine runs once at the file's resolution and
+    is switched off for the one draw of ``savefig`` (restored after). The positions are those
+    ``savefig`` would compute, so the pixels are the same (``tests/test_figures.py``).
+    Measured on the nine figures of ``lcc-synth run`` (``benchmarks/bench_figures.py``,
+    fastest of 5, 2026-12-03): 4.68 -> 3.95 s CPU with the zlib level of
+    :data:`PNG_OPTIONS`. A vector file (PDF, SVG: text measured at 72 dpi by its own renderer)
+    keeps ``savefig``'s two passes."""
     import matplotlib
 
     engine = fig.get_layout_engine()
@@ -307,60 +305,13 @@ def _layout_once(fig, path: Path, dpi: int):
         return
     dpi0 = fig.get_dpi()
     fig.set_dpi(dpi)
-    with _ticks_once(fig):
-        engine.execute(fig)
-        # no engine at all ("none" leaves a placeholder, for which savefig draws twice)
-        with matplotlib.rc_context({"figure.autolayout": False,
-                                    "figure.constrained_layout.use": False}):  # fmt: skip
-            fig.set_layout_engine(None)
-        try:
-            yield
-        finally:
-            fig.set_layout_engine(engine)
-            fig.set_dpi(dpi0)
-
-
-@contextmanager
-def _ticks_once(fig):
-    """Inside, each axis of ``fig`` places its ticks once per size and view of its axes.
-
-    Matplotlib places an axis' ticks (locator, labels, which ones are in view: its private
-    ``Axis._update_ticks``) every time something measures or draws it: the constrained layout
-    asks about eight times per axes and pass (the axis' box, its label's position, each of the
-    four spines' extents), the draw again. Its result depends on the locator and formatter,
-    the view interval and the axes' size in pixels, none of which changes between two of those
-    calls unless the layout moved the axes, so it is kept per axis keyed by the axes' pixel
-    box and view interval and placed again when either changes: three placements per axis
-    instead of about 16 (a 2 x 2 profile). Measured on the six profiles of ``lcc-synth run``:
-    3.36 -> 2.66 s CPU, the same pixels (``tests/test_figures.py`` compares a PNG with
-    matplotlib's own ``savefig`` of the same figure). The instance attributes are removed on
-    leaving (the class's method again)."""
-    axis_list = [axis for ax in fig.get_axes()
-                 for axis in (getattr(ax, "xaxis", None), getattr(ax, "yaxis", None),
-                              getattr(ax, "zaxis", None)) if axis is not None
-                 and callable(getattr(type(axis), "_update_ticks", None))]  # fmt: skip
-    # (a matplotlib without that method: nothing is kept, the figure is drawn as savefig would)
-    for axis in axis_list:
-        axis._update_ticks = _placed_once(axis)
+    engine.execute(fig)
+    # no engine at all ("none" leaves a placeholder, for which savefig draws twice)
+    with matplotlib.rc_context({"figure.autolayout": False,
+                                "figure.constrained_layout.use": False}):  # fmt: skip
+        fig.set_layout_engine(None)
     try:
         yield
     finally:
-        for axis in axis_list:
-            axis.__dict__.pop("_update_ticks", None)
-
-
-def _placed_once(axis):
-    """``axis._update_ticks`` computed once per (axes pixel box, view interval, locator,
-    formatter)."""
-    place = type(axis)._update_ticks
-    memo: list = [None, None]
-
-    def update_ticks():
-        key = (tuple(axis.axes.bbox.bounds), tuple(axis.get_view_interval()),
-               id(axis.get_major_locator()), id(axis.get_major_formatter()),
-               id(axis.get_minor_locator()), id(axis.get_minor_formatter()))  # fmt: skip
-        if memo[0] != key:
-            memo[0], memo[1] = key, place(axis)
-        return memo[1]
-
-    return update_ticks
+        fig.set_layout_engine(engine)
+        fig.set_dpi(dpi0)
