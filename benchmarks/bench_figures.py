@@ -21,8 +21,9 @@ Measured 2026-12-03 on the 2-core machine at a load average of 0.5-1.0, fastest 
 (platoon8); all nine 4.68 -> 3.95 s CPU (-16 %). Also tried and not kept: placing each axis'
 ticks once per layout pass (a memo on matplotlib's private ``Axis._update_ticks``, -22 % in
 all with the above; not worth a private method). Nor drawing each curve through its
-min/max-decimated rows (about 2-3 per pixel column, :func:`lcc_synth.recording.decimate.minmax_rows`) made the six profiles
-slower (3.84 -> 4.24 s): a curve costs matplotlib per artist, not per point (Agg already
+min/max-decimated rows (about 2-3 per pixel column,
+:func:`lcc_synth.recording.decimate.minmax_rows`): it made the six profiles slower
+(3.84 -> 4.24 s): a curve costs matplotlib per artist, not per point (Agg already
 simplifies the 7,001-point paths in C++: 0.16 s for all six), and the decimation itself costs
 0.5 ms per series.
 
