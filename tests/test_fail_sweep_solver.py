@@ -16,9 +16,11 @@ from lcc_synth.recording import summarize_recording
 @pytest.mark.slow  # the failing QP's report: tests/test_fail_solver.py (simulate)
 def test_a_failing_mpc_makes_the_sweep_exit_1(tmp_path):
     text = (PROBLEMS / "sweep_robustness.toml").read_text()
-    assert "[controllers.mpc]" in text
-    text = text.replace("[controllers.mpc]", "[controllers.mpc.solver]\nmax_iter = 1\n\n"
-                        "[controllers.mpc]", 1)  # fmt: skip
+    # the mpc's solver (its first solver line): OSQP stopped after one iteration
+    mpc = text.index("[controllers.mpc]")
+    line = 'solver = { method = "daqp" }'
+    assert text.index(line, mpc) < text.index("[controllers.mpc_delay]")
+    text = text[:mpc] + text[mpc:].replace(line, 'solver = { method = "osqp", max_iter = 1 }', 1)
     (tmp_path / "sw.toml").write_text(text)
     proc = run_cli(["sweep", "sw.toml", "--count", "2", "--workers", "1", "--controllers",
                     "all_hdv,mpc", "--no-figures", "--no-progress", "--out", "res",
