@@ -29,6 +29,8 @@ def sig(value: Any, digits: int = 3) -> str:
     --------
     >>> sig(0.35019700044358615), sig(5.414282189412915), sig(850), sig(1234.5), sig(None)
     ('0.350', '5.41', '850', '1234', 'n/a')
+    >>> sig(9.9996), sig(0.99951), sig(0.0099996)  # rounding up to the next decade
+    ('10.0', '1.00', '0.0100')
     """
     if value is None:
         return "n/a"
@@ -37,7 +39,8 @@ def sig(value: Any, digits: int = 3) -> str:
         return str(x)
     if x == 0:
         return "0"
-    exponent = math.floor(math.log10(abs(x)))
+    # the decade of x rounded to ``digits`` (9.9996 is 10.0: its digits are counted from 10)
+    exponent = math.floor(math.log10(abs(float(f"{x:.{digits - 1}e}"))))
     if exponent < -4:
         return f"{x:.{digits - 1}e}"
     return f"{x:.{max(0, digits - 1 - exponent)}f}"  # 1234.5 -> "1234": no exponent
