@@ -96,7 +96,10 @@ def main() -> None:
     else:
         t0 = time.process_time()
         data = showcase_data(Path(args.problem))
-        data_path.write_bytes(pickle.dumps(data))
+        from lcc_synth.outputs import writing
+
+        with writing(data_path, overwrite=True) as out:  # a stopped run leaves no half file
+            out.tmp.write_bytes(pickle.dumps(data))
         print(f"showcase results computed in {time.process_time() - t0:.1f} s CPU -> {data_path}")
 
     from lcc_synth.figures import plot_gamma_curves, plot_profiles
@@ -146,7 +149,7 @@ def _writer(mode: str):
         yield
         return
     saved = style._layout_once, style.PNG_OPTIONS
-    style._layout_once = lambda fig, path, dpi: nullcontext()
+    style._layout_once = lambda fig, png, dpi: nullcontext()
     style.PNG_OPTIONS = {"compress_level": 6}
     try:
         yield

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from lcc_synth.experiments.comparison import Suite, applies, controller_table, gamma_settings
+from lcc_synth.mpc.settings import table_solver_method
 
 __all__ = [
     "DESIGN_S",
@@ -108,11 +109,6 @@ def _horizon(table: dict[str, Any]) -> int:
     return max(1, int(table.get("horizon", 50) or 50))
 
 
-def _method(table: dict[str, Any]) -> str:
-    solver = table.get("solver")
-    return str(solver.get("method", "osqp")) if isinstance(solver, dict) else "osqp"
-
-
 def _per_step(table: dict[str, Any], per_step_50: float) -> float:
     return per_step_50 * _horizon(table) / 50.0
 
@@ -155,7 +151,7 @@ def estimate_suite(suite: Suite, recording: Any = None) -> SuiteEstimate:
                 continue
             steps = _controller_steps(t, sc)
             if kind in ("mpc", "deep_lcc"):
-                sim += steps * sc.batch * qp_step_seconds(kind, _method(t), _horizon(t))
+                sim += steps * sc.batch * qp_step_seconds(kind, table_solver_method(t), _horizon(t))
             else:
                 sim += steps * (STEP_S + sc.batch * SCENARIO_STEP_S)
     string, curves = 0.0, 0

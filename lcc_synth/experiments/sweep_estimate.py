@@ -52,6 +52,7 @@ from typing import Any
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.experiments.sweep import SWEEP_SAMPLES, SweepSpec, chunks
+from lcc_synth.mpc.settings import table_solver_method
 
 __all__ = [
     "BYTES_PER_VALUE", "BYTES_PER_VALUE_RECORDED", "BASE_BYTES", "BASE_BYTES_RECORDED",
@@ -184,8 +185,7 @@ def _duration(s: float) -> str:
 
 def _per_scenario(table: dict[str, Any], steps: float, duration: float, scale: float) -> float:
     kind = table.get("type")
-    solver = table.get("solver") if isinstance(table.get("solver"), dict) else {}
-    daqp = solver.get("method") == "daqp"
+    daqp = table_solver_method(table) == "daqp"
     if kind == "mpc":
         period = float(table.get("sample_time") or 0.1)
         return duration / period * (MPC_DAQP_SOLVE_S if daqp else MPC_SOLVE_S) * scale

@@ -279,7 +279,7 @@ def _save(
         except OSError as err:
             raise FileError.from_os(path.parent, err, "create") from None
         png = path.suffix.lower() == ".png"
-        with writing(path, overwrite) as out, _layout_once(fig, path, dpi):
+        with writing(path, overwrite) as out, _layout_once(fig, png, dpi):
             fig.savefig(out.tmp, dpi=dpi, **({"pil_kwargs": PNG_OPTIONS} if png else {}))
     finally:
         plt.close(fig)
@@ -287,7 +287,7 @@ def _save(
 
 
 @contextmanager
-def _layout_once(fig, path: Path, dpi: int):
+def _layout_once(fig, png: bool, dpi: int):
     """Lay ``fig`` out once, for a raster file: with a layout engine, ``savefig`` draws the
     figure twice (a pass that only lays it out, with every artist drawn on a renderer that
     paints nothing, then the picture); here the engine runs once at the file's resolution and
@@ -300,7 +300,7 @@ def _layout_once(fig, path: Path, dpi: int):
     import matplotlib
 
     engine = fig.get_layout_engine()
-    if engine is None or path.suffix.lower() != ".png":
+    if engine is None or not png:
         yield
         return
     dpi0 = fig.get_dpi()

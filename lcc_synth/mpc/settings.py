@@ -84,12 +84,21 @@ __all__ = [
     "SPACING_TARGETS",
     "check_spacing_target",
     "settings_from_table",
+    "table_solver_method",
 ]
 
 HEAD_PREDICTIONS = ("constant", "accel")
 INPUT_ON = ("total", "model")
 EQUILIBRIA = ("moving_average", "fixed")
 SOLVER_METHODS = ("osqp", "daqp")
+
+
+def table_solver_method(table: Mapping[str, Any]) -> str:
+    """The QP solver a ``[controllers.NAME]`` table of an MPC or DeeP-LCC asks for
+    (``solver.method``; ``"osqp"`` when the table does not say): what the run-time estimates
+    price a step at, before the table is checked (the loaders check it)."""
+    solver = table.get("solver")
+    return str(solver.get("method", "osqp")) if isinstance(solver, Mapping) else "osqp"
 SPACING_TARGETS = ("safe", "equilibrium")
 
 
