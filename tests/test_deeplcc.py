@@ -212,6 +212,53 @@ def test_reduce_without_the_maps_to_g_is_bit_for_bit_the_same(noise, lam_g, exac
                        atol=1e-7 * np.abs(full.Cb @ b + full.Cy @ y_ini).max())
 
 
+def _reduction_by_stacked_qr(win, q, r, lam_g, lam_y, W):
+    """The reduction's ``Gamma, Cb, Cy`` (module docstring of :mod:`lcc_synth.deeplcc.hankel`)
+    whitened by the Householder QR of ``sqrt(2) [B; sqrt(lambda_g) I]`` (``H = R'R``, no
+    ``B'B`` or ``B B'`` formed): a second method, its round-off set by cond(R) = cond(H)^(1/2)."""
+    N = win.Ef.shape[0]
+    qf, rf = np.tile(q, N), np.tile(r, N)
+    B = np.vstack([np.sqrt(qf)[:, None] * win.Yf, np.sqrt(rf)[:, None] * win.Uf,
+                   np.sqrt(lam_y) * win.Yp])  # fmt: skip
+    K = B.shape[1]
+    R = np.linalg.qr(np.sqrt(2.0) * np.vstack([B, np.sqrt(lam_g) * np.eye(K)]), mode="r")
+    A = np.vstack([win.Up, win.Ep, win.Ef])
+    C = np.vstack([win.Uf, W @ win.Yf])
+    Z = np.linalg.solve(R.T, np.hstack([A.T, C.T, -2.0 * lam_y * win.Yp.T]))
+    nA, nC = A.shape[0], C.shape[0]
+    QA, RA = np.linalg.qr(Z[:, :nA])
+    M = Z[:, nA:nA + nC] - QA @ (QA.T @ Z[:, nA:nA + nC])
+    Cb = Z[:, nA:nA + nC].T @ QA @ np.linalg.inv(RA).T
+    return M.T @ M, Cb, -(M.T @ Z[:, nA + nC:])
+
+
+@pytest.mark.parametrize("units", [1.0, 1e3], ids=["si", "data_x1e3"])
+def test_reduction_equals_a_stacked_qr_whitening(units):
+    """The default path's reduction works in the m = 46 dimensions of the weighted rows B
+    (Woodbury: the K = 151 dimensional Hessian is never formed or factored); it equals the
+    reduction whitened by the QR of the stacked matrix to 1e-11 of each matrix's largest entry
+    (measured 1.4e-15 / 6.8e-14 / 4.0e-13 on Gamma / Cb / Cy; on the sweep's 1931-column data
+    1.4e-15 / 8.8e-14 / 1.6e-12, where the former Cholesky of H gave 2e-12 / 1.3e-11 /
+    4.4e-11). Data in other units (every sample x 1e3, lambda_g x 1e6) give the same
+    matrices: the whitened coordinates do not see the data's scale."""
+    rng = np.random.default_rng(13)
+    data, _ = linear_data(platoon(3, (1,)), 160, rng, noise=1e-3)
+    scaled = DataSet(units * data.u, units * data.e, units * data.y, data.dt)
+    win = windows(scaled, 4, 6)
+    q, r = np.array([1.0, 1.0, 1.0, 0.5]), np.array([0.1])
+    W = spacing_rows(6, data.p, [0], 0.8)
+    red = reduce(win, q, r, 100.0 * units**2, 1e4, W)
+    truth = _reduction_by_stacked_qr(win, q, r, 100.0 * units**2, 1e4, W)
+    for name, got, want in zip(("Gamma", "Cb", "Cy"), (red.Gamma, red.Cb, red.Cy), truth,
+                               strict=True):  # fmt: skip
+        assert np.abs(got - want).max() < 1e-11 * np.abs(want).max(), name
+    if units != 1.0:
+        base = reduce(windows(data, 4, 6), q, r, 100.0, 1e4, W)
+        for name in ("Gamma", "Cb", "Cy"):
+            want = getattr(base, name)
+            assert np.abs(getattr(red, name) - want).max() < 1e-11 * np.abs(want).max(), name
+
+
 def _mpc_first_plan(model, x_t, q, r, N, a_lim=None):
     """The model-based finite-horizon QP on DeeP-LCC's cost (future head error 0), solved by
     cvxpy + Clarabel at 1e-12: the independent truth of the fundamental-lemma tests."""

@@ -30,11 +30,21 @@ on ``C g``, ``C = [U_f; W_f]``: the future inputs (acceleration limits) and, per
 ``nu``; so the optimum lies on ``g(nu) = g0(b, y_ini) + G nu``, on which the cost equals
 ``1/2 nu' Gamma nu`` plus a constant and ``C g(nu) = c(b, y_ini) + Gamma nu`` (the linear term
 vanishes because ``G' (H g0 + f) = G' A' lambda0 = 0``). In whitened coordinates
-(``H = L L'``, ``Z_X = L^-1 X'``) with ``Q_A`` an orthonormal basis of ``Z_A`` (``Z_A = Q_A R_A``)
-and ``M = (I - Q_A Q_A') Z_C``:
+(``Z_X = W X'`` for any ``W`` with ``W' W = H^-1``) with ``Q_A`` an orthonormal basis of
+``Z_A`` (``Z_A = Q_A R_A``) and ``M = (I - Q_A Q_A') Z_C``:
 
-    Gamma = M' M,   c = Z_C' Q_A R_A^-T b - M' Z_f y_ini,   G = L^-T M,
-    g0 = L^-T (Q_A R_A^-T b - (I - Q_A Q_A') Z_f y_ini),   Z_f = L^-1 (-2 lambda_y Y_p').
+    Gamma = M' M,   c = Z_C' Q_A R_A^-T b - M' Z_f y_ini,   G = W' M,
+    g0 = W' (Q_A R_A^-T b - (I - Q_A Q_A') Z_f y_ini),   Z_f = W (-2 lambda_y Y_p').
+
+The whitening works in the ``m = N (p + n_c) + Tini p`` weighted rows ``B`` of the cost
+(890 for the sweep's data) instead of the ``K`` columns (1931): with ``H = 2 (lambda_g I + B'B)``
+and ``P = lambda_g I + B B'`` (Woodbury), ``W = (2 lambda_g)^-1/2 [I - B' P^-1 B;
+sqrt(lambda_g) P^-1 B]`` (``K + m`` rows) has ``W' W = H^-1``, and only ``P`` is factored
+(Cholesky). The rows of ``C`` and of ``Y_p`` are rows of ``B`` (``X = E B``), so their whitened
+columns ``W B' E' = (2 lambda_g)^-1/2 [lambda_g B' P^-1 E'; sqrt(lambda_g) (E' - lambda_g
+P^-1 E')]`` take no difference of large terms; ``A``'s take one, ``A' - B' P^-1 B A'``, whose
+round-off is absolute (about ``eps |A|``), not relative to a cancelled result. The maps back
+to ``g`` apply ``W'``.
 
 So the online QP needs at most ``dim C = 2 N n_c`` unknowns (plus the spacing slacks) instead
 of ``K`` (1931 for T = 2000), with constant matrices; ``Gamma`` is a Gram matrix (positive
@@ -65,13 +75,18 @@ the past: the unregularised QP plans ``u = y = 0``), so ``lambda_g = 0`` is refu
 there; with the slack kept (``lambda_y = 1e4``) the plan stays 4.6e-4 from the MPC's. The
 default path (``lambda_g > 0``, soft past) is the whitened one above, unchanged.
 
-Numerical limits (measured): for the head-brake data (T = 2000, n = 10, default weights) ``H``
-has eigenvalues from ``2 lambda_g`` = 200 to 3.7e10 (condition number 1.8e8), so the
-Cholesky factor's solves lose up to about 8 of 16 digits; on the test case (T = 160) the
-reduced QP's plan matched the full QP in ``g`` (cvxpy + Clarabel at 1e-11) to 3e-11 (exact
-data) and 6e-11 (noisy data). With exact data and ``lambda_g`` below about 1e-5 ``H`` is
-singular to working precision (``B'B`` has rank below ``K``): :func:`reduce` refuses it by
-name (``weights.lambda_g``): the noise-free limit is ``lambda_g = 0`` itself.
+Numerical limits (measured): for the sweep's data (``problems/sweep_robustness.toml``, T = 2000,
+n = 10, default weights) ``H`` has eigenvalues from ``2 lambda_g`` = 200 to 3.7e8 (condition
+number 1.8e6; the refusal floor below is 4e-8) and ``P`` the same spread. Against the reduction
+whitened by the Householder QR of the stacked ``sqrt(2) [B; sqrt(lambda_g) I]`` (round-off set
+by ``cond(H)^1/2``; ``tests/test_deeplcc.py`` has it as a second method) this one agrees to
+1.4e-15 / 8.8e-14 / 1.6e-12 of the largest entry of ``Gamma`` / ``Cb`` / ``Cy`` (three
+scenarios); the Cholesky of the ``K x K`` ``H`` it replaced gave 2e-12 / 1.3e-11 / 4.4e-11, in
+0.19 s instead of 0.11 s (one BLAS thread). On the test case (T = 160) the reduced QP's plan
+matched the full QP in ``g`` (cvxpy + Clarabel at 1e-11) to 3e-11 (exact data) and 6e-11 (noisy
+data). A ``lambda_g`` at or below the round-off of the data's squared norm, ``eps ||B||_F^2``,
+leaves ``P`` (and ``H``) singular to working precision: :func:`reduce` refuses it by name
+(``weights.lambda_g``); with exact data the noise-free limit is ``lambda_g = 0`` itself.
 """
 
 from __future__ import annotations
@@ -186,9 +201,8 @@ class ReducedQP:
     G, G0b, G0y : numpy.ndarray or None
         ``g = G0b b + G0y y_ini + G nu`` (``(K, ...)``; for checks and predictions), computed
         by :func:`reduce` with ``maps=True`` only: the controller never needs ``g``, and the
-        three ``K``-row triangular solves were about a fifth of the set-up (0.09-0.12 s of
-        0.5-0.6 s per scenario of ``problems/sweep_robustness.toml``, one BLAS thread);
-        ``Gamma``, ``Cb``, ``Cy`` and ``B`` are bit for bit the same either way.
+        maps' ``K``-row products and solves with ``P`` would add about a third to the
+        reduction; ``Gamma``, ``Cb``, ``Cy`` and ``B`` are bit for bit the same either way.
     B : numpy.ndarray
         ``(nC, r)`` factor ``Gamma = B B'`` on its range (``B = V sqrt(Lambda)`` over the
         eigenvalues above round-off, ``nC eps lambda_max``): ``B B'`` is the exactly positive
@@ -268,47 +282,70 @@ def reduce(
         without), for checks and predictions; the online QP does not use them.
     """
     N = win.Ef.shape[0]
-    K = win.Up.shape[1]
     qf = np.tile(np.asarray(q, float), N)
     rf = np.tile(np.asarray(r, float), N)
     if lambda_g == 0.0 or exact_past:
         return _reduce_exact(win, qf, rf, lambda_g, lambda_y, W_rows, exact_past, maps)
-    # H = 2 (lambda_g I + B'B) with the weighted rows B
+    # H = 2 (lambda_g I + B'B) with the weighted rows B; P = lambda_g I + B B' (m x m)
+    nY, nU = win.Yf.shape[0], win.Uf.shape[0]
     B = np.vstack([np.sqrt(qf)[:, None] * win.Yf, np.sqrt(rf)[:, None] * win.Uf,
                    np.sqrt(lambda_y) * win.Yp])  # fmt: skip
-    H = B.T @ B
-    H[np.diag_indices(K)] += lambda_g
-    H *= 2.0
+    m = B.shape[0]
+    P = B @ B.T
+    floor = np.finfo(float).eps * float(np.trace(P))  # round-off of ||B||_F^2 >= ||B'B||
+    too_small = ConfigError(
+        "weights.lambda_g",
+        f"{lambda_g:g} is too small for these data: 2 (lambda_g I + B'B), the Hessian of the "
+        f"QP in g, is singular to working precision (lambda_g must exceed {floor:.1e}, the "
+        "round-off of the data's squared norm); raise lambda_g, or use lambda_g = 0 with "
+        "exact data",
+    )
+    if not lambda_g > floor:
+        raise too_small
+    P[np.diag_indices(m)] += lambda_g
     try:
-        Lc = sla.cholesky(H, lower=True, check_finite=False)
+        factor = sla.cho_factor(P, lower=True, check_finite=False)
     except np.linalg.LinAlgError:
-        raise ConfigError(
-            "weights.lambda_g",
-            f"{lambda_g:g} is too small for these data: 2 (lambda_g I + ...) is singular to "
-            "working precision (the Hessian of the QP in g); raise lambda_g",
-        ) from None
+        raise too_small from None
     A = np.vstack([win.Up, win.Ep, win.Ef])
-    C = np.vstack([win.Uf, W_rows @ win.Yf])
-    Fy = -2.0 * lambda_y * win.Yp.T
-    nA, nC = A.shape[0], C.shape[0]
-    Z = sla.solve_triangular(Lc, np.hstack([A.T, C.T, Fy]), lower=True, check_finite=False)
-    ZA, ZC, ZF = Z[:, :nA], Z[:, nA:nA + nC], Z[:, nA + nC:]
-    QA, RA = np.linalg.qr(ZA)
-    M = ZC - QA @ (QA.T @ ZC)
-    Gamma = M.T @ M
+    nA, nC = A.shape[0], nU + W_rows.shape[0]
+    # the rows of C = [U_f; W Y_f] and of Fy' = -2 lambda_y Y_p are rows of B: X = E B
+    E = np.zeros((m, nC + win.Yp.shape[0]))  # E'
+    E[nY:nY + nU, :nU] = np.diag(1.0 / np.sqrt(rf))
+    E[:nY, nU:nC] = (W_rows / np.sqrt(qf)[None, :]).T
+    E[nY + nU:, nC:] = -2.0 * np.sqrt(lambda_y) * np.eye(win.Yp.shape[0])
+    QA, QE = np.hsplit(sla.cho_solve(factor, np.hstack([B @ A.T, E]), check_finite=False), [nA])
+    s, sl = 1.0 / np.sqrt(2.0 * lambda_g), np.sqrt(lambda_g)
+    top_A = s * (A.T - B.T @ QA)  # the factor W X' (module docstring), in two blocks of rows
+    bot_A = (s * sl) * QA
+    top_C = (s * lambda_g) * (B.T @ QE[:, :nC])
+    bot_E = (s * sl) * (E - lambda_g * QE)
+    bot_C, bot_F = bot_E[:, :nC], bot_E[:, nC:]
+    QQ, RA = np.linalg.qr(np.vstack([top_A, bot_A]))
+    K = A.shape[1]
+    Qt, Qb = QQ[:K], QQ[K:]
+    proj = Qt.T @ top_C + Qb.T @ bot_C
+    M_top, M_bot = top_C - Qt @ proj, bot_C - Qb @ proj
+    Gamma = M_top.T @ M_top + M_bot.T @ M_bot
     Gamma = 0.5 * (Gamma + Gamma.T)
     RinvT = sla.solve_triangular(RA, np.eye(nA), trans="T", check_finite=False)  # R_A^-T
-    QR = QA @ RinvT  # (K, nA)
-    Cb = ZC.T @ QR
-    Cy = -(M.T @ ZF)
+    Cb = proj.T @ RinvT
+    # M' Z_F without the K-row block of Z_F: top_F = s lambda_g B' Q_F
+    Cy = -((s * lambda_g) * ((B @ M_top).T @ QE[:, nC:]) + M_bot.T @ bot_F)
     G = G0b = G0y = None
     if maps:
-        PF = ZF - QA @ (QA.T @ ZF)
-        LT = Lc.T
-        G = sla.solve_triangular(LT, M, lower=False, check_finite=False)
-        G0b = sla.solve_triangular(LT, QR, lower=False, check_finite=False)
-        G0y = -sla.solve_triangular(LT, PF, lower=False, check_finite=False)
-    return ReducedQP(Gamma, Cb, Cy, G, G0b, G0y, win.Uf.shape[0], _range_factor(Gamma))
+        top_F = (s * lambda_g) * (B.T @ QE[:, nC:])
+        projF = Qt.T @ top_F + Qb.T @ bot_F
+
+        def back(top: np.ndarray, bot: np.ndarray) -> np.ndarray:
+            """``W' z`` of a whitened ``z`` (two blocks of rows): the map back to ``g``."""
+            return s * (top + B.T @ sla.cho_solve(factor, sl * bot - B @ top,
+                                                  check_finite=False))
+
+        G = back(M_top, M_bot)
+        G0b = back(Qt @ RinvT, Qb @ RinvT)
+        G0y = -back(top_F - Qt @ projF, bot_F - Qb @ projF)
+    return ReducedQP(Gamma, Cb, Cy, G, G0b, G0y, nU, _range_factor(Gamma))
 
 
 def _range_factor(Gamma: np.ndarray) -> np.ndarray:
