@@ -153,8 +153,9 @@ class Excitation:
         self._k += 1
         if self.bar is not None:
             self.bar.update(1)
-        out = np.broadcast_to(row, (self._batch, row.size)).copy()
-        return out[:, 0] if row.size == 1 else out
+        if row.size == 1:
+            return np.full(self._batch, row[0])
+        return np.repeat(row[None, :], self._batch, axis=0)
 
     def describe(self) -> dict[str, Any]:
         """Size of the sequence."""

@@ -13,13 +13,14 @@ delay spread left to draw) and its drawn noise level. The collection's own rando
 (:func:`lcc_synth.deeplcc.data.data_key`) hashes the explicit HDVs, so it is per scenario.
 
 Measured on ``problems/sweep_robustness.toml`` (10-HDV string, T = 2000 at 0.05 s, CPU time
-of one process with one BLAS thread, as a Dask worker has, 4 draws on the loaded 2-core
-machine): per scenario 0.05 s to collect the data (0.6 s for the first, compiling the
-simulator), 0.3-1.0 s to set up the controller (mostly the exact reduction of the data,
-:func:`lcc_synth.deeplcc.hankel.reduce`; the set-up always runs with one BLAS thread,
-also in ``run`` and in the client, where two threads had cost 2.0-3.2 s on the loaded
-machine and rounded differently from the workers) and 0.5-1.0 s to drive the 40 s run
-(800 QPs); a cached data file is 0.22 MB.
+of one process with one BLAS thread, as a Dask worker has, 8 draws, 2026-12-04): per scenario
+0.085 s to collect the data (0.6 s for the first, compiling the simulator), 0.13 s to set up
+the controller (the persistency check and the exact reduction of the data,
+:func:`lcc_synth.deeplcc.hankel.reduce`, 0.12 s; 0.21 s before it factored the 890 x 890
+``lambda_g I + B B'`` instead of the 1931 x 1931 Hessian) and 0.2-0.25 s to drive the 40 s
+run (800 QPs). The set-up always runs with one BLAS thread, also in ``run`` and in the
+client, where two threads had cost 2.0-3.2 s on the loaded machine and rounded differently
+from the workers. A cached data file is 0.22 MB.
 
 The rest is unchanged: :func:`scenario_controllers` builds every other table as
 :func:`lcc_synth.experiments.controller_tables.controller_from_table` does and a
