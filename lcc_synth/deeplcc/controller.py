@@ -65,6 +65,7 @@ from lcc_synth.mpc.report import new_step_record, step_statistics
 from lcc_synth.mpc.scaffold import STATUS_CODES, SampleLoop, update_equilibrium
 from lcc_synth.mpc.settings import paper_fallback_gains
 from lcc_synth.mpc.solver import OSQPSolver
+from lcc_synth.mpc.step_cache import LastValue
 from lcc_synth.resources import single_thread_blas
 
 __all__ = ["DeePLCCController", "NO_RING", "STATUS_CODES"]
@@ -92,6 +93,7 @@ class _Member:
     plan: np.ndarray | None = None
     plan_age: int = 0
     warm: tuple | None = None
+    s_eq: LastValue = field(default_factory=LastValue)  # the HDVs' spacing at the last v_eq
     hist: dict[str, list] = field(default_factory=dict)
 
 
@@ -161,6 +163,7 @@ class DeePLCCController(SampleLoop):
         self.v_star = float(v_star)
         self.nv = int(n_vehicles)
         self.cavs = tuple(int(c) for c in cavs)
+        self._cav_cols = list(self.cavs)  # the same, as an index list (per step)
         self.n_c = len(self.cavs)
         self.p = self.nv - 1 + self.n_c
         self.data_key = data_key
@@ -255,14 +258,15 @@ class DeePLCCController(SampleLoop):
     def _observe(self, b: int, mem: _Member, obs: Observation) -> None:
         """Push the sample into the rings and update ``v_eq``."""
         vel = np.asarray(obs.velocity[b], float)
-        spc = np.asarray(obs.spacing[b], float)[list(self.cavs)]
+        cols = self._cav_cols
+        spc = np.asarray(obs.spacing[b], float)[cols]
         if not mem.started:
             mem.vel[:] = vel
             mem.spc[:] = spc
             mem.u[:] = 0.0
             mem.started = True
         else:
-            u_prev = (vel[list(self.cavs)] - mem.vel[-1, list(self.cavs)]) / self.sample_time
+            u_prev = (vel[cols] - mem.vel[-1, cols]) / self.sample_time
             mem.u[:-1] = mem.u[1:]
             mem.u[-1] = u_prev
             mem.vel[:-1] = mem.vel[1:]
@@ -277,20 +281,22 @@ class DeePLCCController(SampleLoop):
     def parameters(self, mem: _Member) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(b, y_ini, s_eq)`` of the QP from a member's rings (module docstring)."""
         v_eq = mem.v_eq
-        s_eq = float(self.hdv.equilibrium_spacing(self._clip_v(v_eq))) + mem.s_off
+        s_eq = mem.s_eq.get(self.hdv, self._clip_v(v_eq)) + mem.s_off
         e = mem.vel[:, 0] - v_eq  # samples t-Tini .. t
         N = self.settings.horizon
         e_f = np.zeros(N)
         e_f[0] = e[-1]
         b = np.concatenate([mem.u.ravel(), e[:-1], e_f])
-        y = np.column_stack([mem.vel[1:, 1:] - v_eq, mem.spc[1:] - s_eq])
+        y = np.empty((mem.spc.shape[0] - 1, self.p))
+        np.subtract(mem.vel[1:, 1:], v_eq, out=y[:, :self.nv - 1])
+        np.subtract(mem.spc[1:], s_eq, out=y[:, self.nv - 1:])
         return b, y.ravel(), s_eq
 
     def _step(self, b: int, mem: _Member, obs: Observation) -> np.ndarray:
         st = self._st
         self._observe(b, mem, obs)
         c = self.settings.constraints
-        v_c = np.asarray(obs.velocity[b], float)[list(self.cavs)]
+        v_c = np.asarray(obs.velocity[b], float)[self._cav_cols]
         s_c = mem.spc[-1]
         bvec, y_ini, s_eq = self.parameters(mem)
         with np.errstate(invalid="ignore"):
@@ -303,13 +309,13 @@ class DeePLCCController(SampleLoop):
         if viol > 1e-6:
             st["violation_steps"] += 1
             st["max_violation"] = max(st["max_violation"], float(viol))
-        if not (np.all(np.isfinite(bvec)) and np.all(np.isfinite(y_ini))):
+        if not (np.isfinite(bvec).all() and np.isfinite(y_ini).all()):
             return self._fallback(mem, obs, b, s_eq, "nonfinite_state")
         red, qp = self.reduced, self.qp
         cvec = red.Cb @ bvec + red.Cy @ y_ini
         N = self.settings.horizon
         if c.spacing == "safe":
-            b_w = np.tile(c.s_min + c.margin + c.t_gap * mem.v_eq - s_eq, N)
+            b_w = np.tile(c.s_min + c.margin + c.t_gap * mem.v_eq - s_eq, N)  # (N n_c,)
             q, lo, hi = qp.vectors(cvec, self._a_min, self._a_max, b_w)
         else:  # y's spacing errors are from s_eq: constant bounds (mpc.formulation.error_bound)
             b_w = np.full(qp.n_w, error_bound(self._fams[0], c.margin))
