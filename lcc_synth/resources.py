@@ -14,6 +14,9 @@
   busy cores cost far more than they gain (measured: an 82-state structured polish 9.8 s with
   the default threads, 0.5 s with one; the MPC's 22-state Riccati solve 2-40 ms with a stall
   of 1.9 s, ~2 ms with one).
+* :func:`lazy_exports` makes a subpackage load each public name's submodule on first use
+  (PEP 562): a command that refuses its input ends before the stacks it would have used
+  (recording, SciPy, CVXPY, the QP) are imported.
 * :func:`progress_bar` is the one progress bar of the package (tqdm on stderr, with a count);
   :func:`notice` prints one line on stderr (a command's estimate). ``--quiet`` (alias
   ``--no-progress``) of every command sets :func:`set_quiet`: no bar, no progress line, no
@@ -58,15 +61,17 @@ interpreter and its libraries (already in use when :func:`available_memory` is r
 from __future__ import annotations
 
 import functools
+import importlib
 import math
 import sys
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from lcc_synth.errors import ConfigError
 
 __all__ = [
+    "lazy_exports",
     "MEMORY_FRACTION",
     "LONG_RUN_S",
     "VEHICLE_STEP_S",
@@ -468,3 +473,42 @@ def single_thread_blas(fn=None):
     """BLAS/LAPACK limited to one thread (threadpoolctl): ``with single_thread_blas(): ...``,
     or ``@single_thread_blas`` on a function (module docstring)."""
     return _OneBlasThread() if fn is None else _OneBlasThread()(fn)
+
+
+def lazy_exports(
+    package: str, sources: Mapping[str, str]
+) -> tuple[Callable[[str], object], Callable[[], list[str]]]:
+    """The module ``__getattr__`` and ``__dir__`` (PEP 562) of a subpackage whose public names
+    are defined in its submodules, each imported the first time its name is asked for.
+
+    A package whose ``__init__`` imported every submodule made each command pay for all of
+    them (the recording stack; SciPy and CVXPY through the synthesis and MPC modules) before
+    it could refuse a bad input. With these, ``package.NAME``, ``from package import NAME``
+    and ``dir(package)`` work as before; a name is bound on the package once loaded.
+
+    Parameters
+    ----------
+    package : str
+        The subpackage's ``__name__``.
+    sources : Mapping[str, str]
+        ``{public name: submodule}``: the submodule (relative to ``package``) that defines it.
+
+    Returns
+    -------
+    tuple
+        ``(__getattr__, __dir__)``, to assign at the subpackage's top level.
+    """
+    module = sys.modules[package]
+
+    def __getattr__(name: str) -> object:
+        sub = sources.get(name)
+        if sub is None:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        value = getattr(importlib.import_module(f"{package}.{sub}"), name)
+        setattr(module, name, value)
+        return value
+
+    def __dir__() -> list[str]:
+        return sorted({*vars(module), *sources})
+
+    return __getattr__, __dir__

@@ -4,6 +4,7 @@ apply, errors that name the file, help without internal labels, readable human o
 from __future__ import annotations
 
 import json
+import os
 import re
 import tomllib
 from pathlib import Path
@@ -258,6 +259,64 @@ def test_error_without_a_file_gets_the_problem_file(tmp_path, capsys, monkeypatc
     monkeypatch.undo()
     assert main(["simulate", str(path), "--no-record", "--seeds", "0"]) == 2
     assert _error_line(capsys) == "lcc-synth simulate: error: --seeds: must be >= 1, got 0"
+
+
+#: What a command that refuses its input must not have imported: the solvers and the
+#: simulator's compiler (SciPy, numba, CVXPY) and Rerun.
+STACKS = ("scipy", "numba", "cvxpy", "rerun")
+
+
+def test_a_refused_input_loads_no_solver_or_recorder(tmp_path):
+    """In a fresh interpreter, ``simulate`` (a gains file that contradicts its K, a seed study
+    over the recording limit: the whole problem loaded and estimated), ``run`` (an unknown
+    scenario of the showcase, a results root that is a file), ``sweep`` (the same root) and
+    the first look at ``regions`` and ``synthesize`` (a missing file) exit 2 before any
+    heavy import; the same names then load on use."""
+    import subprocess
+    import sys
+
+    gains = {"kind": "fd_lcc", "m": 0, "n": 10, "semantics": "replace", "state_names": ["x"],
+             "K": [1.0], "gains": {}}  # fmt: skip
+    (tmp_path / "g.json").write_text(json.dumps(gains))
+    table2 = (PROBLEMS / "paper_table2.toml").read_text()
+    (tmp_path / "p.toml").write_text(f'{table2}\n[controllers.gf]\ntype = "gains_file"\n'
+                                     'file = "g.json"\n')  # fmt: skip
+    (tmp_path / "blocker").write_text("a file")
+    runs = [
+        ["simulate", "p.toml", "--no-record"],
+        ["simulate", str(PROBLEMS / "paper_table2.toml"), "--seeds", "100000000"],
+        ["run", str(PROBLEMS / "showcase.toml"), "--scenarios", "nope", "--no-record"],
+        ["run", str(PROBLEMS / "showcase.toml"), "--no-record", "--out", "blocker"],
+        ["sweep", str(PROBLEMS / "sweep_robustness.toml"), "--no-record", "--out", "blocker"],
+        ["regions", "missing.toml", "--no-record"],
+        ["synthesize", "missing.toml", "--no-record"],
+    ]
+    code = (
+        "import json, sys\n"
+        "from lcc_synth.cli.main import main\n"
+        f"codes = [main(argv) for argv in {runs!r}]\n"
+        f"heavy = sorted(m for m in {STACKS!r} if m in sys.modules)\n"
+        "from importlib import import_module\n"
+        "packages = [import_module(f'lcc_synth.{p}') for p in ('mpc', 'recording', 'synthesis')]\n"
+        "names = {p.__name__: all(hasattr(p, n) for n in p.__all__) for p in packages}\n"
+        "print(json.dumps([codes, heavy, names]))\n"
+    )  # fmt: skip
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
+                          text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    codes, heavy, names = json.loads(proc.stdout)
+    errors = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert codes == [2] * len(runs), proc.stderr
+    assert [e.split(": error: ")[0] for e in errors] == [
+        f"lcc-synth {argv[0]}" for argv in runs], proc.stderr  # one line each
+    for part in ("gains.x: 0.0 disagrees with K", "--seeds: the recording would be about",
+                 "--scenarios: unknown name(s) ['nope']", "--out:", "--out:",
+                 "missing.toml: path: no such problem file",
+                 "missing.toml: path: no such problem file"):  # fmt: skip
+        assert part in errors.pop(0)
+    assert heavy == []
+    assert names == {"lcc_synth.mpc": True, "lcc_synth.recording": True,
+                     "lcc_synth.synthesis": True}  # fmt: skip
 
 
 # ---------------------------------------------------------------------- no internal labels

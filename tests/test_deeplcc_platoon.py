@@ -114,12 +114,11 @@ def test_per_phase_fuel_json_shape(tmp_path, capsys):
     [({"bad": [10.0, 5.0]}, "metrics.phases.bad"), ({"late": [100.0, 300.0]},
      "metrics.phases.late"), ({"x": "50-60"}, "metrics.phases.x"), ([1, 2], "metrics.phases")],
 )  # fmt: skip
-def test_bad_phases_are_named_field_errors(tmp_path, phases, field):
+def test_bad_phases_are_named_field_errors(spec, phases, field):
     import tomllib
 
     from lcc_synth.metrics import metrics_from
 
-    spec = load_spec(NEDC)
     data = tomllib.loads(NEDC.read_text())
     data["metrics"]["phases"] = phases
     with pytest.raises(ConfigError) as err:

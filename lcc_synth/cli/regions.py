@@ -36,7 +36,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import time
 
-    from lcc_synth.analysis.region_specs import expansion, region_specs_from, run_region_specs
     from lcc_synth.cli.output import write_and_report
     from lcc_synth.errors import ConfigError
     from lcc_synth.outputs import check_file
@@ -53,6 +52,9 @@ def run(args: argparse.Namespace) -> int:
     if args.step is not None and not args.step > 0:
         raise ConfigError("--step", f"must be > 0, got {args.step}")
     system = system_from(prob.data, src)
+    # the analysis stack (SciPy) once the file, its system and the outputs are checked
+    from lcc_synth.analysis.region_specs import expansion, region_specs_from, run_region_specs
+
     model = system.linear_model(warn=False)
     specs, omega = region_specs_from(prob.data, model, src, step=args.step)
     from lcc_synth.resources import format_duration, notice, progress_bar

@@ -172,7 +172,6 @@ def run(args: argparse.Namespace) -> int:
     from lcc_synth.outputs import check_directory, new_directory, writing
     from lcc_synth.recording import recording_path
     from lcc_synth.resources import notice
-    from lcc_synth.synthesis.h2 import SynthesisError
 
     if args.scheduler is not None and args.workers is not None:
         raise ConfigError("--workers", "does not apply with --scheduler (its cluster has its own)")
@@ -208,6 +207,8 @@ def run(args: argparse.Namespace) -> int:
         check_directory(args.out, "--out")
         estimate.require_disk(count_field, args.out)
         out_dir = check_directory(new_directory(args.out, spec.name, stamp), "--out")
+    from lcc_synth.synthesis.h2 import SynthesisError  # after the checks: they need no solver
+
     done = SweepProgress.new(spec)
     start = -1  # scenarios finished when this run started (-1: a new results directory)
     writer = ResultsWriter(out_dir, spec)

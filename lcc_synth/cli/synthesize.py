@@ -32,10 +32,6 @@ def run(args: argparse.Namespace) -> int:
     from lcc_synth.problem import check_top_level, load_problem
     from lcc_synth.provenance import provenance
     from lcc_synth.recording import record_synthesis_file, recording_path
-    from lcc_synth.synthesis.config import spec_from_problem
-    from lcc_synth.synthesis.design import synthesize
-    from lcc_synth.synthesis.gains_file import write_gains
-    from lcc_synth.synthesis.report import format_report
 
     problem = load_problem(args.problem)
     src = str(problem.path)
@@ -48,6 +44,12 @@ def run(args: argparse.Namespace) -> int:
             "synthesis", "this file has no [synthesis] table (required by synthesize; e.g. "
             "problems/synth_cf_lcc_pattern.toml)", src,
         )  # fmt: skip
+    # the synthesis stack (SciPy, CVXPY) once the file is read and has a [synthesis] table
+    from lcc_synth.synthesis.config import spec_from_problem
+    from lcc_synth.synthesis.design import synthesize
+    from lcc_synth.synthesis.gains_file import write_gains
+    from lcc_synth.synthesis.report import format_report
+
     spec = spec_from_problem(problem)
     platoon = spec.system.platoon is not None  # a gain row per CAV
     if args.figure and (platoon or spec.design != "sparsity"):

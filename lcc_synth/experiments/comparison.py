@@ -57,7 +57,6 @@ from lcc_synth.schema import declared
 from lcc_synth.simulation.results import SimResult
 from lcc_synth.simulation.scenario import Scenario
 from lcc_synth.simulation.scenario_file import scenario_from
-from lcc_synth.synthesis.h2 import SynthesisError
 
 __all__ = [
     "SUITE_TYPES", "SuiteScenario", "Suite", "SuiteRun", "load_suite", "select_names",
@@ -358,6 +357,8 @@ def prepare_controllers(
             on_step(name)
         table = controller_table(raw, layout)
         if table.get("type") == "h2":
+            from lcc_synth.synthesis.h2 import SynthesisError  # here: loading a suite needs none
+
             try:
                 table, rep = synthesize_table(
                     name, table, system, f"{label}_{layout}_{name}", source

@@ -131,12 +131,13 @@ def synthesize_h2_tables(
         ``(tables, designs)``: ``{name: table}`` in the order of ``tables`` and
         ``{name: report}`` of the synthesised ones.
     """
-    from lcc_synth.synthesis.h2 import SynthesisError
-
     out: dict[str, dict[str, Any]] = {}
     designs: dict[str, Any] = {}
     for name, table in tables.items():
         if isinstance(table, Mapping) and table.get("type") == "h2":
+            # the synthesis stack (SciPy, CVXPY) only for a file that has an h2 table
+            from lcc_synth.synthesis.h2 import SynthesisError
+
             try:
                 out[name], designs[name] = synthesize_table(
                     name, table, system, f"{label}_{name}", source

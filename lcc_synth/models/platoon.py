@@ -40,7 +40,6 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
-import scipy.linalg as sla
 
 from lcc_synth.errors import ConfigError
 from lcc_synth.models.hdv import CarFollowingModel, LinearCoefficients, linear_coefficients
@@ -506,6 +505,8 @@ def discretize(A: np.ndarray, B: np.ndarray, Ts: float) -> tuple[np.ndarray, np.
     M = np.zeros((nx + nu, nx + nu))
     M[:nx, :nx] = A
     M[:nx, nx:] = B
+    import scipy.linalg as sla  # here, not at the top: loading a problem file needs no SciPy
+
     E = sla.expm(M * Ts)
     return E[:nx, :nx], E[:nx, nx:]
 

@@ -54,12 +54,7 @@ prediction are not written for any layout (the lag state and the delay register 
 to share the augmented state).
 """
 
-from lcc_synth.mpc.build import build_mpc, mpc_controller_from_table
-from lcc_synth.mpc.controller import STATUS_CODES, MPCController
-from lcc_synth.mpc.settings import MPCSettings, paper_fallback_gains, settings_from_table
-
-#: The same class as :class:`MPCController` (the joint MPC of a platoon or ring is the one MPC).
-JointMPCController = MPCController
+from lcc_synth.resources import lazy_exports
 
 __all__ = [
     "MPCController",
@@ -71,3 +66,13 @@ __all__ = [
     "paper_fallback_gains",
     "settings_from_table",
 ]
+
+# Each name's submodule, imported on first use (lcc_synth.resources.lazy_exports): reading
+# an MPC table (.settings) loads neither the QP nor SciPy. JointMPCController is
+# MPCController (the joint MPC of a platoon or ring is the one MPC).
+__getattr__, __dir__ = lazy_exports(__name__, {
+    "MPCController": "controller", "STATUS_CODES": "controller",
+    "JointMPCController": "controller", "MPCSettings": "settings",
+    "paper_fallback_gains": "settings", "settings_from_table": "settings",
+    "build_mpc": "build", "mpc_controller_from_table": "build",
+})  # fmt: skip

@@ -670,3 +670,8 @@ class MPCController(MPCScaffold):
         violations.
         """
         return self.layout.stats(self, step_statistics(self._st))
+
+
+#: The same class as :class:`MPCController` (the joint MPC of a platoon or ring is the one MPC;
+#: :mod:`lcc_synth.mpc` exports it under this name too).
+JointMPCController = MPCController

@@ -8,7 +8,7 @@ Submodules: :mod:`~lcc_synth.recording.core` (opening a recording, names, colour
 :mod:`~lcc_synth.recording.decimate` (min/max-preserving decimation, ``decimate="minmax"``,
 every command's default), :mod:`~lcc_synth.recording.size` (a recording's size estimated before
 the work, ``--max-recording-size``). Everything public is importable from
-``lcc_synth.recording``.
+``lcc_synth.recording`` (each name's submodule is imported on first use).
 
 Every recording command writes one file, by default ``logs/<problem>-<UTC timestamp>.rrd``
 (see :func:`recording_path`), with a default blueprint so that opening it in the Rerun viewer
@@ -102,74 +102,68 @@ every Rerun process started here gets ``CI=1`` in its own environment
 
 from __future__ import annotations
 
-from lcc_synth.recording.analysis import (
-    gamma_grid,
-    record_analysis_file,
-    record_gains,
-    record_gamma,
-    record_region_map,
-    record_synthesis,
-    record_synthesis_file,
-    synthesis_cavs,
-)
-from lcc_synth.recording.cli import (
-    SimulationRecorder,
-    add_recording_arguments,
-    check_recording,
-    check_recording_limit,
-    check_recording_space,
-    parse_record_seeds,
-    record_seed_count,
-    recording_decimation,
-    recording_limit,
-    recording_path,
-)
-from lcc_synth.recording.core import (
-    APP_ID,
-    COLOR_CAV,
-    COLOR_HDV,
-    COLOR_HEAD,
-    ROAD_Y_SCALE,
-    entity_name,
-    open_recording,
-    record_provenance,
-    record_text,
-    set_status,
-    vehicle_colors,
-    vehicle_names,
-    written_path,
-)
-from lcc_synth.recording.layout import (
-    analysis_blueprint,
-    simulation_blueprint,
-    sweep_blueprint,
-    synthesis_blueprint,
-)
-from lcc_synth.recording.reader import (
-    EntitySummary,
-    RecordingSummary,
-    rerun_binary,
-    summarize_recording,
-    viewer_environment,
-)
-from lcc_synth.recording.simulation import (
-    RECORDED_ENTITY,
-    RecordedTrajectories,
-    record_metrics,
-    record_mpc_history,
-    record_recorded,
-    record_simulation,
-    recorded_trajectories,
-)
-from lcc_synth.recording.size import (
-    RecordingEstimate,
-    estimate_recording_bytes,
-    estimate_simulation_recording,
-    estimate_suite_recording,
-    format_size,
-    parse_size,
-)
-from lcc_synth.recording.sweep import record_sweep, record_sweep_file
+from lcc_synth.resources import lazy_exports
+
+#: The submodule that defines each public name: imported on first use
+#: (:func:`~lcc_synth.resources.lazy_exports`), so that importing the package, or one name of
+#: it, does not import every submodule (a refused input ends before the recording stack loads).
+_SOURCE = {
+    "gamma_grid": "analysis",
+    "record_analysis_file": "analysis",
+    "record_gains": "analysis",
+    "record_gamma": "analysis",
+    "record_region_map": "analysis",
+    "record_synthesis": "analysis",
+    "record_synthesis_file": "analysis",
+    "synthesis_cavs": "analysis",
+    "SimulationRecorder": "cli",
+    "add_recording_arguments": "cli",
+    "check_recording": "cli",
+    "check_recording_limit": "cli",
+    "check_recording_space": "cli",
+    "parse_record_seeds": "cli",
+    "record_seed_count": "cli",
+    "recording_decimation": "cli",
+    "recording_limit": "cli",
+    "recording_path": "cli",
+    "APP_ID": "core",
+    "COLOR_CAV": "core",
+    "COLOR_HDV": "core",
+    "COLOR_HEAD": "core",
+    "ROAD_Y_SCALE": "core",
+    "entity_name": "core",
+    "open_recording": "core",
+    "record_provenance": "core",
+    "record_text": "core",
+    "set_status": "core",
+    "vehicle_colors": "core",
+    "vehicle_names": "core",
+    "written_path": "core",
+    "analysis_blueprint": "layout",
+    "simulation_blueprint": "layout",
+    "sweep_blueprint": "layout",
+    "synthesis_blueprint": "layout",
+    "EntitySummary": "reader",
+    "RecordingSummary": "reader",
+    "rerun_binary": "reader",
+    "summarize_recording": "reader",
+    "viewer_environment": "reader",
+    "RECORDED_ENTITY": "simulation",
+    "RecordedTrajectories": "simulation",
+    "record_metrics": "simulation",
+    "record_mpc_history": "simulation",
+    "record_recorded": "simulation",
+    "record_simulation": "simulation",
+    "recorded_trajectories": "simulation",
+    "RecordingEstimate": "size",
+    "estimate_recording_bytes": "size",
+    "estimate_simulation_recording": "size",
+    "estimate_suite_recording": "size",
+    "format_size": "size",
+    "parse_size": "size",
+    "record_sweep": "sweep",
+    "record_sweep_file": "sweep",
+}
 
 __all__ = [
     "APP_ID",
@@ -228,3 +222,6 @@ __all__ = [
     "EntitySummary",
     "summarize_recording",
 ]
+
+
+__getattr__, __dir__ = lazy_exports(__name__, _SOURCE)

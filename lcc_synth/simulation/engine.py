@@ -69,7 +69,6 @@ from lcc_synth.controllers.switch import switch_step
 from lcc_synth.errors import ConfigError
 from lcc_synth.interrupts import checkpoint
 from lcc_synth.resources import require_memory, simulation_bytes
-from lcc_synth.simulation.kernels import _advance, _observe_all
 from lcc_synth.simulation.perturbations import overrides
 from lcc_synth.simulation.results import SimResult
 from lcc_synth.simulation.scenario import MODEL_PARAMS, Draws, Scenario
@@ -152,6 +151,10 @@ def simulate(
     -------
     SimResult
     """
+    # the compiled kernels (numba) here, not at the top: checking a problem file's time step
+    # (simulation.timestep, _steps_of) needs no compiler
+    from lcc_synth.simulation.kernels import _advance, _observe_all
+
     wall0 = time.perf_counter()
     sc = scenario
     B, nv, T, dt = sc.batch, sc.n_vehicles, sc.steps, sc.dt

@@ -14,7 +14,8 @@ vocabularies), :mod:`.design` (:func:`~.design.synthesize`, the one entry point)
 :mod:`.report` (checks and report), :mod:`.gains_file` (the gains JSON file),
 :mod:`.lyapunov` (the Lyapunov solves they share).
 
-cvxpy is imported only inside the functions that solve LMIs.
+cvxpy is imported only inside the functions that solve LMIs; the package itself imports no
+submodule (its names are :mod:`.h2`'s, loaded on first use).
 
 Feature matrix of ``[synthesis]`` (``tests/test_synthesis_layouts.py`` reads this table and
 checks every cell: "yes" parses into a spec, "no: KEY" is one ConfigError naming
@@ -57,6 +58,10 @@ of an open platoon (``test_as_run_design_platoon``) has a fixed equilibrium and 
 step: its ``equilibrium = "estimated"`` and ``weight > 0`` are ConfigErrors naming them.
 """
 
-from lcc_synth.synthesis.h2 import SynthesisError, Weights, h2_norm, make_plant, riccati_gain
+from lcc_synth.resources import lazy_exports
 
 __all__ = ["SynthesisError", "Weights", "h2_norm", "make_plant", "riccati_gain"]
+
+# Every public name is .h2's, imported on first use (lcc_synth.resources.lazy_exports):
+# reading a gains file (.gains_file) or a [synthesis] table loads no solver.
+__getattr__, __dir__ = lazy_exports(__name__, dict.fromkeys(__all__, "h2"))

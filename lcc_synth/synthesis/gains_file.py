@@ -38,7 +38,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -49,7 +49,9 @@ from lcc_synth.models.linear import KINDS, model_from_hdv
 from lcc_synth.models.platoon import PLATOON_KINDS
 from lcc_synth.problem import warn_large_gains
 from lcc_synth.schema.readers import read_json
-from lcc_synth.synthesis.report import UNSET, SynthesisReport, _jsonable
+
+if TYPE_CHECKING:  # imported where a file is written: reading one loads no synthesis stack
+    from lcc_synth.synthesis.report import SynthesisReport
 
 __all__ = ["gains_document", "write_gains", "read_gains", "REQUIRED_KEYS",
            "PLATOON_REQUIRED_KEYS", "platoon_gains_document"]
@@ -63,6 +65,8 @@ PLATOON_REQUIRED_KEYS = ("kind", "size", "cavs", "ring", "semantics", "state_nam
 
 def platoon_gains_document(rep: SynthesisReport) -> dict[str, Any]:
     """The gains-file JSON object of a platoon / ring synthesis report."""
+    from lcc_synth.synthesis.report import _jsonable
+
     c = rep.check
     doc = {
         "kind": rep.kind, "size": rep.size, "cavs": list(rep.cavs), "ring": rep.ring,
@@ -200,6 +204,8 @@ def _platoon_gains(doc: dict[str, Any], model, label: str) -> Gains:
 def gains_document(rep: SynthesisReport) -> dict[str, Any]:
     """The gains-file JSON object of a synthesis report (a row per CAV: the platoon / ring
     form, :func:`platoon_gains_document`)."""
+    from lcc_synth.synthesis.report import UNSET, _jsonable
+
     if rep.per_cav:
         return platoon_gains_document(rep)
     c = rep.check
