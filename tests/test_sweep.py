@@ -186,6 +186,26 @@ def test_local_cluster_equals_serial(problem_file, client, serial):
     assert res.summary == serial.summary
 
 
+def test_local_cluster_workers_run_without_the_profiler(client):
+    """The local cluster's workers and their nannies run with LOCAL_CLUSTER_CONFIG (no 10 ms
+    stack sampling, fewer event-loop wake-ups; the measurement is in its comment), and a
+    worker's profiler has recorded nothing after the module's sweeps ran on it; the client's
+    own configuration is untouched."""
+    import dask
+
+    from lcc_synth.experiments.sweep_cluster import LOCAL_CLUSTER_CONFIG
+
+    def worker_view(dask_worker):
+        return ({k: dask.config.get(k) for k in LOCAL_CLUSTER_CONFIG},
+                dask_worker.profile_recent["count"])  # fmt: skip
+
+    client.submit(sum, [1, 2]).result()  # at least one task ran on a worker
+    for config, samples in client.run(worker_view).values():
+        assert config == LOCAL_CLUSTER_CONFIG
+        assert samples == 0
+    assert dask.config.get("distributed.worker.profile.enabled") is True
+
+
 def test_connect_gives_the_client_after_the_synthesis(problem_file, client, serial,
                                                       monkeypatch):
     """``connect`` (the CLI starts its cluster while the controllers are synthesised) is
