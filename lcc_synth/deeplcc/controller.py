@@ -46,6 +46,7 @@ acceleration is the input (as in the data).
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -299,12 +300,13 @@ class DeePLCCController(SampleLoop):
         v_c = np.asarray(obs.velocity[b], float)[self._cav_cols]
         s_c = mem.spc[-1]
         bvec, y_ini, s_eq = self.parameters(mem)
-        with np.errstate(invalid="ignore"):
-            if c.spacing == "safe":
-                viol = np.nanmax(c.s_min + c.t_gap * v_c - s_c, initial=-np.inf)
-            else:  # the spacing error from s_eq (module docstring, step 4)
-                err = s_c - s_eq
-                lo, hi = c.spacing_error
+        if c.spacing == "safe":  # the largest shortfall over the CAVs, NaN skipped
+            short = (c.s_min + c.t_gap * v_c - s_c).tolist()
+            viol = max((x for x in short if x == x), default=-math.inf)
+        else:  # the spacing error from s_eq (module docstring, step 4)
+            err = s_c - s_eq
+            lo, hi = c.spacing_error
+            with np.errstate(invalid="ignore"):
                 viol = np.nanmax(np.maximum(lo - err, err - hi), initial=-np.inf)
         if viol > 1e-6:
             st["violation_steps"] += 1
@@ -337,7 +339,7 @@ class DeePLCCController(SampleLoop):
         self._note_slack(slack)
         mem.plan = plan
         mem.plan_age = 0
-        cmd = np.clip(plan[0], self._a_min, self._a_max)
+        cmd = np.minimum(np.maximum(plan[0], self._a_min), self._a_max)  # np.clip's values
         self._record(mem, cmd, 0, plan, slack)
         return cmd
 
