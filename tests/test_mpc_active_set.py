@@ -132,6 +132,23 @@ def test_clip_is_numpy_clip_bit_for_bit():
                 got == want and math.copysign(1.0, got) == math.copysign(1.0, want)), (v, lo, hi)
 
 
+def test_moving_average_is_numpy_mean_bit_for_bit():
+    """update_equilibrium's v_eq (sum, then one division) equals np.mean of the window bit for
+    bit, through the window's start (filled with the first value) and its wrap-around."""
+    from types import SimpleNamespace
+
+    from lcc_synth.mpc.scaffold import update_equilibrium
+
+    rng = np.random.default_rng(4)
+    for W in (1, 3, 10, 30, 100):
+        mem = SimpleNamespace(v_buf=np.zeros(W), v_buf_n=0, v_buf_i=0, v_eq=math.nan)
+        for v in rng.normal(15.0, 5.0, 3 * W + 7) * 10.0 ** rng.uniform(-3, 3):
+            update_equilibrium(mem, float(v))
+            assert mem.v_eq == float(np.mean(mem.v_buf)), W
+        update_equilibrium(mem, math.nan)  # not finite: v_eq unchanged
+        assert mem.v_eq == float(np.mean(mem.v_buf))
+
+
 def test_last_value_is_the_equilibrium_spacing():
     cache = LastValue()
     ovm, idm = OVM(), IDM()

@@ -110,7 +110,7 @@ def update_equilibrium(mem: LoopState, v_ref: float) -> None:
     else:
         mem.v_buf[mem.v_buf_i] = v_ref
     mem.v_buf_i = (mem.v_buf_i + 1) % W
-    mem.v_eq = float(mem.v_buf.mean())
+    mem.v_eq = float(mem.v_buf.sum()) / W  # the mean's own sum and division, bit for bit
 
 
 def head_prediction(mem: LoopState, v_ref: float, N: int, Ts: float, prediction,
