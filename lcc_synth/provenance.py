@@ -41,19 +41,18 @@ def _version(module: str) -> str:
 
 
 def solver_of(table: Mapping[str, Any]) -> str | None:
-    """The numerical solver a controller table runs with, as ``"name version"``: an MPC's QP
-    solver (``[controllers.NAME.solver] method``, OSQP by default), DeeP-LCC's (OSQP, with the
-    DAQP re-solve when ``exact``), an ``h2`` table's synthesis (Clarabel for the LMIs, SciPy
-    for the Riccati and Lyapunov equations); ``None`` for a controller without one (a static
-    gain, the HDV law, the baselines)."""
+    """The numerical solver a controller table runs with, as ``"name version"``: an MPC's or
+    DeeP-LCC's QP solver (``[controllers.NAME.solver] method``, OSQP by default; DeeP-LCC's
+    OSQP with the DAQP re-solve of ``exact``, on by default), an ``h2`` table's synthesis
+    (Clarabel for the LMIs, SciPy for the Riccati and Lyapunov equations); ``None`` for a
+    controller without one (a static gain, the HDV law, the baselines)."""
     kind = table.get("type")
     solver = table.get("solver") if isinstance(table.get("solver"), Mapping) else {}
-    if kind == "mpc":
+    if kind in ("mpc", "deep_lcc"):
         method = str(solver.get("method", "osqp"))
-        return f"{method} {_version(method)}"
-    if kind == "deep_lcc":
-        extra = f", daqp {_version('daqp')} re-solve" if solver.get("exact") else ""
-        return f"osqp {_version('osqp')}{extra}"
+        resolve = kind == "deep_lcc" and method == "osqp" and solver.get("exact", True)
+        extra = f", daqp {_version('daqp')} re-solve" if resolve else ""
+        return f"{method} {_version(method)}{extra}"
     if kind == "h2":
         return f"synthesis: clarabel {_version('clarabel')}, scipy {_version('scipy')}"
     return None

@@ -186,6 +186,22 @@ def test_local_cluster_equals_serial(problem_file, client, serial):
     assert res.summary == serial.summary
 
 
+def test_provenance_names_the_qp_solver_that_runs():
+    """provenance.solver_of reads an MPC's and DeeP-LCC's solver.method (DeeP-LCC ran DAQP
+    and was recorded as OSQP before) and DeeP-LCC's exact re-solve, on by default."""
+    from importlib.metadata import version
+
+    from lcc_synth.provenance import solver_of
+
+    osqp, daqp = f"osqp {version('osqp')}", f"daqp {version('daqp')}"
+    assert solver_of({"type": "mpc"}) == osqp
+    assert solver_of({"type": "mpc", "solver": {"method": "daqp"}}) == daqp
+    assert solver_of({"type": "deep_lcc"}) == f"{osqp}, {daqp} re-solve"
+    assert solver_of({"type": "deep_lcc", "solver": {"exact": False}}) == osqp
+    assert solver_of({"type": "deep_lcc", "solver": {"method": "daqp"}}) == daqp
+    assert solver_of({"type": "static"}) is None
+
+
 def test_local_cluster_workers_run_without_the_profiler(client):
     """The local cluster's workers and their nannies run with LOCAL_CLUSTER_CONFIG (no 10 ms
     stack sampling, fewer event-loop wake-ups; the measurement is in its comment), and a
