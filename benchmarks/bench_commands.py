@@ -55,6 +55,12 @@ cache warm; the phases in CPU seconds of the process, ``time.perf_counter`` read
   (1.3 s) and, at the end, writes the figure and the recordings and simulates the hardest
   scenario again with every controller. ``--count 10``: the tasks 14.5-23 s of the 30 s
   wall. 1000 scenarios: about 1,780 s CPU, 15 min wall on 2 workers (budget 5 min).
+* The same sweep on 2026-12-04 (one process, one BLAS thread, 12 scenarios): 0.51-0.52 s CPU
+  per scenario, deep_lcc 0.33 s (its data 0.07 s, its set-up 0.13 s: the reduction in the
+  890 weighted rows instead of the 1931 x 1931 Hessian, 0.19 -> 0.11 s), mpc 0.066 s,
+  mpc_delay 0.072 s, the three static controllers 0.009 s each. On the local cluster the
+  workers spent about 10 % more per scenario than one process, of which Dask's 10 ms stack
+  profiler and 20 ms event-loop ticks took 6 % (``LOCAL_CLUSTER_CONFIG`` turns them down).
 
 Usage: python benchmarks/bench_commands.py [--only run,sweep10] [--update-readme]
        [--table-only]
