@@ -232,20 +232,23 @@ def _reduction_by_stacked_qr(win, q, r, lam_g, lam_y, W):
     return M.T @ M, Cb, -(M.T @ Z[:, nA + nC:])
 
 
-@pytest.mark.parametrize("units", [1.0, 1e3], ids=["si", "data_x1e3"])
-def test_reduction_equals_a_stacked_qr_whitening(units):
+@pytest.mark.parametrize("units, w_spacing", [(1.0, 0.5), (1e3, 0.5), (1.0, 0.0)],
+                         ids=["si", "data_x1e3", "spacing_weight_0"])
+def test_reduction_equals_a_stacked_qr_whitening(units, w_spacing):
     """The default path's reduction works in the m = 46 dimensions of the weighted rows B
     (Woodbury: the K = 151 dimensional Hessian is never formed or factored); it equals the
     reduction whitened by the QR of the stacked matrix to 1e-11 of each matrix's largest entry
     (measured 1.4e-15 / 6.8e-14 / 4.0e-13 on Gamma / Cb / Cy; on the sweep's 1931-column data
     1.4e-15 / 8.8e-14 / 1.6e-12, where the former Cholesky of H gave 2e-12 / 1.3e-11 /
     4.4e-11). Data in other units (every sample x 1e3, lambda_g x 1e6) give the same
-    matrices: the whitened coordinates do not see the data's scale."""
+    matrices: the whitened coordinates do not see the data's scale. A spacing weight of 0 (the
+    schema allows it) leaves the constrained spacing rows W Y_f outside the weighted rows B:
+    they are whitened as A's are, not as combinations of B's rows."""
     rng = np.random.default_rng(13)
     data, _ = linear_data(platoon(3, (1,)), 160, rng, noise=1e-3)
     scaled = DataSet(units * data.u, units * data.e, units * data.y, data.dt)
     win = windows(scaled, 4, 6)
-    q, r = np.array([1.0, 1.0, 1.0, 0.5]), np.array([0.1])
+    q, r = np.array([1.0, 1.0, 1.0, w_spacing]), np.array([0.1])
     W = spacing_rows(6, data.p, [0], 0.8)
     red = reduce(win, q, r, 100.0 * units**2, 1e4, W)
     truth = _reduction_by_stacked_qr(win, q, r, 100.0 * units**2, 1e4, W)

@@ -40,11 +40,12 @@ The whitening works in the ``m = N (p + n_c) + Tini p`` weighted rows ``B`` of t
 (890 for the sweep's data) instead of the ``K`` columns (1931): with ``H = 2 (lambda_g I + B'B)``
 and ``P = lambda_g I + B B'`` (Woodbury), ``W = (2 lambda_g)^-1/2 [I - B' P^-1 B;
 sqrt(lambda_g) P^-1 B]`` (``K + m`` rows) has ``W' W = H^-1``, and only ``P`` is factored
-(Cholesky). The rows of ``C`` and of ``Y_p`` are rows of ``B`` (``X = E B``), so their whitened
-columns ``W B' E' = (2 lambda_g)^-1/2 [lambda_g B' P^-1 E'; sqrt(lambda_g) (E' - lambda_g
-P^-1 E')]`` take no difference of large terms; ``A``'s take one, ``A' - B' P^-1 B A'``, whose
-round-off is absolute (about ``eps |A|``), not relative to a cancelled result. The maps back
-to ``g`` apply ``W'``.
+(Cholesky). The rows of ``U_f`` and of ``Y_p`` are rows of ``B`` (``X = E B``; ``R`` and
+``lambda_y`` are positive), so their whitened columns ``W B' E' = (2 lambda_g)^-1/2
+[lambda_g B' P^-1 E'; sqrt(lambda_g) (E' - lambda_g P^-1 E')]`` take no difference of large
+terms; ``A``'s and those of the constrained rows ``W_f`` (outside ``B`` when the spacing weight
+is 0, which the schema allows) take one, ``X' - B' P^-1 B X'``, whose round-off is absolute
+(about ``eps |X|``), not relative to a cancelled result. The maps back to ``g`` apply ``W'``.
 
 So the online QP needs at most ``dim C = 2 N n_c`` unknowns (plus the spacing slacks) instead
 of ``K`` (1931 for T = 2000), with constant matrices; ``Gamma`` is a Gram matrix (positive
@@ -307,22 +308,26 @@ def reduce(
         factor = sla.cho_factor(P, lower=True, check_finite=False)
     except np.linalg.LinAlgError:
         raise too_small from None
-    A = np.vstack([win.Up, win.Ep, win.Ef])
-    nA, nC = A.shape[0], nU + W_rows.shape[0]
-    # the rows of C = [U_f; W Y_f] and of Fy' = -2 lambda_y Y_p are rows of B: X = E B
-    E = np.zeros((m, nC + win.Yp.shape[0]))  # E'
+    # the rows of A = [U_p; E_p; E_f] and of W Y_f (a spacing weight may be 0) in general;
+    # those of U_f (r > 0) and of Fy' = -2 lambda_y Y_p (lambda_y > 0) are rows of B: E B
+    X = np.vstack([win.Up, win.Ep, win.Ef, W_rows @ win.Yf])  # A, then C's W Y_f rows
+    nA, nW = X.shape[0] - W_rows.shape[0], W_rows.shape[0]
+    E = np.zeros((m, nU + win.Yp.shape[0]))  # E'
     E[nY:nY + nU, :nU] = np.diag(1.0 / np.sqrt(rf))
-    E[:nY, nU:nC] = (W_rows / np.sqrt(qf)[None, :]).T
-    E[nY + nU:, nC:] = -2.0 * np.sqrt(lambda_y) * np.eye(win.Yp.shape[0])
-    QA, QE = np.hsplit(sla.cho_solve(factor, np.hstack([B @ A.T, E]), check_finite=False), [nA])
+    E[nY + nU:, nU:] = -2.0 * np.sqrt(lambda_y) * np.eye(win.Yp.shape[0])
+    QX, QE = np.hsplit(sla.cho_solve(factor, np.hstack([B @ X.T, E]), check_finite=False),
+                       [nA + nW])  # fmt: skip
     s, sl = 1.0 / np.sqrt(2.0 * lambda_g), np.sqrt(lambda_g)
-    top_A = s * (A.T - B.T @ QA)  # the factor W X' (module docstring), in two blocks of rows
-    bot_A = (s * sl) * QA
-    top_C = (s * lambda_g) * (B.T @ QE[:, :nC])
+    top_X = s * (X.T - B.T @ QX)  # the factor W X' (module docstring), in two blocks of rows
+    bot_X = (s * sl) * QX
+    top_E = (s * lambda_g) * (B.T @ QE[:, :nU])
     bot_E = (s * sl) * (E - lambda_g * QE)
-    bot_C, bot_F = bot_E[:, :nC], bot_E[:, nC:]
+    top_A, bot_A = top_X[:, :nA], bot_X[:, :nA]
+    top_C = np.hstack([top_E, top_X[:, nA:]])
+    bot_C = np.hstack([bot_E[:, :nU], bot_X[:, nA:]])
+    bot_F = bot_E[:, nU:]
     QQ, RA = np.linalg.qr(np.vstack([top_A, bot_A]))
-    K = A.shape[1]
+    K = B.shape[1]
     Qt, Qb = QQ[:K], QQ[K:]
     proj = Qt.T @ top_C + Qb.T @ bot_C
     M_top, M_bot = top_C - Qt @ proj, bot_C - Qb @ proj
@@ -331,10 +336,10 @@ def reduce(
     RinvT = sla.solve_triangular(RA, np.eye(nA), trans="T", check_finite=False)  # R_A^-T
     Cb = proj.T @ RinvT
     # M' Z_F without the K-row block of Z_F: top_F = s lambda_g B' Q_F
-    Cy = -((s * lambda_g) * ((B @ M_top).T @ QE[:, nC:]) + M_bot.T @ bot_F)
+    Cy = -((s * lambda_g) * ((B @ M_top).T @ QE[:, nU:]) + M_bot.T @ bot_F)
     G = G0b = G0y = None
     if maps:
-        top_F = (s * lambda_g) * (B.T @ QE[:, nC:])
+        top_F = (s * lambda_g) * (B.T @ QE[:, nU:])
         projF = Qt.T @ top_F + Qb.T @ bot_F
 
         def back(top: np.ndarray, bot: np.ndarray) -> np.ndarray:
