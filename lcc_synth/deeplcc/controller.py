@@ -235,7 +235,7 @@ class DeePLCCController(SampleLoop):
                                         np.full(n_w, -np.inf))  # fmt: skip
             solver = make_solver(self.qp.qp, q, lo, hi, self.settings.solver)
             s_off = np.asarray(ctx.spacing_reference()[b], float) - float(ctx.s_star[b])
-            s_off = np.nan_to_num(s_off, nan=0.0)[list(self.cavs)]
+            s_off = np.nan_to_num(s_off, nan=0.0)[self._cav_cols]
             mem = _Member(solver, s_off, np.zeros(Wn), np.zeros((Tini + 1, self.nv)),
                           np.zeros((Tini + 1, self.n_c)), np.zeros((Tini, self.n_c)),
                           np.zeros((1, self.n_c)), v_eq=float(ctx.v_star[b]))  # fmt: skip
