@@ -15,8 +15,10 @@ to exit is a hang detector, not a measurement (the closing note reports the meas
 from __future__ import annotations
 
 import random
+import shutil
 import signal
 import time
+from pathlib import Path
 
 import psutil
 import pytest
@@ -28,13 +30,44 @@ from lcc_synth.recording import summarize_recording
 HANG = 10.0
 
 
+def _start_and_wait(args, cwd, window):
+    """Start ``lcc-synth ARGS`` and wait a random delay drawn in ``window`` (s); returns
+    ``(proc, delay)`` with the process still running.
+
+    The run's length depends on the machine (CI's is faster than this one), so a draw that falls
+    after the run's end is not a failure of the stop: the run's measured length ``t_end`` then
+    bounds a second draw, in ``[window[0], 0.8 t_end]``, after what the finished run wrote in
+    ``cwd`` is removed. A run shorter than ``window[0] / 0.8`` fails: the test no longer reaches
+    inside the work it means to interrupt."""
+    lo, hi = window
+    before = set(Path(cwd).iterdir())
+    for attempt in range(2):
+        proc = start_cli(args, cwd=cwd)
+        t0 = time.monotonic()
+        delay = random.uniform(lo, hi)
+        while time.monotonic() - t0 < delay and proc.poll() is None:
+            time.sleep(0.02)
+        if proc.poll() is None:
+            return proc, delay
+        t_end = time.monotonic() - t0
+        out, err = proc.communicate()
+        assert attempt == 0 and 0.8 * t_end > lo, (
+            f"the command ended {t_end:.2f} s after its start, before the signal at {delay:.2f} s"
+            f" (window {window}): make it longer",
+            out[-1000:],
+            err[-1000:],
+        )
+        hi = 0.8 * t_end
+        for path in set(Path(cwd).iterdir()) - before:
+            shutil.rmtree(path) if path.is_dir() else path.unlink()
+    raise AssertionError("unreachable")
+
+
 def _interrupt(args, cwd, sig, window):
-    """Start ``lcc-synth ARGS``, send ``sig`` after a random delay in ``window`` (s); returns
-    ``(proc, stdout, stderr, delay, seconds from the signal to the exit)``."""
-    proc = start_cli(args, cwd=cwd)
-    delay = random.uniform(*window)
-    time.sleep(delay)
-    assert proc.poll() is None, (delay, proc.communicate())
+    """Start ``lcc-synth ARGS``, send ``sig`` after a random delay in ``window`` (s) that falls
+    inside the run (:func:`_start_and_wait`); returns ``(proc, stdout, stderr, delay, seconds
+    from the signal to the exit)``."""
+    proc, delay = _start_and_wait(args, cwd, window)
     children = psutil.Process(proc.pid).children(recursive=True)
     t0 = time.monotonic()
     proc.send_signal(sig)
