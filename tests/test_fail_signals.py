@@ -22,7 +22,7 @@ from pathlib import Path
 
 import psutil
 import pytest
-from cli_subprocess import PROBLEMS, rrd_verifies, start_cli
+from cli_subprocess import PROBLEMS, rrd_verifies, start_cli, wait_for
 
 from lcc_synth.recording import summarize_recording
 
@@ -42,25 +42,29 @@ def _start_and_wait(args, cwd, window):
     lo, hi = window
     before = set(Path(cwd).iterdir())
     for attempt in range(2):
-        proc = start_cli(args, cwd=cwd)
-        t0 = time.monotonic()
-        delay = random.uniform(lo, hi)
-        while time.monotonic() - t0 < delay and proc.poll() is None:
-            time.sleep(0.02)
-        if proc.poll() is None:
+        proc, delay, ended = _start_and_draw(args, cwd, lo, hi)
+        if ended is None:
             return proc, delay
-        t_end = time.monotonic() - t0
-        out, err = proc.communicate()
-        assert attempt == 0 and 0.8 * t_end > lo, (
-            f"the command ended {t_end:.2f} s after its start, before the signal at {delay:.2f} s"
-            f" (window {window}): make it longer",
-            out[-1000:],
-            err[-1000:],
-        )
-        hi = 0.8 * t_end
-        for path in set(Path(cwd).iterdir()) - before:
+        assert attempt == 0 and 0.8 * ended > lo, (
+            f"the command ended {ended:.2f} s after its start, before the signal at {delay:.2f} s"
+            f" (window {window}): make it longer", proc.communicate()
+        )  # fmt: skip
+        proc.communicate()
+        for path in set(Path(cwd).iterdir()) - before:  # what the finished run wrote
             shutil.rmtree(path) if path.is_dir() else path.unlink()
-    raise AssertionError("unreachable")
+        hi = 0.8 * ended
+    raise AssertionError("unreachable: the second attempt returns or fails above")
+
+
+def _start_and_draw(args, cwd, lo, hi):
+    """Start ``lcc-synth ARGS`` and wait a delay drawn in ``[lo, hi]``; returns ``(proc, delay,
+    None)``, or ``(proc, delay, seconds the run took)`` if it ended before the delay."""
+    proc = start_cli(args, cwd=cwd)
+    t0 = time.monotonic()
+    delay = random.uniform(lo, hi)
+    if not wait_for(lambda: proc.poll() is not None, delay, poll=0.02):
+        return proc, delay, None
+    return proc, delay, time.monotonic() - t0
 
 
 def _interrupt(args, cwd, sig, window):
